@@ -1,0 +1,127 @@
+//! Fresnel reflection at a smooth dielectric boundary, and the diffuse (cosine-weighted)
+//! averages that the diffusion boundary condition needs.
+//!
+//! η is always a **relative** index, n_transmitted / n_incident. For a medium of index η in
+//! air, light arriving from outside sees η, light leaving from inside sees 1/η.
+//!
+//! The diffusion (Robin, "extrapolated boundary") condition φ + 2AD ∂φ/∂n = 0 uses
+//! A = (1 + F_dr) / (1 − F_dr), where F_dr is the medium's *internal* diffuse reflectance
+//! F_dr(η) = 2 ∫₀¹ F_r(μ; 1/η) μ dμ, total internal reflection included. Mertens' thesis
+//! (L617) prints this integral without the 1/π that makes F_dr ≤ 1; the factor 2 above is
+//! the corrected form (`shared/notes/002_mertens.md` §2.3).
+
+use crate::error::{OpticsError, in_range, refractive_index};
+use crate::integrate::adaptive;
+
+/// Which diffuse Fresnel reflectance to use in A.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DiffuseFresnel {
+    /// The exact cosine-weighted integral of the Fresnel equations.
+    Exact,
+    /// Groenhuis et al.'s fit F_dr ≈ −1.44/η² + 0.71/η + 0.668 + 0.0636η, the form used by
+    /// Jensen et al. 2001 and by Mertens; within 0.001 of the exact value for
+    /// 1.3 ≤ η ≤ 1.5. Defined for η ≥ 1 only.
+    #[default]
+    Groenhuis,
+}
+
+/// A smooth boundary with relative refractive index η = n_inside / n_outside.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Dielectric {
+    eta: f64,
+}
+
+impl Dielectric {
+    /// A boundary with relative index η > 0 (η = 1 is index-matched: no reflection).
+    pub fn new(eta: f64) -> Result<Self, OpticsError> {
+        Ok(Self { eta: refractive_index(eta)? })
+    }
+
+    /// The relative index η.
+    pub fn eta(&self) -> f64 {
+        self.eta
+    }
+
+    /// Unpolarised Fresnel reflectance F_r = (r_∥² + r_⊥²)/2 for light arriving from outside
+    /// with cos θ_i = `cos_theta_i` > 0, or from inside when `cos_theta_i` < 0 (the index is
+    /// then inverted). Returns 1 under total internal reflection.
+    pub fn reflectance(&self, cos_theta_i: f64) -> f64 {
+        fresnel_reflectance(cos_theta_i, self.eta)
+    }
+
+    /// F_t = 1 − F_r.
+    pub fn transmittance(&self, cos_theta_i: f64) -> f64 {
+        1.0 - self.reflectance(cos_theta_i)
+    }
+
+    /// The cosine-weighted hemispherical transmittance 2 ∫₀¹ F_t(μ; η) μ dμ for diffuse light
+    /// arriving from outside (0.9389 for η = 1.3, 0.9082 for η = 1.5).
+    pub fn hemispherical_transmittance(&self) -> f64 {
+        1.0 - cosine_weighted_reflectance(self.eta)
+    }
+
+    /// The internal diffuse reflectance F_dr: the fraction of diffuse light inside that the
+    /// boundary reflects back in, by the chosen model.
+    pub fn diffuse_reflectance(&self, model: DiffuseFresnel) -> Result<f64, OpticsError> {
+        match model {
+            DiffuseFresnel::Exact => Ok(cosine_weighted_reflectance(1.0 / self.eta)),
+            DiffuseFresnel::Groenhuis => {
+                let eta = in_range("eta", self.eta, "[1, inf) for the Groenhuis fit", |e| e >= 1.0)?;
+                Ok(-1.44 / (eta * eta) + 0.71 / eta + 0.668 + 0.0636 * eta)
+            }
+        }
+    }
+
+    /// The boundary factor A = (1 + F_dr)/(1 − F_dr) of the Robin condition
+    /// φ + 2AD ∂φ/∂n = 0 (A = 1 when index-matched; the extrapolation distance is 2AD).
+    pub fn boundary_factor(&self, model: DiffuseFresnel) -> Result<f64, OpticsError> {
+        let f_dr = self.diffuse_reflectance(model)?;
+        Ok((1.0 + f_dr) / (1.0 - f_dr))
+    }
+}
+
+fn fresnel_reflectance(cos_theta_i: f64, eta: f64) -> f64 {
+    let (cos_i, eta) = if cos_theta_i < 0.0 { (-cos_theta_i, 1.0 / eta) } else { (cos_theta_i, eta) };
+    let cos_i = cos_i.min(1.0);
+    let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
+    if sin2_t >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    let r_parallel = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let r_perpendicular = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    0.5 * (r_parallel * r_parallel + r_perpendicular * r_perpendicular)
+}
+
+/// 2 ∫₀¹ F_r(μ; η) μ dμ, with the total-internal-reflection range (F_r = 1 for
+/// μ < μ_c = √(1 − η²) when η < 1) integrated in closed form so that the adaptive rule never
+/// straddles the kink at the critical angle.
+fn cosine_weighted_reflectance(eta: f64) -> f64 {
+    let mu_c = if eta < 1.0 { (1.0 - eta * eta).sqrt() } else { 0.0 };
+    mu_c * mu_c + adaptive(|mu| 2.0 * fresnel_reflectance(mu, eta) * mu, mu_c, 1.0, 1e-14, 0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normal_incidence_and_grazing_limits() {
+        let d = Dielectric::new(1.5).unwrap();
+        // ((η − 1)/(η + 1))² = 0.04 at normal incidence, 1 at grazing incidence.
+        assert!((d.reflectance(1.0) - 0.04).abs() < 1e-15);
+        assert!((d.reflectance(0.0) - 1.0).abs() < 1e-12);
+        // From inside beyond the critical angle (sin θ > 1/1.5): total internal reflection.
+        assert_eq!(d.reflectance(-0.5), 1.0);
+        // Index-matched boundaries do not reflect.
+        assert!(Dielectric::new(1.0).unwrap().reflectance(0.3).abs() < 1e-16);
+    }
+
+    #[test]
+    fn bad_index_is_refused() {
+        assert!(Dielectric::new(0.0).is_err());
+        assert!(Dielectric::new(f64::NAN).is_err());
+        assert!(Dielectric::new(0.8).unwrap().diffuse_reflectance(DiffuseFresnel::Groenhuis).is_err());
+        assert!(Dielectric::new(0.8).unwrap().diffuse_reflectance(DiffuseFresnel::Exact).is_ok());
+    }
+}

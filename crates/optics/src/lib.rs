@@ -1,0 +1,69 @@
+//! # lucent-optics: how light meets a participating medium at one point
+//!
+//! Everything a light-transport solver needs to know about the medium *locally*, and the
+//! closed-form solutions every solver is checked against. No grids, no files, no solvers.
+//!
+//! ## Units and conventions
+//! - Lengths are in **scene units** and coefficients in **inverse scene units**; the crate
+//!   never assumes a unit. The measured table ([`materials::JENSEN_2001`]) is in mm⁻¹ and
+//!   converts with [`MeasuredMaterial::rgb`].
+//! - Directions are unit vectors of **propagation**; phase functions take the direction of
+//!   travel before and after scattering, cos θ = ω_in·ω_out, g > 0 forward.
+//! - Phase functions are densities per steradian **normalised to 1** over the sphere.
+//!   (Murray's seed prints Henyey–Greenstein without 1/(4π); lucent never uses that form.)
+//! - Radiance L (W m⁻² sr⁻¹), fluence φ = ∫_{4π} L dω (W m⁻²), flux vector E = ∫ L ω dω.
+//! - Everything is computed in `f64`: this crate defines references, not hot loops.
+//!
+//! ## Equations
+//! The radiative transfer equation for radiance L(x, ω), with σ_t = σ_a + σ_s:
+//!
+//! ω·∇L = −σ_t L + σ_s ∫_{4π} p(ω′·ω) L(x, ω′) dω′ + Q.
+//!
+//! Its diffusion (P1) limit for φ, with the reduced coefficients σ_s′ = (1 − g)σ_s,
+//! σ_t′ = σ_a + σ_s′, D = 1/(3σ_t′) and σ_tr = √(3σ_a σ_t′):
+//!
+//! −∇·(D∇φ) + σ_a φ = Q₀ − 3∇·(D Q₁),
+//!
+//! (the sign of the first-moment term is printed wrongly in Mertens' thesis, see
+//! `shared/notes/002_mertens.md` §2.2), with the Robin boundary condition
+//! φ + 2AD ∂φ/∂n = 0, A = (1 + F_dr)/(1 − F_dr), whose exitance is φ/(2A).
+//!
+//! ## Contents
+//! - [`OpticalCoefficients`]: σ_a, σ_s, g, validated, and everything derived from them.
+//! - [`phase`]: the [`PhaseFunction`] trait (evaluate, sample exactly, mean cosine,
+//!   Legendre moments) for isotropic, Henyey–Greenstein, double Henyey–Greenstein and
+//!   Rayleigh scattering, and the [`Phase`] enum that dispatches them without trait objects.
+//! - [`quadrature`]: spherical quadratures (level-symmetric S_N, nested octahedral,
+//!   Fibonacci) whose weights sum to 4π.
+//! - [`fresnel`]: dielectric Fresnel reflectance, diffuse reflectance F_dr (exact and the
+//!   Groenhuis fit), the boundary factor A.
+//! - [`analytic`]: Beer–Lambert, the infinite-medium Green's function, the dipole R_d(r),
+//!   and exact Robin solutions for a sphere, a half-space and a slab.
+//! - [`materials`]: Jensen et al. 2001's measured table.
+//! - [`integrate`]: the Gauss–Legendre and adaptive Gauss–Kronrod rules used above.
+//!
+//! ## Stability and validity limits
+//! - |g| < 1 everywhere (|g| = 1 is a delta function); Henyey–Greenstein sampling and
+//!   evaluation stay accurate up to |g| = 1 − 1e-6.
+//! - Diffusion results (the [`analytic`] module) need σ_s′ ≫ σ_a and distances beyond a
+//!   transport mean free path from sources; the closed forms themselves are exact solutions
+//!   of the diffusion equation and need σ_a > 0.
+//!
+//! Every constructor refuses negative, NaN or infinite input with an [`OpticsError`].
+
+pub mod analytic;
+mod coefficients;
+mod error;
+pub mod fresnel;
+pub mod integrate;
+pub mod materials;
+pub mod phase;
+pub mod quadrature;
+
+pub use analytic::DiffusionMedium;
+pub use coefficients::OpticalCoefficients;
+pub use error::OpticsError;
+pub use fresnel::{Dielectric, DiffuseFresnel};
+pub use materials::MeasuredMaterial;
+pub use phase::{Phase, PhaseFunction, PhaseSample};
+pub use quadrature::SphericalQuadrature;

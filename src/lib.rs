@@ -1,0 +1,14 @@
+//! # lucent: light transport in participating media
+//!
+//! The facade of the lucent workspace. Each solver and support crate stands alone (pick
+//! the one your renderer needs); this crate re-exports them under one roof for the `lucent`
+//! command and for users who want everything.
+//!
+//! | module | crate | what it solves |
+//! |---|---|---|
+//! | [`optics`] | `lucent-optics` | coefficients, phase functions, spherical quadratures, Fresnel, analytic diffusion references |
+//!
+//! See `ARCHITECTURE.md` at the repository root for the crate map and the data flow
+//! volume → medium → problem → solver → solution → image.
+
+pub use lucent_optics as optics;
