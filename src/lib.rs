@@ -10,5 +10,13 @@
 //!
 //! See `ARCHITECTURE.md` at the repository root for the crate map and the data flow
 //! volume → medium → problem → solver → solution → image.
+//!
+//! ```
+//! use lucent::optics::{OpticalCoefficients, SphericalQuadrature};
+//! let medium = OpticalCoefficients::from_extinction_albedo(2.0, 0.9, 0.5)?;
+//! assert!((medium.sigma_t_reduced() - 1.1).abs() < 1e-12);
+//! assert_eq!(SphericalQuadrature::octahedral(1)?.len(), 32);
+//! # Ok::<(), lucent::optics::OpticsError>(())
+//! ```
 
 pub use lucent_optics as optics;

@@ -18,7 +18,14 @@ fn main() -> ExitCode {
     let steps: Vec<Vec<&str>> = match command.as_deref() {
         Some("ci") => vec![
             vec!["fmt", "--all", "--check"],
-            vec!["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"],
+            vec![
+                "clippy",
+                "--workspace",
+                "--all-targets",
+                "--",
+                "-D",
+                "warnings",
+            ],
             vec!["doc", "--workspace", "--no-deps"],
             vec!["test", "--workspace"],
         ],
@@ -32,7 +39,10 @@ fn main() -> ExitCode {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
     for args in steps {
         eprintln!("xtask: cargo {}", args.join(" "));
-        let status = Command::new(&cargo).args(&args).env("RUSTDOCFLAGS", "-D warnings").status();
+        let status = Command::new(&cargo)
+            .args(&args)
+            .env("RUSTDOCFLAGS", "-D warnings")
+            .status();
         match status {
             Ok(s) if s.success() => {}
             Ok(s) => {

@@ -158,7 +158,8 @@ impl Dipole {
     pub fn total_reflectance(&self) -> f64 {
         let m = &self.medium;
         let sigma = m.sigma_tr();
-        0.5 * m.coefficients.albedo_reduced() * ((-sigma * m.z_r()).exp() + (-sigma * m.z_v()).exp())
+        0.5 * m.coefficients.albedo_reduced()
+            * ((-sigma * m.z_r()).exp() + (-sigma * m.z_v()).exp())
     }
 
     /// The exact total reflectance of the same source in a Robin half-space,
@@ -240,16 +241,26 @@ pub struct RobinHalfSpace {
 impl RobinHalfSpace {
     fn new(medium: DiffusionMedium, source_depth: f64) -> Result<Self, OpticsError> {
         medium.require_absorption()?;
-        Ok(Self { medium, source_depth: non_negative("source_depth", source_depth)? })
+        Ok(Self {
+            medium,
+            source_depth: non_negative("source_depth", source_depth)?,
+        })
     }
 
     /// Fluence φ(z) at depth z ≥ 0 (1/length per unit source strength).
     pub fn fluence(&self, z: f64) -> Result<f64, OpticsError> {
         let z = non_negative("z", z)?;
-        let (d, sigma, zb) = (self.medium.d(), self.medium.sigma_tr(), self.medium.extrapolation_distance());
+        let (d, sigma, zb) = (
+            self.medium.d(),
+            self.medium.sigma_tr(),
+            self.medium.extrapolation_distance(),
+        );
         let reflection = (1.0 - zb * sigma) / (1.0 + zb * sigma);
         let zp = self.source_depth;
-        Ok(((-sigma * (z - zp).abs()).exp() - reflection * (-sigma * (z + zp)).exp()) / (2.0 * d * sigma))
+        Ok(
+            ((-sigma * (z - zp).abs()).exp() - reflection * (-sigma * (z + zp)).exp())
+                / (2.0 * d * sigma),
+        )
     }
 
     /// Radiant exitance through the surface, φ(0)/(2A) = e^{−σz′}/(1 + 2ADσ).
@@ -273,7 +284,10 @@ pub struct ExtrapolatedSlab {
 impl ExtrapolatedSlab {
     fn new(medium: DiffusionMedium, thickness: f64) -> Result<Self, OpticsError> {
         medium.require_absorption()?;
-        Ok(Self { medium, thickness: in_range("thickness", thickness, "(0, inf)", |d| d > 0.0)? })
+        Ok(Self {
+            medium,
+            thickness: in_range("thickness", thickness, "(0, inf)", |d| d > 0.0)?,
+        })
     }
 
     /// Total diffuse reflectance of the slab.

@@ -156,15 +156,24 @@ mod tests {
     fn bad_input_is_refused_with_the_parameter_named() {
         assert_eq!(
             OpticalCoefficients::new(-1.0, 1.0, 0.0),
-            Err(OpticsError::Negative { name: "sigma_a", value: -1.0 })
+            Err(OpticsError::Negative {
+                name: "sigma_a",
+                value: -1.0
+            })
         );
         assert!(matches!(
             OpticalCoefficients::new(1.0, f64::NAN, 0.0),
-            Err(OpticsError::NotFinite { name: "sigma_s", .. })
+            Err(OpticsError::NotFinite {
+                name: "sigma_s",
+                ..
+            })
         ));
         assert!(matches!(
             OpticalCoefficients::new(1.0, f64::INFINITY, 0.0),
-            Err(OpticsError::NotFinite { name: "sigma_s", .. })
+            Err(OpticsError::NotFinite {
+                name: "sigma_s",
+                ..
+            })
         ));
         assert!(matches!(
             OpticalCoefficients::new(1.0, 1.0, 1.0),
@@ -176,7 +185,10 @@ mod tests {
         ));
         assert!(matches!(
             OpticalCoefficients::from_reduced(0.1, -2.0, 0.0),
-            Err(OpticsError::Negative { name: "sigma_s_reduced", .. })
+            Err(OpticsError::Negative {
+                name: "sigma_s_reduced",
+                ..
+            })
         ));
     }
 

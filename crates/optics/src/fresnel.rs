@@ -34,7 +34,9 @@ pub struct Dielectric {
 impl Dielectric {
     /// A boundary with relative index η > 0 (η = 1 is index-matched: no reflection).
     pub fn new(eta: f64) -> Result<Self, OpticsError> {
-        Ok(Self { eta: refractive_index(eta)? })
+        Ok(Self {
+            eta: refractive_index(eta)?,
+        })
     }
 
     /// The relative index η.
@@ -66,7 +68,9 @@ impl Dielectric {
         match model {
             DiffuseFresnel::Exact => Ok(cosine_weighted_reflectance(1.0 / self.eta)),
             DiffuseFresnel::Groenhuis => {
-                let eta = in_range("eta", self.eta, "[1, inf) for the Groenhuis fit", |e| e >= 1.0)?;
+                let eta = in_range("eta", self.eta, "[1, inf) for the Groenhuis fit", |e| {
+                    e >= 1.0
+                })?;
                 Ok(-1.44 / (eta * eta) + 0.71 / eta + 0.668 + 0.0636 * eta)
             }
         }
@@ -81,7 +85,11 @@ impl Dielectric {
 }
 
 fn fresnel_reflectance(cos_theta_i: f64, eta: f64) -> f64 {
-    let (cos_i, eta) = if cos_theta_i < 0.0 { (-cos_theta_i, 1.0 / eta) } else { (cos_theta_i, eta) };
+    let (cos_i, eta) = if cos_theta_i < 0.0 {
+        (-cos_theta_i, 1.0 / eta)
+    } else {
+        (cos_theta_i, eta)
+    };
     let cos_i = cos_i.min(1.0);
     let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
     if sin2_t >= 1.0 {
@@ -97,8 +105,19 @@ fn fresnel_reflectance(cos_theta_i: f64, eta: f64) -> f64 {
 /// μ < μ_c = √(1 − η²) when η < 1) integrated in closed form so that the adaptive rule never
 /// straddles the kink at the critical angle.
 fn cosine_weighted_reflectance(eta: f64) -> f64 {
-    let mu_c = if eta < 1.0 { (1.0 - eta * eta).sqrt() } else { 0.0 };
-    mu_c * mu_c + adaptive(|mu| 2.0 * fresnel_reflectance(mu, eta) * mu, mu_c, 1.0, 1e-14, 0.0)
+    let mu_c = if eta < 1.0 {
+        (1.0 - eta * eta).sqrt()
+    } else {
+        0.0
+    };
+    mu_c * mu_c
+        + adaptive(
+            |mu| 2.0 * fresnel_reflectance(mu, eta) * mu,
+            mu_c,
+            1.0,
+            1e-14,
+            0.0,
+        )
 }
 
 #[cfg(test)]
@@ -121,7 +140,17 @@ mod tests {
     fn bad_index_is_refused() {
         assert!(Dielectric::new(0.0).is_err());
         assert!(Dielectric::new(f64::NAN).is_err());
-        assert!(Dielectric::new(0.8).unwrap().diffuse_reflectance(DiffuseFresnel::Groenhuis).is_err());
-        assert!(Dielectric::new(0.8).unwrap().diffuse_reflectance(DiffuseFresnel::Exact).is_ok());
+        assert!(
+            Dielectric::new(0.8)
+                .unwrap()
+                .diffuse_reflectance(DiffuseFresnel::Groenhuis)
+                .is_err()
+        );
+        assert!(
+            Dielectric::new(0.8)
+                .unwrap()
+                .diffuse_reflectance(DiffuseFresnel::Exact)
+                .is_ok()
+        );
     }
 }

@@ -132,7 +132,10 @@ pub fn adaptive(mut f: impl FnMut(f64) -> f64, a: f64, b: f64, abs_tol: f64, rel
         let (total, err) = intervals
             .iter()
             .fold((0.0, 0.0), |(s, t), &(_, _, v, e)| (s + v, t + e));
-        if err <= abs_tol.max(rel_tol * total.abs()) || intervals.len() >= MAX_INTERVALS || !err.is_finite() {
+        if err <= abs_tol.max(rel_tol * total.abs())
+            || intervals.len() >= MAX_INTERVALS
+            || !err.is_finite()
+        {
             return total;
         }
         let worst = intervals
@@ -159,10 +162,21 @@ mod tests {
         for n in [1, 2, 5, 16, 64, 200] {
             let (x, w) = gauss_legendre(n);
             for degree in 0..2 * n.min(20) {
-                let quad: f64 = x.iter().zip(&w).map(|(x, w)| w * x.powi(degree as i32)).sum();
-                let exact = if degree % 2 == 1 { 0.0 } else { 2.0 / (degree as f64 + 1.0) };
+                let quad: f64 = x
+                    .iter()
+                    .zip(&w)
+                    .map(|(x, w)| w * x.powi(degree as i32))
+                    .sum();
+                let exact = if degree % 2 == 1 {
+                    0.0
+                } else {
+                    2.0 / (degree as f64 + 1.0)
+                };
                 // Round-off in the sum of n terms of size <= 2: a few ulps times n.
-                assert!((quad - exact).abs() < 1e-14 * n as f64, "n={n} degree={degree}: {quad} vs {exact}");
+                assert!(
+                    (quad - exact).abs() < 1e-14 * n as f64,
+                    "n={n} degree={degree}: {quad} vs {exact}"
+                );
             }
         }
     }
@@ -171,7 +185,11 @@ mod tests {
     fn kronrod_rule_is_exact_to_degree_22_and_gauss_part_to_13() {
         for degree in 0..=22 {
             let (k, e) = kronrod15(&mut |x: f64| x.powi(degree), -1.0, 1.0);
-            let exact = if degree % 2 == 1 { 0.0 } else { 2.0 / (degree as f64 + 1.0) };
+            let exact = if degree % 2 == 1 {
+                0.0
+            } else {
+                2.0 / (degree as f64 + 1.0)
+            };
             assert!((k - exact).abs() < 1e-15, "degree {degree}: {k}");
             if degree <= 13 {
                 // The Gauss part is exact too, so the error estimate must vanish.

@@ -50,6 +50,27 @@
 //!   of the diffusion equation and need σ_a > 0.
 //!
 //! Every constructor refuses negative, NaN or infinite input with an [`OpticsError`].
+//!
+//! ## Example
+//! ```
+//! use glam::DVec3;
+//! use lucent_optics::{Dielectric, DiffuseFresnel, DiffusionMedium, MeasuredMaterial, Phase, PhaseFunction};
+//!
+//! // Marble's red channel (mm⁻¹) behind an η = 1.3 surface.
+//! let marble = MeasuredMaterial::by_name("marble")?.channel(0, 0.0)?;
+//! let medium = DiffusionMedium::with_boundary(marble, Dielectric::new(1.3)?, DiffuseFresnel::Groenhuis)?;
+//! assert!((medium.d() - 0.152061).abs() < 1e-6);
+//! assert!((medium.dipole().total_reflectance() - 0.86654).abs() < 1e-5);
+//!
+//! // A forward-scattering lobe, sampled exactly: the pdf is the phase function.
+//! let phase = Phase::henyey_greenstein(0.8)?;
+//! let s = phase.sample(DVec3::Z, [0.3, 0.7]);
+//! assert!((s.pdf - phase.eval(DVec3::Z, s.omega_out)).abs() < 1e-12);
+//!
+//! // Bad input is a typed error, not a NaN.
+//! assert!(lucent_optics::OpticalCoefficients::new(-1.0, 1.0, 0.0).is_err());
+//! # Ok::<(), lucent_optics::OpticsError>(())
+//! ```
 
 pub mod analytic;
 mod coefficients;

@@ -47,14 +47,27 @@ impl MeasuredMaterial {
 
     /// All three channels in scene units of `mm_per_scene_unit` millimetres
     /// (1 for scenes in mm, 10 for cm, 1000 for m).
-    pub fn rgb(&self, g: f64, mm_per_scene_unit: f64) -> Result<[OpticalCoefficients; 3], OpticsError> {
+    pub fn rgb(
+        &self,
+        g: f64,
+        mm_per_scene_unit: f64,
+    ) -> Result<[OpticalCoefficients; 3], OpticsError> {
         let c = |i| self.channel(i, g)?.scaled(mm_per_scene_unit);
         Ok([c(0)?, c(1)?, c(2)?])
     }
 }
 
-const fn material(name: &'static str, sigma_s_reduced: [f64; 3], sigma_a: [f64; 3]) -> MeasuredMaterial {
-    MeasuredMaterial { name, sigma_s_reduced, sigma_a, eta: 1.3 }
+const fn material(
+    name: &'static str,
+    sigma_s_reduced: [f64; 3],
+    sigma_a: [f64; 3],
+) -> MeasuredMaterial {
+    MeasuredMaterial {
+        name,
+        sigma_s_reduced,
+        sigma_a,
+        eta: 1.3,
+    }
 }
 
 /// Jensen et al. 2001, Figure 5: reduced scattering and absorption in mm⁻¹, η = 1.3.

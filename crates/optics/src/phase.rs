@@ -62,7 +62,11 @@ pub trait PhaseFunction {
         let omega_out =
             (sin_theta * cos_phi * t + sin_theta * sin_phi * b + cos_theta * omega_in).normalize();
         let value = self.eval_cos(cos_theta);
-        PhaseSample { omega_out, pdf: value, value }
+        PhaseSample {
+            omega_out,
+            pdf: value,
+            value,
+        }
     }
 
     /// Legendre moments χ_0 … χ_order (χ_0 = 1, χ_1 = g).
@@ -99,7 +103,9 @@ impl PhaseFunction for Isotropic {
         0.0
     }
     fn legendre_moments(&self, order: usize) -> Vec<f64> {
-        (0..=order).map(|l| if l == 0 { 1.0 } else { 0.0 }).collect()
+        (0..=order)
+            .map(|l| if l == 0 { 1.0 } else { 0.0 })
+            .collect()
     }
 }
 
@@ -119,7 +125,9 @@ pub struct HenyeyGreenstein {
 impl HenyeyGreenstein {
     /// A Henyey–Greenstein lobe with mean cosine g ∈ (−1, 1).
     pub fn new(g: f64) -> Result<Self, OpticsError> {
-        Ok(Self { g: anisotropy("g", g)? })
+        Ok(Self {
+            g: anisotropy("g", g)?,
+        })
     }
 
     /// The mean cosine g.
@@ -143,7 +151,11 @@ impl PhaseFunction for HenyeyGreenstein {
             let t = a + 2.0 * g * u;
             ((2.0 * u * (1.0 + g * g) * (a + g * u) - a * a) / (t * t)).clamp(-1.0, 1.0)
         };
-        if self.g >= 0.0 { forward(self.g, u) } else { -forward(-self.g, 1.0 - u) }
+        if self.g >= 0.0 {
+            forward(self.g, u)
+        } else {
+            -forward(-self.g, 1.0 - u)
+        }
     }
     fn mean_cosine(&self) -> f64 {
         self.g
@@ -184,7 +196,8 @@ impl PhaseFunction for DoubleHenyeyGreenstein {
         if u < self.weight {
             self.first.sample_cos(u / self.weight)
         } else {
-            self.second.sample_cos(((u - self.weight) / (1.0 - self.weight)).min(1.0))
+            self.second
+                .sample_cos(((u - self.weight) / (1.0 - self.weight)).min(1.0))
         }
     }
     fn mean_cosine(&self) -> f64 {
@@ -255,7 +268,9 @@ impl Phase {
 
     /// Two Henyey–Greenstein lobes, see [`DoubleHenyeyGreenstein::new`].
     pub fn double_henyey_greenstein(g1: f64, g2: f64, weight: f64) -> Result<Self, OpticsError> {
-        Ok(Self::DoubleHenyeyGreenstein(DoubleHenyeyGreenstein::new(g1, g2, weight)?))
+        Ok(Self::DoubleHenyeyGreenstein(DoubleHenyeyGreenstein::new(
+            g1, g2, weight,
+        )?))
     }
 }
 

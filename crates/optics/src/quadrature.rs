@@ -53,14 +53,32 @@ pub struct SphericalQuadrature {
 /// Classical μ_1 of the level-symmetric LQ_N sets (Lewis & Miller, *Computational Methods
 /// of Neutron Transport*, table 4-1), indexed by N/2 − 1. Used as the starting point of the
 /// solve, and as the value itself where the moment equations leave μ_1 free.
-const CLASSICAL_MU1: [f64; 8] =
-    [0.577_350_3, 0.350_021_2, 0.266_635_5, 0.218_217_9, 0.189_321_3, 0.167_212_6, 0.151_985_9, 0.138_956_8];
+const CLASSICAL_MU1: [f64; 8] = [
+    0.577_350_3,
+    0.350_021_2,
+    0.266_635_5,
+    0.218_217_9,
+    0.189_321_3,
+    0.167_212_6,
+    0.151_985_9,
+    0.138_956_8,
+];
 
 /// The deepest nested octahedral level offered (8·4⁶ = 32 768 directions).
 pub const MAX_OCTAHEDRAL_LEVEL: usize = 6;
 
 impl SphericalQuadrature {
     /// The level-symmetric S_N set with N(N+2) directions, N ∈ {2, 4, …, 16}.
+    ///
+    /// ```
+    /// use lucent_optics::SphericalQuadrature;
+    /// let s8 = SphericalQuadrature::level_symmetric(8)?;
+    /// assert_eq!(s8.len(), 80);
+    /// // ∫ ω_z⁸ dω = 4π/9, exact because the design degree is 9.
+    /// let z8 = s8.integrate(|d| d.z.powi(8));
+    /// assert!((z8 - 4.0 * std::f64::consts::PI / 9.0).abs() < 1e-13);
+    /// # Ok::<(), lucent_optics::OpticsError>(())
+    /// ```
     ///
     /// | N | directions | design degree |
     /// |---|---|---|
@@ -92,7 +110,13 @@ impl SphericalQuadrature {
         };
         let conditions = symmetric_exponents(degree / 2);
         let mu1 = if solve_mu1 {
-            solve_mu1_for_consistency(levels, &points, &classes, &conditions, CLASSICAL_MU1[levels - 1])
+            solve_mu1_for_consistency(
+                levels,
+                &points,
+                &classes,
+                &conditions,
+                CLASSICAL_MU1[levels - 1],
+            )
         } else if n == 2 {
             1.0 / 3f64.sqrt()
         } else {
@@ -128,9 +152,20 @@ impl SphericalQuadrature {
             });
         }
         let cells = octahedral_cells(level);
-        let directions = cells.iter().map(|[a, b, c]| (*a + *b + *c).normalize()).collect();
-        let weights = cells.iter().map(|[a, b, c]| solid_angle(*a, *b, *c)).collect();
-        Ok(Self { family: QuadratureFamily::Octahedral(level), directions, weights, design_degree: 3 })
+        let directions = cells
+            .iter()
+            .map(|[a, b, c]| (*a + *b + *c).normalize())
+            .collect();
+        let weights = cells
+            .iter()
+            .map(|[a, b, c]| solid_angle(*a, *b, *c))
+            .collect();
+        Ok(Self {
+            family: QuadratureFamily::Octahedral(level),
+            directions,
+            weights,
+            design_degree: 3,
+        })
     }
 
     /// The index, in level `level − 1`, of the cell that contains direction `index` of
@@ -170,7 +205,11 @@ impl SphericalQuadrature {
                 DVec3::new(r * c, r * s, z)
             })
             .collect();
-        let directions = upper.iter().copied().chain(upper.iter().map(|&d| -d)).collect();
+        let directions = upper
+            .iter()
+            .copied()
+            .chain(upper.iter().map(|&d| -d))
+            .collect();
         Ok(Self {
             family: QuadratureFamily::Fibonacci(count),
             directions,
@@ -212,7 +251,11 @@ impl SphericalQuadrature {
 
     /// Σ_m w_m f(ω_m), accumulated in f64.
     pub fn integrate(&self, mut f: impl FnMut(DVec3) -> f64) -> f64 {
-        self.directions.iter().zip(&self.weights).map(|(&d, &w)| w * f(d)).sum()
+        self.directions
+            .iter()
+            .zip(&self.weights)
+            .map(|(&d, &w)| w * f(d))
+            .sum()
     }
 
     /// The octant of direction `m` as a bit mask: bit 0 set when ω_x < 0, bit 1 when
@@ -267,7 +310,9 @@ fn level_cosines(levels: usize, mu1: f64) -> Vec<f64> {
         return vec![mu1];
     }
     let delta = 2.0 * (1.0 - 3.0 * mu1 * mu1) / (2.0 * levels as f64 - 2.0);
-    (0..levels).map(|i| (mu1 * mu1 + i as f64 * delta).sqrt()).collect()
+    (0..levels)
+        .map(|i| (mu1 * mu1 + i as f64 * delta).sqrt())
+        .collect()
 }
 
 /// Exponent triples a ≥ b ≥ c ≥ 0 with a + b + c = `half_degree`: the symmetric monomials
@@ -377,7 +422,9 @@ fn determinant(mut m: Vec<Vec<f64>>) -> f64 {
     let n = m.len();
     let mut det = 1.0;
     for col in 0..n {
-        let pivot = (col..n).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs())).unwrap_or(col);
+        let pivot = (col..n)
+            .max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))
+            .unwrap_or(col);
         if m[pivot][col] == 0.0 {
             return 0.0;
         }
@@ -438,7 +485,11 @@ fn octahedral_cells(level: usize) -> Vec<[DVec3; 3]> {
     let mut cells: Vec<[DVec3; 3]> = (0..8)
         .map(|octant| {
             let s = octant_sign(octant);
-            [DVec3::new(s.x, 0.0, 0.0), DVec3::new(0.0, s.y, 0.0), DVec3::new(0.0, 0.0, s.z)]
+            [
+                DVec3::new(s.x, 0.0, 0.0),
+                DVec3::new(0.0, s.y, 0.0),
+                DVec3::new(0.0, 0.0, s.z),
+            ]
         })
         .collect();
     for _ in 0..level {
@@ -483,7 +534,8 @@ mod tests {
             let fine = SphericalQuadrature::octahedral(level).unwrap();
             let coarse_cells = octahedral_cells(level - 1);
             for (m, d) in fine.directions().iter().enumerate() {
-                let [a, b, c] = coarse_cells[SphericalQuadrature::octahedral_parent(level, m).unwrap()];
+                let [a, b, c] =
+                    coarse_cells[SphericalQuadrature::octahedral_parent(level, m).unwrap()];
                 // Inside the spherical triangle: on the inner side of all three great circles.
                 let n = a.cross(b).dot(c).signum();
                 for (p, q) in [(a, b), (b, c), (c, a)] {

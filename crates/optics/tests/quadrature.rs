@@ -27,7 +27,8 @@ fn worst_monomial_error(q: &SphericalQuadrature, degree: u32) -> f64 {
     for a in 0..=degree {
         for b in 0..=degree - a {
             for c in 0..=degree - a - b {
-                let err = (q.integrate(|d| monomial(d, a, b, c)) - monomial_integral(a, b, c)).abs();
+                let err =
+                    (q.integrate(|d| monomial(d, a, b, c)) - monomial_integral(a, b, c)).abs();
                 worst = worst.max(err);
             }
         }
@@ -36,7 +37,9 @@ fn worst_monomial_error(q: &SphericalQuadrature, degree: u32) -> f64 {
 }
 
 fn all_quadratures() -> Vec<SphericalQuadrature> {
-    let mut all: Vec<_> = (1..=8).map(|k| SphericalQuadrature::level_symmetric(2 * k).unwrap()).collect();
+    let mut all: Vec<_> = (1..=8)
+        .map(|k| SphericalQuadrature::level_symmetric(2 * k).unwrap())
+        .collect();
     all.extend((0..=4).map(|l| SphericalQuadrature::octahedral(l).unwrap()));
     all.extend([2, 10, 100, 1000].map(|n| SphericalQuadrature::fibonacci(n).unwrap()));
     all
@@ -46,9 +49,23 @@ fn all_quadratures() -> Vec<SphericalQuadrature> {
 fn weights_sum_to_4pi_are_positive_and_directions_are_unit() {
     for q in all_quadratures() {
         let total: f64 = q.weights().iter().sum();
-        assert!((total - 4.0 * PI).abs() < 1e-12, "{:?}: Σw = {total}", q.family());
-        assert!(q.weights().iter().all(|&w| w > 0.0), "{:?} has a non-positive weight", q.family());
-        assert!(q.directions().iter().all(|d| (d.length() - 1.0).abs() < 1e-14), "{:?}", q.family());
+        assert!(
+            (total - 4.0 * PI).abs() < 1e-12,
+            "{:?}: Σw = {total}",
+            q.family()
+        );
+        assert!(
+            q.weights().iter().all(|&w| w > 0.0),
+            "{:?} has a non-positive weight",
+            q.family()
+        );
+        assert!(
+            q.directions()
+                .iter()
+                .all(|d| (d.length() - 1.0).abs() < 1e-14),
+            "{:?}",
+            q.family()
+        );
         assert_eq!(q.directions().len(), q.weights().len());
     }
 }
@@ -56,7 +73,12 @@ fn weights_sum_to_4pi_are_positive_and_directions_are_unit() {
 #[test]
 fn first_moment_vanishes() {
     for q in all_quadratures() {
-        let first: DVec3 = q.directions().iter().zip(q.weights()).map(|(&d, &w)| w * d).sum();
+        let first: DVec3 = q
+            .directions()
+            .iter()
+            .zip(q.weights())
+            .map(|(&d, &w)| w * d)
+            .sum();
         assert!(first.length() < 1e-13, "{:?}: Σ w ω = {first}", q.family());
     }
 }
@@ -66,17 +88,34 @@ fn polynomials_up_to_the_design_degree_are_exact() {
     for q in all_quadratures() {
         let degree = q.design_degree();
         let err = worst_monomial_error(&q, degree);
-        assert!(err < 1e-12, "{:?}: error {err:e} at degree ≤ {degree}", q.family());
+        assert!(
+            err < 1e-12,
+            "{:?}: error {err:e} at degree ≤ {degree}",
+            q.family()
+        );
         // ...and the design degree is not understated by more than one: the next even degree
         // is no longer exact (odd degrees vanish by symmetry for every set here).
         let next_even = degree + 1 + (degree + 1) % 2;
-        assert!(worst_monomial_error(&q, next_even) > 1e-9, "{:?}: exact beyond degree {degree}", q.family());
+        assert!(
+            worst_monomial_error(&q, next_even) > 1e-9,
+            "{:?}: exact beyond degree {degree}",
+            q.family()
+        );
     }
 }
 
 #[test]
 fn level_symmetric_sizes_degrees_and_classical_cosines() {
-    for (n, degree) in [(2, 3), (4, 5), (6, 7), (8, 9), (10, 11), (12, 11), (14, 15), (16, 15)] {
+    for (n, degree) in [
+        (2, 3),
+        (4, 5),
+        (6, 7),
+        (8, 9),
+        (10, 11),
+        (12, 11),
+        (14, 15),
+        (16, 15),
+    ] {
         let q = SphericalQuadrature::level_symmetric(n).unwrap();
         assert_eq!(q.len(), n * (n + 2));
         assert_eq!(q.design_degree(), degree, "S{n}");
@@ -84,10 +123,18 @@ fn level_symmetric_sizes_degrees_and_classical_cosines() {
     }
     // Where the moment equations determine μ1, the solved value reproduces the classical
     // 7-digit tables (Lewis & Miller table 4-1) to their last digit.
-    for (n, classical) in [(4, 0.3500212), (6, 0.2666355), (8, 0.2182179), (10, 0.1893213)] {
+    for (n, classical) in [
+        (4, 0.3500212),
+        (6, 0.2666355),
+        (8, 0.2182179),
+        (10, 0.1893213),
+    ] {
         let q = SphericalQuadrature::level_symmetric(n).unwrap();
         let mu1 = q.directions().iter().map(|d| d.x.abs()).fold(1.0, f64::min);
-        assert!((mu1 - classical).abs() < 1e-7, "S{n}: μ1 = {mu1}, classical {classical}");
+        assert!(
+            (mu1 - classical).abs() < 1e-7,
+            "S{n}: μ1 = {mu1}, classical {classical}"
+        );
     }
     // Every direction sits in a proper octant, N(N+2)/8 per octant.
     let q = SphericalQuadrature::level_symmetric(8).unwrap();
@@ -112,7 +159,10 @@ fn octahedral_levels_are_nested() {
             summed[SphericalQuadrature::octahedral_parent(level, m).unwrap()] += w;
         }
         for (s, w) in summed.iter().zip(coarse.weights()) {
-            assert!((s - w).abs() < 1e-14, "level {level}: children {s} vs parent {w}");
+            assert!(
+                (s - w).abs() < 1e-14,
+                "level {level}: children {s} vs parent {w}"
+            );
         }
     }
     assert_eq!(SphericalQuadrature::octahedral(0).unwrap().len(), 8);
@@ -128,10 +178,15 @@ fn octahedral_and_fibonacci_converge_beyond_their_design_degree() {
     let f = |d: DVec3| a.dot(d).exp();
     // Octahedral: second order in the cell size h ∝ 2^-level, so the error falls ~4× a level.
     // (Level 1 → 2 is pre-asymptotic, ratio 7.)
-    let errors: Vec<f64> = (2..=6).map(|l| (SphericalQuadrature::octahedral(l).unwrap().integrate(f) - exact).abs()).collect();
+    let errors: Vec<f64> = (2..=6)
+        .map(|l| (SphericalQuadrature::octahedral(l).unwrap().integrate(f) - exact).abs())
+        .collect();
     for pair in errors.windows(2) {
         let ratio = pair[0] / pair[1];
-        assert!((3.0..5.5).contains(&ratio), "octahedral error ratio {ratio} ({errors:?})");
+        assert!(
+            (3.0..5.5).contains(&ratio),
+            "octahedral error ratio {ratio} ({errors:?})"
+        );
     }
     // Fibonacci: no exactness to rely on, and the error wanders with n (the lattice's
     // discrepancy is not monotone), but it stays below C/n: measured C ≈ 2–4 for this

@@ -5,7 +5,9 @@
 //! rounding (plus nothing else).
 
 use lucent_optics::materials::JENSEN_2001;
-use lucent_optics::{Dielectric, DiffuseFresnel, DiffusionMedium, MeasuredMaterial, OpticalCoefficients};
+use lucent_optics::{
+    Dielectric, DiffuseFresnel, DiffusionMedium, MeasuredMaterial, OpticalCoefficients,
+};
 
 /// |actual − printed| ≤ half a unit in the last printed digit of a value with `digits`
 /// significant digits.
@@ -31,7 +33,12 @@ fn marble(channel: usize) -> DiffusionMedium {
 fn t1_hemispherical_transmittance_and_boundary_factor() {
     for (eta, transmittance) in [(1.3, 0.9389), (1.5, 0.9082)] {
         let boundary = Dielectric::new(eta).unwrap();
-        assert_printed(boundary.hemispherical_transmittance(), transmittance, 4, "hemispherical F_t");
+        assert_printed(
+            boundary.hemispherical_transmittance(),
+            transmittance,
+            4,
+            "hemispherical F_t",
+        );
     }
     // Note 002 §2.3: (η, F_dr fit, A fit, F_dr exact, A exact).
     for (eta, f_fit, a_fit, f_exact, a_exact) in [
@@ -41,10 +48,30 @@ fn t1_hemispherical_transmittance_and_boundary_factor() {
         (1.5, 0.5967, 3.9595, 0.5963, 3.9547),
     ] {
         let b = Dielectric::new(eta).unwrap();
-        assert_printed(b.diffuse_reflectance(DiffuseFresnel::Groenhuis).unwrap(), f_fit, 4, "F_dr fit");
-        assert_printed(b.boundary_factor(DiffuseFresnel::Groenhuis).unwrap(), a_fit, 5, "A fit");
-        assert_printed(b.diffuse_reflectance(DiffuseFresnel::Exact).unwrap(), f_exact, 4, "F_dr exact");
-        assert_printed(b.boundary_factor(DiffuseFresnel::Exact).unwrap(), a_exact, 5, "A exact");
+        assert_printed(
+            b.diffuse_reflectance(DiffuseFresnel::Groenhuis).unwrap(),
+            f_fit,
+            4,
+            "F_dr fit",
+        );
+        assert_printed(
+            b.boundary_factor(DiffuseFresnel::Groenhuis).unwrap(),
+            a_fit,
+            5,
+            "A fit",
+        );
+        assert_printed(
+            b.diffuse_reflectance(DiffuseFresnel::Exact).unwrap(),
+            f_exact,
+            4,
+            "F_dr exact",
+        );
+        assert_printed(
+            b.boundary_factor(DiffuseFresnel::Exact).unwrap(),
+            a_exact,
+            5,
+            "A exact",
+        );
     }
 }
 
@@ -56,7 +83,10 @@ fn exact_diffuse_reflectance_obeys_the_reciprocity_relation() {
         let b = Dielectric::new(eta).unwrap();
         let internal = b.diffuse_reflectance(DiffuseFresnel::Exact).unwrap();
         let external_t = b.hemispherical_transmittance();
-        assert!(((1.0 - internal) - external_t / (eta * eta)).abs() < 1e-12, "eta {eta}");
+        assert!(
+            ((1.0 - internal) - external_t / (eta * eta)).abs() < 1e-12,
+            "eta {eta}"
+        );
     }
 }
 
@@ -102,7 +132,10 @@ fn t3_dipole_reflectance_profile() {
         for (channel, &printed) in values.iter().enumerate() {
             let actual = marble(channel).dipole().reflectance_profile(r);
             // The issue asks for 1e-4 relative; five printed digits allow ≤ 5e-5 relative.
-            assert!(((actual - printed) / printed).abs() < 1e-4, "R_d({r}) channel {channel}: {actual} vs {printed}");
+            assert!(
+                ((actual - printed) / printed).abs() < 1e-4,
+                "R_d({r}) channel {channel}: {actual} vs {printed}"
+            );
         }
     }
 }
@@ -121,24 +154,34 @@ fn t4_total_reflectance_and_its_radial_integral() {
     for (name, rho) in table {
         let material = MeasuredMaterial::by_name(name).unwrap();
         for (channel, &printed) in rho.iter().enumerate() {
-            let medium =
-                DiffusionMedium::with_boundary(material.channel(channel, 0.0).unwrap(), boundary, DiffuseFresnel::Groenhuis)
-                    .unwrap();
+            let medium = DiffusionMedium::with_boundary(
+                material.channel(channel, 0.0).unwrap(),
+                boundary,
+                DiffuseFresnel::Groenhuis,
+            )
+            .unwrap();
             let dipole = medium.dipole();
-            assert!((dipole.total_reflectance() - printed).abs() <= 0.5e-3, "{name} {channel}");
+            assert!(
+                (dipole.total_reflectance() - printed).abs() <= 0.5e-3,
+                "{name} {channel}"
+            );
             // ρ = ∫ 2πr R_d(r) dr: the closed form must match quadrature of the profile to 1e-6
             // (the note's own check). Substituting r = t/(1 − t) maps [0, ∞) to [0, 1).
             let integral = lucent_optics::integrate::adaptive(
                 |t| {
                     let r = t / (1.0 - t);
-                    2.0 * std::f64::consts::PI * r * dipole.reflectance_profile(r) / ((1.0 - t) * (1.0 - t))
+                    2.0 * std::f64::consts::PI * r * dipole.reflectance_profile(r)
+                        / ((1.0 - t) * (1.0 - t))
                 },
                 0.0,
                 1.0 - 1e-12,
                 1e-10,
                 0.0,
             );
-            assert!((integral - dipole.total_reflectance()).abs() < 1e-6, "{name} {channel}: {integral}");
+            assert!(
+                (integral - dipole.total_reflectance()).abs() < 1e-6,
+                "{name} {channel}: {integral}"
+            );
         }
     }
     // Marble with η = 1.5 reproduces Jensen's published (0.83, 0.79, 0.75).
@@ -166,11 +209,17 @@ fn t5_exact_robin_half_space_reflectance() {
     for (name, rho) in table {
         let material = MeasuredMaterial::by_name(name).unwrap();
         for (channel, &printed) in rho.iter().enumerate() {
-            let medium =
-                DiffusionMedium::with_boundary(material.channel(channel, 0.0).unwrap(), boundary, DiffuseFresnel::Groenhuis)
-                    .unwrap();
+            let medium = DiffusionMedium::with_boundary(
+                material.channel(channel, 0.0).unwrap(),
+                boundary,
+                DiffuseFresnel::Groenhuis,
+            )
+            .unwrap();
             let exact = medium.dipole().total_reflectance_exact().unwrap();
-            assert!((exact - printed).abs() <= 0.5e-5 * (1.0 + 1e-9), "{name} {channel}: {exact} vs {printed}");
+            assert!(
+                (exact - printed).abs() <= 0.5e-5 * (1.0 + 1e-9),
+                "{name} {channel}: {exact} vs {printed}"
+            );
         }
     }
 }
@@ -178,8 +227,18 @@ fn t5_exact_robin_half_space_reflectance() {
 #[test]
 fn t6_infinite_medium_green_function() {
     let m = marble(0);
-    assert_printed(m.infinite_medium_fluence(1.0, 5.0).unwrap(), 5.815900e-2, 7, "phi(5)");
-    assert_printed(m.infinite_medium_fluence(1.0, 10.0).unwrap(), 1.615854e-2, 7, "phi(10)");
+    assert_printed(
+        m.infinite_medium_fluence(1.0, 5.0).unwrap(),
+        5.815900e-2,
+        7,
+        "phi(5)",
+    );
+    assert_printed(
+        m.infinite_medium_fluence(1.0, 10.0).unwrap(),
+        1.615854e-2,
+        7,
+        "phi(10)",
+    );
     assert!(m.infinite_medium_fluence(1.0, 0.0).is_err());
 }
 
@@ -194,9 +253,36 @@ fn t7_sphere_with_central_point_source() {
     .unwrap();
     // (medium, R, C, φ(R/4), φ(R/2), φ(R), escaped, absorbed)
     let cases = [
-        (marble(0), 10.0, -0.1688382, 1.455077e-1, 4.716763e-2, 3.214529e-3, 0.776210, 0.223790),
-        (marble(0), 5.0, -0.6571997, 3.209014e-1, 1.150398e-1, 1.537528e-2, 0.928164, 0.071836),
-        (skin_red, 5.0, 6.888845e-3, 1.052657e-1, 3.769908e-2, 9.912175e-3, 0.598371, 0.401629),
+        (
+            marble(0),
+            10.0,
+            -0.1688382,
+            1.455077e-1,
+            4.716763e-2,
+            3.214529e-3,
+            0.776210,
+            0.223790,
+        ),
+        (
+            marble(0),
+            5.0,
+            -0.6571997,
+            3.209014e-1,
+            1.150398e-1,
+            1.537528e-2,
+            0.928164,
+            0.071836,
+        ),
+        (
+            skin_red,
+            5.0,
+            6.888845e-3,
+            1.052657e-1,
+            3.769908e-2,
+            9.912175e-3,
+            0.598371,
+            0.401629,
+        ),
     ];
     for (medium, radius, c, q, h, full, escaped, absorbed) in cases {
         let sphere = medium.sphere(radius).unwrap();
@@ -205,8 +291,14 @@ fn t7_sphere_with_central_point_source() {
         assert_printed(sphere.fluence(radius / 2.0).unwrap(), h, 7, "phi(R/2)");
         assert_printed(sphere.fluence(radius).unwrap(), full, 7, "phi(R)");
         // Printed with six decimals.
-        assert!((sphere.escaped_fraction() - escaped).abs() <= 0.5e-6, "escaped");
-        assert!((sphere.absorbed_fraction() - absorbed).abs() <= 0.5e-6, "absorbed");
+        assert!(
+            (sphere.escaped_fraction() - escaped).abs() <= 0.5e-6,
+            "escaped"
+        );
+        assert!(
+            (sphere.absorbed_fraction() - absorbed).abs() <= 0.5e-6,
+            "absorbed"
+        );
         // Energy balance is exact in closed form.
         assert!((sphere.escaped_fraction() + sphere.absorbed_fraction() - 1.0).abs() < 1e-12);
         assert!(sphere.fluence(1.01 * radius).is_err());
@@ -217,7 +309,12 @@ fn t7_sphere_with_central_point_source() {
 fn t9_half_space_with_plane_source() {
     let m = marble(0);
     let half_space = m.half_space(m.z_r()).unwrap();
-    for (z, printed) in [(0.0, 4.512810), (m.z_r(), 7.122021), (1.0, 6.681108), (5.0, 4.175425)] {
+    for (z, printed) in [
+        (0.0, 4.512810),
+        (m.z_r(), 7.122021),
+        (1.0, 6.681108),
+        (5.0, 4.175425),
+    ] {
         assert_printed(half_space.fluence(z).unwrap(), printed, 7, "phi(z)");
     }
     assert_printed(half_space.exitance(), 0.867159, 6, "exitance");
@@ -225,7 +322,12 @@ fn t9_half_space_with_plane_source() {
 
 #[test]
 fn t10_slab_totals() {
-    for (d, r, t) in [(1.0, 0.512925, 0.479010), (2.0, 0.643055, 0.340486), (5.0, 0.786701, 0.173053), (20.0, 0.864679, 0.023519)] {
+    for (d, r, t) in [
+        (1.0, 0.512925, 0.479010),
+        (2.0, 0.643055, 0.340486),
+        (5.0, 0.786701, 0.173053),
+        (20.0, 0.864679, 0.023519),
+    ] {
         let slab = marble(0).slab(d).unwrap();
         assert_printed(slab.total_reflectance(), r, 6, "slab R");
         assert_printed(slab.total_transmittance(), t, 5, "slab T");
@@ -239,7 +341,8 @@ fn t10_slab_totals() {
 
 #[test]
 fn closed_forms_refuse_what_they_cannot_represent() {
-    let no_absorption = DiffusionMedium::new(OpticalCoefficients::new(0.0, 1.0, 0.0).unwrap(), 2.0).unwrap();
+    let no_absorption =
+        DiffusionMedium::new(OpticalCoefficients::new(0.0, 1.0, 0.0).unwrap(), 2.0).unwrap();
     assert!(no_absorption.sphere(1.0).is_err());
     assert!(no_absorption.half_space(1.0).is_err());
     assert!(marble(0).sphere(-1.0).is_err());
@@ -266,10 +369,17 @@ fn measured_table_matches_the_anchors() {
         let m = MeasuredMaterial::by_name(name).unwrap();
         for (channel, &a) in albedo.iter().enumerate() {
             let c = m.channel(channel, 0.0).unwrap();
-            assert!((c.albedo_reduced() - a).abs() <= 0.5e-3 + 1e-12, "{name} {channel}: {}", c.albedo_reduced());
+            assert!(
+                (c.albedo_reduced() - a).abs() <= 0.5e-3 + 1e-12,
+                "{name} {channel}: {}",
+                c.albedo_reduced()
+            );
         }
     }
     // Unit conversion: marble in cm⁻¹ is ten times denser.
-    let cm = MeasuredMaterial::by_name("marble").unwrap().rgb(0.0, 10.0).unwrap();
+    let cm = MeasuredMaterial::by_name("marble")
+        .unwrap()
+        .rgb(0.0, 10.0)
+        .unwrap();
     assert!((cm[0].sigma_a() - 0.021).abs() < 1e-15);
 }

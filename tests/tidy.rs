@@ -1,0 +1,140 @@
+//! Checks of the repository itself (rust-analyzer's "tidy" tests): the conventions that
+//! keep lucent navigable are enforced, not hoped for. Run alone with `cargo xtask tidy`.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+/// The README's test command; `.ci/run` must run exactly this.
+const TEST_COMMAND: &str = "cargo test --workspace";
+/// The README's main job.
+const RUN_COMMAND: &str = "cargo run --release";
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn read(path: impl AsRef<Path>) -> String {
+    let path = root().join(path);
+    fs::read_to_string(&path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()))
+}
+
+fn crate_dirs() -> Vec<PathBuf> {
+    let mut dirs: Vec<PathBuf> = fs::read_dir(root().join("crates"))
+        .expect("crates/ exists")
+        .map(|e| e.expect("readable entry").path())
+        .filter(|p| p.join("Cargo.toml").exists())
+        .collect();
+    dirs.sort();
+    dirs
+}
+
+fn package_name(crate_dir: &Path) -> String {
+    let manifest = fs::read_to_string(crate_dir.join("Cargo.toml")).expect("manifest");
+    manifest
+        .lines()
+        .find_map(|l| {
+            l.strip_prefix("name = \"")
+                .and_then(|r| r.strip_suffix('"'))
+        })
+        .unwrap_or_else(|| panic!("no package name in {}", crate_dir.display()))
+        .to_owned()
+}
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        if path.is_dir() && path.file_name().is_some_and(|n| n != "target") {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path);
+        }
+    }
+}
+
+#[test]
+fn every_crate_starts_with_a_doc_comment_and_has_an_example() {
+    for dir in crate_dirs() {
+        let lib = fs::read_to_string(dir.join("src/lib.rs")).expect("lib.rs");
+        assert!(
+            lib.starts_with("//!"),
+            "{}: lib.rs must open with a //! doc comment",
+            dir.display()
+        );
+        let mut examples = Vec::new();
+        rust_files(&dir.join("examples"), &mut examples);
+        assert!(
+            !examples.is_empty(),
+            "{}: every crate has a runnable example of using it alone",
+            dir.display()
+        );
+    }
+}
+
+#[test]
+fn architecture_lists_every_crate() {
+    let architecture = read("ARCHITECTURE.md");
+    let readme = read("README.md");
+    for dir in crate_dirs() {
+        let name = package_name(&dir);
+        assert!(
+            architecture.contains(&format!("`{name}`")),
+            "ARCHITECTURE.md does not describe `{name}`"
+        );
+        assert!(
+            readme.contains(&format!("`{name}`")),
+            "README.md's crate map does not list `{name}`"
+        );
+    }
+}
+
+#[test]
+fn readme_and_ci_agree_on_the_commands() {
+    let readme = read("README.md");
+    let ci = read(".ci/run");
+    assert!(
+        readme.contains(TEST_COMMAND) && readme.contains(RUN_COMMAND),
+        "README must give both commands"
+    );
+    assert!(
+        ci.lines().any(|l| l.trim() == TEST_COMMAND),
+        ".ci/run must run exactly `{TEST_COMMAND}`"
+    );
+    assert!(ci.contains("set -euo pipefail"));
+}
+
+#[test]
+fn no_debugging_leftovers() {
+    let mut files = Vec::new();
+    for dir in ["crates", "src", "xtask", "benches", "examples", "tests"] {
+        rust_files(&root().join(dir), &mut files);
+    }
+    let this_file = root().join(file!());
+    // Spelled in pieces so that this file does not match itself.
+    let forbidden = [
+        concat!("dbg", "!("),
+        concat!("todo", "!("),
+        concat!("unimplemented", "!("),
+    ];
+    for file in files.iter().filter(|f| **f != this_file) {
+        let text = fs::read_to_string(file).expect("source");
+        for pattern in forbidden {
+            assert!(
+                !text.contains(pattern),
+                "{} contains {pattern}",
+                file.display()
+            );
+        }
+    }
+}
+
+#[test]
+fn benchmarks_md_has_its_table() {
+    let benchmarks = read("BENCHMARKS.md");
+    assert!(
+        benchmarks.contains("| what | command | machine | result | date |"),
+        "BENCHMARKS.md must keep the what/command/machine/result/date table"
+    );
+}
