@@ -19,14 +19,20 @@ fn assert_printed(actual: f64, printed: f64, digits: i32, what: &str) {
     );
 }
 
-fn marble(channel: usize) -> DiffusionMedium {
-    let material = MeasuredMaterial::by_name("marble").unwrap();
+/// One channel of a measured material behind a surface of index `eta`, with the
+/// Groenhuis A that the note's values use.
+fn medium(name: &str, channel: usize, eta: f64) -> DiffusionMedium {
+    let material = MeasuredMaterial::by_name(name).unwrap();
     DiffusionMedium::with_boundary(
         material.channel(channel, 0.0).unwrap(),
-        Dielectric::new(1.3).unwrap(),
+        Dielectric::new(eta).unwrap(),
         DiffuseFresnel::Groenhuis,
     )
     .unwrap()
+}
+
+fn marble(channel: usize) -> DiffusionMedium {
+    medium("marble", channel, 1.3)
 }
 
 #[test]
@@ -109,12 +115,7 @@ fn t2_marble_derived_parameters() {
         assert_printed(m.z_v(), zv, 7, "z_v");
     }
     // With η = 1.5, z_v for the red channel.
-    let m15 = DiffusionMedium::with_boundary(
-        *marble(0).coefficients(),
-        Dielectric::new(1.5).unwrap(),
-        DiffuseFresnel::Groenhuis,
-    )
-    .unwrap();
+    let m15 = medium("marble", 0, 1.5);
     assert_printed(m15.z_v(), 2.864527, 7, "z_v at eta 1.5");
 }
 
@@ -150,16 +151,9 @@ fn t4_total_reflectance_and_its_radial_integral() {
         ("apple", [0.846, 0.841, 0.528]),
         ("wholemilk", [0.908, 0.881, 0.759]),
     ];
-    let boundary = Dielectric::new(1.3).unwrap();
     for (name, rho) in table {
-        let material = MeasuredMaterial::by_name(name).unwrap();
         for (channel, &printed) in rho.iter().enumerate() {
-            let medium = DiffusionMedium::with_boundary(
-                material.channel(channel, 0.0).unwrap(),
-                boundary,
-                DiffuseFresnel::Groenhuis,
-            )
-            .unwrap();
+            let medium = medium(name, channel, 1.3);
             let dipole = medium.dipole();
             assert!(
                 (dipole.total_reflectance() - printed).abs() <= 0.5e-3,
@@ -185,14 +179,8 @@ fn t4_total_reflectance_and_its_radial_integral() {
         }
     }
     // Marble with η = 1.5 reproduces Jensen's published (0.83, 0.79, 0.75).
-    let material = MeasuredMaterial::by_name("marble").unwrap();
     for (channel, printed) in [0.830, 0.791, 0.753].into_iter().enumerate() {
-        let medium = DiffusionMedium::with_boundary(
-            material.channel(channel, 0.0).unwrap(),
-            Dielectric::new(1.5).unwrap(),
-            DiffuseFresnel::Groenhuis,
-        )
-        .unwrap();
+        let medium = medium("marble", channel, 1.5);
         assert!((medium.dipole().total_reflectance() - printed).abs() <= 0.5e-3);
     }
 }
@@ -205,16 +193,9 @@ fn t5_exact_robin_half_space_reflectance() {
         ("ketchup", [0.12441, 0.00324, 0.00092]),
         ("skin1", [0.41800, 0.18899, 0.09375]),
     ];
-    let boundary = Dielectric::new(1.3).unwrap();
     for (name, rho) in table {
-        let material = MeasuredMaterial::by_name(name).unwrap();
         for (channel, &printed) in rho.iter().enumerate() {
-            let medium = DiffusionMedium::with_boundary(
-                material.channel(channel, 0.0).unwrap(),
-                boundary,
-                DiffuseFresnel::Groenhuis,
-            )
-            .unwrap();
+            let medium = medium(name, channel, 1.3);
             let exact = medium.dipole().total_reflectance_exact().unwrap();
             assert!(
                 (exact - printed).abs() <= 0.5e-5 * (1.0 + 1e-9),
@@ -244,13 +225,7 @@ fn t6_infinite_medium_green_function() {
 
 #[test]
 fn t7_sphere_with_central_point_source() {
-    let skin1 = MeasuredMaterial::by_name("skin1").unwrap();
-    let skin_red = DiffusionMedium::with_boundary(
-        skin1.channel(0, 0.0).unwrap(),
-        Dielectric::new(1.3).unwrap(),
-        DiffuseFresnel::Groenhuis,
-    )
-    .unwrap();
+    let skin_red = medium("skin1", 0, 1.3);
     // (medium, R, C, φ(R/4), φ(R/2), φ(R), escaped, absorbed)
     let cases = [
         (
