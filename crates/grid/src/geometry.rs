@@ -1,0 +1,164 @@
+//! Where a grid's cells are in the world.
+
+use glam::DVec3;
+
+use crate::error::GridError;
+
+/// The geometry of a cell-centred grid: `dims` cells of size `spacing` (anisotropic allowed)
+/// starting at the corner `origin`, stored x-fastest.
+///
+/// Cell (i, j, k) covers `origin + [i, i+1)·h_x × [j, j+1)·h_y × [k, k+1)·h_z`; its value
+/// lives at the centre `origin + (i + ½, j + ½, k + ½)·h`. The linear index is
+/// `i + n_x (j + n_y k)`, so a z-slab of `n_x n_y` values is contiguous.
+///
+/// Continuous *voxel coordinates* put cell centres on integers: world point p has voxel
+/// coordinate (p − origin)/h − ½.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridGeometry {
+    dims: [usize; 3],
+    spacing: DVec3,
+    origin: DVec3,
+}
+
+impl GridGeometry {
+    /// A geometry with at least one cell per axis, finite positive spacing and a finite
+    /// origin. The cell count must fit in `usize` and in 2⁴⁰ (a terabyte of f32): anything
+    /// larger is a corrupt header, not a volume.
+    pub fn new(dims: [usize; 3], spacing: DVec3, origin: DVec3) -> Result<Self, GridError> {
+        if dims.contains(&0) {
+            return Err(GridError::InvalidGeometry(format!(
+                "dims {dims:?} must all be at least 1"
+            )));
+        }
+        if voxel_count(dims).is_none_or(|n| n > MAX_VOXELS) {
+            return Err(GridError::InvalidGeometry(format!(
+                "dims {dims:?} exceed 2^40 cells"
+            )));
+        }
+        if !spacing.is_finite() || spacing.min_element() <= 0.0 {
+            return Err(GridError::InvalidGeometry(format!(
+                "spacing {spacing} must be finite and positive"
+            )));
+        }
+        if !origin.is_finite() {
+            return Err(GridError::InvalidGeometry(format!(
+                "origin {origin} must be finite"
+            )));
+        }
+        Ok(Self {
+            dims,
+            spacing,
+            origin,
+        })
+    }
+
+    /// `dims` cells filling the box [`min`, `max`].
+    pub fn from_bounds(dims: [usize; 3], min: DVec3, max: DVec3) -> Result<Self, GridError> {
+        let extent = max - min;
+        let n = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
+        Self::new(dims, extent / n, min)
+    }
+
+    /// Cells per axis.
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    /// Cell size per axis (scene units).
+    pub fn spacing(&self) -> DVec3 {
+        self.spacing
+    }
+
+    /// The corner of cell (0, 0, 0).
+    pub fn origin(&self) -> DVec3 {
+        self.origin
+    }
+
+    /// Total number of cells.
+    pub fn voxel_count(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+
+    /// Values in one z-slab, n_x n_y.
+    pub fn slab_len(&self) -> usize {
+        self.dims[0] * self.dims[1]
+    }
+
+    /// Volume of one cell.
+    pub fn cell_volume(&self) -> f64 {
+        self.spacing.x * self.spacing.y * self.spacing.z
+    }
+
+    /// Linear index of cell (i, j, k), x-fastest. The caller keeps indices in range.
+    #[inline]
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+
+    /// (i, j, k) of a linear index.
+    #[inline]
+    pub fn coords(&self, index: usize) -> [usize; 3] {
+        let slab = self.slab_len();
+        [
+            index % self.dims[0],
+            (index % slab) / self.dims[0],
+            index / slab,
+        ]
+    }
+
+    /// World position of the centre of cell (i, j, k).
+    #[inline]
+    pub fn cell_centre(&self, i: usize, j: usize, k: usize) -> DVec3 {
+        self.origin + (DVec3::new(i as f64, j as f64, k as f64) + 0.5) * self.spacing
+    }
+
+    /// Continuous voxel coordinate of a world point (cell centres at integers).
+    #[inline]
+    pub fn world_to_voxel(&self, p: DVec3) -> DVec3 {
+        (p - self.origin) / self.spacing - 0.5
+    }
+
+    /// World point of a continuous voxel coordinate.
+    #[inline]
+    pub fn voxel_to_world(&self, v: DVec3) -> DVec3 {
+        self.origin + (v + 0.5) * self.spacing
+    }
+
+    /// The world-space box covered by the cells: (min corner, max corner).
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        (self.origin, self.origin + self.extent())
+    }
+
+    /// Size of the box covered by the cells.
+    pub fn extent(&self) -> DVec3 {
+        DVec3::new(
+            self.dims[0] as f64,
+            self.dims[1] as f64,
+            self.dims[2] as f64,
+        ) * self.spacing
+    }
+
+    /// The geometry one level coarser: cells `factor` times larger, ⌈n/factor⌉ of them,
+    /// same origin (the last coarse cell sticks out when n is not a multiple of `factor`).
+    pub fn coarsened(&self, factor: usize) -> Result<Self, GridError> {
+        if factor == 0 {
+            return Err(GridError::InvalidParameter {
+                name: "factor",
+                reason: "must be at least 1".into(),
+            });
+        }
+        Self::new(
+            self.dims.map(|n| n.div_ceil(factor)),
+            self.spacing * factor as f64,
+            self.origin,
+        )
+    }
+}
+
+/// The most cells a grid may have: 2⁴⁰.
+pub const MAX_VOXELS: usize = 1 << 40;
+
+/// n_x n_y n_z, or `None` on overflow.
+pub(crate) fn voxel_count(dims: [usize; 3]) -> Option<usize> {
+    dims[0].checked_mul(dims[1])?.checked_mul(dims[2])
+}

@@ -1,0 +1,182 @@
+//! NumPy `.npy` arrays, so researchers can load fields in Python with `np.load`.
+//!
+//! A grid is the C-order array `a[z, y, x]` of shape (n_z, n_y, n_x) (Fortran order, shape
+//! (n_x, n_y, n_z), is read too). `.npy` has no geometry: grids read back with unit spacing
+//! at the origin.
+
+use std::path::Path;
+
+use glam::DVec3;
+
+use super::{
+    Cursor, Endian, LoadOptions, ScalarType, checked_voxels, decode, encode, read_file, write_file,
+};
+use crate::dense::Grid;
+use crate::error::GridError;
+use crate::geometry::GridGeometry;
+
+const MAGIC: &[u8] = b"\x93NUMPY";
+
+/// Reads a `.npy` file holding a 3D array of a [`ScalarType`].
+pub fn read(path: impl AsRef<Path>, options: &LoadOptions) -> Result<Grid, GridError> {
+    let path = path.as_ref();
+    parse(&read_file(path, options)?, path, options)
+}
+
+fn malformed(path: &Path, reason: impl Into<String>) -> GridError {
+    GridError::Malformed {
+        path: path.to_owned(),
+        format: "npy",
+        reason: reason.into(),
+    }
+}
+
+/// Decodes a `.npy` file already in memory.
+pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, GridError> {
+    let mut c = Cursor::new(bytes, path);
+    if c.take(6, "magic")? != MAGIC {
+        return Err(malformed(path, "missing \\x93NUMPY magic"));
+    }
+    let major = c.u8("version")?;
+    let _minor = c.u8("version")?;
+    let header_len = match major {
+        1 => u16::from_le_bytes(c.array("header length")?) as usize,
+        2 | 3 => c.u32("header length")? as usize,
+        v => {
+            return Err(GridError::Unsupported {
+                path: path.to_owned(),
+                what: "npy version",
+                value: v.to_string(),
+            });
+        }
+    };
+    let header = std::str::from_utf8(c.take(header_len, "header")?)
+        .map_err(|_| malformed(path, "header is not text"))?;
+    let descr = dict_value(header, "descr").ok_or_else(|| malformed(path, "no 'descr'"))?;
+    let descr = descr.trim().trim_matches(|ch| ch == '\'' || ch == '"');
+    let (scalar, endian) = parse_descr(descr).ok_or_else(|| GridError::Unsupported {
+        path: path.to_owned(),
+        what: "npy dtype",
+        value: descr.to_owned(),
+    })?;
+    let fortran = dict_value(header, "fortran_order")
+        .ok_or_else(|| malformed(path, "no 'fortran_order'"))?
+        .trim()
+        == "True";
+    let shape_text = dict_value(header, "shape").ok_or_else(|| malformed(path, "no 'shape'"))?;
+    let shape: Vec<usize> = shape_text
+        .trim()
+        .trim_start_matches('(')
+        .trim_end_matches(')')
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| {
+            s.parse::<usize>()
+                .map_err(|_| malformed(path, format!("bad shape {shape_text}")))
+        })
+        .collect::<Result<_, _>>()?;
+    if shape.len() != 3 {
+        return Err(GridError::Unsupported {
+            path: path.to_owned(),
+            what: "array rank",
+            value: shape.len().to_string(),
+        });
+    }
+    let dims = if fortran {
+        [shape[0], shape[1], shape[2]]
+    } else {
+        [shape[2], shape[1], shape[0]]
+    };
+    let voxels = checked_voxels(path, "npy", dims)?;
+    options.reserve_voxels(path, voxels, scalar)?;
+    let expected = voxels * scalar.size() as u64;
+    if (c.remaining() as u64) != expected {
+        return Err(GridError::SizeMismatch {
+            path: path.to_owned(),
+            expected,
+            found: c.remaining() as u64,
+        });
+    }
+    let payload = c.take(expected as usize, "array data")?;
+    let geometry = GridGeometry::new(dims, DVec3::ONE, DVec3::ZERO)?;
+    Grid::from_vec(geometry, decode(payload, scalar, endian))
+}
+
+/// The text after `'key':` in a Python dict literal, up to the next top-level comma.
+fn dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
+    let start = header
+        .find(&format!("'{key}'"))
+        .or_else(|| header.find(&format!("\"{key}\"")))?
+        + key.len()
+        + 2;
+    let rest = header[start..].trim_start().strip_prefix(':')?;
+    let mut depth = 0i32;
+    for (i, ch) in rest.char_indices() {
+        match ch {
+            '(' | '[' => depth += 1,
+            ')' | ']' => depth -= 1,
+            ',' | '}' if depth <= 0 => return Some(&rest[..i]),
+            _ => {}
+        }
+    }
+    None
+}
+
+fn parse_descr(descr: &str) -> Option<(ScalarType, Endian)> {
+    let (order, code) = descr.split_at(descr.len().checked_sub(2)?);
+    let endian = match order {
+        "<" | "|" | "=" => Endian::Little,
+        ">" => Endian::Big,
+        _ => return None,
+    };
+    let scalar = match code {
+        "u1" => ScalarType::U8,
+        "i1" => ScalarType::I8,
+        "u2" => ScalarType::U16,
+        "i2" => ScalarType::I16,
+        "u4" => ScalarType::U32,
+        "i4" => ScalarType::I32,
+        "f2" => ScalarType::F16,
+        "f4" => ScalarType::F32,
+        "f8" => ScalarType::F64,
+        _ => return None,
+    };
+    Some((scalar, endian))
+}
+
+fn descr(scalar: ScalarType) -> &'static str {
+    match scalar {
+        ScalarType::U8 => "|u1",
+        ScalarType::I8 => "|i1",
+        ScalarType::U16 => "<u2",
+        ScalarType::I16 => "<i2",
+        ScalarType::U32 => "<u4",
+        ScalarType::I32 => "<i4",
+        ScalarType::F16 => "<f2",
+        ScalarType::F32 => "<f4",
+        ScalarType::F64 => "<f8",
+    }
+}
+
+/// Writes the grid as a C-order (n_z, n_y, n_x) array of `scalar` (format version 1.0,
+/// header padded to 64 bytes as NumPy does). Values the type cannot hold exactly are refused.
+pub fn write(path: impl AsRef<Path>, grid: &Grid, scalar: ScalarType) -> Result<(), GridError> {
+    let path = path.as_ref();
+    let [nx, ny, nz] = grid.dims();
+    let mut header = format!(
+        "{{'descr': '{}', 'fortran_order': False, 'shape': ({nz}, {ny}, {nx}), }}",
+        descr(scalar)
+    );
+    // magic (6) + version (2) + length (2) + header + '\n' must be a multiple of 64.
+    let unpadded = 10 + header.len() + 1;
+    header.push_str(&" ".repeat(unpadded.next_multiple_of(64) - unpadded));
+    header.push('\n');
+    let mut out = Vec::with_capacity(10 + header.len() + grid.data().len() * scalar.size());
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&[1, 0]);
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    out.extend_from_slice(&encode(path, grid.data(), scalar, Endian::Little)?);
+    write_file(path, &out)
+}
