@@ -7,6 +7,7 @@
 //! | module | crate | what it solves |
 //! |---|---|---|
 //! | [`optics`] | `lucent-optics` | coefficients, phase functions, spherical quadratures, Fresnel, analytic diffusion references |
+//! | [`grid`] | `lucent-grid` | dense and bricked voxel grids, resampling, transfer functions, procedural volumes, volume files |
 //!
 //! See `ARCHITECTURE.md` at the repository root for the crate map and the data flow
 //! volume → medium → problem → solver → solution → image.
@@ -19,4 +20,5 @@
 //! # Ok::<(), lucent::optics::OpticsError>(())
 //! ```
 
+pub use lucent_grid as grid;
 pub use lucent_optics as optics;

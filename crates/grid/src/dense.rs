@@ -137,17 +137,18 @@ impl Grid {
         let (i0, tx) = axis_lerp(v.x, nx);
         let (j0, ty) = axis_lerp(v.y, ny);
         let (k0, tz) = axis_lerp(v.z, nz);
-        let (i1, j1, k1) = (
-            (i0 + 1).min(nx - 1),
-            (j0 + 1).min(ny - 1),
-            (k0 + 1).min(nz - 1),
-        );
-        let at = |i, j, k| f64::from(self.data[self.geometry.index(i, j, k)]);
+        // One base index and three strides (0 along an axis of a single cell).
+        let base = self.geometry.index(i0, j0, k0);
+        let sx = usize::from(nx > 1);
+        let sy = if ny > 1 { nx } else { 0 };
+        let sz = if nz > 1 { nx * ny } else { 0 };
+        let d = &self.data;
+        let at = |offset: usize| f64::from(d[base + offset]);
         let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
-        let c00 = lerp(at(i0, j0, k0), at(i1, j0, k0), tx);
-        let c10 = lerp(at(i0, j1, k0), at(i1, j1, k0), tx);
-        let c01 = lerp(at(i0, j0, k1), at(i1, j0, k1), tx);
-        let c11 = lerp(at(i0, j1, k1), at(i1, j1, k1), tx);
+        let c00 = lerp(at(0), at(sx), tx);
+        let c10 = lerp(at(sy), at(sy + sx), tx);
+        let c01 = lerp(at(sz), at(sz + sx), tx);
+        let c11 = lerp(at(sz + sy), at(sz + sy + sx), tx);
         lerp(lerp(c00, c10, ty), lerp(c01, c11, ty), tz) as f32
     }
 
@@ -223,7 +224,8 @@ fn axis_lerp(v: f64, n: usize) -> (usize, f64) {
     if n == 1 || v.is_nan() {
         return (0, 0.0);
     }
+    // After clamping v ≥ 0, truncation is floor (and needs no libm call).
     let v = v.clamp(0.0, (n - 1) as f64);
-    let i0 = (v.floor() as usize).min(n - 2);
+    let i0 = (v as usize).min(n - 2);
     (i0, v - i0 as f64)
 }

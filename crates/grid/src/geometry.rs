@@ -18,6 +18,8 @@ pub struct GridGeometry {
     dims: [usize; 3],
     spacing: DVec3,
     origin: DVec3,
+    /// 1/spacing, so that sampling multiplies instead of dividing.
+    inv_spacing: DVec3,
 }
 
 impl GridGeometry {
@@ -49,6 +51,7 @@ impl GridGeometry {
             dims,
             spacing,
             origin,
+            inv_spacing: spacing.recip(),
         })
     }
 
@@ -115,7 +118,7 @@ impl GridGeometry {
     /// Continuous voxel coordinate of a world point (cell centres at integers).
     #[inline]
     pub fn world_to_voxel(&self, p: DVec3) -> DVec3 {
-        (p - self.origin) / self.spacing - 0.5
+        (p - self.origin) * self.inv_spacing - 0.5
     }
 
     /// World point of a continuous voxel coordinate.

@@ -79,7 +79,8 @@ pub fn prolong_constant(coarse: &Grid, fine_geometry: GridGeometry) -> Result<Gr
 /// centres, so each fine value is the tensor product of the 1D weights (¾, ¼) toward its
 /// nearest coarse neighbours. At the domain boundary the missing neighbour is extrapolated
 /// linearly (2u₀ − u₁), so every field linear in x, y, z is reproduced exactly, and
-/// `restrict(prolong_trilinear(c)) == c` for such fields.
+/// `restrict(prolong_trilinear(c)) == c` for such fields (given at least two coarse cells
+/// per axis: along an axis of one coarse cell the prolonged field is constant).
 pub fn prolong_trilinear(coarse: &Grid, fine_geometry: GridGeometry) -> Result<Grid, GridError> {
     check_refinement(coarse.geometry(), &fine_geometry)?;
     let cg = *coarse.geometry();

@@ -235,3 +235,34 @@ fn a_tiny_budget_is_refused_before_reading() {
         );
     }
 }
+
+#[test]
+fn mutated_smoke_vdb_never_panics() {
+    // The synthetic fuzz cases in formats.rs cannot reach deep into a VDB tree; mutating the
+    // real file can. Corrupt a few bytes of the topology and buffers, and cut the file short.
+    use rand::{Rng, SeedableRng};
+    let Some(dir) = data_dir() else { return };
+    let original = std::fs::read(dir.join("smoke.vdb")).unwrap();
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(222);
+    let options = LoadOptions {
+        memory_budget: 1 << 28,
+    };
+    for case in 0..48 {
+        let mut bytes = original.clone();
+        for _ in 0..rng.random_range(1..5) {
+            // Half the edits in the header and topology (first 64 KiB), half anywhere.
+            let limit = if case % 2 == 0 { 65_536 } else { bytes.len() };
+            let pos = rng.random_range(0..limit);
+            bytes[pos] = rng.random();
+        }
+        if case % 3 == 0 {
+            bytes.truncate(rng.random_range(0..bytes.len()));
+        }
+        let _ = io::vdb::parse(
+            &bytes,
+            std::path::Path::new("smoke-mutated.vdb"),
+            None,
+            &options,
+        );
+    }
+}

@@ -18,7 +18,6 @@ use super::{
 };
 use crate::dense::Grid;
 use crate::error::GridError;
-use crate::geometry::GridGeometry;
 
 fn malformed(path: &Path, reason: impl Into<String>) -> GridError {
     GridError::Malformed {
@@ -162,7 +161,7 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, G
         .or(triple("Origin")?)
         .or(triple("Position")?)
         .unwrap_or(DVec3::ZERO);
-    let geometry = GridGeometry::new(dims, spacing, first - 0.5 * spacing)?;
+    let geometry = super::geometry(path, "MetaImage", dims, spacing, first - 0.5 * spacing)?;
     let msb = field("ElementByteOrderMSB")
         .or(field("BinaryDataByteOrderMSB"))
         .unwrap_or("False");

@@ -105,11 +105,13 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Vec<Gri
         DVec3::new(bbox[3].into(), bbox[4].into(), bbox[5].into()),
     );
     let usable = min.is_finite() && max.is_finite() && (max - min).min_element() > 1e-30;
-    let geometry = if usable {
-        GridGeometry::from_bounds(dims, min, max)?
+    let (min, max) = if usable {
+        (min, max)
     } else {
-        GridGeometry::from_bounds(dims, DVec3::ZERO, DVec3::ONE)?
+        (DVec3::ZERO, DVec3::ONE)
     };
+    let geometry =
+        GridGeometry::from_bounds(dims, min, max).map_err(|e| malformed(e.to_string()))?;
     let values = decode(
         c.take(expected as usize, "voxel data")?,
         ScalarType::F32,

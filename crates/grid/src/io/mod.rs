@@ -438,3 +438,18 @@ pub(crate) fn checked_voxels(
             reason: format!("dimensions {dims:?} are zero or absurdly large"),
         })
 }
+
+/// A geometry from a file's header; an invalid one is a malformed file, named.
+pub(crate) fn geometry(
+    path: &Path,
+    format: &'static str,
+    dims: [usize; 3],
+    spacing: glam::DVec3,
+    origin: glam::DVec3,
+) -> Result<crate::geometry::GridGeometry, GridError> {
+    crate::geometry::GridGeometry::new(dims, spacing, origin).map_err(|e| GridError::Malformed {
+        path: path.to_owned(),
+        format,
+        reason: e.to_string(),
+    })
+}

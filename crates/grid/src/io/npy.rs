@@ -13,7 +13,6 @@ use super::{
 };
 use crate::dense::Grid;
 use crate::error::GridError;
-use crate::geometry::GridGeometry;
 
 const MAGIC: &[u8] = b"\x93NUMPY";
 
@@ -99,7 +98,7 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, G
         });
     }
     let payload = c.take(expected as usize, "array data")?;
-    let geometry = GridGeometry::new(dims, DVec3::ONE, DVec3::ZERO)?;
+    let geometry = super::geometry(path, "npy", dims, DVec3::ONE, DVec3::ZERO)?;
     Grid::from_vec(geometry, decode(payload, scalar, endian))
 }
 
@@ -124,7 +123,11 @@ fn dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
 }
 
 fn parse_descr(descr: &str) -> Option<(ScalarType, Endian)> {
-    let (order, code) = descr.split_at(descr.len().checked_sub(2)?);
+    let split = descr
+        .len()
+        .checked_sub(2)
+        .filter(|&n| descr.is_char_boundary(n))?;
+    let (order, code) = descr.split_at(split);
     let endian = match order {
         "<" | "|" | "=" => Endian::Little,
         ">" => Endian::Big,

@@ -18,7 +18,6 @@ use super::{
 };
 use crate::dense::Grid;
 use crate::error::GridError;
-use crate::geometry::GridGeometry;
 
 /// Payload encodings of a written file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -122,7 +121,7 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, G
         Some(text) => vector(text).ok_or_else(|| malformed(path, "bad `space origin`"))?,
         None => DVec3::ZERO,
     };
-    let geometry = GridGeometry::new(dims, spacing, first_sample - 0.5 * spacing)?;
+    let geometry = super::geometry(path, "NRRD", dims, spacing, first_sample - 0.5 * spacing)?;
 
     let voxels = checked_voxels(path, "NRRD", dims)?;
     options.reserve_voxels(path, voxels, scalar)?;

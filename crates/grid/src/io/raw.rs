@@ -10,7 +10,6 @@ use super::{
 };
 use crate::dense::Grid;
 use crate::error::GridError;
-use crate::geometry::GridGeometry;
 
 /// What a raw file holds.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -73,7 +72,7 @@ pub fn parse(
     layout: &RawLayout,
     options: &LoadOptions,
 ) -> Result<Grid, GridError> {
-    let geometry = GridGeometry::new(layout.dims, layout.spacing, layout.origin)?;
+    let geometry = super::geometry(path, "raw", layout.dims, layout.spacing, layout.origin)?;
     let voxels = checked_voxels(path, "raw", layout.dims)?;
     options.reserve_voxels(path, voxels, layout.scalar)?;
     let expected = voxels * layout.scalar.size() as u64;

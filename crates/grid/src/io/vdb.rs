@@ -29,7 +29,6 @@ use glam::DVec3;
 use super::{Cursor, Endian, LoadOptions, ScalarType, inflate, read_file};
 use crate::dense::Grid;
 use crate::error::GridError;
-use crate::geometry::GridGeometry;
 
 const MAGIC: u64 = 0x5644_4220;
 const ZIP: u32 = 0x1;
@@ -507,7 +506,7 @@ fn read_grid(
     let spacing = scale;
     let first_centre =
         translation + DVec3::new(f64::from(lo[0]), f64::from(lo[1]), f64::from(lo[2])) * scale;
-    let geometry = GridGeometry::new(dims, spacing, first_centre - 0.5 * spacing)?;
+    let geometry = super::geometry(path, "OpenVDB", dims, spacing, first_centre - 0.5 * spacing)?;
     let mut grid = Grid::filled(geometry, background);
     let data = grid.data_mut();
     let mut fill = |min: [i32; 3], size: i32, value: f32| {

@@ -13,7 +13,6 @@ use super::{
 };
 use crate::dense::Grid;
 use crate::error::GridError;
-use crate::geometry::GridGeometry;
 
 fn malformed(path: &Path, reason: impl Into<String>) -> GridError {
     GridError::Malformed {
@@ -168,7 +167,7 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, G
     }
     let dims = dims.ok_or_else(|| malformed(path, "no DIMENSIONS"))?;
     let scalar = scalar.ok_or_else(|| malformed(path, "no SCALARS before LOOKUP_TABLE"))?;
-    let geometry = GridGeometry::new(dims, spacing, origin - 0.5 * spacing)?;
+    let geometry = super::geometry(path, "legacy VTK", dims, spacing, origin - 0.5 * spacing)?;
     let voxels = checked_voxels(path, "legacy VTK", dims)?;
     options.reserve_voxels(path, voxels, scalar)?;
     let payload = &bytes[pos..];
