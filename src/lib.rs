@@ -1,13 +1,16 @@
 //! # lucent: light transport in participating media
 //!
 //! The facade of the lucent workspace. Each solver and support crate stands alone (pick
-//! the one your renderer needs); this crate re-exports them under one roof for the `lucent`
-//! command and for users who want everything.
+//! the one your renderer needs); this crate re-exports them under one roof, reads scene
+//! files, holds the registry of every solver, and is the `lucent` command.
 //!
 //! | module | crate | what it solves |
 //! |---|---|---|
 //! | [`optics`] | `lucent-optics` | coefficients, phase functions, spherical quadratures, Fresnel, analytic diffusion references |
 //! | [`grid`] | `lucent-grid` | dense and bricked voxel grids, resampling, transfer functions, procedural volumes, volume files |
+//! | [`core`] | `lucent-core` | the `Problem`, the `Solver` trait, solutions and stop reasons, the `direct` solver |
+//! | [`render`] | `lucent-render` | cameras, ray marching, tone mapping, PNG and EXR |
+//! | [`scene`] | (here) | TOML scene files and the built-in default scene |
 //!
 //! See `ARCHITECTURE.md` at the repository root for the crate map and the data flow
 //! volume → medium → problem → solver → solution → image.
@@ -20,5 +23,56 @@
 //! # Ok::<(), lucent::optics::OpticsError>(())
 //! ```
 
+pub mod scene;
+
+use std::path::PathBuf;
+
+pub use lucent_core as core;
 pub use lucent_grid as grid;
 pub use lucent_optics as optics;
+pub use lucent_render as render;
+
+/// Every solver lucent has, by name.
+pub fn registry() -> lucent_core::Registry {
+    lucent_core::Registry::with_core_solvers()
+}
+
+/// Everything that can go wrong between a scene file and an image, with a message meant
+/// for the person at the command line.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A file could not be read or written.
+    #[error("{path}: {reason}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+    /// A scene file that is not valid TOML or not a valid scene.
+    #[error("{path}: bad scene: {reason}")]
+    Scene {
+        /// The scene file.
+        path: PathBuf,
+        /// The parser's message (with line and column).
+        reason: String,
+    },
+    /// A scene value that makes no sense.
+    #[error("invalid scene: {0}")]
+    Invalid(String),
+    /// From reading or building grids.
+    #[error(transparent)]
+    Grid(#[from] lucent_grid::GridError),
+    /// From assembling the problem.
+    #[error(transparent)]
+    Problem(#[from] lucent_core::ProblemError),
+    /// From the solver.
+    #[error(transparent)]
+    Solve(#[from] lucent_core::SolveError),
+    /// From the renderer.
+    #[error(transparent)]
+    Render(#[from] lucent_render::RenderError),
+    /// From the optics.
+    #[error(transparent)]
+    Optics(#[from] lucent_optics::OpticsError),
+}

@@ -1,43 +1,109 @@
-//! The `lucent` command.
+//! The `lucent` command: render a scene, solve it to a fluence grid, list solvers.
 //!
-//! Scenes, solvers and rendering arrive with the crates that provide them. Until then the
-//! default job prints the optics of the built-in default materials (Jensen et al. 2001):
-//! the derived diffusion parameters and the dipole against the exact Robin half-space.
+//! `cargo run --release` with no arguments renders the built-in default scene to
+//! `lucent.png`. Errors print one line (`lucent: ...`) and exit with status 1; usage errors
+//! exit with 2.
+
+// Printing is this binary's job; the lint guards the libraries.
+#![allow(clippy::print_stdout)]
 
 use std::io::{self, Write};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Instant;
 
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use lucent::Error;
+use lucent::core::{Progress, Solution, SolveOptions, Solver};
+use lucent::grid::io::ScalarType;
 use lucent::optics::materials::{JENSEN_2001, LENGTH_UNIT};
-use lucent::optics::{Dielectric, DiffuseFresnel, DiffusionMedium, OpticsError};
+use lucent::optics::{Dielectric, DiffuseFresnel, DiffusionMedium};
+use lucent::scene::{BuiltScene, Scene};
 
-const USAGE: &str = "\
-lucent: light transport in participating media
+#[derive(Parser)]
+#[command(
+    name = "lucent",
+    version,
+    about = "Light transport in participating media: solve a scene, render a picture."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+    /// No progress bars.
+    #[arg(long, short, global = true)]
+    quiet: bool,
+}
 
-USAGE:
-    lucent            print the diffusion optics of the measured materials (default job)
-    lucent --help     this text
-    lucent --version  the version
-";
+#[derive(Subcommand)]
+enum Command {
+    /// Solve a scene and render it to PNG (sRGB) or EXR (linear).
+    Render {
+        /// Scene file (TOML); the built-in default scene if omitted.
+        scene: Option<PathBuf>,
+        /// Solver to use instead of the scene's (with default parameters).
+        #[arg(long)]
+        solver: Option<String>,
+        /// Output image, .png or .exr.
+        #[arg(short, long, default_value = "lucent.png")]
+        output: PathBuf,
+        /// Image size WIDTHxHEIGHT instead of the scene's.
+        #[arg(long)]
+        size: Option<String>,
+    },
+    /// Solve a scene and write the fluence grid (.npy or .vol) and a JSON report beside it.
+    Solve {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// Solver to use instead of the scene's (with default parameters).
+        #[arg(long)]
+        solver: Option<String>,
+        /// Output grid, .npy or .vol.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// List the solvers and what they can do.
+    Solvers,
+    /// Describe a scene: grid, medium, lights, and whether its solver can handle it.
+    Info {
+        /// Scene file (TOML); the built-in default scene if omitted.
+        scene: Option<PathBuf>,
+    },
+    /// Print the diffusion optics of the measured materials (Jensen et al. 2001).
+    Materials,
+}
 
 fn main() -> ExitCode {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let mut out = io::stdout().lock();
-    let result = match args
-        .iter()
-        .map(String::as_str)
-        .collect::<Vec<_>>()
-        .as_slice()
-    {
-        [] => materials_table(&mut out),
-        ["--help" | "-h"] => write!(out, "{USAGE}").map_err(Error::from),
-        ["--version" | "-V"] => {
-            writeln!(out, "lucent {}", env!("CARGO_PKG_VERSION")).map_err(Error::from)
+    let cli = Cli::parse();
+    let result = match cli.command {
+        None => render(None, None, Path::new("lucent.png"), None, cli.quiet),
+        Some(Command::Render {
+            scene,
+            solver,
+            output,
+            size,
+        }) => render(scene.as_deref(), solver, &output, size, cli.quiet),
+        Some(Command::Solve {
+            scene,
+            solver,
+            output,
+        }) => solve_to_file(&scene, solver, &output, cli.quiet),
+        Some(Command::Solvers) => list_solvers(),
+        Some(Command::Info { scene }) => info(scene.as_deref()),
+        Some(Command::Materials) => {
+            materials_table(&mut io::stdout().lock()).map_err(|e| match e {
+                TableError::Io(e) => Error::Io {
+                    path: "<stdout>".into(),
+                    reason: e.to_string(),
+                },
+                TableError::Optics(e) => Error::Optics(e),
+            })
         }
-        other => Err(Error::Usage(other.join(" "))),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(Error::Io(e)) if e.kind() == io::ErrorKind::BrokenPipe => ExitCode::SUCCESS,
+        Err(Error::Io { reason, .. }) if reason.contains("Broken pipe") => ExitCode::SUCCESS,
         Err(e) => {
             let _ = writeln!(io::stderr(), "lucent: {e}");
             ExitCode::FAILURE
@@ -45,38 +111,258 @@ fn main() -> ExitCode {
     }
 }
 
-#[derive(Debug)]
-enum Error {
-    Io(io::Error),
-    Optics(OpticsError),
-    Usage(String),
+/// Loads a scene (or the default one) and builds it; relative paths start at its folder.
+fn load(scene: Option<&Path>) -> Result<(Scene, BuiltScene, String), Error> {
+    let (parsed, base, name) = match scene {
+        Some(path) => (
+            Scene::load(path)?,
+            path.parent().unwrap_or(Path::new(".")).to_owned(),
+            path.display().to_string(),
+        ),
+        None => (
+            Scene::default_scene()?,
+            PathBuf::from("."),
+            "built-in default scene".to_owned(),
+        ),
+    };
+    let built = parsed.build(&base)?;
+    Ok((parsed, built, name))
 }
 
-impl std::fmt::Display for Error {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Error::Io(e) => write!(f, "{e}"),
-            Error::Optics(e) => write!(f, "{e}"),
-            Error::Usage(args) => write!(f, "unexpected arguments `{args}`\n\n{USAGE}"),
+fn bar(quiet: bool, message: &'static str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(1000).with_message(message);
+    bar.set_style(
+        ProgressStyle::with_template("{msg:>8} [{bar:40}] {percent:>3}% {elapsed_precise}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar
+}
+
+fn run_solver(
+    scene: &Scene,
+    built: &BuiltScene,
+    solver: Option<String>,
+    quiet: bool,
+) -> Result<(Box<dyn Solver>, Solution), Error> {
+    let registry = lucent::registry();
+    let solver = match solver {
+        Some(name) if name != scene.solver.name => registry.build(&name, &Default::default())?,
+        _ => registry.build(&scene.solver.name, &scene.solver.params)?,
+    };
+    let progress = bar(quiet, "solve");
+    let callback = progress.clone();
+    let options = SolveOptions {
+        progress: Some(Arc::new(move |p: Progress| {
+            callback.set_position((p.fraction * 1000.0) as u64)
+        })),
+        ..SolveOptions::default()
+    };
+    let solution = solver.solve(&built.problem, &options)?;
+    progress.finish_and_clear();
+    Ok((solver, solution))
+}
+
+fn render(
+    scene: Option<&Path>,
+    solver: Option<String>,
+    output: &Path,
+    size: Option<String>,
+    quiet: bool,
+) -> Result<(), Error> {
+    let start = Instant::now();
+    let (parsed, mut built, name) = load(scene)?;
+    if let Some(size) = size {
+        let (w, h) = size
+            .split_once('x')
+            .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
+            .ok_or_else(|| Error::Invalid(format!("--size `{size}` is not WIDTHxHEIGHT")))?;
+        built.settings.width = w;
+        built.settings.height = h;
+    }
+    let (solver, solution) = run_solver(&parsed, &built, solver, quiet)?;
+    let progress = bar(quiet, "render");
+    let callback = progress.clone();
+    let image = lucent::render::render(
+        &built.problem,
+        &solution,
+        &built.camera,
+        &built.settings,
+        Some(&move |f: f64| callback.set_position((f * 1000.0) as u64)),
+    )?;
+    progress.finish_and_clear();
+    image.write(output, built.exposure, built.tone)?;
+    if !quiet {
+        println!(
+            "lucent: rendered {name} with `{}` to {} ({}×{}) in {:.2} s (solve {:.2} s)",
+            solver.name(),
+            output.display(),
+            image.width,
+            image.height,
+            start.elapsed().as_secs_f64(),
+            solution.report.wall_time_s
+        );
+    }
+    Ok(())
+}
+
+fn solve_to_file(
+    scene: &Path,
+    solver: Option<String>,
+    output: &Path,
+    quiet: bool,
+) -> Result<(), Error> {
+    let (parsed, built, name) = load(Some(scene))?;
+    let (solver, solution) = run_solver(&parsed, &built, solver, quiet)?;
+    let grids: Vec<&lucent::grid::Grid> = solution.fluence.iter().collect();
+    match output
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        Some("npy") => lucent::grid::io::npy::write_channels(output, &grids, ScalarType::F32)?,
+        Some("vol") => lucent::grid::io::mitsuba::write(output, &grids)?,
+        _ => {
+            return Err(Error::Invalid(format!(
+                "{}: the fluence is written as .npy or .vol",
+                output.display()
+            )));
         }
     }
+    let report_path = output.with_extension("json");
+    let g = built.problem.geometry();
+    let report = serde_json::json!({
+        "scene": name,
+        "solver": solver.name(),
+        "params": parsed.solver.params,
+        "capabilities": solver.capabilities(),
+        "channels": solution.fluence.len(),
+        "dims": g.dims(),
+        "spacing": g.spacing().to_array(),
+        "origin": g.origin().to_array(),
+        "fluence": output.file_name().map(|n| n.to_string_lossy().into_owned()),
+        "report": solution.report,
+    });
+    let text = serde_json::to_string_pretty(&report).map_err(|e| Error::Invalid(e.to_string()))?;
+    std::fs::write(&report_path, text + "\n").map_err(|e| Error::Io {
+        path: report_path.clone(),
+        reason: e.to_string(),
+    })?;
+    if !quiet {
+        println!(
+            "lucent: solved {name} with `{}` ({:?}) in {:.2} s; fluence {} and report {}",
+            solver.name(),
+            solution.report.stop_reason,
+            solution.report.wall_time_s,
+            output.display(),
+            report_path.display()
+        );
+    }
+    Ok(())
 }
 
-impl From<io::Error> for Error {
+fn list_solvers() -> Result<(), Error> {
+    let mut out = io::stdout().lock();
+    let io_err = |e: io::Error| Error::Io {
+        path: "<stdout>".into(),
+        reason: e.to_string(),
+    };
+    for entry in lucent::registry().entries() {
+        let solver = (entry.build)(&Default::default())?;
+        let c = solver.capabilities();
+        writeln!(out, "{:<16} {}", entry.name, entry.summary).map_err(io_err)?;
+        writeln!(
+            out,
+            "{:<16} anisotropic: {}, heterogeneous: {}, embedded geometry: {}, output: {:?}\n{:<16} boundaries: {:?}\n{:<16} lights: {:?}",
+            "", c.anisotropic, c.heterogeneous, c.embedded_geometry, c.output, "", c.boundaries, "", c.lights
+        )
+        .map_err(io_err)?;
+    }
+    Ok(())
+}
+
+fn info(scene: Option<&Path>) -> Result<(), Error> {
+    let (parsed, built, name) = load(scene)?;
+    let p = &built.problem;
+    let g = p.geometry();
+    let s = built.volume.stats();
+    let mut out = io::stdout().lock();
+    let io_err = |e: io::Error| Error::Io {
+        path: "<stdout>".into(),
+        reason: e.to_string(),
+    };
+    let (lo, hi) = g.bounds();
+    writeln!(out, "{name}").map_err(io_err)?;
+    writeln!(
+        out,
+        "  grid      {:?} cells of {}, box {} to {}",
+        g.dims(),
+        g.spacing(),
+        lo,
+        hi
+    )
+    .map_err(io_err)?;
+    writeln!(
+        out,
+        "  volume    min {} max {} mean {:.4} non-zero {:.1}%",
+        s.min,
+        s.max,
+        s.mean,
+        100.0 * s.nonzero_fraction
+    )
+    .map_err(io_err)?;
+    let sigma = p.medium().sigma_t(0).stats();
+    writeln!(
+        out,
+        "  medium    sigma_t up to {} (channels: {}), phase {:?}",
+        sigma.max,
+        p.channels(),
+        p.medium().phase
+    )
+    .map_err(io_err)?;
+    for light in p.lights() {
+        writeln!(out, "  light     {:?} {:?}", light.kind(), light.spectrum()).map_err(io_err)?;
+    }
+    writeln!(out, "  boundary  {:?}", p.boundary()).map_err(io_err)?;
+    let solver = lucent::registry().build(&parsed.solver.name, &parsed.solver.params)?;
+    let verdict = match solver.capabilities().check(solver.name(), p) {
+        Ok(()) => "can solve this scene".to_owned(),
+        Err(e) => e.to_string(),
+    };
+    writeln!(out, "  solver    `{}`: {verdict}", solver.name()).map_err(io_err)?;
+    writeln!(
+        out,
+        "  image     {}×{}, camera {:?}",
+        built.settings.width, built.settings.height, built.camera
+    )
+    .map_err(io_err)?;
+    Ok(())
+}
+
+#[derive(Debug)]
+enum TableError {
+    Io(io::Error),
+    Optics(lucent::optics::OpticsError),
+}
+
+impl From<io::Error> for TableError {
     fn from(e: io::Error) -> Self {
-        Error::Io(e)
+        TableError::Io(e)
     }
 }
 
-impl From<OpticsError> for Error {
-    fn from(e: OpticsError) -> Self {
-        Error::Optics(e)
+impl From<lucent::optics::OpticsError> for TableError {
+    fn from(e: lucent::optics::OpticsError) -> Self {
+        TableError::Optics(e)
     }
 }
 
 /// One row per material and channel: reduced albedo, D, σ_tr, z_r, z_v, the dipole's total
 /// diffuse reflectance and the exact Robin half-space value it approximates.
-fn materials_table(out: &mut impl Write) -> Result<(), Error> {
+fn materials_table(out: &mut impl Write) -> Result<(), TableError> {
     writeln!(
         out,
         "Diffusion optics of Jensen et al. 2001's measured materials (lengths in {LENGTH_UNIT}, Groenhuis A)"

@@ -54,6 +54,7 @@ mod dense;
 mod error;
 mod geometry;
 pub mod io;
+mod line;
 pub mod procedural;
 pub mod resample;
 pub mod transfer;

@@ -165,21 +165,48 @@ fn descr(scalar: ScalarType) -> &'static str {
 /// Writes the grid as a C-order (n_z, n_y, n_x) array of `scalar` (format version 1.0,
 /// header padded to 64 bytes as NumPy does). Values the type cannot hold exactly are refused.
 pub fn write(path: impl AsRef<Path>, grid: &Grid, scalar: ScalarType) -> Result<(), GridError> {
+    write_channels(path, &[grid], scalar)
+}
+
+/// Writes one grid as a 3D array, or several grids on one geometry (RGB fluence) as a
+/// C-order (channels, n_z, n_y, n_x) array.
+pub fn write_channels(
+    path: impl AsRef<Path>,
+    grids: &[&Grid],
+    scalar: ScalarType,
+) -> Result<(), GridError> {
     let path = path.as_ref();
+    let grid = grids.first().ok_or_else(|| GridError::InvalidParameter {
+        name: "grids",
+        reason: "need at least one".into(),
+    })?;
+    if grids.iter().any(|g| g.geometry() != grid.geometry()) {
+        return Err(GridError::Mismatch(
+            "all channels of an .npy array share one geometry".into(),
+        ));
+    }
     let [nx, ny, nz] = grid.dims();
+    let shape = if grids.len() == 1 {
+        format!("({nz}, {ny}, {nx})")
+    } else {
+        format!("({}, {nz}, {ny}, {nx})", grids.len())
+    };
     let mut header = format!(
-        "{{'descr': '{}', 'fortran_order': False, 'shape': ({nz}, {ny}, {nx}), }}",
+        "{{'descr': '{}', 'fortran_order': False, 'shape': {shape}, }}",
         descr(scalar)
     );
     // magic (6) + version (2) + length (2) + header + '\n' must be a multiple of 64.
     let unpadded = 10 + header.len() + 1;
     header.push_str(&" ".repeat(unpadded.next_multiple_of(64) - unpadded));
     header.push('\n');
-    let mut out = Vec::with_capacity(10 + header.len() + grid.data().len() * scalar.size());
+    let mut out =
+        Vec::with_capacity(10 + header.len() + grids.len() * grid.data().len() * scalar.size());
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&[1, 0]);
     out.extend_from_slice(&(header.len() as u16).to_le_bytes());
     out.extend_from_slice(header.as_bytes());
-    out.extend_from_slice(&encode(path, grid.data(), scalar, Endian::Little)?);
+    for g in grids {
+        out.extend_from_slice(&encode(path, g.data(), scalar, Endian::Little)?);
+    }
     write_file(path, &out)
 }

@@ -1,0 +1,286 @@
+//! `direct`: uncollided light from every light to every cell by exact ray marching.
+//!
+//! For each light and each cell centre x the optical depth τ = ∫ σ_t ds from the light to x
+//! is integrated exactly for the trilinear extinction field ([`Grid::line_integral`]: a DDA
+//! over dual cells and a 2-point Gauss rule per piece), and the uncollided fluence is
+//!
+//! φ_u(x) = Σ_lights E_l(x) e^{−τ_l(x)} + Σ_d w_d L_sky e^{−τ_d(x)},
+//!
+//! with E_l the unoccluded irradiance (E for a directional light, I/r² for point and spot
+//! lights, with r at least half a cell) and the sky integrated over the nested octahedral
+//! quadrature (8·4^level directions). This is Zhang & Ma's absorption step done exactly,
+//! without their upwind diffusion. The per-light transmittance grids are kept in the
+//! solution, so in-scattering is weighted by the phase function exactly (single
+//! scattering of the direct light); the sky's part in-scatters isotropically.
+//!
+//! Cost: O(N) per cell and light (N cells across), so O(N⁴) per light; grey extinction is
+//! marched once for all channels. Marching stops at τ = `max_optical_depth` (default 50,
+//! where e^{−τ} is below f32's normal range), which makes dense media cheaper.
+
+use std::time::Instant;
+
+use glam::DVec3;
+use lucent_grid::Grid;
+use lucent_optics::SphericalQuadrature;
+use rayon::prelude::*;
+
+use crate::error::SolveError;
+use crate::problem::{BoundaryKind, Light, LightKind, Problem};
+use crate::registry::{Params, SolverEntry};
+use crate::solution::{Angular, LightTransmittance, Solution};
+use crate::solver::{
+    Capabilities, OutputKind, Progress, SolveOptions, SolveReport, Solver, StopReason,
+};
+
+/// The exact uncollided-light solver.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DirectSolver {
+    /// Refinement level of the octahedral sky quadrature (8·4^level directions).
+    pub sky_level: usize,
+    /// Optical depth at which marching stops.
+    pub max_optical_depth: f64,
+}
+
+impl Default for DirectSolver {
+    fn default() -> Self {
+        Self {
+            sky_level: 1,
+            max_optical_depth: 50.0,
+        }
+    }
+}
+
+impl DirectSolver {
+    /// The registry name.
+    pub const NAME: &'static str = "direct";
+
+    /// The registry entry. Parameters: `sky_level` (0–4, default 1), `max_optical_depth`
+    /// (> 0, default 50).
+    pub const ENTRY: SolverEntry = SolverEntry {
+        name: Self::NAME,
+        summary: "uncollided light from every light to every cell by exact ray marching (single scattering)",
+        build: |params| Ok(Box::new(Self::from_params(params)?)),
+    };
+
+    /// Builds from registry parameters.
+    pub fn from_params(params: &Params) -> Result<Self, SolveError> {
+        params.check_known(Self::NAME, &["sky_level", "max_optical_depth"])?;
+        let d = Self::default();
+        let solver = Self {
+            sky_level: params.usize_or("sky_level", d.sky_level)?,
+            max_optical_depth: params.f64_or("max_optical_depth", d.max_optical_depth)?,
+        };
+        if solver.sky_level > 4 {
+            return Err(SolveError::InvalidParameter {
+                name: "sky_level".into(),
+                reason: "at most 4 (2048 directions)".into(),
+            });
+        }
+        if solver.max_optical_depth.is_nan() || solver.max_optical_depth <= 0.0 {
+            return Err(SolveError::InvalidParameter {
+                name: "max_optical_depth".into(),
+                reason: "must be positive".into(),
+            });
+        }
+        Ok(solver)
+    }
+}
+
+/// Transmittance from `source(x)` to every cell centre x through `sigma_t`.
+fn transmittance(sigma_t: &Grid, cutoff: f64, source: impl Fn(DVec3) -> DVec3 + Sync) -> Grid {
+    let geometry = *sigma_t.geometry();
+    Grid::from_fn(geometry, |x| {
+        (-sigma_t.line_integral(source(x), x, cutoff)).exp() as f32
+    })
+}
+
+impl Solver for DirectSolver {
+    fn name(&self) -> &str {
+        Self::NAME
+    }
+
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            anisotropic: true,
+            heterogeneous: true,
+            embedded_geometry: false,
+            boundaries: vec![BoundaryKind::Vacuum],
+            lights: vec![
+                LightKind::Directional,
+                LightKind::Point,
+                LightKind::Spot,
+                LightKind::Sky,
+            ],
+            output: OutputKind::AngularRadiance,
+        }
+    }
+
+    fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
+        self.capabilities().check(Self::NAME, problem)?;
+        options.validate()?;
+        let start = Instant::now();
+        let geometry = *problem.geometry();
+        let medium = problem.medium();
+        let channels = problem.channels();
+        let extinction_channels = medium.sigma_t.len();
+        let point_lights: Vec<&Light> = problem
+            .lights()
+            .iter()
+            .filter(|l| !matches!(l, Light::Sky { .. }))
+            .collect();
+        let sky: Vec<&Light> = problem
+            .lights()
+            .iter()
+            .filter(|l| matches!(l, Light::Sky { .. }))
+            .collect();
+
+        // Memory: transmittance per point-like light and extinction channel, fluence and
+        // isotropic fluence per channel.
+        let grid_bytes = geometry.voxel_count() as u64 * 4;
+        let needed =
+            grid_bytes * (point_lights.len() * extinction_channels + 2 * channels + 1) as u64;
+        if needed > options.memory_budget {
+            return Err(SolveError::OverBudget {
+                solver: Self::NAME.into(),
+                needed,
+                budget: options.memory_budget,
+            });
+        }
+
+        let (lo, hi) = geometry.bounds();
+        let far = 4.0 * (hi - lo).length() + 1.0;
+        let min_distance = 0.5 * geometry.spacing().min_element();
+        let work = (point_lights.len() + usize::from(!sky.is_empty())) as f64;
+        let mut done = 0.0;
+        let cutoff = self.max_optical_depth;
+        let quadrature = SphericalQuadrature::octahedral(self.sky_level).map_err(|e| {
+            SolveError::InvalidParameter {
+                name: "sky_level".into(),
+                reason: e.to_string(),
+            }
+        })?;
+
+        let result = options.install(|| {
+            // Per-light transmittance, one grid per extinction channel.
+            let mut per_light = Vec::with_capacity(point_lights.len());
+            for light in &point_lights {
+                let grids: Vec<Grid> = medium
+                    .sigma_t
+                    .iter()
+                    .map(|sigma_t| {
+                        transmittance(sigma_t, cutoff, |x| {
+                            light
+                                .arrival(x, far, min_distance)
+                                .map_or(x, |(_, _, from)| from)
+                        })
+                    })
+                    .collect();
+                per_light.push(grids);
+                done += 1.0;
+                options.report(Progress {
+                    fraction: done / work,
+                    iteration: 0,
+                    residual: None,
+                });
+            }
+            // Sky: Σ_d w_d e^{−τ_d}, per extinction channel.
+            let sky_transmittance: Option<Vec<Grid>> = (!sky.is_empty()).then(|| {
+                let sum = medium
+                    .sigma_t
+                    .iter()
+                    .map(|sigma_t| {
+                        let mut total = Grid::filled(geometry, 0.0);
+                        let directions: Vec<(DVec3, f64)> = quadrature
+                            .directions()
+                            .iter()
+                            .copied()
+                            .zip(quadrature.weights().iter().copied())
+                            .collect();
+                        total.slabs_mut().for_each(|(k, slab)| {
+                            let [nx, ny, _] = geometry.dims();
+                            for j in 0..ny {
+                                for i in 0..nx {
+                                    let x = geometry.cell_centre(i, j, k);
+                                    let s: f64 = directions
+                                        .iter()
+                                        .map(|&(d, w)| {
+                                            w * (-sigma_t.line_integral(x - d * far, x, cutoff))
+                                                .exp()
+                                        })
+                                        .sum();
+                                    slab[i + nx * j] = s as f32;
+                                }
+                            }
+                        });
+                        total
+                    })
+                    .collect();
+                options.report(Progress {
+                    fraction: 1.0,
+                    iteration: 0,
+                    residual: None,
+                });
+                sum
+            });
+            (per_light, sky_transmittance)
+        })?;
+        let (per_light, sky_transmittance) = result;
+
+        // Fluence per channel: point-like lights (irradiance × transmittance) plus the sky.
+        let sky_radiance: Vec<f64> = (0..channels)
+            .map(|c| sky.iter().map(|l| l.spectrum().channel(c)).sum())
+            .collect();
+        let isotropic_fluence: Vec<Grid> = (0..channels)
+            .map(|c| match &sky_transmittance {
+                Some(t) => t[c.min(t.len() - 1)].map(|v| (f64::from(v) * sky_radiance[c]) as f32),
+                None => Grid::filled(geometry, 0.0),
+            })
+            .collect();
+        let fluence: Vec<Grid> = (0..channels)
+            .map(|c| {
+                let mut phi = isotropic_fluence[c].clone();
+                phi.slabs_mut().for_each(|(k, slab)| {
+                    let [nx, ny, _] = geometry.dims();
+                    for j in 0..ny {
+                        for i in 0..nx {
+                            let x = geometry.cell_centre(i, j, k);
+                            let index = i + nx * j + nx * ny * k;
+                            let mut sum = f64::from(slab[i + nx * j]);
+                            for (light, grids) in point_lights.iter().zip(&per_light) {
+                                if let Some((_, irradiance, _)) =
+                                    light.arrival(x, far, min_distance)
+                                {
+                                    let t = grids[c.min(grids.len() - 1)].data()[index];
+                                    sum += light.spectrum().channel(c) * irradiance * f64::from(t);
+                                }
+                            }
+                            slab[i + nx * j] = sum as f32;
+                        }
+                    }
+                });
+                phi
+            })
+            .collect();
+
+        let angular = LightTransmittance {
+            phase: medium.phase,
+            lights: point_lights.into_iter().cloned().collect(),
+            transmittance: per_light,
+            far,
+            min_distance,
+            isotropic_fluence,
+        };
+        Ok(Solution {
+            fluence,
+            angular: Some(Angular::Lights(angular)),
+            report: SolveReport {
+                solver: Self::NAME.into(),
+                iterations: 0,
+                residual_history: Vec::new(),
+                wall_time_s: start.elapsed().as_secs_f64(),
+                peak_memory_bytes: needed,
+                stop_reason: StopReason::Exact,
+            },
+        })
+    }
+}

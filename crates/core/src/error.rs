@@ -1,0 +1,55 @@
+//! Errors of problem assembly and solving.
+
+use thiserror::Error;
+
+/// A problem that does not describe valid physics (negative extinction, albedo above one,
+/// grids on different geometries, ...).
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("invalid problem: {0}")]
+pub struct ProblemError(pub String);
+
+/// Why a solve could not run. (A solve that ran but did not converge is not an error: it
+/// returns a solution whose report says why it stopped.)
+#[derive(Debug, Error)]
+pub enum SolveError {
+    /// The problem has a feature this solver cannot handle.
+    #[error("solver `{solver}` cannot handle {feature}")]
+    Unsupported {
+        /// The solver's name.
+        solver: String,
+        /// The feature, in words.
+        feature: String,
+    },
+    /// An option or solver parameter is invalid.
+    #[error("invalid parameter `{name}`: {reason}")]
+    InvalidParameter {
+        /// The parameter.
+        name: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// No solver of that name is registered.
+    #[error("unknown solver `{name}`; available: {available}")]
+    UnknownSolver {
+        /// The requested name.
+        name: String,
+        /// The registered names, comma-separated.
+        available: String,
+    },
+    /// The solve would need more memory than the budget allows.
+    #[error("solver `{solver}` needs {needed} bytes, over the memory budget of {budget} bytes")]
+    OverBudget {
+        /// The solver's name.
+        solver: String,
+        /// Bytes needed.
+        needed: u64,
+        /// The budget.
+        budget: u64,
+    },
+    /// The problem is invalid.
+    #[error(transparent)]
+    Problem(#[from] ProblemError),
+    /// A grid operation failed.
+    #[error(transparent)]
+    Grid(#[from] lucent_grid::GridError),
+}

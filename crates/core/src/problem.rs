@@ -1,0 +1,398 @@
+//! The problem every solver solves: a medium on a grid, lights, a boundary.
+
+use glam::DVec3;
+use lucent_grid::{Grid, GridGeometry};
+use lucent_optics::Phase;
+
+use crate::error::ProblemError;
+use crate::spectrum::Spectrum;
+
+/// A scalar field on the problem's grid: one constant or one grid.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Field {
+    /// The same value everywhere.
+    Constant(f32),
+    /// A value per cell.
+    Grid(Grid),
+}
+
+impl Field {
+    /// The value of cell `index`.
+    #[inline]
+    pub fn at(&self, index: usize) -> f32 {
+        match self {
+            Field::Constant(v) => *v,
+            Field::Grid(g) => g.data()[index],
+        }
+    }
+
+    /// The trilinearly interpolated value at a world point.
+    #[inline]
+    pub fn sample(&self, p: DVec3) -> f32 {
+        match self {
+            Field::Constant(v) => *v,
+            Field::Grid(g) => g.sample_trilinear(p),
+        }
+    }
+}
+
+/// The participating medium: extinction, albedo and phase function per channel.
+///
+/// `sigma_t` and `albedo` hold one entry for a grey quantity or three for RGB; a quantity
+/// with one entry serves every channel. σ_s = albedo·σ_t, σ_a = (1 − albedo)·σ_t.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Medium {
+    /// Extinction σ_t (1/length), per channel.
+    pub sigma_t: Vec<Grid>,
+    /// Single-scattering albedo in [0, 1], per channel.
+    pub albedo: Vec<Field>,
+    /// Phase function (the same in every channel).
+    pub phase: Phase,
+    /// Relative refractive index of the medium's boundary (1 = index-matched).
+    pub eta: f64,
+}
+
+impl Medium {
+    /// The extinction grid of `channel`.
+    pub fn sigma_t(&self, channel: usize) -> &Grid {
+        &self.sigma_t[channel.min(self.sigma_t.len() - 1)]
+    }
+
+    /// The albedo field of `channel`.
+    pub fn albedo(&self, channel: usize) -> &Field {
+        &self.albedo[channel.min(self.albedo.len() - 1)]
+    }
+
+    /// σ_s = albedo·σ_t at a world point (trilinear in both).
+    pub fn sigma_s_at(&self, channel: usize, p: DVec3) -> f32 {
+        self.albedo(channel).sample(p) * self.sigma_t(channel).sample_trilinear(p)
+    }
+}
+
+/// A light source. Directions are directions of propagation; all radiometric values are
+/// grey or RGB.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Light {
+    /// A distant light (the sun): parallel rays travelling along `direction`, delivering
+    /// `irradiance` (W/m²) on a surface facing it.
+    Directional {
+        /// Unit direction of travel.
+        direction: DVec3,
+        /// Irradiance normal to the beam.
+        irradiance: Spectrum,
+    },
+    /// An isotropic point light of radiant `intensity` (W/sr).
+    Point {
+        /// Position.
+        position: DVec3,
+        /// Radiant intensity.
+        intensity: Spectrum,
+    },
+    /// A spot light: a point light restricted to a cone around `direction`, full intensity
+    /// inside `inner_angle`, falling smoothly to zero at `outer_angle` (radians).
+    Spot {
+        /// Position.
+        position: DVec3,
+        /// Unit axis of the cone.
+        direction: DVec3,
+        /// Radiant intensity on the axis.
+        intensity: Spectrum,
+        /// Half-angle of full intensity.
+        inner_angle: f64,
+        /// Half-angle beyond which the light is dark.
+        outer_angle: f64,
+    },
+    /// A uniform sky: `radiance` (W/m²/sr) arriving from every direction outside the domain.
+    Sky {
+        /// Radiance of the sky.
+        radiance: Spectrum,
+    },
+    /// Volumetric emission: radiance `scale`·grid (W/m³/sr) emitted isotropically by every cell.
+    Emission {
+        /// Emission per cell (on the problem's geometry).
+        grid: Grid,
+        /// Multiplier (grey or RGB).
+        scale: Spectrum,
+    },
+}
+
+/// What kind a light is, for capability checks and messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LightKind {
+    /// [`Light::Directional`].
+    Directional,
+    /// [`Light::Point`].
+    Point,
+    /// [`Light::Spot`].
+    Spot,
+    /// [`Light::Sky`].
+    Sky,
+    /// [`Light::Emission`].
+    Emission,
+}
+
+impl Light {
+    /// The light's kind.
+    pub fn kind(&self) -> LightKind {
+        match self {
+            Light::Directional { .. } => LightKind::Directional,
+            Light::Point { .. } => LightKind::Point,
+            Light::Spot { .. } => LightKind::Spot,
+            Light::Sky { .. } => LightKind::Sky,
+            Light::Emission { .. } => LightKind::Emission,
+        }
+    }
+
+    /// The light's spectrum (irradiance, intensity, radiance or emission scale).
+    pub fn spectrum(&self) -> Spectrum {
+        match self {
+            Light::Directional { irradiance, .. } => *irradiance,
+            Light::Point { intensity, .. } | Light::Spot { intensity, .. } => *intensity,
+            Light::Sky { radiance } => *radiance,
+            Light::Emission { scale, .. } => *scale,
+        }
+    }
+
+    /// For lights that arrive at `x` from one direction: the unit direction of travel of
+    /// that light at `x`, the unoccluded irradiance it delivers there (normal to the
+    /// beam, per unit of the light's spectrum) and the point it comes from (or a point
+    /// `far` away for distant lights). Distances to point and spot lights are taken as at
+    /// least `min_distance`, which keeps the 1/r² of a light sitting on a cell centre finite.
+    /// `None` for sky and emission.
+    pub fn arrival(&self, x: DVec3, far: f64, min_distance: f64) -> Option<(DVec3, f64, DVec3)> {
+        let floor = (min_distance * min_distance).max(1e-300);
+        match *self {
+            Light::Directional { direction, .. } => Some((direction, 1.0, x - direction * far)),
+            Light::Point { position, .. } => {
+                let d = x - position;
+                let r2 = d.length_squared();
+                let w = if r2 > 0.0 { d / r2.sqrt() } else { DVec3::Z };
+                Some((w, 1.0 / r2.max(floor), position))
+            }
+            Light::Spot {
+                position,
+                direction,
+                inner_angle,
+                outer_angle,
+                ..
+            } => {
+                let d = x - position;
+                let r2 = d.length_squared();
+                let w = if r2 > 0.0 { d / r2.sqrt() } else { direction };
+                let cos = w.dot(direction);
+                let (ci, co) = (inner_angle.cos(), outer_angle.cos());
+                let falloff = if cos >= ci {
+                    1.0
+                } else if cos <= co {
+                    0.0
+                } else {
+                    // Smoothstep between the outer and inner cone.
+                    let t = (cos - co) / (ci - co);
+                    t * t * (3.0 - 2.0 * t)
+                };
+                Some((w, falloff / r2.max(floor), position))
+            }
+            Light::Sky { .. } | Light::Emission { .. } => None,
+        }
+    }
+}
+
+/// The condition at the domain boundary.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Boundary {
+    /// Nothing comes in; light leaves freely (index-matched).
+    Vacuum,
+    /// The diffusion Robin condition φ + 2AD ∂φ/∂n = 0 with A from the relative index η.
+    Robin {
+        /// Relative refractive index.
+        eta: f64,
+    },
+    /// A fixed fluence on the boundary.
+    Dirichlet {
+        /// The boundary fluence.
+        value: f64,
+    },
+    /// A fixed normal flux through the boundary (0 = reflecting).
+    Neumann {
+        /// Outward normal flux.
+        flux: f64,
+    },
+}
+
+/// What kind a boundary is, for capability checks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BoundaryKind {
+    /// [`Boundary::Vacuum`].
+    Vacuum,
+    /// [`Boundary::Robin`].
+    Robin,
+    /// [`Boundary::Dirichlet`].
+    Dirichlet,
+    /// [`Boundary::Neumann`].
+    Neumann,
+}
+
+impl Boundary {
+    /// The boundary's kind.
+    pub fn kind(&self) -> BoundaryKind {
+        match self {
+            Boundary::Vacuum => BoundaryKind::Vacuum,
+            Boundary::Robin { .. } => BoundaryKind::Robin,
+            Boundary::Dirichlet { .. } => BoundaryKind::Dirichlet,
+            Boundary::Neumann { .. } => BoundaryKind::Neumann,
+        }
+    }
+}
+
+/// A complete light-transport problem. Build it with [`Problem::new`], which validates it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Problem {
+    geometry: GridGeometry,
+    medium: Medium,
+    lights: Vec<Light>,
+    boundary: Boundary,
+    embedded: Option<Grid>,
+}
+
+impl Problem {
+    /// Validates and assembles a problem: every grid on `geometry`, σ_t ≥ 0 and finite,
+    /// albedo in [0, 1], one or three channels everywhere, finite unit light directions,
+    /// valid spectra, an SDF on the same geometry.
+    pub fn new(
+        geometry: GridGeometry,
+        medium: Medium,
+        lights: Vec<Light>,
+        boundary: Boundary,
+        embedded: Option<Grid>,
+    ) -> Result<Self, ProblemError> {
+        let bad = |what: &str| Err(ProblemError(what.to_owned()));
+        let on_grid = |g: &Grid| g.geometry() == &geometry;
+        if medium.sigma_t.is_empty() || medium.albedo.is_empty() {
+            return bad("the medium needs an extinction and an albedo");
+        }
+        for list in [medium.sigma_t.len(), medium.albedo.len()] {
+            if list != 1 && list != 3 {
+                return bad("medium quantities need one (grey) or three (RGB) channels");
+            }
+        }
+        for g in &medium.sigma_t {
+            if !on_grid(g) {
+                return bad("an extinction grid is not on the problem's geometry");
+            }
+            if let Some(v) = g.data().iter().find(|v| !v.is_finite() || **v < 0.0) {
+                return bad(&format!(
+                    "extinction must be finite and non-negative, found {v}"
+                ));
+            }
+        }
+        for a in &medium.albedo {
+            let in_unit = |v: &f32| (0.0..=1.0).contains(v);
+            match a {
+                Field::Constant(v) if !in_unit(v) => {
+                    return bad(&format!("albedo {v} is outside [0, 1]"));
+                }
+                Field::Grid(g) if !on_grid(g) => {
+                    return bad("an albedo grid is not on the problem's geometry");
+                }
+                Field::Grid(g) if !g.data().iter().all(in_unit) => {
+                    return bad("albedo values must lie in [0, 1]");
+                }
+                _ => {}
+            }
+        }
+        if !(medium.eta.is_finite() && medium.eta > 0.0) {
+            return bad("the refractive index must be finite and positive");
+        }
+        for light in &lights {
+            if !light.spectrum().is_valid() {
+                return bad("light spectra must be finite and non-negative");
+            }
+            let unit = |d: DVec3| d.is_finite() && (d.length() - 1.0).abs() < 1e-9;
+            let ok = match light {
+                Light::Directional { direction, .. } => unit(*direction),
+                Light::Point { position, .. } => position.is_finite(),
+                Light::Spot {
+                    position,
+                    direction,
+                    inner_angle,
+                    outer_angle,
+                    ..
+                } => {
+                    position.is_finite()
+                        && unit(*direction)
+                        && *inner_angle >= 0.0
+                        && inner_angle <= outer_angle
+                        && *outer_angle <= std::f64::consts::PI
+                }
+                Light::Sky { .. } => true,
+                Light::Emission { grid, .. } => {
+                    on_grid(grid) && grid.data().iter().all(|v| v.is_finite() && *v >= 0.0)
+                }
+            };
+            if !ok {
+                return bad(&format!(
+                    "invalid {:?} light (unit directions, finite positions, 0 ≤ inner ≤ outer ≤ π, emission on the grid)",
+                    light.kind()
+                ));
+            }
+        }
+        match boundary {
+            Boundary::Robin { eta } if !(eta.is_finite() && eta > 0.0) => {
+                return bad("Robin boundary needs a positive η");
+            }
+            Boundary::Dirichlet { value } if !value.is_finite() => {
+                return bad("Dirichlet value must be finite");
+            }
+            Boundary::Neumann { flux } if !flux.is_finite() => {
+                return bad("Neumann flux must be finite");
+            }
+            _ => {}
+        }
+        if embedded.as_ref().is_some_and(|g| !on_grid(g)) {
+            return bad("the embedded SDF is not on the problem's geometry");
+        }
+        Ok(Self {
+            geometry,
+            medium,
+            lights,
+            boundary,
+            embedded,
+        })
+    }
+
+    /// The grid geometry (the domain).
+    pub fn geometry(&self) -> &GridGeometry {
+        &self.geometry
+    }
+
+    /// The medium.
+    pub fn medium(&self) -> &Medium {
+        &self.medium
+    }
+
+    /// The lights.
+    pub fn lights(&self) -> &[Light] {
+        &self.lights
+    }
+
+    /// The boundary condition.
+    pub fn boundary(&self) -> Boundary {
+        self.boundary
+    }
+
+    /// The embedded geometry's signed distance grid, if any (negative inside the object).
+    pub fn embedded(&self) -> Option<&Grid> {
+        self.embedded.as_ref()
+    }
+
+    /// Channels to solve: 1 if the medium and every light are grey, else 3.
+    pub fn channels(&self) -> usize {
+        let medium = self.medium.sigma_t.len().max(self.medium.albedo.len());
+        self.lights
+            .iter()
+            .map(|l| l.spectrum().channels())
+            .fold(medium, usize::max)
+    }
+}

@@ -1,0 +1,92 @@
+//! What a solver returns: the fluence, optionally an angular representation, and a report.
+
+use glam::DVec3;
+use lucent_grid::Grid;
+use lucent_optics::{Phase, PhaseFunction};
+
+use crate::problem::Light;
+use crate::solver::SolveReport;
+
+/// Uncollided light from point-like lights (directional, point, spot), kept per light so
+/// that in-scattering can weight it by the phase function: the exact single-scattering
+/// source. Made by the `direct` solver; later solvers reuse it for their source terms.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LightTransmittance {
+    /// The phase function of the medium.
+    pub phase: Phase,
+    /// The lights, in the order of `transmittance`.
+    pub lights: Vec<Light>,
+    /// Transmittance e^{−τ} from each light to every cell centre: `[light][channel]`, one
+    /// channel when the extinction is grey.
+    pub transmittance: Vec<Vec<Grid>>,
+    /// How far away distant lights are placed for ray marching (beyond the domain).
+    pub far: f64,
+    /// The smallest distance used in a point light's 1/r².
+    pub min_distance: f64,
+    /// The rest of the fluence, which in-scatters isotropically (the uncollided sky for
+    /// `direct`, the scattered fluence for a solver that adds multiple scattering), per
+    /// channel.
+    pub isotropic_fluence: Vec<Grid>,
+}
+
+impl LightTransmittance {
+    /// The uncollided fluence φ_u(x) = Σ_l E_l(x) T_l(x) in `channel`.
+    pub fn fluence(&self, channel: usize, x: DVec3) -> f64 {
+        self.sum(channel, x, |_| 1.0)
+    }
+
+    /// In-scattered radiance toward `omega` (direction of travel after scattering), per
+    /// unit σ_s: Σ_l p(ω_l·ω) E_l(x) T_l(x) + φ_iso(x)/(4π).
+    pub fn inscattered(&self, channel: usize, x: DVec3, omega: DVec3) -> f64 {
+        let iso = &self.isotropic_fluence[channel.min(self.isotropic_fluence.len() - 1)];
+        self.sum(channel, x, |w| self.phase.eval(w, omega))
+            + f64::from(iso.sample_trilinear(x)) / (4.0 * std::f64::consts::PI)
+    }
+
+    fn sum(&self, channel: usize, x: DVec3, weight: impl Fn(DVec3) -> f64) -> f64 {
+        let mut total = 0.0;
+        for (light, grids) in self.lights.iter().zip(&self.transmittance) {
+            if let Some((w, irradiance, _)) = light.arrival(x, self.far, self.min_distance) {
+                let t = grids[channel.min(grids.len() - 1)].sample_trilinear(x);
+                total += weight(w) * light.spectrum().channel(channel) * irradiance * f64::from(t);
+            }
+        }
+        total
+    }
+}
+
+/// An angular representation of the radiance field.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Angular {
+    /// Per-light transmittance of point-like lights.
+    Lights(LightTransmittance),
+}
+
+/// A solver's result.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Solution {
+    /// The fluence φ = ∫ L dω per channel (one grid for grey problems).
+    pub fluence: Vec<Grid>,
+    /// The part of the radiance that is kept with its directions, if any.
+    pub angular: Option<Angular>,
+    /// What happened.
+    pub report: SolveReport,
+}
+
+impl Solution {
+    /// The fluence grid of `channel`.
+    pub fn fluence(&self, channel: usize) -> &Grid {
+        &self.fluence[channel.min(self.fluence.len() - 1)]
+    }
+
+    /// In-scattered radiance ∫ p(ω′·ω) L(x, ω′) dω′ toward `omega` at `x`, per unit σ_s:
+    /// from the angular representation where there is one, else φ/(4π) (isotropic).
+    pub fn inscattered(&self, channel: usize, x: DVec3, omega: DVec3) -> f64 {
+        match &self.angular {
+            Some(Angular::Lights(lights)) => lights.inscattered(channel, x, omega),
+            None => {
+                f64::from(self.fluence(channel).sample_trilinear(x)) / (4.0 * std::f64::consts::PI)
+            }
+        }
+    }
+}

@@ -1,0 +1,284 @@
+//! The `Solver` trait, what a solver can do, how it is asked, and how it reports.
+
+use std::fmt;
+use std::sync::Arc;
+use std::time::Duration;
+
+use serde::Serialize;
+
+use crate::error::SolveError;
+use crate::problem::{BoundaryKind, LightKind, Problem};
+use crate::solution::Solution;
+
+/// What a solver's solution contains.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OutputKind {
+    /// The fluence φ only: the renderer in-scatters σ_s φ/(4π).
+    Fluence,
+    /// Fluence and an angular representation: the renderer in-scatters phase-weighted.
+    AngularRadiance,
+}
+
+/// What problems a solver handles. [`Capabilities::check`] turns a mismatch into a clear
+/// [`SolveError::Unsupported`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Capabilities {
+    /// Handles a non-isotropic phase function.
+    pub anisotropic: bool,
+    /// Handles spatially varying coefficients.
+    pub heterogeneous: bool,
+    /// Handles an embedded boundary (SDF).
+    pub embedded_geometry: bool,
+    /// Boundary conditions it implements.
+    pub boundaries: Vec<BoundaryKind>,
+    /// Lights it implements.
+    pub lights: Vec<LightKind>,
+    /// What its solution holds.
+    pub output: OutputKind,
+}
+
+impl Capabilities {
+    /// `Ok` if `solver` (with these capabilities) can solve `problem`.
+    pub fn check(&self, solver: &str, problem: &Problem) -> Result<(), SolveError> {
+        let unsupported = |feature: String| {
+            Err(SolveError::Unsupported {
+                solver: solver.to_owned(),
+                feature,
+            })
+        };
+        let boundary = problem.boundary().kind();
+        if !self.boundaries.contains(&boundary) {
+            return unsupported(format!(
+                "a {boundary:?} boundary (it handles {:?})",
+                self.boundaries
+            ));
+        }
+        if let Some(light) = problem
+            .lights()
+            .iter()
+            .find(|l| !self.lights.contains(&l.kind()))
+        {
+            return unsupported(format!(
+                "{:?} lights (it handles {:?})",
+                light.kind(),
+                self.lights
+            ));
+        }
+        if !self.embedded_geometry && problem.embedded().is_some() {
+            return unsupported("embedded geometry".into());
+        }
+        let phase = problem.medium().phase;
+        if !self.anisotropic && !matches!(phase, lucent_optics::Phase::Isotropic) {
+            return unsupported(format!("an anisotropic phase function ({phase:?})"));
+        }
+        if !self.heterogeneous {
+            let constant = |g: &lucent_grid::Grid| g.data().windows(2).all(|w| w[0] == w[1]);
+            if !problem.medium().sigma_t.iter().all(constant) {
+                return unsupported("a heterogeneous medium".into());
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Progress of a running solve, passed to [`SolveOptions::progress`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Progress {
+    /// Fraction done in [0, 1] (iterative solvers: an estimate from the residual).
+    pub fraction: f64,
+    /// Iterations so far (0 for direct methods).
+    pub iteration: usize,
+    /// Current relative residual, if the solver has one.
+    pub residual: Option<f64>,
+}
+
+/// A progress callback.
+pub type ProgressFn = Arc<dyn Fn(Progress) + Send + Sync>;
+
+/// How a solve is asked to run.
+#[derive(Clone)]
+pub struct SolveOptions {
+    /// Stop when the residual falls below this fraction of the initial one.
+    pub relative_tolerance: f64,
+    /// Stop when the residual falls below this absolute value.
+    pub absolute_tolerance: f64,
+    /// Stop after this many iterations.
+    pub max_iterations: usize,
+    /// Stop after this much wall time.
+    pub time_budget: Option<Duration>,
+    /// Worker threads (`None`: rayon's global pool).
+    pub threads: Option<usize>,
+    /// The most bytes the solver may allocate.
+    pub memory_budget: u64,
+    /// Called as the solve advances.
+    pub progress: Option<ProgressFn>,
+}
+
+impl Default for SolveOptions {
+    fn default() -> Self {
+        Self {
+            relative_tolerance: 1e-6,
+            absolute_tolerance: 0.0,
+            max_iterations: 10_000,
+            time_budget: None,
+            threads: None,
+            memory_budget: 8 << 30,
+            progress: None,
+        }
+    }
+}
+
+impl fmt::Debug for SolveOptions {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("SolveOptions")
+            .field("relative_tolerance", &self.relative_tolerance)
+            .field("absolute_tolerance", &self.absolute_tolerance)
+            .field("max_iterations", &self.max_iterations)
+            .field("time_budget", &self.time_budget)
+            .field("threads", &self.threads)
+            .field("memory_budget", &self.memory_budget)
+            .field("progress", &self.progress.as_ref().map(|_| "callback"))
+            .finish()
+    }
+}
+
+impl SolveOptions {
+    /// Checks the numbers (tolerances ≥ 0 and finite, at least one iteration, at least one
+    /// thread).
+    pub fn validate(&self) -> Result<(), SolveError> {
+        let bad = |name: &str, reason: &str| {
+            Err(SolveError::InvalidParameter {
+                name: name.into(),
+                reason: reason.into(),
+            })
+        };
+        if !(self.relative_tolerance >= 0.0 && self.relative_tolerance.is_finite()) {
+            return bad("relative_tolerance", "must be finite and ≥ 0");
+        }
+        if !(self.absolute_tolerance >= 0.0 && self.absolute_tolerance.is_finite()) {
+            return bad("absolute_tolerance", "must be finite and ≥ 0");
+        }
+        if self.max_iterations == 0 {
+            return bad("max_iterations", "must be at least 1");
+        }
+        if self.threads == Some(0) {
+            return bad("threads", "must be at least 1");
+        }
+        Ok(())
+    }
+
+    /// Runs `f` on a pool of `threads` workers, or on rayon's global pool.
+    pub fn install<T: Send>(&self, f: impl FnOnce() -> T + Send) -> Result<T, SolveError> {
+        match self.threads {
+            None => Ok(f()),
+            Some(n) => rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map(|pool| pool.install(f))
+                .map_err(|e| SolveError::InvalidParameter {
+                    name: "threads".into(),
+                    reason: e.to_string(),
+                }),
+        }
+    }
+
+    /// Reports progress if a callback is set.
+    pub fn report(&self, progress: Progress) {
+        if let Some(callback) = &self.progress {
+            callback(progress);
+        }
+    }
+}
+
+/// Why a solver stopped, in the manner of PETSc's KSP converged reasons.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "reason", rename_all = "kebab-case")]
+pub enum StopReason {
+    /// A non-iterative method finished: the result is exact up to its discretisation.
+    Exact,
+    /// The residual fell below the relative tolerance.
+    ConvergedRelative {
+        /// Final relative residual.
+        residual: f64,
+    },
+    /// The residual fell below the absolute tolerance.
+    ConvergedAbsolute {
+        /// Final residual.
+        residual: f64,
+    },
+    /// The iteration limit was reached first.
+    IterationLimit {
+        /// Relative residual when stopped.
+        residual: f64,
+    },
+    /// The time budget ran out first.
+    TimeLimit {
+        /// Relative residual when stopped.
+        residual: f64,
+    },
+    /// A NaN or infinity appeared.
+    DivergedNonFinite {
+        /// The iteration at which it appeared.
+        iteration: usize,
+    },
+    /// The residual grew beyond any hope of convergence.
+    DivergedGrowth {
+        /// Growth of the residual over its initial value.
+        growth: f64,
+        /// The iteration at which the solver gave up.
+        iteration: usize,
+    },
+    /// The requested parameters are beyond the scheme's stability limit; nothing was run.
+    UnstableParameters {
+        /// The parameter (time step, CFL number, ...).
+        parameter: String,
+        /// The largest stable value.
+        limit: f64,
+        /// The value requested.
+        requested: f64,
+    },
+}
+
+impl StopReason {
+    /// Whether the solution can be trusted (exact or converged).
+    pub fn is_converged(&self) -> bool {
+        matches!(
+            self,
+            StopReason::Exact
+                | StopReason::ConvergedRelative { .. }
+                | StopReason::ConvergedAbsolute { .. }
+        )
+    }
+}
+
+/// What happened during a solve.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SolveReport {
+    /// The solver's name.
+    pub solver: String,
+    /// Iterations run (0 for non-iterative methods).
+    pub iterations: usize,
+    /// Relative residual after each iteration.
+    pub residual_history: Vec<f64>,
+    /// Wall time of the solve, in seconds.
+    pub wall_time_s: f64,
+    /// Bytes the solver allocated for its working data and result, at peak.
+    pub peak_memory_bytes: u64,
+    /// Why it stopped.
+    pub stop_reason: StopReason,
+}
+
+/// A light-transport solver: one obvious way to be called.
+pub trait Solver: Send + Sync {
+    /// The registry name (`direct`, `diffusion-mg`, ...).
+    fn name(&self) -> &str;
+
+    /// What problems it handles.
+    fn capabilities(&self) -> Capabilities;
+
+    /// Solves `problem`. Fails only when the solve cannot run (unsupported feature, bad
+    /// option, over budget); a solve that ran returns its [`SolveReport`] with the reason it
+    /// stopped.
+    fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError>;
+}

@@ -1,0 +1,176 @@
+//! Ray marching through the medium.
+
+use glam::DVec3;
+use lucent_core::{Light, Problem, Solution};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::RenderError;
+use crate::camera::Camera;
+use crate::image_io::Image;
+
+/// Image size and marching parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderSettings {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Step length as a fraction of the smallest cell size.
+    #[serde(default = "default_step")]
+    pub step: f64,
+    /// Radiance behind the medium (linear RGB); `None` uses the sky's radiance.
+    #[serde(default)]
+    pub background: Option<[f64; 3]>,
+}
+
+fn default_step() -> f64 {
+    0.5
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            width: 640,
+            height: 480,
+            step: default_step(),
+            background: None,
+        }
+    }
+}
+
+/// A per-pixel jitter in [0, 1) from a hash of the pixel (deterministic).
+fn jitter(x: usize, y: usize) -> f64 {
+    let mut h = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    h = (h ^ (h >> 31)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h ^= h >> 29;
+    (h >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// Renders `solution` of `problem` through `camera`. `progress` is called with the fraction
+/// of rows done.
+pub fn render(
+    problem: &Problem,
+    solution: &Solution,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: Option<&(dyn Fn(f64) + Sync)>,
+) -> Result<Image, RenderError> {
+    camera.validate()?;
+    if settings.width == 0 || settings.height == 0 || settings.width * settings.height > 1 << 26 {
+        return Err(RenderError::Invalid(format!(
+            "image size {}×{} (1 to 2^26 pixels)",
+            settings.width, settings.height
+        )));
+    }
+    if !(settings.step > 0.0 && settings.step.is_finite()) {
+        return Err(RenderError::Invalid(format!(
+            "step {} must be positive",
+            settings.step
+        )));
+    }
+    let geometry = problem.geometry();
+    let (lo, hi) = geometry.bounds();
+    let step = settings.step * geometry.spacing().min_element();
+    let medium = problem.medium();
+    let channels = problem.channels().max(solution.fluence.len());
+    let sky: [f64; 3] = std::array::from_fn(|c| {
+        problem
+            .lights()
+            .iter()
+            .filter(|l| matches!(l, Light::Sky { .. }))
+            .map(|l| l.spectrum().channel(c))
+            .sum()
+    });
+    let background = settings.background.unwrap_or(sky);
+    let emission: Vec<&Light> = problem
+        .lights()
+        .iter()
+        .filter(|l| matches!(l, Light::Emission { .. }))
+        .collect();
+    let aspect = settings.width as f64 / settings.height as f64;
+    let rows_done = std::sync::atomic::AtomicUsize::new(0);
+
+    let mut pixels = vec![[0f32; 3]; settings.width * settings.height];
+    pixels
+        .par_chunks_mut(settings.width)
+        .enumerate()
+        .try_for_each(|(y, row)| -> Result<(), RenderError> {
+            for (x, pixel) in row.iter_mut().enumerate() {
+                let u = (x as f64 + 0.5) / settings.width as f64;
+                let v = (y as f64 + 0.5) / settings.height as f64;
+                let (origin, dir) = camera.ray(u, v, aspect)?;
+                let mut radiance = [0f64; 3];
+                let mut transmittance = [1f64; 3];
+                if let Some((t0, t1)) = clip(origin, dir, lo, hi) {
+                    let mut t = t0 + step * jitter(x, y);
+                    // March; the first (jittered) partial step starts at t0.
+                    let mut previous = t0;
+                    while previous < t1 && transmittance.iter().take(channels).any(|&t| t > 1e-4) {
+                        let end = t.min(t1);
+                        let ds = end - previous;
+                        let p = origin + dir * (0.5 * (previous + end));
+                        for c in 0..channels {
+                            let sigma_t = f64::from(medium.sigma_t(c).sample_trilinear(p));
+                            let sigma_s = f64::from(medium.albedo(c).sample(p)) * sigma_t;
+                            let mut source = if sigma_s > 0.0 {
+                                sigma_s * solution.inscattered(c, p, -dir)
+                            } else {
+                                0.0
+                            };
+                            for light in &emission {
+                                if let Light::Emission { grid, scale } = light {
+                                    source +=
+                                        scale.channel(c) * f64::from(grid.sample_trilinear(p));
+                                }
+                            }
+                            let attenuation = (-sigma_t * ds).exp();
+                            let weight = if sigma_t * ds > 1e-6 {
+                                (1.0 - attenuation) / sigma_t
+                            } else {
+                                ds
+                            };
+                            radiance[c] += transmittance[c] * source * weight;
+                            transmittance[c] *= attenuation;
+                        }
+                        previous = end;
+                        t += step;
+                    }
+                }
+                let rgb: [f64; 3] = std::array::from_fn(|c| {
+                    let c_in = c.min(channels - 1);
+                    radiance[c_in] + transmittance[c_in] * background[c]
+                });
+                *pixel = rgb.map(|v| v as f32);
+            }
+            let done = rows_done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if let Some(callback) = progress {
+                callback(done as f64 / settings.height as f64);
+            }
+            Ok(())
+        })?;
+    Ok(Image {
+        width: settings.width,
+        height: settings.height,
+        pixels,
+    })
+}
+
+/// The parametric interval where the ray o + t d (t ≥ 0) is inside the box, if any.
+fn clip(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
+    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+    for a in 0..3 {
+        if d[a] == 0.0 {
+            if o[a] < lo[a] || o[a] > hi[a] {
+                return None;
+            }
+        } else {
+            let (ta, tb) = ((lo[a] - o[a]) / d[a], (hi[a] - o[a]) / d[a]);
+            t0 = t0.max(ta.min(tb));
+            t1 = t1.min(ta.max(tb));
+        }
+    }
+    (t0 < t1).then_some((t0, t1))
+}

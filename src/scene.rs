@@ -1,0 +1,684 @@
+//! Scene files (TOML): everything one experiment needs — volume, medium, lights,
+//! boundary, camera, image, solver — in one place. `examples/scenes/` has one documented
+//! file per feature; `default.toml` there is the built-in default scene.
+//!
+//! Paths to volume files are relative to the scene file; a `data:` prefix resolves in
+//! `$LUCENT_DATA` (default `../shared/data/volumes`).
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+use lucent_core::{Boundary, Field, Light, Medium, Params, Problem, Spectrum};
+use lucent_grid::io::raw::RawLayout;
+use lucent_grid::io::{self, Endian, LoadOptions, ScalarType};
+use lucent_grid::procedural::{NoiseCloud, Shape, gaussian_blob};
+use lucent_grid::transfer::TransferFunction;
+use lucent_grid::{Grid, GridGeometry, resample};
+use lucent_optics::Phase;
+use lucent_render::{Camera, RenderSettings, ToneMap};
+use serde::Deserialize;
+
+use crate::Error;
+
+/// The built-in default scene: a procedural cloud lit by a sun-like directional light and a
+/// blue sky (`examples/scenes/default.toml`).
+pub const DEFAULT_SCENE: &str = include_str!("../examples/scenes/default.toml");
+
+/// A parsed scene file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// Where the density comes from.
+    pub volume: VolumeSpec,
+    /// How density becomes a medium.
+    #[serde(default)]
+    pub medium: MediumSpec,
+    /// The lights.
+    #[serde(default)]
+    pub lights: Vec<LightSpec>,
+    /// The boundary condition.
+    #[serde(default)]
+    pub boundary: BoundarySpec,
+    /// The camera.
+    pub camera: Camera,
+    /// Image size and tone mapping.
+    #[serde(default)]
+    pub image: ImageSpec,
+    /// Which solver, with which parameters.
+    #[serde(default)]
+    pub solver: SolverSpec,
+}
+
+/// Where the scalar volume comes from.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum VolumeSpec {
+    /// A seeded fBm noise cloud filling a ball in the box.
+    Cloud {
+        /// Cells per axis.
+        resolution: [usize; 3],
+        /// The box [min, max].
+        bounds: [[f64; 3]; 2],
+        /// Noise seed.
+        #[serde(default)]
+        seed: u64,
+        /// Density offset (larger: thinner, more broken cloud).
+        #[serde(default)]
+        threshold: Option<f64>,
+    },
+    /// A shape's density (1 inside, 0 outside, linear edge of width `edge`).
+    Shape {
+        /// Cells per axis.
+        resolution: [usize; 3],
+        /// The box [min, max].
+        bounds: [[f64; 3]; 2],
+        /// The shape.
+        shape: ShapeSpec,
+        /// Width of the soft edge (scene units).
+        #[serde(default)]
+        edge: f64,
+    },
+    /// A Gaussian blob of peak 1.
+    Blob {
+        /// Cells per axis.
+        resolution: [usize; 3],
+        /// The box [min, max].
+        bounds: [[f64; 3]; 2],
+        /// Centre.
+        centre: [f64; 3],
+        /// Standard deviation.
+        sigma: f64,
+    },
+    /// A volume file; `.raw` files need `raw`.
+    File {
+        /// Path (relative to the scene file, or `data:NAME` in `$LUCENT_DATA`).
+        path: String,
+        /// Layout of a headerless raw file.
+        #[serde(default)]
+        raw: Option<RawSpec>,
+        /// Resample to this resolution.
+        #[serde(default)]
+        resolution: Option<[usize; 3]>,
+        /// Place the volume in this box instead of where the file puts it.
+        #[serde(default)]
+        bounds: Option<[[f64; 3]; 2]>,
+    },
+}
+
+/// A procedural shape.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(tag = "type", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ShapeSpec {
+    /// A ball.
+    Sphere {
+        /// Centre.
+        centre: [f64; 3],
+        /// Radius.
+        radius: f64,
+    },
+    /// An axis-aligned box.
+    Box {
+        /// Minimum corner.
+        min: [f64; 3],
+        /// Maximum corner.
+        max: [f64; 3],
+    },
+    /// A torus around the z axis.
+    Torus {
+        /// Centre.
+        centre: [f64; 3],
+        /// Ring radius.
+        major: f64,
+        /// Tube radius.
+        minor: f64,
+    },
+    /// A slab between two parallel planes.
+    Slab {
+        /// Plane normal.
+        normal: [f64; 3],
+        /// Mid-plane offset along the normal.
+        offset: f64,
+        /// Thickness.
+        thickness: f64,
+    },
+}
+
+/// Layout of a headerless raw file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawSpec {
+    /// Cells per axis.
+    pub dims: [usize; 3],
+    /// `u8`, `i8`, `u16`, `i16`, `u32`, `i32`, `f32` or `f64`.
+    #[serde(rename = "type")]
+    pub scalar: String,
+    /// Big-endian samples.
+    #[serde(default)]
+    pub big_endian: bool,
+    /// Cell size.
+    #[serde(default)]
+    pub spacing: Option<[f64; 3]>,
+}
+
+/// How the scalar volume becomes a medium.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MediumSpec {
+    /// σ_t = density × value (1/length) when there is no transfer function.
+    #[serde(default = "one")]
+    pub density: f64,
+    /// Single-scattering albedo (grey or RGB) when there is no transfer function.
+    #[serde(default = "default_albedo")]
+    pub albedo: Spectrum,
+    /// Per-channel multiplier of the extinction (coloured media such as ketchup).
+    #[serde(default)]
+    pub extinction_color: Option<[f64; 3]>,
+    /// A transfer function (replaces `density` and `albedo`).
+    #[serde(default)]
+    pub transfer: Option<TransferFunction>,
+    /// The phase function.
+    #[serde(default)]
+    pub phase: PhaseSpec,
+    /// Relative refractive index of the boundary.
+    #[serde(default = "one")]
+    pub eta: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn default_albedo() -> Spectrum {
+    Spectrum::Grey(0.9)
+}
+
+impl Default for MediumSpec {
+    fn default() -> Self {
+        Self {
+            density: 1.0,
+            albedo: default_albedo(),
+            extinction_color: None,
+            transfer: None,
+            phase: PhaseSpec::Isotropic,
+            eta: 1.0,
+        }
+    }
+}
+
+/// A phase function.
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum PhaseSpec {
+    /// Isotropic.
+    #[default]
+    Isotropic,
+    /// Henyey–Greenstein with mean cosine `g`.
+    HenyeyGreenstein {
+        /// Mean cosine.
+        g: f64,
+    },
+    /// Two Henyey–Greenstein lobes.
+    DoubleHenyeyGreenstein {
+        /// First lobe's mean cosine.
+        g1: f64,
+        /// Second lobe's mean cosine.
+        g2: f64,
+        /// First lobe's weight.
+        weight: f64,
+    },
+    /// Rayleigh.
+    Rayleigh,
+}
+
+/// A light. Angles in degrees; directions need not be normalised.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum LightSpec {
+    /// A distant light travelling along `direction`.
+    Directional {
+        /// Direction of travel.
+        direction: [f64; 3],
+        /// Irradiance across the beam.
+        irradiance: Spectrum,
+    },
+    /// A point light.
+    Point {
+        /// Position.
+        position: [f64; 3],
+        /// Radiant intensity (W/sr).
+        intensity: Spectrum,
+    },
+    /// A spot light.
+    Spot {
+        /// Position.
+        position: [f64; 3],
+        /// Axis of the cone.
+        direction: [f64; 3],
+        /// Radiant intensity on the axis.
+        intensity: Spectrum,
+        /// Half-angle of full intensity, degrees.
+        inner_angle: f64,
+        /// Half-angle of darkness, degrees.
+        outer_angle: f64,
+    },
+    /// A uniform sky.
+    Sky {
+        /// Radiance.
+        radiance: Spectrum,
+    },
+    /// Emission proportional to the volume's values.
+    Emission {
+        /// Radiance per unit length per unit of volume value.
+        scale: Spectrum,
+    },
+}
+
+/// A boundary condition.
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum BoundarySpec {
+    /// Vacuum.
+    #[default]
+    Vacuum,
+    /// Robin with relative index `eta`.
+    Robin {
+        /// Relative refractive index.
+        eta: f64,
+    },
+    /// Fixed fluence.
+    Dirichlet {
+        /// Boundary fluence.
+        value: f64,
+    },
+    /// Fixed normal flux.
+    Neumann {
+        /// Outward flux.
+        flux: f64,
+    },
+}
+
+/// Image size, exposure and tone mapping.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImageSpec {
+    /// Width in pixels.
+    #[serde(default = "default_width")]
+    pub width: usize,
+    /// Height in pixels.
+    #[serde(default = "default_height")]
+    pub height: usize,
+    /// Exposure in stops.
+    #[serde(default)]
+    pub exposure: f64,
+    /// Tone curve.
+    #[serde(default)]
+    pub tone: ToneMap,
+    /// Ray-marching step as a fraction of the smallest cell.
+    #[serde(default = "default_step")]
+    pub step: f64,
+    /// Background radiance (default: the sky's).
+    #[serde(default)]
+    pub background: Option<[f64; 3]>,
+}
+
+fn default_width() -> usize {
+    640
+}
+fn default_height() -> usize {
+    480
+}
+fn default_step() -> f64 {
+    0.5
+}
+
+impl Default for ImageSpec {
+    fn default() -> Self {
+        Self {
+            width: 640,
+            height: 480,
+            exposure: 0.0,
+            tone: ToneMap::Aces,
+            step: 0.5,
+            background: None,
+        }
+    }
+}
+
+/// The solver to run.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverSpec {
+    /// Registry name.
+    #[serde(default = "default_solver")]
+    pub name: String,
+    /// Its parameters.
+    #[serde(default)]
+    pub params: Params,
+}
+
+fn default_solver() -> String {
+    "direct".into()
+}
+
+impl Default for SolverSpec {
+    fn default() -> Self {
+        Self {
+            name: default_solver(),
+            params: Params::default(),
+        }
+    }
+}
+
+/// A scene ready to solve and render.
+#[derive(Debug, Clone)]
+pub struct BuiltScene {
+    /// The problem.
+    pub problem: Problem,
+    /// The camera.
+    pub camera: Camera,
+    /// Image settings.
+    pub settings: RenderSettings,
+    /// Exposure in stops.
+    pub exposure: f64,
+    /// Tone curve.
+    pub tone: ToneMap,
+    /// The scalar volume before the medium mapping.
+    pub volume: Grid,
+}
+
+impl Scene {
+    /// Parses scene text; `origin` names it in errors and anchors relative paths.
+    pub fn parse(text: &str, origin: &Path) -> Result<Self, Error> {
+        toml::from_str(text).map_err(|e| Error::Scene {
+            path: origin.to_owned(),
+            reason: e.to_string(),
+        })
+    }
+
+    /// Reads and parses a scene file.
+    pub fn load(path: &Path) -> Result<Self, Error> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+            path: path.to_owned(),
+            reason: e.to_string(),
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// The built-in default scene.
+    pub fn default_scene() -> Result<Self, Error> {
+        Self::parse(DEFAULT_SCENE, Path::new("<built-in default scene>"))
+    }
+
+    /// Builds the problem, camera and image settings; `base` is the folder that relative
+    /// volume paths start from.
+    pub fn build(&self, base: &Path) -> Result<BuiltScene, Error> {
+        let invalid = |reason: String| Error::Invalid(reason);
+        let volume = self.load_volume(base)?;
+        let geometry = *volume.geometry();
+        let m = &self.medium;
+        let (sigma_t_base, albedo): (Grid, Vec<Field>) = match &m.transfer {
+            Some(tf) => {
+                let grids = tf.apply(&volume);
+                let albedo = match grids.color {
+                    Some(rgb) => rgb
+                        .into_iter()
+                        .map(|c| Field::Grid(multiply(&grids.albedo, &c)))
+                        .collect(),
+                    None => vec![Field::Grid(grids.albedo)],
+                };
+                (grids.sigma_t, albedo)
+            }
+            None => {
+                if !(m.density.is_finite() && m.density >= 0.0) {
+                    return Err(invalid(format!(
+                        "medium.density {} must be finite and ≥ 0",
+                        m.density
+                    )));
+                }
+                let albedo = (0..m.albedo.channels())
+                    .map(|c| Field::Constant(m.albedo.channel(c) as f32))
+                    .collect();
+                (
+                    volume.map(|v| (f64::from(v.max(0.0)) * m.density) as f32),
+                    albedo,
+                )
+            }
+        };
+        let sigma_t = match m.extinction_color {
+            Some(rgb) => rgb
+                .iter()
+                .map(|&s| sigma_t_base.map(|v| (f64::from(v) * s) as f32))
+                .collect(),
+            None => vec![sigma_t_base],
+        };
+        let phase = match m.phase {
+            PhaseSpec::Isotropic => Phase::Isotropic,
+            PhaseSpec::HenyeyGreenstein { g } => {
+                Phase::henyey_greenstein(g).map_err(|e| invalid(e.to_string()))?
+            }
+            PhaseSpec::DoubleHenyeyGreenstein { g1, g2, weight } => {
+                Phase::double_henyey_greenstein(g1, g2, weight)
+                    .map_err(|e| invalid(e.to_string()))?
+            }
+            PhaseSpec::Rayleigh => Phase::Rayleigh,
+        };
+        let medium = Medium {
+            sigma_t,
+            albedo,
+            phase,
+            eta: m.eta,
+        };
+        let unit = |v: [f64; 3], what: &str| -> Result<DVec3, Error> {
+            let d = DVec3::from_array(v);
+            let n = d.normalize_or_zero();
+            if n == DVec3::ZERO || !n.is_finite() {
+                Err(invalid(format!("{what} {v:?} is not a direction")))
+            } else {
+                Ok(n)
+            }
+        };
+        let mut lights = Vec::new();
+        for light in &self.lights {
+            lights.push(match light {
+                LightSpec::Directional {
+                    direction,
+                    irradiance,
+                } => Light::Directional {
+                    direction: unit(*direction, "light direction")?,
+                    irradiance: *irradiance,
+                },
+                LightSpec::Point {
+                    position,
+                    intensity,
+                } => Light::Point {
+                    position: DVec3::from_array(*position),
+                    intensity: *intensity,
+                },
+                LightSpec::Spot {
+                    position,
+                    direction,
+                    intensity,
+                    inner_angle,
+                    outer_angle,
+                } => Light::Spot {
+                    position: DVec3::from_array(*position),
+                    direction: unit(*direction, "spot direction")?,
+                    intensity: *intensity,
+                    inner_angle: inner_angle.to_radians(),
+                    outer_angle: outer_angle.to_radians(),
+                },
+                LightSpec::Sky { radiance } => Light::Sky {
+                    radiance: *radiance,
+                },
+                LightSpec::Emission { scale } => Light::Emission {
+                    grid: volume.map(|v| v.max(0.0)),
+                    scale: *scale,
+                },
+            });
+        }
+        let boundary = match self.boundary {
+            BoundarySpec::Vacuum => Boundary::Vacuum,
+            BoundarySpec::Robin { eta } => Boundary::Robin { eta },
+            BoundarySpec::Dirichlet { value } => Boundary::Dirichlet { value },
+            BoundarySpec::Neumann { flux } => Boundary::Neumann { flux },
+        };
+        let problem = Problem::new(geometry, medium, lights, boundary, None)?;
+        self.camera.validate()?;
+        let i = self.image;
+        let settings = RenderSettings {
+            width: i.width,
+            height: i.height,
+            step: i.step,
+            background: i.background,
+        };
+        Ok(BuiltScene {
+            problem,
+            camera: self.camera,
+            settings,
+            exposure: i.exposure,
+            tone: i.tone,
+            volume,
+        })
+    }
+
+    fn load_volume(&self, base: &Path) -> Result<Grid, Error> {
+        let geometry = |resolution: [usize; 3], bounds: [[f64; 3]; 2]| {
+            GridGeometry::from_bounds(
+                resolution,
+                DVec3::from_array(bounds[0]),
+                DVec3::from_array(bounds[1]),
+            )
+        };
+        Ok(match &self.volume {
+            VolumeSpec::Cloud {
+                resolution,
+                bounds,
+                seed,
+                threshold,
+            } => {
+                let g = geometry(*resolution, *bounds)?;
+                let (lo, hi) = g.bounds();
+                let mut cloud =
+                    NoiseCloud::new(*seed, 0.5 * (lo + hi), 0.48 * (hi - lo).min_element());
+                if let Some(t) = threshold {
+                    cloud.threshold = *t;
+                }
+                cloud.rasterize(g)?
+            }
+            VolumeSpec::Shape {
+                resolution,
+                bounds,
+                shape,
+                edge,
+            } => {
+                let shape = match *shape {
+                    ShapeSpec::Sphere { centre, radius } => Shape::Sphere {
+                        centre: DVec3::from_array(centre),
+                        radius,
+                    },
+                    ShapeSpec::Box { min, max } => Shape::Box {
+                        min: DVec3::from_array(min),
+                        max: DVec3::from_array(max),
+                    },
+                    ShapeSpec::Torus {
+                        centre,
+                        major,
+                        minor,
+                    } => Shape::Torus {
+                        centre: DVec3::from_array(centre),
+                        major,
+                        minor,
+                    },
+                    ShapeSpec::Slab {
+                        normal,
+                        offset,
+                        thickness,
+                    } => Shape::Slab {
+                        normal: DVec3::from_array(normal),
+                        offset,
+                        thickness,
+                    },
+                };
+                shape.density_grid(geometry(*resolution, *bounds)?, *edge)?
+            }
+            VolumeSpec::Blob {
+                resolution,
+                bounds,
+                centre,
+                sigma,
+            } => gaussian_blob(
+                geometry(*resolution, *bounds)?,
+                DVec3::from_array(*centre),
+                *sigma,
+            )?,
+            VolumeSpec::File {
+                path,
+                raw,
+                resolution,
+                bounds,
+            } => {
+                let path = resolve(base, path);
+                let mut grid = match raw {
+                    Some(r) => {
+                        let scalar = scalar_type(&r.scalar).ok_or_else(|| {
+                            Error::Invalid(format!("unknown raw type `{}`", r.scalar))
+                        })?;
+                        let mut layout = RawLayout::new(r.dims, scalar);
+                        layout.endian = if r.big_endian {
+                            Endian::Big
+                        } else {
+                            Endian::Little
+                        };
+                        if let Some(s) = r.spacing {
+                            layout.spacing = DVec3::from_array(s);
+                        }
+                        io::raw::read(&path, &layout, &LoadOptions::default())?
+                    }
+                    None => io::read_volume(&path)?,
+                };
+                if let Some(b) = bounds {
+                    grid = grid.clone().with_geometry(geometry(grid.dims(), *b)?)?;
+                }
+                if let Some(r) = resolution {
+                    grid = resample::resample(&grid, *r)?;
+                }
+                grid
+            }
+        })
+    }
+}
+
+fn multiply(a: &Grid, b: &Grid) -> Grid {
+    let mut out = a.clone();
+    for (o, v) in out.data_mut().iter_mut().zip(b.data()) {
+        *o *= v;
+    }
+    out
+}
+
+fn scalar_type(name: &str) -> Option<ScalarType> {
+    Some(match name {
+        "u8" => ScalarType::U8,
+        "i8" => ScalarType::I8,
+        "u16" => ScalarType::U16,
+        "i16" => ScalarType::I16,
+        "u32" => ScalarType::U32,
+        "i32" => ScalarType::I32,
+        "f32" => ScalarType::F32,
+        "f64" => ScalarType::F64,
+        _ => return None,
+    })
+}
+
+/// The folder of shared test volumes: `$LUCENT_DATA`, or `../shared/data/volumes`.
+pub fn data_dir() -> PathBuf {
+    std::env::var_os("LUCENT_DATA")
+        .map_or_else(|| PathBuf::from("../shared/data/volumes"), PathBuf::from)
+}
+
+fn resolve(base: &Path, path: &str) -> PathBuf {
+    match path.strip_prefix("data:") {
+        Some(name) => data_dir().join(name),
+        None => base.join(path),
+    }
+}

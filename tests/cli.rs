@@ -1,0 +1,242 @@
+//! The `lucent` binary end to end: render a scene, solve to `.npy` and read it back, and one
+//! clear message with a non-zero exit for each kind of mistake.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn lucent(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lucent"))
+        .args(args)
+        .current_dir(dir)
+        .env("LUCENT_DATA", data_dir())
+        .output()
+        .expect("the lucent binary runs")
+}
+
+fn data_dir() -> PathBuf {
+    std::env::var_os("LUCENT_DATA").map_or_else(
+        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/volumes"),
+        PathBuf::from,
+    )
+}
+
+fn scene(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("examples/scenes")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// One message (a TOML error may quote the offending line under it), no panic, no
+/// backtrace, exit status 1.
+fn assert_clean_failure(o: &Output, expected: &str) {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(1), "stderr: {err}");
+    assert!(err.contains(expected), "expected `{expected}` in: {err}");
+    assert!(
+        !err.contains("panicked") && !err.contains("backtrace") && !err.contains("RUST_BACKTRACE"),
+        "{err}"
+    );
+    assert!(
+        err.starts_with("lucent: ") && err.matches("lucent: ").count() == 1,
+        "one message: {err}"
+    );
+}
+
+#[test]
+fn renders_the_default_scene_with_visible_structure() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = lucent(
+        &["render", "--size", "96x72", "-o", "cloud.png", "--quiet"],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let image = image::open(dir.path().join("cloud.png")).unwrap().to_rgb8();
+    assert_eq!(image.dimensions(), (96, 72));
+    // The cloud is in the middle against the sky: the centre differs from the corner, and
+    // its pixels vary (lit and shadowed parts), so it is neither empty nor flat.
+    let luminance = |p: &image::Rgb<u8>| {
+        0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2])
+    };
+    let corner = luminance(image.get_pixel(2, 2));
+    let centre: Vec<f64> = (24..72)
+        .flat_map(|x| (18..54).map(move |y| (x, y)))
+        .map(|(x, y)| luminance(image.get_pixel(x, y)))
+        .collect();
+    let mean = centre.iter().sum::<f64>() / centre.len() as f64;
+    let spread = centre.iter().fold(0.0f64, |m, &v| m.max((v - mean).abs()));
+    let covered = centre
+        .iter()
+        .filter(|&&v| (v - corner).abs() > 20.0)
+        .count() as f64
+        / centre.len() as f64;
+    assert!(
+        covered > 0.25,
+        "the cloud covers the middle of the view: {covered}"
+    );
+    assert!(
+        spread > 40.0,
+        "lit and shadowed parts differ: spread {spread}"
+    );
+}
+
+#[test]
+fn no_arguments_renders_the_default_scene_to_lucent_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = lucent(&[], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains("lucent.png"), "says where: {said}");
+    assert_eq!(
+        image::open(dir.path().join("lucent.png")).unwrap().width(),
+        640
+    );
+}
+
+#[test]
+fn renders_exr_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = lucent(
+        &[
+            "render",
+            &scene("rgb_medium.toml"),
+            "--size",
+            "40x30",
+            "-o",
+            "blob.exr",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let image = image::open(dir.path().join("blob.exr"));
+    // The image crate here is built for PNG only; check the EXR magic number instead.
+    let bytes = std::fs::read(dir.path().join("blob.exr")).unwrap();
+    assert_eq!(
+        &bytes[..4],
+        &[0x76, 0x2f, 0x31, 0x01],
+        "OpenEXR magic ({image:?})"
+    );
+}
+
+#[test]
+fn solves_to_npy_with_a_json_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = lucent(
+        &[
+            "solve",
+            &scene("point_light.toml"),
+            "--solver",
+            "direct",
+            "-o",
+            "fluence.npy",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let grid =
+        lucent::grid::io::npy::read(dir.path().join("fluence.npy"), &Default::default()).unwrap();
+    assert_eq!(grid.dims(), [48, 48, 48]);
+    let s = grid.stats();
+    assert!(
+        s.min > 0.0 && s.max.is_finite(),
+        "a point light reaches every cell: {s:?}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("fluence.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["solver"], "direct");
+    assert_eq!(report["report"]["stop_reason"]["reason"], "exact");
+    assert_eq!(report["dims"], serde_json::json!([48, 48, 48]));
+    assert!(report["report"]["wall_time_s"].as_f64().unwrap() >= 0.0);
+    assert!(report["report"]["peak_memory_bytes"].as_u64().unwrap() > 48 * 48 * 48 * 4);
+}
+
+#[test]
+fn every_example_scene_is_valid() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes =
+        std::fs::read_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes")).unwrap();
+    let mut count = 0;
+    for entry in scenes {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let out = lucent(&["info", &path.display().to_string()], dir.path());
+            assert!(out.status.success(), "{}: {}", path.display(), stderr(&out));
+            count += 1;
+        }
+    }
+    assert!(count >= 8, "one scene per feature");
+}
+
+#[test]
+fn lists_solvers_with_capabilities() {
+    let out = lucent(&["solvers"], Path::new("."));
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("direct") && text.contains("boundaries") && text.contains("Directional"),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_missing_scene_file() {
+    let out = lucent(&["render", "no-such-scene.toml"], Path::new("."));
+    assert_clean_failure(&out, "no-such-scene.toml");
+}
+
+#[test]
+fn bad_toml() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("bad.toml"), "[volume\nkind = 3").unwrap();
+    let out = lucent(&["render", "bad.toml"], dir.path());
+    assert_clean_failure(&out, "bad scene");
+    // A well-formed file with a misspelt field is refused too, naming the field.
+    std::fs::write(dir.path().join("typo.toml"), DEFAULT_WITH_TYPO).unwrap();
+    let out = lucent(&["info", "typo.toml"], dir.path());
+    assert_clean_failure(&out, "densty");
+}
+
+const DEFAULT_WITH_TYPO: &str = "[volume]\nkind = \"blob\"\nresolution = [8, 8, 8]\nbounds = [[0, 0, 0], [1, 1, 1]]\ncentre = [0.5, 0.5, 0.5]\nsigma = 0.2\n[medium]\ndensty = 3.0\n[camera]\nkind = \"pinhole\"\nposition = [3, 0, 0]\nlook_at = [0, 0, 0]\n";
+
+#[test]
+fn an_unknown_solver() {
+    let out = lucent(
+        &["render", "--solver", "magic", "--size", "8x8"],
+        Path::new("."),
+    );
+    assert_clean_failure(&out, "unknown solver `magic`");
+}
+
+#[test]
+fn a_feature_the_solver_cannot_handle() {
+    let out = lucent(
+        &["render", &scene("marble_robin.toml"), "--size", "8x8"],
+        Path::new("."),
+    );
+    assert_clean_failure(&out, "cannot handle a Robin boundary");
+}
+
+#[test]
+fn bad_output_formats_and_sizes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = lucent(
+        &["render", "--size", "8x8", "-o", "picture.bmp"],
+        dir.path(),
+    );
+    assert_clean_failure(&out, ".png or .exr");
+    let out = lucent(&["render", "--size", "eight"], dir.path());
+    assert_clean_failure(&out, "WIDTHxHEIGHT");
+    let out = lucent(
+        &["solve", &scene("point_light.toml"), "-o", "fluence.csv"],
+        dir.path(),
+    );
+    assert_clean_failure(&out, ".npy or .vol");
+}
