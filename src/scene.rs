@@ -20,6 +20,9 @@ use serde::Deserialize;
 
 use crate::Error;
 
+/// The most bytes one scene grid may take (2 GiB: a scene holds several such grids).
+const MAX_GRID_BYTES: u64 = 2 << 30;
+
 /// The built-in default scene: a procedural cloud lit by a sun-like directional light and a
 /// blue sky (`examples/scenes/default.toml`).
 pub const DEFAULT_SCENE: &str = include_str!("../examples/scenes/default.toml");
@@ -542,13 +545,25 @@ impl Scene {
     }
 
     fn load_volume(&self, base: &Path) -> Result<Grid, Error> {
-        let geometry = |resolution: [usize; 3], bounds: [[f64; 3]; 2]| {
-            GridGeometry::from_bounds(
-                resolution,
-                DVec3::from_array(bounds[0]),
-                DVec3::from_array(bounds[1]),
-            )
-        };
+        // A scene builds a handful of grids of this size (volume, σ_t and albedo per channel,
+        // per-light transmittance): refuse resolutions that could not fit before allocating.
+        let geometry =
+            |resolution: [usize; 3], bounds: [[f64; 3]; 2]| -> Result<GridGeometry, Error> {
+                let g = GridGeometry::from_bounds(
+                    resolution,
+                    DVec3::from_array(bounds[0]),
+                    DVec3::from_array(bounds[1]),
+                )?;
+                let bytes = g.voxel_count() as u64 * 4;
+                if bytes > MAX_GRID_BYTES {
+                    return Err(Error::Invalid(format!(
+                        "a {resolution:?} grid needs {:.1} GiB per field; the limit is {} GiB",
+                        bytes as f64 / (1u64 << 30) as f64,
+                        MAX_GRID_BYTES >> 30
+                    )));
+                }
+                Ok(g)
+            };
         Ok(match &self.volume {
             VolumeSpec::Cloud {
                 resolution,
@@ -640,6 +655,7 @@ impl Scene {
                     grid = grid.clone().with_geometry(geometry(grid.dims(), *b)?)?;
                 }
                 if let Some(r) = resolution {
+                    geometry(*r, [[0.0; 3], [1.0; 3]])?;
                     grid = resample::resample(&grid, *r)?;
                 }
                 grid

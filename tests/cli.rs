@@ -204,6 +204,17 @@ fn bad_toml() {
     assert_clean_failure(&out, "densty");
 }
 
+#[test]
+fn an_absurd_resolution_is_refused_before_allocating() {
+    let dir = tempfile::tempdir().unwrap();
+    let huge = DEFAULT_WITH_TYPO
+        .replace("[8, 8, 8]", "[5000, 5000, 5000]")
+        .replace("densty", "density");
+    std::fs::write(dir.path().join("huge.toml"), huge).unwrap();
+    let out = lucent(&["info", "huge.toml"], dir.path());
+    assert_clean_failure(&out, "GiB");
+}
+
 const DEFAULT_WITH_TYPO: &str = "[volume]\nkind = \"blob\"\nresolution = [8, 8, 8]\nbounds = [[0, 0, 0], [1, 1, 1]]\ncentre = [0.5, 0.5, 0.5]\nsigma = 0.2\n[medium]\ndensty = 3.0\n[camera]\nkind = \"pinhole\"\nposition = [3, 0, 0]\nlook_at = [0, 0, 0]\n";
 
 #[test]
