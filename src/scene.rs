@@ -41,7 +41,7 @@ pub struct Scene {
     pub lights: Vec<LightSpec>,
     /// The boundary condition.
     #[serde(default)]
-    pub boundary: BoundarySpec,
+    pub boundary: Boundary,
     /// The camera.
     pub camera: Camera,
     /// Image size and tone mapping.
@@ -276,30 +276,6 @@ pub enum LightSpec {
     },
 }
 
-/// A boundary condition.
-#[derive(Debug, Clone, Copy, Default, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
-pub enum BoundarySpec {
-    /// Vacuum.
-    #[default]
-    Vacuum,
-    /// Robin with relative index `eta`.
-    Robin {
-        /// Relative refractive index.
-        eta: f64,
-    },
-    /// Fixed fluence.
-    Dirichlet {
-        /// Boundary fluence.
-        value: f64,
-    },
-    /// Fixed normal flux.
-    Neumann {
-        /// Outward flux.
-        flux: f64,
-    },
-}
-
 /// Image size, exposure and tone mapping.
 #[derive(Debug, Clone, Copy, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -519,12 +495,7 @@ impl Scene {
                 },
             });
         }
-        let boundary = match self.boundary {
-            BoundarySpec::Vacuum => Boundary::Vacuum,
-            BoundarySpec::Robin { eta } => Boundary::Robin { eta },
-            BoundarySpec::Dirichlet { value } => Boundary::Dirichlet { value },
-            BoundarySpec::Neumann { flux } => Boundary::Neumann { flux },
-        };
+        let boundary = self.boundary;
         let problem = Problem::new(geometry, medium, lights, boundary, None)?;
         self.camera.validate()?;
         let i = self.image;

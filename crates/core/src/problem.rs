@@ -198,10 +198,14 @@ impl Light {
     }
 }
 
-/// The condition at the domain boundary.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The condition at the domain boundary. In scene files: `{ kind = "vacuum" }`,
+/// `{ kind = "robin", eta = 1.3 }`, `{ kind = "dirichlet", value = 0.0 }`,
+/// `{ kind = "neumann", flux = 0.0 }`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Boundary {
     /// Nothing comes in; light leaves freely (index-matched).
+    #[default]
     Vacuum,
     /// The diffusion Robin condition φ + 2AD ∂φ/∂n = 0 with A from the relative index η.
     Robin {
