@@ -10,6 +10,7 @@
 //! | [`grid`] | `lucent-grid` | dense and bricked voxel grids, resampling, transfer functions, procedural volumes, volume files |
 //! | [`core`] | `lucent-core` | the `Problem`, the `Solver` trait, solutions and stop reasons, the `direct` solver |
 //! | [`render`] | `lucent-render` | cameras, ray marching, tone mapping, PNG and EXR |
+//! | [`mc`] | `lucent-mc` | Monte Carlo ground truth: delta tracking, track-length fluence with standard errors |
 //! | [`scene`] | (here) | TOML scene files and the built-in default scene |
 //!
 //! See `ARCHITECTURE.md` at the repository root for the crate map and the data flow
@@ -29,12 +30,15 @@ use std::path::PathBuf;
 
 pub use lucent_core as core;
 pub use lucent_grid as grid;
+pub use lucent_mc as mc;
 pub use lucent_optics as optics;
 pub use lucent_render as render;
 
 /// Every solver lucent has, by name.
 pub fn registry() -> lucent_core::Registry {
-    lucent_core::Registry::with_core_solvers()
+    let mut registry = lucent_core::Registry::with_core_solvers();
+    registry.register(lucent_mc::McSolver::ENTRY);
+    registry
 }
 
 /// Everything that can go wrong between a scene file and an image, with a message meant

@@ -273,6 +273,7 @@ impl Solver for DirectSolver {
         Ok(Solution {
             fluence,
             angular: Some(Angular::Lights(angular)),
+            standard_error: None,
             report: SolveReport {
                 solver: Self::NAME.into(),
                 iterations: 0,

@@ -69,6 +69,8 @@ pub struct Solution {
     pub fluence: Vec<Grid>,
     /// The part of the radiance that is kept with its directions, if any.
     pub angular: Option<Angular>,
+    /// Per-cell standard error of the fluence, for stochastic solvers (Monte Carlo).
+    pub standard_error: Option<Vec<Grid>>,
     /// What happened.
     pub report: SolveReport,
 }

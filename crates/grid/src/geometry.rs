@@ -165,3 +165,82 @@ pub const MAX_VOXELS: usize = 1 << 40;
 pub(crate) fn voxel_count(dims: [usize; 3]) -> Option<usize> {
     dims[0].checked_mul(dims[1])?.checked_mul(dims[2])
 }
+
+impl GridGeometry {
+    /// Walks the cells that the segment from `a` to `b` crosses, in order, calling
+    /// `visit(index, enter, exit)` with each cell's linear index and the distances from `a`
+    /// at which the segment enters and leaves it (Amanatides–Woo 3D DDA). Parts of the
+    /// segment outside the grid's box are skipped. Track-length estimators, majorant walks
+    /// and voxel-exact ray casts use it.
+    pub fn traverse(&self, a: DVec3, b: DVec3, mut visit: impl FnMut(usize, f64, f64)) {
+        let d = b - a;
+        let length = d.length();
+        if !(length > 0.0 && length.is_finite()) {
+            return;
+        }
+        // In cell coordinates: c = (p − origin)/h, cell i spans [i, i + 1).
+        let ca = (a - self.origin) * self.inv_spacing;
+        let dc = d * self.inv_spacing;
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        for axis in 0..3 {
+            let n = self.dims[axis] as f64;
+            if dc[axis] == 0.0 {
+                if ca[axis] < 0.0 || ca[axis] >= n {
+                    return;
+                }
+            } else {
+                let (ta, tb) = (-ca[axis] / dc[axis], (n - ca[axis]) / dc[axis]);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+        }
+        if t0 >= t1 {
+            return;
+        }
+        let start = ca + dc * t0;
+        let mut cell = [0i64; 3];
+        let mut t_next = [f64::INFINITY; 3];
+        let mut t_step = [f64::INFINITY; 3];
+        let mut step = [0i64; 3];
+        for axis in 0..3 {
+            let n = self.dims[axis] as i64;
+            cell[axis] = (start[axis].floor() as i64).clamp(0, n - 1);
+            if dc[axis] > 0.0 {
+                step[axis] = 1;
+                t_step[axis] = 1.0 / dc[axis];
+                t_next[axis] = t0 + ((cell[axis] + 1) as f64 - start[axis]) / dc[axis];
+            } else if dc[axis] < 0.0 {
+                step[axis] = -1;
+                t_step[axis] = -1.0 / dc[axis];
+                t_next[axis] = t0 + (cell[axis] as f64 - start[axis]) / dc[axis];
+            }
+        }
+        let mut t = t0;
+        loop {
+            let axis = if t_next[0] <= t_next[1] && t_next[0] <= t_next[2] {
+                0
+            } else if t_next[1] <= t_next[2] {
+                1
+            } else {
+                2
+            };
+            let t_end = t_next[axis].min(t1);
+            if t_end > t {
+                visit(
+                    self.index(cell[0] as usize, cell[1] as usize, cell[2] as usize),
+                    t * length,
+                    t_end * length,
+                );
+            }
+            if t_end >= t1 {
+                return;
+            }
+            t = t_end;
+            cell[axis] += step[axis];
+            t_next[axis] += t_step[axis];
+            if cell[axis] < 0 || cell[axis] >= self.dims[axis] as i64 {
+                return;
+            }
+        }
+    }
+}

@@ -24,6 +24,7 @@ fn dark_solution(problem: &Problem) -> Solution {
     Solution {
         fluence: vec![Grid::filled(*problem.geometry(), 0.0)],
         angular: None,
+        standard_error: None,
         report: SolveReport {
             solver: "none".into(),
             iterations: 0,

@@ -1,0 +1,104 @@
+//! The coarse majorant grid: an upper bound of the extinction per coarse cell, walked by a
+//! DDA so that delta tracking takes long steps through thin regions (pbrt-v4's approach,
+//! `shared/notes/anchors.md` §1.1–1.3).
+
+use glam::DVec3;
+use lucent_grid::{Grid, GridGeometry};
+
+/// Per coarse cell, the largest extinction the trilinear medium takes inside it.
+///
+/// The trilinear interpolant inside a box never exceeds the largest of the cell values it
+/// interpolates, so the bound of a coarse cell is the maximum over the fine cells whose
+/// centres lie within one fine cell of it (the clamped boundary half-cells included).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MajorantGrid {
+    geometry: GridGeometry,
+    values: Vec<f64>,
+}
+
+impl MajorantGrid {
+    /// Majorants over blocks of `factor`³ fine cells (`factor` ≥ 1; the last block of an
+    /// axis may stick out of the domain).
+    pub fn new(sigma_t: &Grid, factor: usize) -> Self {
+        let fine = *sigma_t.geometry();
+        let factor = factor.max(1);
+        let geometry = fine.coarsened(factor).unwrap_or(fine);
+        let [fx, fy, fz] = fine.dims();
+        let [cx, cy, cz] = geometry.dims();
+        let range = |c: usize, n: usize| {
+            c.saturating_mul(factor).saturating_sub(1)..((c + 1) * factor + 1).min(n)
+        };
+        let mut values = vec![0.0; cx * cy * cz];
+        for k in 0..cz {
+            for j in 0..cy {
+                for i in 0..cx {
+                    let mut max = 0.0f32;
+                    for kk in range(k, fz) {
+                        for jj in range(j, fy) {
+                            for ii in range(i, fx) {
+                                max = max.max(sigma_t.data()[fine.index(ii, jj, kk)]);
+                            }
+                        }
+                    }
+                    values[geometry.index(i, j, k)] = f64::from(max);
+                }
+            }
+        }
+        Self { geometry, values }
+    }
+
+    /// One majorant for the whole domain (the largest extinction): the global-majorant
+    /// reference that local majorants must agree with.
+    pub fn global(sigma_t: &Grid) -> Self {
+        let max = sigma_t.stats().max;
+        let g = *sigma_t.geometry();
+        let (lo, hi) = g.bounds();
+        let geometry = GridGeometry::from_bounds([1, 1, 1], lo, hi).unwrap_or(g);
+        Self {
+            geometry,
+            values: vec![f64::from(max.max(0.0))],
+        }
+    }
+
+    /// The coarse geometry.
+    pub fn geometry(&self) -> &GridGeometry {
+        &self.geometry
+    }
+
+    /// The majorant of the coarse cell containing world point `p` (0 outside).
+    pub fn at(&self, p: DVec3) -> f64 {
+        let c = ((p - self.geometry.origin()) / self.geometry.spacing()).floor();
+        let [nx, ny, nz] = self.geometry.dims();
+        if c.x < 0.0
+            || c.y < 0.0
+            || c.z < 0.0
+            || c.x >= nx as f64
+            || c.y >= ny as f64
+            || c.z >= nz as f64
+        {
+            return 0.0;
+        }
+        self.values[self
+            .geometry
+            .index(c.x as usize, c.y as usize, c.z as usize)]
+    }
+
+    /// Walks the ray `origin + t·dir` (unit `dir`) for t ∈ [0, t_max] through the coarse
+    /// cells, calling `visit(t_enter, t_exit, majorant)` in order until it returns `false`.
+    pub fn walk(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        t_max: f64,
+        mut visit: impl FnMut(f64, f64, f64) -> bool,
+    ) {
+        let mut stop = false;
+        let values = &self.values;
+        self.geometry
+            .traverse(origin, origin + dir * t_max, |index, enter, exit| {
+                if !stop && !visit(enter, exit, values[index]) {
+                    stop = true;
+                }
+            });
+    }
+}

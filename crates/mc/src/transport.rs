@@ -1,0 +1,444 @@
+//! Particle tracing: light leaves the lights, flies by delta tracking, scatters by the
+//! phase function, is absorbed by implicit capture and Russian roulette, and leaves its
+//! track lengths in the cells it crosses.
+
+use std::f64::consts::PI;
+
+use glam::DVec3;
+use lucent_core::{Light, Problem, SolveError};
+use lucent_grid::Grid;
+use lucent_optics::PhaseFunction;
+use rayon::prelude::*;
+
+use crate::majorant::MajorantGrid;
+use crate::rng::PathRng;
+
+/// How much to trace.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct McConfig {
+    /// Particles per batch and light.
+    pub particles: u64,
+    /// Independent batches (their spread gives the standard errors; at least 2).
+    pub batches: usize,
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// Scattering events after which a path is cut (its energy is counted as truncated).
+    pub max_depth: u32,
+    /// Fine cells per majorant cell along each axis.
+    pub majorant_cells: usize,
+    /// Use one global majorant instead of the grid (the reference for tests).
+    pub global_majorant: bool,
+}
+
+impl Default for McConfig {
+    fn default() -> Self {
+        Self {
+            particles: 50_000,
+            batches: 16,
+            seed: 1,
+            max_depth: 10_000,
+            majorant_cells: 8,
+            global_majorant: false,
+        }
+    }
+}
+
+/// A batch-averaged quantity and its standard error.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Estimate {
+    /// Mean over batches.
+    pub mean: f64,
+    /// Standard error of the mean.
+    pub std_error: f64,
+}
+
+/// Where the emitted power went, per channel (W).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EnergyBalance {
+    /// Power entering the domain (or emitted inside it).
+    pub emitted: Estimate,
+    /// Power absorbed in the medium.
+    pub absorbed: Estimate,
+    /// Power leaving through the boundary.
+    pub escaped: Estimate,
+    /// Power in paths cut at `max_depth`.
+    pub truncated: Estimate,
+    /// emitted − absorbed − escaped − truncated, per batch: zero in expectation (Russian
+    /// roulette is its only source of noise), the test of the energy balance.
+    pub imbalance: Estimate,
+}
+
+/// The result of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct McEstimate {
+    /// Cell-averaged fluence per channel.
+    pub fluence: Vec<Grid>,
+    /// Its standard error per cell.
+    pub standard_error: Vec<Grid>,
+    /// Power accounting per channel.
+    pub energy: Vec<EnergyBalance>,
+    /// Paths traced.
+    pub paths: u64,
+}
+
+/// Per-batch tallies of one tracing group (the channels sharing one extinction).
+struct Tally {
+    fluence: Vec<Vec<f64>>,
+    emitted: Vec<f64>,
+    absorbed: Vec<f64>,
+    escaped: Vec<f64>,
+    truncated: Vec<f64>,
+}
+
+impl Tally {
+    fn new(channels: usize, voxels: usize) -> Self {
+        Self {
+            fluence: vec![vec![0.0; voxels]; channels],
+            emitted: vec![0.0; channels],
+            absorbed: vec![0.0; channels],
+            escaped: vec![0.0; channels],
+            truncated: vec![0.0; channels],
+        }
+    }
+}
+
+/// The parametric interval of `o + t d` inside [lo, hi], t ≥ 0.
+fn clip(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
+    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+    for a in 0..3 {
+        if d[a] == 0.0 {
+            if o[a] < lo[a] || o[a] > hi[a] {
+                return None;
+            }
+        } else {
+            let (ta, tb) = ((lo[a] - o[a]) / d[a], (hi[a] - o[a]) / d[a]);
+            t0 = t0.max(ta.min(tb));
+            t1 = t1.min(ta.max(tb));
+        }
+    }
+    (t0 < t1).then_some((t0, t1))
+}
+
+fn uniform_sphere(u: [f64; 2]) -> DVec3 {
+    let z = 1.0 - 2.0 * u[0];
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let (s, c) = (2.0 * PI * u[1]).sin_cos();
+    DVec3::new(r * c, r * s, z)
+}
+
+/// Samples a particle leaving `light`: origin, unit direction, and the light's power per
+/// unit of its spectrum carried by the particle before dividing by the particle count.
+fn emit(light: &Light, lo: DVec3, hi: DVec3, rng: &mut PathRng) -> Option<(DVec3, DVec3, f64)> {
+    match *light {
+        Light::Directional { direction, .. } => {
+            // A disc covering the domain's bounding sphere, perpendicular to the beam.
+            let centre = 0.5 * (lo + hi);
+            let radius = 0.5 * (hi - lo).length();
+            let (t, b) = direction.any_orthonormal_pair();
+            let [u, v] = rng.uniform2();
+            let (r, phi) = (radius * u.sqrt(), 2.0 * PI * v);
+            let origin =
+                centre - direction * (2.0 * radius) + t * (r * phi.cos()) + b * (r * phi.sin());
+            Some((origin, direction, PI * radius * radius))
+        }
+        Light::Point { position, .. } => Some((position, uniform_sphere(rng.uniform2()), 4.0 * PI)),
+        Light::Spot {
+            position,
+            direction,
+            outer_angle,
+            ..
+        } => {
+            // Uniform in solid angle inside the outer cone, weighted by the fall-off.
+            let cos_outer = outer_angle.cos();
+            let [u, v] = rng.uniform2();
+            let cos = 1.0 - u * (1.0 - cos_outer);
+            let sin = (1.0 - cos * cos).max(0.0).sqrt();
+            let (t, b) = direction.any_orthonormal_pair();
+            let d = t * (sin * (2.0 * PI * v).cos())
+                + b * (sin * (2.0 * PI * v).sin())
+                + direction * cos;
+            let falloff = light
+                .arrival(position + d, 1.0, 0.0)
+                .map_or(0.0, |(_, e, _)| e);
+            Some((position, d, 2.0 * PI * (1.0 - cos_outer) * falloff))
+        }
+        Light::Sky { .. } => {
+            // Power π L A enters through the boundary of area A: pick a face by area, a point
+            // on it, and a cosine-weighted inward direction.
+            let e = hi - lo;
+            let areas = [
+                e.y * e.z,
+                e.y * e.z,
+                e.x * e.z,
+                e.x * e.z,
+                e.x * e.y,
+                e.x * e.y,
+            ];
+            let total: f64 = areas.iter().sum();
+            let mut pick = rng.uniform() * total;
+            let mut face = 5;
+            for (f, a) in areas.iter().enumerate() {
+                if pick < *a {
+                    face = f;
+                    break;
+                }
+                pick -= a;
+            }
+            let axis = face / 2;
+            let [u, v] = rng.uniform2();
+            let mut p = lo + e * DVec3::new(u, v, rng.uniform());
+            let inward = if face % 2 == 0 { 1.0 } else { -1.0 };
+            p[axis] = if face % 2 == 0 { lo[axis] } else { hi[axis] };
+            let mut normal = DVec3::ZERO;
+            normal[axis] = inward;
+            let [a, b] = rng.uniform2();
+            let (r, phi) = (a.sqrt(), 2.0 * PI * b);
+            let (t1, t2) = normal.any_orthonormal_pair();
+            let d =
+                t1 * (r * phi.cos()) + t2 * (r * phi.sin()) + normal * (1.0 - a).max(0.0).sqrt();
+            // Start a hair outside so that the first clip finds the face.
+            Some((p - d * 1e-9 * e.max_element(), d, PI * total))
+        }
+        Light::Emission { .. } => None,
+    }
+}
+
+/// Traces `config.particles` particles per light and batch and returns the batch-averaged
+/// fluence with standard errors and the energy balance.
+pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, SolveError> {
+    if config.batches < 2
+        || config.particles == 0
+        || config.max_depth == 0
+        || config.majorant_cells == 0
+    {
+        return Err(SolveError::InvalidParameter {
+            name: "mc".into(),
+            reason: "needs ≥ 2 batches, ≥ 1 particle, max_depth ≥ 1 and majorant_cells ≥ 1".into(),
+        });
+    }
+    let geometry = *problem.geometry();
+    let medium = problem.medium();
+    let channels = problem.channels();
+    let voxels = geometry.voxel_count();
+    let lights: Vec<&Light> = problem
+        .lights()
+        .iter()
+        .filter(|l| !matches!(l, Light::Emission { .. }))
+        .collect();
+    // Tracing groups: one per extinction grid; a grey extinction carries every channel.
+    let groups: Vec<(usize, Vec<usize>)> = if medium.sigma_t.len() == 1 {
+        vec![(0, (0..channels).collect())]
+    } else {
+        (0..3).map(|c| (c, vec![c])).collect()
+    };
+    let mut sum = vec![vec![0.0f64; voxels]; channels];
+    let mut sum_sq = vec![vec![0.0f64; voxels]; channels];
+    let mut energy_sums = vec![[[0.0f64; 2]; 5]; channels];
+    let batch_ids: Vec<usize> = (0..config.batches).collect();
+    let group_size = rayon::current_num_threads().max(1);
+    for (extinction, members) in &groups {
+        let sigma_t = medium.sigma_t(*extinction);
+        let majorant = if config.global_majorant {
+            MajorantGrid::global(sigma_t)
+        } else {
+            MajorantGrid::new(sigma_t, config.majorant_cells)
+        };
+        for chunk in batch_ids.chunks(group_size) {
+            let tallies: Vec<Tally> = chunk
+                .par_iter()
+                .map(|&batch| {
+                    trace_batch(
+                        problem,
+                        &lights,
+                        sigma_t,
+                        &majorant,
+                        members,
+                        config,
+                        batch as u64 + 1000 * *extinction as u64,
+                    )
+                })
+                .collect();
+            // Accumulate in batch order: the result does not depend on the thread count.
+            for tally in tallies {
+                for (m, &c) in members.iter().enumerate() {
+                    let inv_volume = 1.0 / geometry.cell_volume();
+                    for (v, &t) in tally.fluence[m].iter().enumerate() {
+                        let phi = t * inv_volume;
+                        sum[c][v] += phi;
+                        sum_sq[c][v] += phi * phi;
+                    }
+                    let imbalance = tally.emitted[m]
+                        - tally.absorbed[m]
+                        - tally.escaped[m]
+                        - tally.truncated[m];
+                    for (q, value) in [
+                        tally.emitted[m],
+                        tally.absorbed[m],
+                        tally.escaped[m],
+                        tally.truncated[m],
+                        imbalance,
+                    ]
+                    .into_iter()
+                    .enumerate()
+                    {
+                        energy_sums[c][q][0] += value;
+                        energy_sums[c][q][1] += value * value;
+                    }
+                }
+            }
+        }
+    }
+    let b = config.batches as f64;
+    let stat = |s: f64, s2: f64| {
+        let mean = s / b;
+        let var = ((s2 / b - mean * mean) * b / (b - 1.0)).max(0.0);
+        Estimate {
+            mean,
+            std_error: (var / b).sqrt(),
+        }
+    };
+    let fluence = (0..channels)
+        .map(|c| Grid::from_vec(geometry, sum[c].iter().map(|&s| (s / b) as f32).collect()))
+        .collect::<Result<Vec<_>, _>>()?;
+    let standard_error = (0..channels)
+        .map(|c| {
+            Grid::from_vec(
+                geometry,
+                sum[c]
+                    .iter()
+                    .zip(&sum_sq[c])
+                    .map(|(&s, &s2)| stat(s, s2).std_error as f32)
+                    .collect(),
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let energy = energy_sums
+        .iter()
+        .map(|e| EnergyBalance {
+            emitted: stat(e[0][0], e[0][1]),
+            absorbed: stat(e[1][0], e[1][1]),
+            escaped: stat(e[2][0], e[2][1]),
+            truncated: stat(e[3][0], e[3][1]),
+            imbalance: stat(e[4][0], e[4][1]),
+        })
+        .collect();
+    let paths =
+        config.particles * lights.len() as u64 * config.batches as u64 * groups.len() as u64;
+    Ok(McEstimate {
+        fluence,
+        standard_error,
+        energy,
+        paths,
+    })
+}
+
+/// One batch of one tracing group: every light emits `config.particles` particles.
+fn trace_batch(
+    problem: &Problem,
+    lights: &[&Light],
+    sigma_t: &Grid,
+    majorant: &MajorantGrid,
+    members: &[usize],
+    config: &McConfig,
+    batch: u64,
+) -> Tally {
+    let geometry = *problem.geometry();
+    let (lo, hi) = geometry.bounds();
+    let medium = problem.medium();
+    let phase = medium.phase;
+    let mut tally = Tally::new(members.len(), geometry.voxel_count());
+    let n = config.particles as f64;
+    for (l, light) in lights.iter().enumerate() {
+        for path in 0..config.particles {
+            let mut rng = PathRng::new(config.seed, batch, (l as u64) << 40 | path);
+            let Some((mut pos, mut dir, power)) = emit(light, lo, hi, &mut rng) else {
+                continue;
+            };
+            let mut weight: Vec<f64> = members
+                .iter()
+                .map(|&c| light.spectrum().channel(c) * power / n)
+                .collect();
+            if weight.iter().all(|&w| w == 0.0) {
+                continue;
+            }
+            let mut entered = false;
+            let initial = weight.iter().copied().fold(0.0, f64::max);
+            let mut depth = 0;
+            loop {
+                let Some((t_in, t_out)) = clip(pos, dir, lo, hi) else {
+                    if entered {
+                        for (m, w) in weight.iter().enumerate() {
+                            tally.escaped[m] += w;
+                        }
+                    }
+                    break;
+                };
+                if !entered {
+                    entered = true;
+                    for (m, w) in weight.iter().enumerate() {
+                        tally.emitted[m] += w;
+                    }
+                }
+                // Delta tracking between t_in and t_out.
+                let mut collision = None;
+                majorant.walk(pos, dir, t_out, |t0, t1, sigma_max| {
+                    if sigma_max <= 0.0 || t1 <= t_in {
+                        return true;
+                    }
+                    let mut t = t0.max(t_in);
+                    loop {
+                        t -= (1.0 - rng.uniform()).ln() / sigma_max;
+                        if t >= t1 {
+                            return true;
+                        }
+                        let sigma = f64::from(sigma_t.sample_trilinear(pos + dir * t));
+                        if rng.uniform() * sigma_max < sigma {
+                            collision = Some(t);
+                            return false;
+                        }
+                    }
+                });
+                let t_end = collision.unwrap_or(t_out);
+                // Track-length estimator: w·ℓ in every cell the free flight crosses.
+                geometry.traverse(pos + dir * t_in, pos + dir * t_end, |index, enter, exit| {
+                    for (m, w) in weight.iter().enumerate() {
+                        tally.fluence[m][index] += w * (exit - enter);
+                    }
+                });
+                let Some(t) = collision else {
+                    for (m, w) in weight.iter().enumerate() {
+                        tally.escaped[m] += w;
+                    }
+                    break;
+                };
+                pos += dir * t;
+                // Implicit capture: the absorbed share is tallied, the rest scatters on.
+                for (m, &c) in members.iter().enumerate() {
+                    let albedo = f64::from(medium.albedo(c).sample(pos)).clamp(0.0, 1.0);
+                    tally.absorbed[m] += weight[m] * (1.0 - albedo);
+                    weight[m] *= albedo;
+                }
+                depth += 1;
+                let strongest = weight.iter().copied().fold(0.0, f64::max);
+                if depth >= config.max_depth {
+                    for (m, w) in weight.iter().enumerate() {
+                        tally.truncated[m] += w;
+                    }
+                    break;
+                }
+                // Russian roulette once a path carries less than a tenth of its start.
+                if strongest < 0.1 * initial {
+                    let survive = strongest / (0.1 * initial);
+                    if strongest == 0.0 || rng.uniform() >= survive {
+                        break;
+                    }
+                    for w in &mut weight {
+                        *w /= survive;
+                    }
+                }
+                dir = phase.sample(dir, rng.uniform2()).omega_out;
+            }
+        }
+    }
+    tally
+}
