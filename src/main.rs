@@ -182,30 +182,77 @@ fn render(
         built.settings.width = w;
         built.settings.height = h;
     }
-    let (solver, solution) = run_solver(&parsed, &built, solver, quiet)?;
-    let progress = bar(quiet, "render");
-    let callback = progress.clone();
-    let image = lucent::render::render(
-        &built.problem,
-        &solution,
-        &built.camera,
-        &built.settings,
-        Some(&move |f: f64| callback.set_position((f * 1000.0) as u64)),
-    )?;
-    progress.finish_and_clear();
+    let name_of_solver = solver.clone().unwrap_or_else(|| parsed.solver.name.clone());
+    let (solver_name, solve_seconds, image) = if name_of_solver == lucent::mc::McSolver::NAME {
+        // Monte Carlo renders by path tracing from the camera: no fluence solve needed.
+        let params = if solver.is_some() && name_of_solver != parsed.solver.name {
+            Default::default()
+        } else {
+            parsed.solver.params.clone()
+        };
+        let mc = lucent::mc::McSolver::from_params(&params)?;
+        mc.capabilities().check(mc.name(), &built.problem)?;
+        let s = built.settings;
+        let background = s.background.unwrap_or_else(|| sky_radiance(&built.problem));
+        let camera = built.camera;
+        camera.validate()?;
+        let aspect = s.width as f64 / s.height as f64;
+        let estimate = lucent::mc::camera_image(
+            &built.problem,
+            s.width,
+            s.height,
+            mc.samples_per_pixel,
+            background,
+            &mc.config,
+            |u, v| {
+                camera
+                    .ray(u, v, aspect)
+                    .unwrap_or((glam::DVec3::ZERO, glam::DVec3::Z))
+            },
+        )?;
+        let image = lucent::render::Image {
+            width: estimate.width,
+            height: estimate.height,
+            pixels: estimate.radiance,
+        };
+        ("mc".to_owned(), 0.0, image)
+    } else {
+        let (solver, solution) = run_solver(&parsed, &built, solver, quiet)?;
+        let progress = bar(quiet, "render");
+        let callback = progress.clone();
+        let image = lucent::render::render(
+            &built.problem,
+            &solution,
+            &built.camera,
+            &built.settings,
+            Some(&move |f: f64| callback.set_position((f * 1000.0) as u64)),
+        )?;
+        progress.finish_and_clear();
+        (solver.name().to_owned(), solution.report.wall_time_s, image)
+    };
     image.write(output, built.exposure, built.tone)?;
     if !quiet {
         println!(
-            "lucent: rendered {name} with `{}` to {} ({}×{}) in {:.2} s (solve {:.2} s)",
-            solver.name(),
+            "lucent: rendered {name} with `{solver_name}` to {} ({}×{}) in {:.2} s (solve {solve_seconds:.2} s)",
             output.display(),
             image.width,
             image.height,
             start.elapsed().as_secs_f64(),
-            solution.report.wall_time_s
         );
     }
     Ok(())
+}
+
+/// The sky's radiance per channel (what escaping camera rays see by default).
+fn sky_radiance(problem: &lucent::core::Problem) -> [f64; 3] {
+    std::array::from_fn(|c| {
+        problem
+            .lights()
+            .iter()
+            .filter(|l| matches!(l, lucent::core::Light::Sky { .. }))
+            .map(|l| l.spectrum().channel(c))
+            .sum()
+    })
 }
 
 fn solve_to_file(

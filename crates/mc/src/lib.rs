@@ -50,11 +50,13 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod camera;
 mod majorant;
 mod rng;
 mod solver;
 mod transport;
 
+pub use camera::{CameraEstimate, camera_image};
 pub use majorant::MajorantGrid;
 pub use rng::PathRng;
 pub use solver::McSolver;

@@ -10,10 +10,21 @@ use lucent_core::{
 use crate::transport::{McConfig, estimate};
 
 /// Monte Carlo particle tracing as a [`Solver`].
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct McSolver {
     /// What to trace.
     pub config: McConfig,
+    /// Paths per pixel for camera images.
+    pub samples_per_pixel: usize,
+}
+
+impl Default for McSolver {
+    fn default() -> Self {
+        Self {
+            config: McConfig::default(),
+            samples_per_pixel: 64,
+        }
+    }
 }
 
 impl McSolver {
@@ -22,7 +33,8 @@ impl McSolver {
 
     /// The registry entry. Parameters: `particles` (per batch and light, default 50 000),
     /// `batches` (≥ 2, default 16), `seed`, `max_depth` (default 10 000),
-    /// `majorant_cells` (default 8), `global_majorant` (default false).
+    /// `majorant_cells` (default 8), `global_majorant` (default false), `spp` (paths per
+    /// pixel for camera images, default 64).
     pub const ENTRY: SolverEntry = SolverEntry {
         name: Self::NAME,
         summary: "Monte Carlo particle tracing (delta tracking, track-length fluence with standard errors): the ground truth",
@@ -63,6 +75,7 @@ impl McSolver {
                 majorant_cells: params.usize_or("majorant_cells", d.majorant_cells)?,
                 global_majorant: global,
             },
+            samples_per_pixel: params.usize_or("spp", 64)?.max(2),
         })
     }
 }

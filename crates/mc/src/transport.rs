@@ -103,7 +103,7 @@ impl Tally {
 }
 
 /// The parametric interval of `o + t d` inside [lo, hi], t ≥ 0.
-fn clip(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
+pub(crate) fn clip(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
     let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
     for a in 0..3 {
         if d[a] == 0.0 {

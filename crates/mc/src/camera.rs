@@ -1,0 +1,270 @@
+//! Camera images by path tracing: the estimator behind `lucent render --solver mc`.
+//!
+//! For each pixel, paths start at the camera and fly by delta tracking. At every real
+//! collision the light sources are sampled directly (next-event estimation: the direction
+//! to each point, spot and directional light, and one uniformly sampled sky direction),
+//! with ratio tracking for the shadow ray's transmittance; the path then scatters by phase
+//! sampling with implicit capture and Russian roulette. Only camera rays that escape see the
+//! background (the sky is counted by next-event estimation alone, so nothing is counted
+//! twice). With `max_depth = 1` the estimate is exactly the single-scattering image.
+
+use std::f64::consts::PI;
+
+use glam::DVec3;
+use lucent_core::{Light, Problem, SolveError};
+use lucent_grid::Grid;
+use lucent_optics::PhaseFunction;
+use rayon::prelude::*;
+
+use crate::majorant::MajorantGrid;
+use crate::rng::PathRng;
+use crate::transport::{McConfig, clip};
+
+/// A path-traced image: linear RGB radiance and its standard error per pixel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraEstimate {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Mean radiance per pixel, rows from the top.
+    pub radiance: Vec<[f32; 3]>,
+    /// Standard error per pixel, from the spread over samples.
+    pub std_error: Vec<[f32; 3]>,
+}
+
+/// Path-traces a `width`×`height` image with `samples` paths per pixel; `ray(u, v)` gives
+/// the camera ray (origin, unit direction) through image point (u, v) ∈ [0, 1]² (v down).
+/// `background` is the radiance camera rays see when they leave the medium.
+#[allow(clippy::too_many_arguments)]
+pub fn camera_image(
+    problem: &Problem,
+    width: usize,
+    height: usize,
+    samples: usize,
+    background: [f64; 3],
+    config: &McConfig,
+    ray: impl Fn(f64, f64) -> (DVec3, DVec3) + Sync,
+) -> Result<CameraEstimate, SolveError> {
+    if width == 0 || height == 0 || samples < 2 || width * height > 1 << 26 {
+        return Err(SolveError::InvalidParameter {
+            name: "image".into(),
+            reason: format!(
+                "{width}×{height} pixels with {samples} samples (need ≥ 1 pixel and ≥ 2 samples)"
+            ),
+        });
+    }
+    let medium = problem.medium();
+    let channels = problem.channels();
+    let majorants: Vec<MajorantGrid> = medium
+        .sigma_t
+        .iter()
+        .map(|s| MajorantGrid::new(s, config.majorant_cells))
+        .collect();
+    let groups: Vec<(usize, Vec<usize>)> = if medium.sigma_t.len() == 1 {
+        vec![(0, (0..channels).collect())]
+    } else {
+        (0..3).map(|c| (c, vec![c])).collect()
+    };
+    let mut radiance = vec![[0f32; 3]; width * height];
+    let mut std_error = vec![[0f32; 3]; width * height];
+    radiance
+        .par_chunks_mut(width)
+        .zip(std_error.par_chunks_mut(width))
+        .enumerate()
+        .for_each(|(y, (row, row_err))| {
+            for x in 0..width {
+                let pixel = (y * width + x) as u64;
+                let mut sum = [0f64; 3];
+                let mut sum_sq = [0f64; 3];
+                for s in 0..samples {
+                    let mut rng = PathRng::new(config.seed, pixel, s as u64);
+                    let [jx, jy] = rng.uniform2();
+                    let (origin, dir) = ray(
+                        (x as f64 + jx) / width as f64,
+                        (y as f64 + jy) / height as f64,
+                    );
+                    let mut value = [0f64; 3];
+                    for (extinction, members) in &groups {
+                        let path = trace_path(
+                            problem,
+                            &medium.sigma_t[*extinction],
+                            &majorants[*extinction],
+                            members,
+                            background,
+                            config,
+                            origin,
+                            dir,
+                            &mut rng,
+                        );
+                        for (m, &c) in members.iter().enumerate() {
+                            value[c] = path[m];
+                        }
+                    }
+                    for c in 0..3 {
+                        let v = value[c.min(channels - 1)];
+                        sum[c] += v;
+                        sum_sq[c] += v * v;
+                    }
+                }
+                let n = samples as f64;
+                for c in 0..3 {
+                    let mean = sum[c] / n;
+                    let var = ((sum_sq[c] / n - mean * mean) * n / (n - 1.0)).max(0.0);
+                    row[x][c] = mean as f32;
+                    row_err[x][c] = (var / n).sqrt() as f32;
+                }
+            }
+        });
+    Ok(CameraEstimate {
+        width,
+        height,
+        radiance,
+        std_error,
+    })
+}
+
+/// Ratio-tracking transmittance along `origin + t·dir`, t ∈ [0, t_max].
+fn ratio_transmittance(
+    sigma_t: &Grid,
+    majorant: &MajorantGrid,
+    origin: DVec3,
+    dir: DVec3,
+    t_max: f64,
+    rng: &mut PathRng,
+) -> f64 {
+    let mut transmittance = 1.0;
+    majorant.walk(origin, dir, t_max, |t0, t1, sigma_max| {
+        if sigma_max <= 0.0 {
+            return true;
+        }
+        let mut t = t0;
+        loop {
+            t -= (1.0 - rng.uniform()).ln() / sigma_max;
+            if t >= t1 {
+                return true;
+            }
+            transmittance *=
+                1.0 - f64::from(sigma_t.sample_trilinear(origin + dir * t)) / sigma_max;
+            if transmittance < 1e-3 {
+                // Russian roulette on faint shadow rays.
+                if rng.uniform() >= 0.5 {
+                    transmittance = 0.0;
+                    return false;
+                }
+                transmittance *= 2.0;
+            }
+        }
+    });
+    transmittance
+}
+
+/// One camera path for the channels in `members`; returns their radiance.
+#[allow(clippy::too_many_arguments)]
+fn trace_path(
+    problem: &Problem,
+    sigma_t: &Grid,
+    majorant: &MajorantGrid,
+    members: &[usize],
+    background: [f64; 3],
+    config: &McConfig,
+    origin: DVec3,
+    dir: DVec3,
+    rng: &mut PathRng,
+) -> Vec<f64> {
+    let geometry = problem.geometry();
+    let (lo, hi) = geometry.bounds();
+    let medium = problem.medium();
+    let phase = medium.phase;
+    let far = 4.0 * (hi - lo).length() + 1.0;
+    let mut throughput = vec![1.0f64; members.len()];
+    let mut result = vec![0.0f64; members.len()];
+    let (mut pos, mut dir) = (origin, dir);
+    let mut depth = 0u32;
+    loop {
+        let Some((t_in, t_out)) = clip(pos, dir, lo, hi) else {
+            if depth == 0 {
+                for (m, &c) in members.iter().enumerate() {
+                    result[m] += background[c];
+                }
+            }
+            return result;
+        };
+        let mut collision = None;
+        majorant.walk(pos, dir, t_out, |t0, t1, sigma_max| {
+            if sigma_max <= 0.0 || t1 <= t_in {
+                return true;
+            }
+            let mut t = t0.max(t_in);
+            loop {
+                t -= (1.0 - rng.uniform()).ln() / sigma_max;
+                if t >= t1 {
+                    return true;
+                }
+                if rng.uniform() * sigma_max < f64::from(sigma_t.sample_trilinear(pos + dir * t)) {
+                    collision = Some(t);
+                    return false;
+                }
+            }
+        });
+        let Some(t) = collision else {
+            if depth == 0 {
+                for (m, &c) in members.iter().enumerate() {
+                    result[m] += background[c];
+                }
+            }
+            return result;
+        };
+        pos += dir * t;
+        // Implicit capture: the scattered fraction continues.
+        for (m, &c) in members.iter().enumerate() {
+            throughput[m] *= f64::from(medium.albedo(c).sample(pos)).clamp(0.0, 1.0);
+        }
+        // Next-event estimation toward every light (radiance toward the camera, so the
+        // scattered light travels along −dir).
+        let toward_eye = -dir;
+        for light in problem.lights() {
+            let (w_light, irradiance, distance) = match light {
+                Light::Sky { .. } => {
+                    // One uniformly sampled sky direction, pdf 1/(4π).
+                    let [u, v] = rng.uniform2();
+                    let z = 1.0 - 2.0 * u;
+                    let r = (1.0 - z * z).max(0.0).sqrt();
+                    let w = DVec3::new(r * (2.0 * PI * v).cos(), r * (2.0 * PI * v).sin(), z);
+                    (w, 4.0 * PI, far)
+                }
+                Light::Emission { .. } => continue,
+                _ => match light.arrival(pos, far, 0.0) {
+                    Some((w, e, from)) if e > 0.0 => (w, e, (pos - from).length()),
+                    _ => continue,
+                },
+            };
+            let p = phase.eval(w_light, toward_eye);
+            if p <= 0.0 {
+                continue;
+            }
+            let shadow = ratio_transmittance(sigma_t, majorant, pos, -w_light, distance, rng);
+            if shadow > 0.0 {
+                for (m, &c) in members.iter().enumerate() {
+                    result[m] +=
+                        throughput[m] * p * irradiance * light.spectrum().channel(c) * shadow;
+                }
+            }
+        }
+        depth += 1;
+        if depth >= config.max_depth {
+            return result;
+        }
+        let strongest = throughput.iter().copied().fold(0.0, f64::max);
+        if strongest < 0.1 {
+            let survive = strongest / 0.1;
+            if strongest == 0.0 || rng.uniform() >= survive {
+                return result;
+            }
+            for t in &mut throughput {
+                *t /= survive;
+            }
+        }
+        dir = phase.sample(dir, rng.uniform2()).omega_out;
+    }
+}
