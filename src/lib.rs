@@ -24,6 +24,7 @@
 //! # Ok::<(), lucent::optics::OpticsError>(())
 //! ```
 
+pub mod crosscheck;
 pub mod scene;
 
 use std::path::PathBuf;

@@ -6,15 +6,21 @@
 //! - `doc`: `cargo doc --workspace --no-deps` with rustdoc warnings denied.
 //! - `tidy`: the repository's own checks (`tests/tidy.rs`): crate docs present, no stray
 //!   `dbg!`/`todo!`, every crate listed in ARCHITECTURE.md.
+//! - `crosscheck`: every solver on every suite scene against its reference; prints the
+//!   table and writes `docs/validation.md`. References are cached in
+//!   `target/crosscheck-cache/`.
 //!
-//! Later issues add `crosscheck`, `pareto` and the external comparisons here.
+//! Later issues add `pareto` and the external comparisons here.
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
+    if command.as_deref() == Some("crosscheck") {
+        return crosscheck();
+    }
     let steps: Vec<Vec<&str>> = match command.as_deref() {
         Some("ci") => vec![
             vec!["fmt", "--all", "--check"],
@@ -56,4 +62,38 @@ fn main() -> ExitCode {
         }
     }
     ExitCode::SUCCESS
+}
+
+/// Runs the cross-check harness and writes `docs/validation.md`.
+fn crosscheck() -> ExitCode {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    if std::env::var_os("LUCENT_DATA").is_none() {
+        eprintln!("xtask: LUCENT_DATA not set; the suite's CT scene reads ../shared/data/volumes");
+    }
+    let started = std::time::Instant::now();
+    let outcomes = match lucent::crosscheck::run(
+        &root.join("examples/scenes/suite"),
+        Some(&root.join("target/crosscheck-cache")),
+    ) {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("xtask: crosscheck failed: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let markdown = lucent::crosscheck::validation_markdown(&outcomes, "cargo xtask crosscheck");
+    eprint!("{markdown}");
+    eprintln!(
+        "xtask: crosscheck took {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+    if let Err(e) = std::fs::write(root.join("docs/validation.md"), &markdown) {
+        eprintln!("xtask: cannot write docs/validation.md: {e}");
+        return ExitCode::FAILURE;
+    }
+    if outcomes.iter().all(|o| o.passed()) {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
 }

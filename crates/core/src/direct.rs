@@ -29,7 +29,7 @@ use crate::problem::{BoundaryKind, Light, LightKind, Problem};
 use crate::registry::{Params, SolverEntry};
 use crate::solution::{Angular, LightTransmittance, Solution};
 use crate::solver::{
-    Capabilities, OutputKind, Progress, SolveOptions, SolveReport, Solver, StopReason,
+    Capabilities, FluenceKind, OutputKind, Progress, SolveOptions, SolveReport, Solver, StopReason,
 };
 
 /// The exact uncollided-light solver.
@@ -112,6 +112,7 @@ impl Solver for DirectSolver {
                 LightKind::Sky,
             ],
             output: OutputKind::AngularRadiance,
+            fluence: FluenceKind::Uncollided,
         }
     }
 

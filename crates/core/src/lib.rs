@@ -61,6 +61,7 @@ pub use problem::{Boundary, BoundaryKind, Field, Light, LightKind, Medium, Probl
 pub use registry::{ParamValue, Params, Registry, SolverEntry};
 pub use solution::{Angular, LightTransmittance, Solution};
 pub use solver::{
-    Capabilities, OutputKind, Progress, ProgressFn, SolveOptions, SolveReport, Solver, StopReason,
+    Capabilities, FluenceKind, OutputKind, Progress, ProgressFn, SolveOptions, SolveReport, Solver,
+    StopReason,
 };
 pub use spectrum::Spectrum;

@@ -36,6 +36,18 @@ pub struct Capabilities {
     pub lights: Vec<LightKind>,
     /// What its solution holds.
     pub output: OutputKind,
+    /// Which light its fluence counts.
+    pub fluence: FluenceKind,
+}
+
+/// Which part of the light a solver's fluence counts: what it must be compared with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FluenceKind {
+    /// Only light that has not yet scattered (`direct`).
+    Uncollided,
+    /// All light, every order of scattering.
+    Total,
 }
 
 impl Capabilities {

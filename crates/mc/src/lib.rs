@@ -5,7 +5,7 @@
 //!
 //! ## Method
 //! Light is traced *forward* from the lights (particle tracing): each light emits particles
-//! carrying its power (directional: a disc covering the domain, power E·πR²; point: 4πI;
+//! carrying its power (directional: the faces facing the beam, by projected area, power E·A_⊥; point: 4πI;
 //! spot: uniform in the outer cone, weighted by the fall-off; sky: πL·A through the box
 //! faces, cosine-weighted). A particle flies by **delta tracking** against a coarse
 //! **majorant grid** walked by a 3D DDA (the majorant of a coarse cell bounds the trilinear

@@ -3,8 +3,8 @@
 use std::time::Instant;
 
 use lucent_core::{
-    BoundaryKind, Capabilities, LightKind, OutputKind, Params, Problem, Progress, Solution,
-    SolveError, SolveOptions, SolveReport, Solver, SolverEntry, StopReason,
+    BoundaryKind, Capabilities, FluenceKind, LightKind, OutputKind, Params, Problem, Progress,
+    Solution, SolveError, SolveOptions, SolveReport, Solver, SolverEntry, StopReason,
 };
 
 use crate::transport::{McConfig, estimate};
@@ -98,6 +98,7 @@ impl Solver for McSolver {
                 LightKind::Sky,
             ],
             output: OutputKind::Fluence,
+            fluence: FluenceKind::Total,
         }
     }
 

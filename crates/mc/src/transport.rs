@@ -131,15 +131,30 @@ fn uniform_sphere(u: [f64; 2]) -> DVec3 {
 fn emit(light: &Light, lo: DVec3, hi: DVec3, rng: &mut PathRng) -> Option<(DVec3, DVec3, f64)> {
     match *light {
         Light::Directional { direction, .. } => {
-            // A disc covering the domain's bounding sphere, perpendicular to the beam.
-            let centre = 0.5 * (lo + hi);
-            let radius = 0.5 * (hi - lo).length();
-            let (t, b) = direction.any_orthonormal_pair();
+            // Start on the box faces that face the beam, chosen by projected area |n·d| A:
+            // every particle enters, and the power is E times the box's projected area.
+            let e = hi - lo;
+            let areas = [e.y * e.z, e.x * e.z, e.x * e.y];
+            let projected: [f64; 3] = std::array::from_fn(|a| areas[a] * direction[a].abs());
+            let total: f64 = projected.iter().sum();
+            let mut pick = rng.uniform() * total;
+            let mut axis = 2;
+            for (a, p) in projected.iter().enumerate() {
+                if pick < *p {
+                    axis = a;
+                    break;
+                }
+                pick -= p;
+            }
             let [u, v] = rng.uniform2();
-            let (r, phi) = (radius * u.sqrt(), 2.0 * PI * v);
-            let origin =
-                centre - direction * (2.0 * radius) + t * (r * phi.cos()) + b * (r * phi.sin());
-            Some((origin, direction, PI * radius * radius))
+            let mut p = lo + e * DVec3::new(u, v, rng.uniform());
+            p[axis] = if direction[axis] > 0.0 {
+                lo[axis]
+            } else {
+                hi[axis]
+            };
+            // Start a hair outside so that the first clip finds the face.
+            Some((p - direction * 1e-9 * e.max_element(), direction, total))
         }
         Light::Point { position, .. } => Some((position, uniform_sphere(rng.uniform2()), 4.0 * PI)),
         Light::Spot {

@@ -48,7 +48,7 @@ fn pure_absorber_transmits_beer_lambert() {
     let transmitted = e.escaped.mean / e.emitted.mean;
     let exact = (-2.0f64).exp();
     // Each entering particle crosses independently with probability e^{−2}: binomial.
-    let power_per_particle = std::f64::consts::PI * 0.75 / config.particles as f64; // E·πR², R² = 3/4
+    let power_per_particle = 1.0 / config.particles as f64; // E·A⊥: the unit face
     let entered = e.emitted.mean * config.batches as f64 / power_per_particle;
     let sigma = (exact * (1.0 - exact) / entered).sqrt();
     assert!(

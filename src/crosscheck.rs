@@ -1,0 +1,427 @@
+//! The cross-check harness: every registered solver on every suite scene its capabilities
+//! allow, its fluence compared with a reference under a stated tolerance.
+//!
+//! The suite lives in `examples/scenes/suite/` with `tolerances.toml` beside it. The
+//! reference is the analytic solution where one exists (the marble sphere of note 002, T7),
+//! otherwise Monte Carlo (`lucent-mc`) run until its mean relative standard error is below
+//! a fifth of the tolerance — counting only uncollided light for solvers whose fluence is
+//! uncollided. Monte Carlo references are cached under the given folder (`target/`), keyed
+//! by the scene text, the fluence kind and the target error; never in git.
+//!
+//! The error measure: relative L2 over the cells inside the medium where the reference
+//! exceeds 10⁻³ of its peak, ‖φ − φ_ref‖₂/‖φ_ref‖₂, and the largest relative error over
+//! those cells above 10⁻² of the peak. (Outside the medium the fluence is that of vacuum;
+//! shadow edges crossing empty cells would compare centre values with cell averages.)
+
+use std::collections::hash_map::DefaultHasher;
+use std::hash::{Hash, Hasher};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::DVec3;
+use lucent_core::{FluenceKind, Params, SolveOptions};
+use lucent_grid::Grid;
+use lucent_grid::io::{LoadOptions, ScalarType, npy};
+use lucent_mc::{McConfig, estimate};
+use lucent_optics::{Dielectric, DiffuseFresnel, DiffusionMedium, OpticalCoefficients};
+use serde::Deserialize;
+
+use crate::Error;
+use crate::scene::{BuiltScene, Scene};
+
+/// One line of `tolerances.toml`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tolerance {
+    /// Registered solver name.
+    pub solver: String,
+    /// Suite scene name (file stem).
+    pub scene: String,
+    /// Largest accepted relative L2 error.
+    pub tolerance: f64,
+    /// Solver parameters for this check.
+    #[serde(default)]
+    pub params: Params,
+    /// Why this tolerance.
+    pub why: String,
+}
+
+#[derive(Deserialize)]
+struct ToleranceFile {
+    entry: Vec<Tolerance>,
+}
+
+/// A suite scene, built.
+#[derive(Debug, Clone)]
+pub struct SuiteScene {
+    /// File stem.
+    pub name: String,
+    /// The scene, ready to solve.
+    pub built: BuiltScene,
+    /// Hash of the file's text (the cache key).
+    pub text_hash: u64,
+}
+
+/// Reads every scene of a suite folder (all `*.toml` but `tolerances.toml`) and its
+/// tolerances.
+pub fn load_suite(dir: &Path) -> Result<(Vec<SuiteScene>, Vec<Tolerance>), Error> {
+    let io = |path: &Path, e: std::io::Error| Error::Io {
+        path: path.to_owned(),
+        reason: e.to_string(),
+    };
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| io(dir, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension().is_some_and(|e| e == "toml")
+                && p.file_stem().is_some_and(|s| s != "tolerances")
+        })
+        .collect();
+    files.sort();
+    let mut scenes = Vec::new();
+    for path in files {
+        let text = std::fs::read_to_string(&path).map_err(|e| io(&path, e))?;
+        let scene = Scene::parse(&text, &path)?;
+        let built = scene.build(path.parent().unwrap_or(Path::new(".")))?;
+        let mut hasher = DefaultHasher::new();
+        text.hash(&mut hasher);
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        scenes.push(SuiteScene {
+            name,
+            built,
+            text_hash: hasher.finish(),
+        });
+    }
+    let tolerance_path = dir.join("tolerances.toml");
+    let text = std::fs::read_to_string(&tolerance_path).map_err(|e| io(&tolerance_path, e))?;
+    let file: ToleranceFile = toml::from_str(&text).map_err(|e| Error::Scene {
+        path: tolerance_path.clone(),
+        reason: e.to_string(),
+    })?;
+    Ok((scenes, file.entry))
+}
+
+/// A reference fluence.
+#[derive(Debug, Clone)]
+pub struct Reference {
+    /// Per channel.
+    pub fluence: Vec<Grid>,
+    /// Cells where the reference is valid (`None`: all).
+    pub mask: Option<Vec<bool>>,
+    /// `analytic` or `monte carlo`.
+    pub kind: &'static str,
+    /// Achieved mean relative standard error (0 for analytic references).
+    pub relative_std_error: f64,
+}
+
+/// The analytic reference of a scene, if it has one: the marble sphere (T7), valid at least
+/// three transport mean free paths from the source and one cell inside the boundary.
+fn analytic(scene: &SuiteScene) -> Option<Reference> {
+    if scene.name != "marble_sphere" {
+        return None;
+    }
+    let g = *scene.built.problem.geometry();
+    let coefficients = OpticalCoefficients::from_extinction_albedo(2.1921, 0.999042, 0.0).ok()?;
+    let medium = DiffusionMedium::with_boundary(
+        coefficients,
+        Dielectric::new(1.3).ok()?,
+        DiffuseFresnel::Groenhuis,
+    )
+    .ok()?;
+    let sphere = medium.sphere(10.0).ok()?;
+    let r_min = 3.0 * medium.z_r();
+    let r_max = 10.0 - g.spacing().max_element();
+    let mut mask = vec![false; g.voxel_count()];
+    let grid = Grid::from_fn(g, |p| sphere.fluence(p.length()).map_or(0.0, |v| v as f32));
+    for (index, m) in mask.iter_mut().enumerate() {
+        let [i, j, k] = g.coords(index);
+        let r = (g.cell_centre(i, j, k) - DVec3::ZERO).length();
+        *m = r >= r_min && r <= r_max;
+    }
+    Some(Reference {
+        fluence: vec![grid],
+        mask: Some(mask),
+        kind: "analytic",
+        relative_std_error: 0.0,
+    })
+}
+
+/// The reference's own expected relative L2 error, √Σσ²/√Σφ² over the compared cells: the
+/// same measure the comparison uses.
+fn relative_error(fluence: &Grid, std_error: &Grid, mask: &[bool]) -> f64 {
+    let peak = fluence.stats().max;
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for ((p, e), m) in fluence.data().iter().zip(std_error.data()).zip(mask) {
+        if *m && *p > 1e-3 * peak {
+            num += f64::from(*e) * f64::from(*e);
+            den += f64::from(*p) * f64::from(*p);
+        }
+    }
+    if den > 0.0 { (num / den).sqrt() } else { 0.0 }
+}
+
+/// Cells inside the medium (σ_t > 0): where solvers are compared. Outside it the fluence
+/// is that of vacuum, and shadow edges crossing empty cells make centre values and cell
+/// averages differ by O(1) without saying anything about a solver.
+fn medium_mask(scene: &SuiteScene) -> Vec<bool> {
+    scene
+        .built
+        .problem
+        .medium()
+        .sigma_t(0)
+        .data()
+        .iter()
+        .map(|&s| s > 0.0)
+        .collect()
+}
+
+/// The reference for `scene` and fluence `kind`: analytic if there is one, else Monte Carlo
+/// to a mean relative standard error of `target`, cached in `cache` when given.
+pub fn reference(
+    scene: &SuiteScene,
+    kind: FluenceKind,
+    target: f64,
+    cache: Option<&Path>,
+) -> Result<Reference, Error> {
+    if let Some(r) = analytic(scene).filter(|_| kind == FluenceKind::Total) {
+        return Ok(r);
+    }
+    let tag = match kind {
+        FluenceKind::Uncollided => "uncollided",
+        FluenceKind::Total => "total",
+    };
+    let channels = scene.built.problem.channels();
+    let mask = medium_mask(scene);
+    let file = cache.map(|dir| {
+        dir.join(format!(
+            "{}-{tag}-{:016x}-{:.0e}.npy",
+            scene.name, scene.text_hash, target
+        ))
+    });
+    if let Some(path) = file.as_ref().filter(|p| p.exists()) {
+        let grid = npy::read(path, &LoadOptions::default())?
+            .with_geometry(*scene.built.problem.geometry())?;
+        if channels == 1 {
+            return Ok(Reference {
+                fluence: vec![grid],
+                mask: Some(mask),
+                kind: "monte carlo (cached)",
+                relative_std_error: target,
+            });
+        }
+    }
+    let mut config = McConfig {
+        particles: 4000,
+        batches: 16,
+        seed: 0xC0FFEE,
+        ..Default::default()
+    };
+    if kind == FluenceKind::Uncollided {
+        // Stop every path at its first collision: only first flights are tallied.
+        config.max_depth = 1;
+    }
+    loop {
+        let run = estimate(&scene.built.problem, &config)?;
+        let achieved = relative_error(&run.fluence[0], &run.standard_error[0], &mask);
+        if achieved <= target || config.particles >= 4_096_000 {
+            if let (Some(path), 1) = (&file, channels) {
+                if let Some(dir) = path.parent() {
+                    let _ = std::fs::create_dir_all(dir);
+                }
+                npy::write(path, &run.fluence[0], ScalarType::F32)?;
+            }
+            return Ok(Reference {
+                fluence: run.fluence,
+                mask: Some(mask),
+                kind: "monte carlo",
+                relative_std_error: achieved,
+            });
+        }
+        // Error falls as 1/√N: jump straight to the particle count that should reach it.
+        let factor = ((achieved / target).powi(2) * 1.2).clamp(2.0, 64.0);
+        config.particles = ((config.particles as f64 * factor) as u64).min(4_096_000);
+    }
+}
+
+/// Errors of a fluence against a reference.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Comparison {
+    /// Relative L2 over cells above 10⁻³ of the reference peak.
+    pub relative_l2: f64,
+    /// Largest relative error over cells above 10⁻² of the peak.
+    pub max_relative: f64,
+}
+
+/// Compares `fluence` with `reference`, channel by channel (the worst channel counts).
+pub fn compare(fluence: &[Grid], reference: &Reference) -> Comparison {
+    let mut worst = Comparison {
+        relative_l2: 0.0,
+        max_relative: 0.0,
+    };
+    for (c, r) in reference.fluence.iter().enumerate() {
+        let f = &fluence[c.min(fluence.len() - 1)];
+        let peak = r.stats().max;
+        let (mut num, mut den, mut max) = (0.0f64, 0.0f64, 0.0f64);
+        for (index, (&a, &b)) in f.data().iter().zip(r.data()).enumerate() {
+            if reference.mask.as_ref().is_some_and(|m| !m[index]) || b <= 1e-3 * peak {
+                continue;
+            }
+            let d = f64::from(a) - f64::from(b);
+            num += d * d;
+            den += f64::from(b) * f64::from(b);
+            if b > 1e-2 * peak {
+                max = max.max(d.abs() / f64::from(b));
+            }
+        }
+        let l2 = if den > 0.0 { (num / den).sqrt() } else { 0.0 };
+        worst.relative_l2 = worst.relative_l2.max(l2);
+        worst.max_relative = worst.max_relative.max(max);
+    }
+    worst
+}
+
+/// The outcome of one (solver, scene) check.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    /// Solver name.
+    pub solver: String,
+    /// Scene name.
+    pub scene: String,
+    /// The tolerance and its reason.
+    pub tolerance: Tolerance,
+    /// What happened.
+    pub result: CheckResult,
+}
+
+/// A check's result.
+#[derive(Debug, Clone)]
+pub enum CheckResult {
+    /// Solved and compared.
+    Compared {
+        /// The errors.
+        comparison: Comparison,
+        /// Solve time, seconds.
+        seconds: f64,
+        /// The reference's kind.
+        reference: &'static str,
+        /// The reference's own relative standard error.
+        reference_error: f64,
+        /// For stochastic solvers, the run's own expected relative L2 error.
+        solution_error: Option<f64>,
+    },
+    /// The solver cannot handle the scene (its capabilities say why).
+    Skipped(String),
+}
+
+impl Outcome {
+    /// Whether the check passed (skips pass: capabilities decide what is checked).
+    pub fn passed(&self) -> bool {
+        match &self.result {
+            CheckResult::Compared { comparison, .. } => {
+                comparison.relative_l2 <= self.tolerance.tolerance
+            }
+            CheckResult::Skipped(_) => true,
+        }
+    }
+}
+
+/// Runs every entry of the suite's tolerance table.
+pub fn run(suite: &Path, cache: Option<&Path>) -> Result<Vec<Outcome>, Error> {
+    let (scenes, tolerances) = load_suite(suite)?;
+    let registry = crate::registry();
+    let mut outcomes = Vec::new();
+    for entry in tolerances {
+        let scene = scenes
+            .iter()
+            .find(|s| s.name == entry.scene)
+            .ok_or_else(|| {
+                Error::Invalid(format!(
+                    "tolerances.toml names scene `{}`, which is not in the suite",
+                    entry.scene
+                ))
+            })?;
+        let solver = registry.build(&entry.solver, &entry.params)?;
+        let capabilities = solver.capabilities();
+        let result = match capabilities.check(solver.name(), &scene.built.problem) {
+            Err(e) => CheckResult::Skipped(e.to_string()),
+            Ok(()) => {
+                let start = Instant::now();
+                let solution = solver.solve(&scene.built.problem, &SolveOptions::default())?;
+                let seconds = start.elapsed().as_secs_f64();
+                let reference =
+                    reference(scene, capabilities.fluence, entry.tolerance / 5.0, cache)?;
+                let mask = reference
+                    .mask
+                    .clone()
+                    .unwrap_or_else(|| vec![true; scene.built.problem.geometry().voxel_count()]);
+                let solution_error = solution
+                    .standard_error
+                    .as_ref()
+                    .map(|se| relative_error(&solution.fluence[0], &se[0], &mask));
+                CheckResult::Compared {
+                    comparison: compare(&solution.fluence, &reference),
+                    seconds,
+                    reference: reference.kind,
+                    reference_error: reference.relative_std_error,
+                    solution_error,
+                }
+            }
+        };
+        outcomes.push(Outcome {
+            solver: entry.solver.clone(),
+            scene: entry.scene.clone(),
+            tolerance: entry,
+            result,
+        });
+    }
+    Ok(outcomes)
+}
+
+/// The validation table as Markdown (`docs/validation.md`).
+pub fn validation_markdown(outcomes: &[Outcome], command: &str) -> String {
+    let mut out = String::from(
+        "# Validation\n\nEvery solver against a reference on the suite scenes of `examples/scenes/suite/`, \
+         with the tolerance and the reason for it from `tolerances.toml`. Errors: relative L2 of the fluence over \
+         cells above 10⁻³ of the reference's peak, and the largest relative error over cells above 10⁻².\n\n",
+    );
+    out.push_str(&format!("Generated by `{command}`.\n\n"));
+    out.push_str("| solver | scene | reference | tolerance | relative L2 | max relative | own noise | solve time | verdict | why this tolerance |\n");
+    out.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
+    for o in outcomes {
+        let why = o.tolerance.why.replace('|', "/");
+        match &o.result {
+            CheckResult::Compared {
+                comparison,
+                seconds,
+                reference,
+                reference_error,
+                solution_error,
+            } => out.push_str(&format!(
+                "| {} | {} | {} (±{:.2}%) | {:.1}% | {:.2}% | {:.1}% | {} | {:.2} s | {} | {} |\n",
+                o.solver,
+                o.scene,
+                reference,
+                100.0 * reference_error,
+                100.0 * o.tolerance.tolerance,
+                100.0 * comparison.relative_l2,
+                100.0 * comparison.max_relative,
+                solution_error.map_or("–".to_owned(), |e| format!("±{:.2}%", 100.0 * e)),
+                seconds,
+                if o.passed() { "pass" } else { "FAIL" },
+                why
+            )),
+            CheckResult::Skipped(reason) => out.push_str(&format!(
+                "| {} | {} | – | {:.1}% | – | – | – | – | skipped: {} | {} |\n",
+                o.solver,
+                o.scene,
+                100.0 * o.tolerance.tolerance,
+                reason,
+                why
+            )),
+        }
+    }
+    out
+}
