@@ -56,6 +56,10 @@ struct ToleranceFile {
 pub struct SuiteScene {
     /// File stem.
     pub name: String,
+    /// The scene as parsed (to rebuild it at other resolutions).
+    pub scene: Scene,
+    /// The folder its relative paths start from.
+    pub base: PathBuf,
     /// The scene, ready to solve.
     pub built: BuiltScene,
     /// Hash of the file's text (the cache key).
@@ -89,8 +93,11 @@ pub fn load_suite(dir: &Path) -> Result<(Vec<SuiteScene>, Vec<Tolerance>), Error
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default();
+        let base = path.parent().unwrap_or(Path::new(".")).to_owned();
         scenes.push(SuiteScene {
             name,
+            scene,
+            base,
             built,
             text_hash: hasher.finish(),
         });

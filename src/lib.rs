@@ -25,6 +25,7 @@
 //! ```
 
 pub mod crosscheck;
+pub mod pareto;
 pub mod scene;
 
 use std::path::PathBuf;

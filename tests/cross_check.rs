@@ -74,3 +74,34 @@ fn the_marble_sphere_reference_is_the_t7_solution_for_the_scene_as_written() {
         other => panic!("the marble sphere has a point source, not {other:?}"),
     }
 }
+
+#[test]
+fn pareto_sweep_shows_each_solvers_convergence_on_the_slab() {
+    let suite = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/suite");
+    let (scenes, _) = lucent::crosscheck::load_suite(&suite).unwrap();
+    let slab = scenes.iter().find(|s| s.name == "slab").unwrap();
+    let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("crosscheck-cache");
+    let points = lucent::pareto::sweep(slab, Some(&cache)).unwrap();
+    let mc: Vec<f64> = points
+        .iter()
+        .filter(|p| p.solver == "mc")
+        .map(|p| p.error)
+        .collect();
+    assert_eq!(mc.len(), 4);
+    // Monte Carlo error falls as 1/√N: 64 times the paths, about 8 times smaller (the
+    // reference's own ±1% noise flattens the last step a little).
+    assert!(mc.windows(2).all(|w| w[1] < w[0]), "{mc:?}");
+    assert!(mc[0] / mc[3] > 4.0, "{mc:?}");
+    let direct: Vec<f64> = points
+        .iter()
+        .filter(|p| p.solver == "direct")
+        .map(|p| p.error)
+        .collect();
+    assert!(
+        direct.iter().all(|&e| e < 0.01),
+        "direct on the slab: {direct:?}"
+    );
+    let svg = lucent::pareto::svg("slab", &points);
+    assert_eq!(svg.matches("<polyline").count(), 2, "one curve per solver");
+    assert!(lucent::pareto::csv(&points).lines().count() == points.len() + 1);
+}

@@ -10,16 +10,22 @@
 //!   table and writes `docs/validation.md`. References are cached in
 //!   `target/crosscheck-cache/`.
 //!
-//! Later issues add `pareto` and the external comparisons here.
+//! - `pareto [SCENE...]`: error against wall time for every solver on the suite scenes
+//!   (all of them by default), as `docs/pareto/<scene>.svg` and `.csv`.
+//!
+//! Later issues add the external comparisons (Mitsuba, pyamg, scipy) here.
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
     if command.as_deref() == Some("crosscheck") {
         return crosscheck();
+    }
+    if command.as_deref() == Some("pareto") {
+        return pareto(std::env::args().skip(2).collect());
     }
     let steps: Vec<Vec<&str>> = match command.as_deref() {
         Some("ci") => vec![
@@ -96,4 +102,59 @@ fn crosscheck() -> ExitCode {
     } else {
         ExitCode::FAILURE
     }
+}
+
+/// Sweeps every solver on the suite scenes and writes the error-against-time charts.
+fn pareto(only: Vec<String>) -> ExitCode {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let cache = root.join("target/crosscheck-cache");
+    let out = root.join("docs/pareto");
+    let scenes = match lucent::crosscheck::load_suite(&root.join("examples/scenes/suite")) {
+        Ok((scenes, _)) => scenes,
+        Err(e) => {
+            eprintln!("xtask: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    if let Err(e) = std::fs::create_dir_all(&out) {
+        eprintln!("xtask: cannot create {}: {e}", out.display());
+        return ExitCode::FAILURE;
+    }
+    for scene in scenes
+        .iter()
+        .filter(|s| only.is_empty() || only.contains(&s.name))
+    {
+        let points = match lucent::pareto::sweep(scene, Some(&cache)) {
+            Ok(p) => p,
+            Err(e) => {
+                eprintln!("xtask: {}: {e}", scene.name);
+                continue;
+            }
+        };
+        if points.is_empty() {
+            eprintln!("xtask: {}: no solver can run it yet", scene.name);
+            continue;
+        }
+        for p in &points {
+            eprintln!(
+                "{:<14} {:<7} {:<32} {:>9.3} s {:>8.3}%",
+                scene.name,
+                p.solver,
+                p.setting,
+                p.seconds,
+                100.0 * p.error
+            );
+        }
+        let title = format!("{}: error against time (dev machine)", scene.name);
+        let svg = lucent::pareto::svg(&title, &points);
+        let csv = lucent::pareto::csv(&points);
+        for (ext, text) in [("svg", svg), ("csv", csv)] {
+            let path = out.join(format!("{}.{ext}", scene.name));
+            if let Err(e) = std::fs::write(&path, text) {
+                eprintln!("xtask: cannot write {}: {e}", path.display());
+                return ExitCode::FAILURE;
+            }
+        }
+    }
+    ExitCode::SUCCESS
 }

@@ -1,0 +1,247 @@
+//! Error against time: each solver swept over its accuracy knobs on a suite scene, its
+//! error measured against the reference for what it computes, charted log-log.
+//!
+//! - `direct`: grid resolution (1× and 2× the scene's: the medium resampled trilinearly, so
+//!   that it is the same medium, and the fine solution averaged back onto the scene's cells,
+//!   so that cell averages are compared with cell averages) and the sky quadrature (8 and
+//!   32 directions);
+//! - `mc`: particles per batch (8 batches).
+//!
+//! `cargo xtask pareto` writes `docs/pareto/<scene>.svg` and `.csv`.
+
+use std::path::Path;
+use std::time::Instant;
+
+use lucent_core::{Field, FluenceKind, Light, Medium, ParamValue, Params, Problem, SolveOptions};
+use lucent_grid::Grid;
+use lucent_grid::resample::{resample, restrict};
+
+use crate::Error;
+use crate::crosscheck::{SuiteScene, compare, reference};
+
+/// One measured point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Point {
+    /// Solver name.
+    pub solver: String,
+    /// The knob setting, in words.
+    pub setting: String,
+    /// Wall time of the solve, seconds.
+    pub seconds: f64,
+    /// Relative L2 error against the reference.
+    pub error: f64,
+}
+
+fn params(pairs: &[(&str, i64)]) -> Params {
+    Params(
+        pairs
+            .iter()
+            .map(|(k, v)| ((*k).to_owned(), ParamValue::Int(*v)))
+            .collect(),
+    )
+}
+
+/// The same medium on `factor` times as many cells per axis: every grid resampled
+/// trilinearly at the finer cell centres, so that refining converges to the scene's own
+/// (trilinear) medium instead of revealing new detail of a procedural volume.
+fn refined(scene: &SuiteScene, factor: usize) -> Result<Problem, Error> {
+    let p = &scene.built.problem;
+    let fine = p.geometry().dims().map(|n| n * factor);
+    let up = |g: &Grid| {
+        if factor == 1 {
+            Ok(g.clone())
+        } else {
+            resample(g, fine)
+        }
+    };
+    let m = p.medium();
+    let medium = Medium {
+        sigma_t: m.sigma_t.iter().map(up).collect::<Result<_, _>>()?,
+        albedo: m
+            .albedo
+            .iter()
+            .map(|a| match a {
+                Field::Constant(v) => Ok(Field::Constant(*v)),
+                Field::Grid(g) => up(g).map(Field::Grid),
+            })
+            .collect::<Result<_, lucent_grid::GridError>>()?,
+        phase: m.phase,
+        eta: m.eta,
+    };
+    let lights = p
+        .lights()
+        .iter()
+        .map(|l| match l {
+            Light::Emission { grid, scale } => up(grid).map(|grid| Light::Emission {
+                grid,
+                scale: *scale,
+            }),
+            other => Ok(other.clone()),
+        })
+        .collect::<Result<_, _>>()?;
+    let geometry = *medium.sigma_t[0].geometry();
+    Ok(Problem::new(geometry, medium, lights, p.boundary(), None)?)
+}
+
+/// Sweeps `direct` and `mc` on `scene`.
+pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Vec<Point>, Error> {
+    let registry = crate::registry();
+    let mut points = Vec::new();
+    let uncollided = reference(scene, FluenceKind::Uncollided, 0.005, cache)?;
+    let total = reference(scene, FluenceKind::Total, 0.01, cache)?;
+    for factor in [1usize, 2] {
+        let problem = refined(scene, factor)?;
+        for sky_level in [0i64, 1] {
+            let solver = registry.build("direct", &params(&[("sky_level", sky_level)]))?;
+            if solver.capabilities().check("direct", &problem).is_err() {
+                continue;
+            }
+            let start = Instant::now();
+            let solution = solver.solve(&problem, &SolveOptions::default())?;
+            let seconds = start.elapsed().as_secs_f64();
+            let averaged: Vec<Grid> = solution
+                .fluence
+                .iter()
+                .map(|g| if factor == 2 { restrict(g) } else { g.clone() })
+                .collect();
+            points.push(Point {
+                solver: "direct".into(),
+                setting: format!("{factor}x cells, {} sky directions", 8 << (2 * sky_level)),
+                seconds,
+                error: compare(&averaged, &uncollided).relative_l2,
+            });
+        }
+    }
+    for particles in [1000i64, 4000, 16000, 64000] {
+        let solver = registry.build("mc", &params(&[("particles", particles), ("batches", 8)]))?;
+        if solver
+            .capabilities()
+            .check("mc", &scene.built.problem)
+            .is_err()
+        {
+            continue;
+        }
+        let start = Instant::now();
+        let solution = solver.solve(&scene.built.problem, &SolveOptions::default())?;
+        points.push(Point {
+            solver: "mc".into(),
+            setting: format!("{} paths", particles * 8),
+            seconds: start.elapsed().as_secs_f64(),
+            error: compare(&solution.fluence, &total).relative_l2,
+        });
+    }
+    Ok(points)
+}
+
+/// The points as CSV.
+pub fn csv(points: &[Point]) -> String {
+    let mut out = String::from("solver,setting,seconds,relative_l2\n");
+    for p in points {
+        out.push_str(&format!(
+            "{},{},{:.6},{:.6}\n",
+            p.solver, p.setting, p.seconds, p.error
+        ));
+    }
+    out
+}
+
+/// A log-log chart of error against time, one curve per solver, as SVG.
+pub fn svg(title: &str, points: &[Point]) -> String {
+    let (w, h) = (640.0, 420.0);
+    let (left, right, top, bottom) = (70.0, 150.0, 40.0, 50.0);
+    let lg = |v: f64| v.max(1e-12).log10();
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for p in points {
+        x0 = x0.min(lg(p.seconds));
+        x1 = x1.max(lg(p.seconds));
+        y0 = y0.min(lg(p.error));
+        y1 = y1.max(lg(p.error));
+    }
+    if !x0.is_finite() {
+        (x0, x1, y0, y1) = (-3.0, 0.0, -3.0, 0.0);
+    }
+    let (x0, x1, y0, y1) = (
+        x0.floor(),
+        x1.ceil().max(x0.floor() + 1.0),
+        y0.floor(),
+        y1.ceil().max(y0.floor() + 1.0),
+    );
+    let px = |v: f64| left + (lg(v) - x0) / (x1 - x0) * (w - left - right);
+    let py = |v: f64| h - bottom - (lg(v) - y0) / (y1 - y0) * (h - top - bottom);
+    let mut s = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"12\">\n\
+         <rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\n<text x=\"{}\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">{title}</text>\n",
+        (left + w - right) / 2.0
+    );
+    for d in (x0 as i32)..=(x1 as i32) {
+        let x = px(10f64.powi(d));
+        s.push_str(&format!(
+            "<line x1=\"{x}\" y1=\"{top}\" x2=\"{x}\" y2=\"{}\" stroke=\"#ddd\"/><text x=\"{x}\" y=\"{}\" text-anchor=\"middle\">1e{d}</text>\n",
+            h - bottom,
+            h - bottom + 16.0
+        ));
+    }
+    for d in (y0 as i32)..=(y1 as i32) {
+        let y = py(10f64.powi(d));
+        s.push_str(&format!(
+            "<line x1=\"{left}\" y1=\"{y}\" x2=\"{}\" y2=\"{y}\" stroke=\"#ddd\"/><text x=\"{}\" y=\"{}\" text-anchor=\"end\">1e{d}</text>\n",
+            w - right,
+            left - 6.0,
+            y + 4.0
+        ));
+    }
+    s.push_str(&format!(
+        "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">wall time (s)</text>\n<text x=\"16\" y=\"{}\" text-anchor=\"middle\" transform=\"rotate(-90 16 {})\">relative L2 error</text>\n",
+        (left + w - right) / 2.0,
+        h - 12.0,
+        (top + h - bottom) / 2.0,
+        (top + h - bottom) / 2.0
+    ));
+    let colours = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e"];
+    let mut solvers: Vec<&str> = points.iter().map(|p| p.solver.as_str()).collect();
+    solvers.dedup();
+    for (i, solver) in solvers.iter().enumerate() {
+        let colour = colours[i % colours.len()];
+        let mut curve: Vec<&Point> = points.iter().filter(|p| p.solver == *solver).collect();
+        curve.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
+        let path: Vec<String> = curve
+            .iter()
+            .map(|p| format!("{:.1},{:.1}", px(p.seconds), py(p.error)))
+            .collect();
+        s.push_str(&format!(
+            "<polyline points=\"{}\" fill=\"none\" stroke=\"{colour}\" stroke-width=\"2\"/>\n",
+            path.join(" ")
+        ));
+        for p in &curve {
+            s.push_str(&format!(
+                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"4\" fill=\"{colour}\"><title>{}: {} ({:.3} s, {:.2}%)</title></circle>\n",
+                px(p.seconds),
+                py(p.error),
+                p.solver,
+                p.setting,
+                p.seconds,
+                100.0 * p.error
+            ));
+        }
+        let label = if *solver == "direct" {
+            "direct (uncollided)"
+        } else {
+            solver
+        };
+        let ly = top + 20.0 + 20.0 * i as f64;
+        s.push_str(&format!(
+            "<line x1=\"{}\" y1=\"{ly}\" x2=\"{}\" y2=\"{ly}\" stroke=\"{colour}\" stroke-width=\"3\"/><text x=\"{}\" y=\"{}\">{label}</text>\n",
+            w - right + 10.0,
+            w - right + 30.0,
+            w - right + 36.0,
+            ly + 4.0
+        ));
+    }
+    s.push_str("</svg>\n");
+    s
+}
