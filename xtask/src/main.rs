@@ -13,16 +13,38 @@
 //! - `pareto [SCENE...]`: error against wall time for every solver on the suite scenes
 //!   (all of them by default), as `docs/pareto/<scene>.svg` and `.csv`.
 //!
-//! Later issues add the external comparisons (Mitsuba, pyamg, scipy) here.
+//! - `mitsuba [SPP]`: the default cloud at 256×256 rendered by lucent's Monte Carlo and by
+//!   Mitsuba 3 (`pip install mitsuba`; `scalar_rgb` and `llvm_ad_rgb`) with the same camera,
+//!   lights, medium, spp and depth; prints the mean difference, per-pixel z-scores and both
+//!   renderers' paths per second. Not part of the default test run.
+//!
+//! Later issues add the pyamg and scipy comparisons here.
+
+// This binary reports to the terminal.
+#![allow(clippy::print_stdout)]
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...]>";
+const USAGE: &str =
+    "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
     if command.as_deref() == Some("crosscheck") {
         return crosscheck();
+    }
+    if command.as_deref() == Some("mitsuba") {
+        let spp = std::env::args()
+            .nth(2)
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(64);
+        return match mitsuba(spp) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("xtask: mitsuba: {e}");
+                ExitCode::FAILURE
+            }
+        };
     }
     if command.as_deref() == Some("pareto") {
         return pareto(std::env::args().skip(2).collect());
@@ -157,4 +179,160 @@ fn pareto(only: Vec<String>) -> ExitCode {
         }
     }
     ExitCode::SUCCESS
+}
+
+/// Renders the default cloud with lucent's Monte Carlo and with Mitsuba 3 and compares them.
+fn mitsuba(spp: usize) -> Result<(), String> {
+    use lucent::core::{Field, Light};
+    use lucent::optics::Phase;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let dir = root.join("target/mitsuba");
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let scene = lucent::scene::Scene::default_scene().map_err(|e| e.to_string())?;
+    let built = scene.build(&root).map_err(|e| e.to_string())?;
+    let problem = &built.problem;
+    let medium = problem.medium();
+    if medium.sigma_t.len() != 1 {
+        return Err("only grey extinction is exported".into());
+    }
+    let albedo: Vec<f64> = (0..3)
+        .map(|c| match medium.albedo(c) {
+            Field::Constant(v) => Ok(f64::from(*v)),
+            Field::Grid(_) => Err("only constant albedo is exported".to_owned()),
+        })
+        .collect::<Result<_, _>>()?;
+    let g = match medium.phase {
+        Phase::Isotropic => 0.0,
+        Phase::HenyeyGreenstein(hg) => hg.g(),
+        other => return Err(format!("phase {other:?} is not exported")),
+    };
+    let mut lights = Vec::new();
+    for light in problem.lights() {
+        let value: Vec<f64> = (0..3).map(|c| light.spectrum().channel(c)).collect();
+        match light {
+            Light::Directional { direction, .. } => lights.push(lucent_json(&[
+                ("kind", "\"directional\"".into()),
+                ("direction", format!("{:?}", direction.to_array())),
+                ("value", format!("{value:?}")),
+            ])),
+            Light::Sky { .. } => lights.push(lucent_json(&[
+                ("kind", "\"sky\"".into()),
+                ("value", format!("{value:?}")),
+            ])),
+            other => return Err(format!("{:?} lights are not exported", other.kind())),
+        }
+    }
+    let (width, height) = (256usize, 256usize);
+    let (position, look_at, up, fov) = match built.camera {
+        lucent::render::Camera::Pinhole {
+            position,
+            look_at,
+            up,
+            fov,
+        } => (position, look_at, up, fov),
+        _ => return Err("only pinhole cameras are exported".into()),
+    };
+    // The volume: σ_t as a Mitsuba grid, placed by to_world (Mitsuba ignores the file's box).
+    let volume = dir.join("sigma_t.vol");
+    lucent::grid::io::mitsuba::write(&volume, &[&medium.sigma_t[0]]).map_err(|e| e.to_string())?;
+    // lucent's image, timed.
+    let config = lucent::mc::McConfig {
+        seed: 42,
+        ..Default::default()
+    };
+    let camera = built.camera;
+    let aspect = width as f64 / height as f64;
+    let background = std::array::from_fn(|c| {
+        problem
+            .lights()
+            .iter()
+            .filter(|l| matches!(l, Light::Sky { .. }))
+            .map(|l| l.spectrum().channel(c))
+            .sum()
+    });
+    let start = std::time::Instant::now();
+    let estimate =
+        lucent::mc::camera_image(problem, width, height, spp, background, &config, |u, v| {
+            camera.ray(u, v, aspect).unwrap_or_default()
+        })
+        .map_err(|e| e.to_string())?;
+    let lucent_seconds = start.elapsed().as_secs_f64();
+    let image = lucent::render::Image {
+        width,
+        height,
+        pixels: estimate.radiance,
+    };
+    let stderr = lucent::render::Image {
+        width,
+        height,
+        pixels: estimate.std_error,
+    };
+    let (image_path, stderr_path) = (dir.join("lucent.f32"), dir.join("lucent_stderr.f32"));
+    image
+        .write_exr(dir.join("lucent.exr"))
+        .map_err(|e| e.to_string())?;
+    let raw = |img: &lucent::render::Image| {
+        img.pixels
+            .iter()
+            .flat_map(|p| p.iter().flat_map(|v| v.to_le_bytes()))
+            .collect::<Vec<u8>>()
+    };
+    std::fs::write(&image_path, raw(&image)).map_err(|e| e.to_string())?;
+    std::fs::write(&stderr_path, raw(&stderr)).map_err(|e| e.to_string())?;
+    let (lo, hi) = problem.geometry().bounds();
+    // llvm_ad_rgb needs LLVM 19 (15 and 16 abort or hang at the first render): only with
+    // DRJIT_LIBLLVM_PATH pointing at it.
+    let variants = if std::env::var_os("DRJIT_LIBLLVM_PATH").is_some() {
+        r#"["scalar_rgb", "llvm_ad_rgb"]"#
+    } else {
+        r#"["scalar_rgb"]"#
+    };
+    let config_json = format!(
+        "{{\"variants\": {variants}, \"width\": {width}, \"height\": {height}, \"spp\": {spp}, \"max_depth\": -1, \
+         \"bounds\": [{:?}, {:?}], \"camera\": {{\"position\": {position:?}, \"look_at\": {look_at:?}, \"up\": {up:?}, \"fov\": {fov}}}, \
+         \"volume\": {:?}, \"albedo\": {albedo:?}, \"g\": {g}, \"lights\": [{}], \"output_prefix\": {:?}, \
+         \"lucent_image\": {:?}, \"lucent_stderr\": {:?}}}",
+        lo.to_array(),
+        hi.to_array(),
+        volume.display().to_string(),
+        lights.join(", "),
+        dir.join("mitsuba_").display().to_string(),
+        image_path.display().to_string(),
+        stderr_path.display().to_string()
+    );
+    let config_path = dir.join("config.json");
+    std::fs::write(&config_path, config_json).map_err(|e| e.to_string())?;
+    let script = dir.join("render.py");
+    std::fs::write(&script, include_str!("mitsuba.py")).map_err(|e| e.to_string())?;
+    let output = Command::new("python3")
+        .arg(&script)
+        .arg(&config_path)
+        .output()
+        .map_err(|e| format!("python3: {e}"))?;
+    if !output.status.success() {
+        return Err(format!(
+            "the Mitsuba script failed (is `pip install mitsuba` done?):\n{}",
+            String::from_utf8_lossy(&output.stderr)
+        ));
+    }
+    let paths = (width * height * spp) as f64;
+    eprintln!(
+        "lucent mc: {lucent_seconds:.2} s, {:.0} paths/s",
+        paths / lucent_seconds
+    );
+    println!(
+        "{{\"lucent\": {{\"seconds\": {lucent_seconds}, \"paths_per_second\": {}}}, \"mitsuba\": {}}}",
+        paths / lucent_seconds,
+        String::from_utf8_lossy(&output.stdout).trim()
+    );
+    Ok(())
+}
+
+/// A tiny JSON object from pre-formatted values.
+fn lucent_json(fields: &[(&str, String)]) -> String {
+    let inner: Vec<String> = fields
+        .iter()
+        .map(|(k, v)| format!("\"{k}\": {v}"))
+        .collect();
+    format!("{{{}}}", inner.join(", "))
 }
