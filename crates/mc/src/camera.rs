@@ -66,6 +66,17 @@ pub fn camera_image(
     } else {
         (0..3).map(|c| (c, vec![c])).collect()
     };
+    // RGB extinction: one path for all three channels with hero-channel MIS over a shared
+    // majorant (unless switched off, for comparison with per-channel tracing).
+    let spectral = (medium.sigma_t.len() == 3 && config.spectral_mis).then(|| {
+        let mut max = medium.sigma_t[0].clone();
+        for other in &medium.sigma_t[1..] {
+            for (m, v) in max.data_mut().iter_mut().zip(other.data()) {
+                *m = m.max(*v);
+            }
+        }
+        MajorantGrid::new(&max, config.majorant_cells)
+    });
     let mut radiance = vec![[0f32; 3]; width * height];
     let mut std_error = vec![[0f32; 3]; width * height];
     radiance
@@ -85,20 +96,26 @@ pub fn camera_image(
                         (y as f64 + jy) / height as f64,
                     );
                     let mut value = [0f64; 3];
-                    for (extinction, members) in &groups {
-                        let path = trace_path(
-                            problem,
-                            &medium.sigma_t[*extinction],
-                            &majorants[*extinction],
-                            members,
-                            background,
-                            config,
-                            origin,
-                            dir,
-                            &mut rng,
+                    if let Some(majorant) = &spectral {
+                        value = trace_path_spectral(
+                            problem, majorant, background, config, origin, dir, &mut rng,
                         );
-                        for (m, &c) in members.iter().enumerate() {
-                            value[c] = path[m];
+                    } else {
+                        for (extinction, members) in &groups {
+                            let path = trace_path(
+                                problem,
+                                &medium.sigma_t[*extinction],
+                                &majorants[*extinction],
+                                members,
+                                background,
+                                config,
+                                origin,
+                                dir,
+                                &mut rng,
+                            );
+                            for (m, &c) in members.iter().enumerate() {
+                                value[c] = path[m];
+                            }
                         }
                     }
                     for c in 0..3 {
@@ -263,6 +280,156 @@ fn trace_path(
             }
             for t in &mut throughput {
                 *t /= survive;
+            }
+        }
+        dir = phase.sample(dir, rng.uniform2()).omega_out;
+    }
+}
+
+/// One camera path for an RGB extinction: distances and real/null decisions follow a hero
+/// channel drawn per path, every channel's contribution is weighted by the balance
+/// heuristic over the three possible heroes (spectral MIS, as pbrt-v4 does). `f` holds each
+/// channel's path throughput and `p` the path's probability under each hero, both divided
+/// by the mean of `p` after every event, so that `f` is the MIS-weighted estimate itself.
+fn trace_path_spectral(
+    problem: &Problem,
+    majorant: &MajorantGrid,
+    background: [f64; 3],
+    config: &McConfig,
+    origin: DVec3,
+    dir: DVec3,
+    rng: &mut PathRng,
+) -> [f64; 3] {
+    let geometry = problem.geometry();
+    let (lo, hi) = geometry.bounds();
+    let medium = problem.medium();
+    let phase = medium.phase;
+    let far = 4.0 * (hi - lo).length() + 1.0;
+    let hero = ((rng.uniform() * 3.0) as usize).min(2);
+    let sigma = |x: DVec3| -> [f64; 3] {
+        std::array::from_fn(|c| f64::from(medium.sigma_t(c).sample_trilinear(x)))
+    };
+    let mut f = [1.0f64; 3];
+    let mut p = [1.0f64; 3];
+    let mut result = [0.0f64; 3];
+    let (mut pos, mut dir) = (origin, dir);
+    let mut depth = 0u32;
+    let normalise = |f: &mut [f64; 3], p: &mut [f64; 3]| {
+        let mean = (p[0] + p[1] + p[2]) / 3.0;
+        if mean > 0.0 {
+            for c in 0..3 {
+                f[c] /= mean;
+                p[c] /= mean;
+            }
+        }
+    };
+    loop {
+        let escape = |f: &[f64; 3], result: &mut [f64; 3]| {
+            if depth == 0 {
+                for c in 0..3 {
+                    result[c] += f[c] * background[c];
+                }
+            }
+        };
+        let Some((t_in, t_out)) = clip(pos, dir, lo, hi) else {
+            escape(&f, &mut result);
+            return result;
+        };
+        let mut collision = None;
+        majorant.walk(pos, dir, t_out, |t0, t1, sigma_max| {
+            if sigma_max <= 0.0 || t1 <= t_in {
+                return true;
+            }
+            let mut t = t0.max(t_in);
+            loop {
+                t -= (1.0 - rng.uniform()).ln() / sigma_max;
+                if t >= t1 {
+                    return true;
+                }
+                let s = sigma(pos + dir * t);
+                let real = rng.uniform() * sigma_max < s[hero];
+                for c in 0..3 {
+                    let q = (s[c] / sigma_max).min(1.0);
+                    let factor = if real { q } else { 1.0 - q };
+                    f[c] *= factor;
+                    p[c] *= factor;
+                }
+                normalise(&mut f, &mut p);
+                if real {
+                    collision = Some(t);
+                    return false;
+                }
+            }
+        });
+        let Some(t) = collision else {
+            escape(&f, &mut result);
+            return result;
+        };
+        pos += dir * t;
+        for c in 0..3 {
+            f[c] *= f64::from(medium.albedo(c).sample(pos)).clamp(0.0, 1.0);
+        }
+        let toward_eye = -dir;
+        for light in problem.lights() {
+            let (w_light, irradiance, distance) = match light {
+                Light::Sky { .. } => {
+                    let [u, v] = rng.uniform2();
+                    let z = 1.0 - 2.0 * u;
+                    let r = (1.0 - z * z).max(0.0).sqrt();
+                    (
+                        DVec3::new(r * (2.0 * PI * v).cos(), r * (2.0 * PI * v).sin(), z),
+                        4.0 * PI,
+                        far,
+                    )
+                }
+                Light::Emission { .. } => continue,
+                _ => match light.arrival(pos, far, 0.0) {
+                    Some((w, e, from)) if e > 0.0 => (w, e, (pos - from).length()),
+                    _ => continue,
+                },
+            };
+            let phase_value = phase.eval(w_light, toward_eye);
+            if phase_value <= 0.0 {
+                continue;
+            }
+            // Ratio tracking against the shared majorant is unbiased for every channel.
+            let mut shadow = [1.0f64; 3];
+            majorant.walk(pos, -w_light, distance, |t0, t1, sigma_max| {
+                if sigma_max <= 0.0 {
+                    return true;
+                }
+                let mut t = t0;
+                loop {
+                    t -= (1.0 - rng.uniform()).ln() / sigma_max;
+                    if t >= t1 {
+                        return true;
+                    }
+                    let s = sigma(pos - w_light * t);
+                    for c in 0..3 {
+                        shadow[c] *= 1.0 - (s[c] / sigma_max).min(1.0);
+                    }
+                    if shadow.iter().all(|&v| v < 1e-6) {
+                        return false;
+                    }
+                }
+            });
+            for c in 0..3 {
+                result[c] +=
+                    f[c] * phase_value * irradiance * light.spectrum().channel(c) * shadow[c];
+            }
+        }
+        depth += 1;
+        if depth >= config.max_depth {
+            return result;
+        }
+        let strongest = f.iter().copied().fold(0.0, f64::max);
+        if strongest < 0.1 {
+            let survive = strongest / 0.1;
+            if strongest == 0.0 || rng.uniform() >= survive {
+                return result;
+            }
+            for v in &mut f {
+                *v /= survive;
             }
         }
         dir = phase.sample(dir, rng.uniform2()).omega_out;

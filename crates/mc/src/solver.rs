@@ -74,6 +74,7 @@ impl McSolver {
                     .unwrap_or(u32::MAX),
                 majorant_cells: params.usize_or("majorant_cells", d.majorant_cells)?,
                 global_majorant: global,
+                spectral_mis: d.spectral_mis,
             },
             samples_per_pixel: params.usize_or("spp", 64)?.max(2),
         })

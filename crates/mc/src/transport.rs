@@ -28,6 +28,9 @@ pub struct McConfig {
     pub majorant_cells: usize,
     /// Use one global majorant instead of the grid (the reference for tests).
     pub global_majorant: bool,
+    /// Camera paths in RGB-extinction media follow one hero channel with spectral MIS
+    /// (one path for three channels) instead of one path per channel.
+    pub spectral_mis: bool,
 }
 
 impl Default for McConfig {
@@ -39,6 +42,7 @@ impl Default for McConfig {
             max_depth: 10_000,
             majorant_cells: 8,
             global_majorant: false,
+            spectral_mis: true,
         }
     }
 }

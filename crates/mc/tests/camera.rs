@@ -1,0 +1,102 @@
+//! Camera images: spectral MIS over RGB extinction must agree with tracing every channel on
+//! its own (two unbiased estimators of the same image), and cost one path instead of three.
+
+use glam::DVec3;
+use lucent_core::{Boundary, Field, Light, Medium, Problem, Spectrum};
+use lucent_grid::GridGeometry;
+use lucent_grid::procedural::gaussian_blob;
+use lucent_mc::{McConfig, camera_image};
+use lucent_optics::Phase;
+
+#[test]
+fn spectral_mis_agrees_with_per_channel_tracing() {
+    let geometry = GridGeometry::new([20; 3], DVec3::splat(0.1), DVec3::splat(-1.0)).unwrap();
+    let blob = gaussian_blob(geometry, DVec3::ZERO, 0.4).unwrap();
+    // Ketchup-like: the channels' extinctions differ by 3.5×, their albedos by 40×.
+    let medium = Medium {
+        sigma_t: [2.0f32, 5.0, 7.0]
+            .iter()
+            .map(|&s| blob.map(|d| s * d))
+            .collect(),
+        albedo: vec![
+            Field::Constant(0.9),
+            Field::Constant(0.3),
+            Field::Constant(0.02),
+        ],
+        phase: Phase::henyey_greenstein(0.4).unwrap(),
+        eta: 1.0,
+    };
+    let lights = vec![
+        Light::Directional {
+            direction: DVec3::new(0.3, 0.5, -0.81).normalize(),
+            irradiance: Spectrum::Rgb([3.0, 3.0, 3.0]),
+        },
+        Light::Sky {
+            radiance: Spectrum::Grey(0.2),
+        },
+    ];
+    let problem = Problem::new(geometry, medium, lights, Boundary::Vacuum, None).unwrap();
+    let ray = |u: f64, v: f64| {
+        let origin = DVec3::new(-0.9 + 1.8 * u, -3.0, 0.9 - 1.8 * v);
+        (origin, DVec3::Y)
+    };
+    let (w, h, spp) = (24, 24, 256);
+    let mis = camera_image(
+        &problem,
+        w,
+        h,
+        spp,
+        [0.0; 3],
+        &McConfig {
+            seed: 1,
+            ..Default::default()
+        },
+        ray,
+    )
+    .unwrap();
+    let separate = camera_image(
+        &problem,
+        w,
+        h,
+        spp,
+        [0.0; 3],
+        &McConfig {
+            seed: 2,
+            spectral_mis: false,
+            ..Default::default()
+        },
+        ray,
+    )
+    .unwrap();
+    for c in 0..3 {
+        let mean =
+            |img: &[[f32; 3]]| img.iter().map(|p| f64::from(p[c])).sum::<f64>() / img.len() as f64;
+        let se = |err: &[[f32; 3]]| {
+            err.iter()
+                .map(|e| f64::from(e[c]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+                / err.len() as f64
+        };
+        let (a, b) = (mean(&mis.radiance), mean(&separate.radiance));
+        let sigma = se(&mis.std_error).hypot(se(&separate.std_error));
+        assert!(a > 0.0 && b > 0.0, "channel {c} is lit");
+        assert!(
+            (a - b).abs() < 4.0 * sigma,
+            "channel {c}: spectral MIS {a}, per channel {b}, σ {sigma}"
+        );
+        // Per pixel, z-scores of the difference must look like noise.
+        let z: Vec<f64> = mis
+            .radiance
+            .iter()
+            .zip(&separate.radiance)
+            .zip(mis.std_error.iter().zip(&separate.std_error))
+            .filter(|(_, (e1, e2))| e1[c] > 0.0 && e2[c] > 0.0)
+            .map(|((p, q), (e1, e2))| {
+                (f64::from(p[c]) - f64::from(q[c])) / f64::from(e1[c]).hypot(f64::from(e2[c]))
+            })
+            .collect();
+        let rms = (z.iter().map(|v| v * v).sum::<f64>() / z.len() as f64).sqrt();
+        assert!(rms < 1.3, "channel {c}: rms z {rms}");
+    }
+}
