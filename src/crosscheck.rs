@@ -124,30 +124,43 @@ pub struct Reference {
     pub relative_std_error: f64,
 }
 
-/// The analytic reference of a scene, if it has one: the marble sphere (T7), valid at least
-/// three transport mean free paths from the source and one cell inside the boundary.
+/// The analytic reference of a scene, if it has one: the marble sphere (T7) with the
+/// scene's boundary index, valid at least three transport mean free paths from the source
+/// and from the boundary (where diffusion is meant to hold).
 fn analytic(scene: &SuiteScene) -> Option<Reference> {
     if scene.name != "marble_sphere" {
         return None;
     }
-    let g = *scene.built.problem.geometry();
+    let problem = &scene.built.problem;
+    let g = *problem.geometry();
+    let eta = match problem.boundary() {
+        lucent_core::Boundary::Robin { eta } => eta,
+        _ => 1.0,
+    };
     let coefficients = OpticalCoefficients::from_extinction_albedo(2.1921, 0.999042, 0.0).ok()?;
-    let medium = DiffusionMedium::with_boundary(
-        coefficients,
-        Dielectric::new(1.3).ok()?,
-        DiffuseFresnel::Groenhuis,
-    )
-    .ok()?;
-    let sphere = medium.sphere(10.0).ok()?;
-    let r_min = 3.0 * medium.z_r();
-    let r_max = 10.0 - g.spacing().max_element();
-    let mut mask = vec![false; g.voxel_count()];
-    let grid = Grid::from_fn(g, |p| sphere.fluence(p.length()).map_or(0.0, |v| v as f32));
-    for (index, m) in mask.iter_mut().enumerate() {
-        let [i, j, k] = g.coords(index);
-        let r = (g.cell_centre(i, j, k) - DVec3::ZERO).length();
-        *m = r >= r_min && r <= r_max;
-    }
+    // Groenhuis for a mismatched boundary (as T7), exact (A = 1) when index-matched.
+    let model = if eta > 1.0 {
+        DiffuseFresnel::Groenhuis
+    } else {
+        DiffuseFresnel::Exact
+    };
+    let medium =
+        DiffusionMedium::with_boundary(coefficients, Dielectric::new(eta).ok()?, model).ok()?;
+    let radius = 10.0;
+    let sphere = medium.sphere(radius).ok()?;
+    let margin = 3.0 * medium.z_r();
+    let grid = Grid::from_fn(g, |p| {
+        sphere
+            .fluence(p.length().max(1e-9))
+            .map_or(0.0, |v| v as f32)
+    });
+    let mask = (0..g.voxel_count())
+        .map(|index| {
+            let [i, j, k] = g.coords(index);
+            let r = (g.cell_centre(i, j, k) - DVec3::ZERO).length();
+            r >= margin && r <= radius - margin
+        })
+        .collect();
     Some(Reference {
         fluence: vec![grid],
         mask: Some(mask),
@@ -430,5 +443,34 @@ pub fn validation_markdown(outcomes: &[Outcome], command: &str) -> String {
             )),
         }
     }
+    out.push_str(MARBLE_NOTE);
     out
 }
+
+/// What the marble sphere shows about diffusion, with the measurements behind it.
+const MARBLE_NOTE: &str = "
+## Marble sphere: transport against diffusion
+
+Monte Carlo (4000 paths, a Fresnel interface at η = 1.3 on the embedded sphere) against the
+analytic diffusion solution T7 (Robin condition, Groenhuis A = 2.602), as the ratio of
+fluences averaged over 1 mm shells (measured 2026-11-22 on the dev machine with the suite
+scene and `McConfig { particles: 500, batches: 8 }`; the index-matched column is what
+`cargo test --release --test cross_check index_matched` asserts within 3%):
+
+| r (mm) | 0–1 | 1–2 | 2–3 | 3–4 | 4–5 | 5–6 | 6–7 | 7–8 | 8–9 | 9–10 |
+|---|---|---|---|---|---|---|---|---|---|---|
+| η = 1.3 | 1.193 | 1.001 | 0.985 | 0.986 | 0.988 | 0.982 | 0.955 | 0.949 | 0.928 | 0.862 |
+| η = 1 | 1.195 | 1.004 | 0.990 | 0.993 | 1.000 | 0.999 | 0.978 | 0.986 | 0.992 | 0.985 |
+
+- **Near the source** (r < 3 transport mean free paths = 1.37 mm) diffusion is not meant to
+  hold: the point source's first flights are ballistic, not diffusive, and the innermost
+  cells' Monte Carlo averages of a 1/r singularity are compared with its values at cell
+  centres. The 19% excess in the first shell is both effects; it is outside the compared
+  region.
+- **Near a mismatched surface** the transport solution falls 5–7% below diffusion from
+  r = 6 mm outward, while the index-matched sphere agrees within 2%: the Robin condition
+  with A from the diffuse Fresnel reflectance assumes a P1 (linearly anisotropic) radiance at
+  the surface, and total internal reflection above the critical angle (50° at η = 1.3) makes
+  the real radiance there far from P1. Transport also leaks more: escaped 0.783 ± 0.002
+  against diffusion's 0.776, absorbed 0.217 ± 0.002 against 0.224.
+";

@@ -42,6 +42,11 @@ pub struct Scene {
     /// The boundary condition.
     #[serde(default)]
     pub boundary: Boundary,
+    /// Embedded geometry: the medium is the inside of this shape (its signed distance,
+    /// sampled on the grid, is the problem's embedded SDF), and a Robin boundary applies
+    /// on its surface.
+    #[serde(default)]
+    pub embedded: Option<ShapeSpec>,
     /// The camera.
     pub camera: Camera,
     /// Image size and tone mapping.
@@ -496,7 +501,11 @@ impl Scene {
             });
         }
         let boundary = self.boundary;
-        let problem = Problem::new(geometry, medium, lights, boundary, None)?;
+        let embedded = match self.embedded {
+            Some(spec) => Some(to_shape(spec).sdf_grid(geometry)?),
+            None => None,
+        };
+        let problem = Problem::new(geometry, medium, lights, boundary, embedded)?;
         self.camera.validate()?;
         let i = self.image;
         let settings = RenderSettings {
@@ -557,34 +566,7 @@ impl Scene {
                 shape,
                 edge,
             } => {
-                let shape = match *shape {
-                    ShapeSpec::Sphere { centre, radius } => Shape::Sphere {
-                        centre: DVec3::from_array(centre),
-                        radius,
-                    },
-                    ShapeSpec::Box { min, max } => Shape::Box {
-                        min: DVec3::from_array(min),
-                        max: DVec3::from_array(max),
-                    },
-                    ShapeSpec::Torus {
-                        centre,
-                        major,
-                        minor,
-                    } => Shape::Torus {
-                        centre: DVec3::from_array(centre),
-                        major,
-                        minor,
-                    },
-                    ShapeSpec::Slab {
-                        normal,
-                        offset,
-                        thickness,
-                    } => Shape::Slab {
-                        normal: DVec3::from_array(normal),
-                        offset,
-                        thickness,
-                    },
-                };
+                let shape = to_shape(*shape);
                 shape.density_grid(geometry(*resolution, *bounds)?, *edge)?
             }
             VolumeSpec::Blob {
@@ -632,6 +614,37 @@ impl Scene {
                 grid
             }
         })
+    }
+}
+
+fn to_shape(spec: ShapeSpec) -> Shape {
+    match spec {
+        ShapeSpec::Sphere { centre, radius } => Shape::Sphere {
+            centre: DVec3::from_array(centre),
+            radius,
+        },
+        ShapeSpec::Box { min, max } => Shape::Box {
+            min: DVec3::from_array(min),
+            max: DVec3::from_array(max),
+        },
+        ShapeSpec::Torus {
+            centre,
+            major,
+            minor,
+        } => Shape::Torus {
+            centre: DVec3::from_array(centre),
+            major,
+            minor,
+        },
+        ShapeSpec::Slab {
+            normal,
+            offset,
+            thickness,
+        } => Shape::Slab {
+            normal: DVec3::from_array(normal),
+            offset,
+            thickness,
+        },
     }
 }
 

@@ -54,6 +54,12 @@ pub fn camera_image(
             ),
         });
     }
+    if problem.embedded().is_some() {
+        return Err(SolveError::Unsupported {
+            solver: "mc".into(),
+            feature: "camera images of embedded geometry (the particle tracer handles it; the camera tracer does not yet)".into(),
+        });
+    }
     let medium = problem.medium();
     let channels = problem.channels();
     let majorants: Vec<MajorantGrid> = medium

@@ -32,8 +32,13 @@
 //! for any thread count.
 //!
 //! ## Units and limits
-//! Scene units, fluence in W/length² for lights in W. Vacuum boundaries only for now; the
-//! energy balance (emitted = absorbed + escaped + truncated) holds per path in expectation.
+//! Scene units, fluence in W/length² for lights in W. The box faces are vacuum boundaries.
+//! With embedded geometry (a signed distance grid, negative inside) the medium is the
+//! inside of its zero level, found by sphere tracing the trilinear SDF with bisection; a
+//! Robin boundary of relative index η there becomes, for transport, a smooth dielectric
+//! interface: Fresnel reflection (total internal reflection included) or Snell refraction.
+//! Camera images do not handle embedded geometry yet. The energy balance (emitted =
+//! absorbed + escaped + truncated) holds per path in expectation.
 //!
 //! ## Example
 //! ```

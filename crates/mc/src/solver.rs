@@ -90,8 +90,8 @@ impl Solver for McSolver {
         Capabilities {
             anisotropic: true,
             heterogeneous: true,
-            embedded_geometry: false,
-            boundaries: vec![BoundaryKind::Vacuum],
+            embedded_geometry: true,
+            boundaries: vec![BoundaryKind::Vacuum, BoundaryKind::Robin],
             lights: vec![
                 LightKind::Directional,
                 LightKind::Point,
@@ -105,6 +105,14 @@ impl Solver for McSolver {
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
         self.capabilities().check(Self::NAME, problem)?;
+        if matches!(problem.boundary(), lucent_core::Boundary::Robin { .. })
+            && problem.embedded().is_none()
+        {
+            return Err(SolveError::Unsupported {
+                solver: Self::NAME.into(),
+                feature: "a Robin boundary without embedded geometry (its dielectric interface is the embedded surface)".into(),
+            });
+        }
         options.validate()?;
         let start = Instant::now();
         let voxels = problem.geometry().voxel_count() as u64;

@@ -5,9 +5,9 @@
 use std::f64::consts::PI;
 
 use glam::DVec3;
-use lucent_core::{Light, Problem, SolveError};
+use lucent_core::{Boundary, Light, Problem, SolveError};
 use lucent_grid::Grid;
-use lucent_optics::PhaseFunction;
+use lucent_optics::{Dielectric, PhaseFunction};
 use rayon::prelude::*;
 
 use crate::majorant::MajorantGrid;
@@ -367,6 +367,9 @@ fn trace_batch(
     let phase = medium.phase;
     let mut tally = Tally::new(members.len(), geometry.voxel_count());
     let n = config.particles as f64;
+    let surface = problem
+        .embedded()
+        .map(|sdf| Interface::new(sdf, problem.boundary()));
     for (l, light) in lights.iter().enumerate() {
         for path in 0..config.particles {
             let mut rng = PathRng::new(config.seed, batch, (l as u64) << 40 | path);
@@ -383,6 +386,7 @@ fn trace_batch(
             let mut entered = false;
             let initial = weight.iter().copied().fold(0.0, f64::max);
             let mut depth = 0;
+            let mut crossings = 0u32;
             loop {
                 let Some((t_in, t_out)) = clip(pos, dir, lo, hi) else {
                     if entered {
@@ -398,26 +402,35 @@ fn trace_batch(
                         tally.emitted[m] += w;
                     }
                 }
-                // Delta tracking between t_in and t_out.
+                // With embedded geometry the flight also ends where it meets the surface,
+                // and only the inside holds medium.
+                let inside = surface.as_ref().is_none_or(|s| s.inside(pos));
+                let t_surface = surface
+                    .as_ref()
+                    .and_then(|s| s.hit(pos, dir, t_in, t_out, inside));
+                let t_stop = t_surface.unwrap_or(t_out);
+                // Delta tracking between t_in and t_stop.
                 let mut collision = None;
-                majorant.walk(pos, dir, t_out, |t0, t1, sigma_max| {
-                    if sigma_max <= 0.0 || t1 <= t_in {
-                        return true;
-                    }
-                    let mut t = t0.max(t_in);
-                    loop {
-                        t -= (1.0 - rng.uniform()).ln() / sigma_max;
-                        if t >= t1 {
+                if inside {
+                    majorant.walk(pos, dir, t_stop, |t0, t1, sigma_max| {
+                        if sigma_max <= 0.0 || t1 <= t_in {
                             return true;
                         }
-                        let sigma = f64::from(sigma_t.sample_trilinear(pos + dir * t));
-                        if rng.uniform() * sigma_max < sigma {
-                            collision = Some(t);
-                            return false;
+                        let mut t = t0.max(t_in);
+                        loop {
+                            t -= (1.0 - rng.uniform()).ln() / sigma_max;
+                            if t >= t1 {
+                                return true;
+                            }
+                            let sigma = f64::from(sigma_t.sample_trilinear(pos + dir * t));
+                            if rng.uniform() * sigma_max < sigma {
+                                collision = Some(t);
+                                return false;
+                            }
                         }
-                    }
-                });
-                let t_end = collision.unwrap_or(t_out);
+                    });
+                }
+                let t_end = collision.unwrap_or(t_stop);
                 // Track-length estimator: w·ℓ in every cell the free flight crosses.
                 geometry.traverse(pos + dir * t_in, pos + dir * t_end, |index, enter, exit| {
                     for (m, w) in weight.iter().enumerate() {
@@ -425,6 +438,21 @@ fn trace_batch(
                     }
                 });
                 let Some(t) = collision else {
+                    if let (Some(s), Some(t)) = (&surface, t_surface) {
+                        // At the interface: Fresnel reflection or refraction, then fly on.
+                        crossings += 1;
+                        if crossings > 100_000 {
+                            // A path trapped at the surface (round-off in the SDF): cut it.
+                            for (m, w) in weight.iter().enumerate() {
+                                tally.truncated[m] += w;
+                            }
+                            break;
+                        }
+                        let (p, d) = s.interact(pos + dir * t, dir, rng.uniform());
+                        pos = p;
+                        dir = d;
+                        continue;
+                    }
                     for (m, w) in weight.iter().enumerate() {
                         tally.escaped[m] += w;
                     }
@@ -460,4 +488,101 @@ fn trace_batch(
         }
     }
     tally
+}
+
+/// The embedded surface (the zero level of a signed distance grid, negative inside) and the
+/// refractive index jump across it: a Robin boundary of index η is, for transport, a smooth
+/// dielectric interface of relative index η; a vacuum boundary an index-matched one.
+struct Interface<'a> {
+    sdf: &'a Grid,
+    dielectric: Option<Dielectric>,
+    /// Nudge off the surface after an interaction.
+    epsilon: f64,
+    /// The shortest sphere-tracing step (an eighth of a cell: grazing rays stay cheap; a
+    /// surface crossed twice within it is missed, which the trilinear SDF cannot resolve
+    /// anyway).
+    min_step: f64,
+}
+
+impl<'a> Interface<'a> {
+    fn new(sdf: &'a Grid, boundary: Boundary) -> Self {
+        let dielectric = match boundary {
+            Boundary::Robin { eta } if eta != 1.0 => Dielectric::new(eta).ok(),
+            _ => None,
+        };
+        let g = sdf.geometry();
+        Self {
+            sdf,
+            dielectric,
+            epsilon: 1e-6 * g.extent().max_element(),
+            min_step: 0.125 * g.spacing().min_element(),
+        }
+    }
+
+    fn distance(&self, p: DVec3) -> f64 {
+        f64::from(self.sdf.sample_trilinear(p))
+    }
+
+    fn inside(&self, p: DVec3) -> bool {
+        self.distance(p) < 0.0
+    }
+
+    /// The first t in (t0, t1) where the ray crosses the surface from the side it is on:
+    /// sphere tracing on the trilinear distance (steps of 0.9|d|, at least ε), then
+    /// bisection on the bracketing step.
+    fn hit(&self, o: DVec3, d: DVec3, t0: f64, t1: f64, inside: bool) -> Option<f64> {
+        let side = |t: f64| {
+            let v = self.distance(o + d * t);
+            if inside { v >= 0.0 } else { v <= 0.0 }
+        };
+        let mut t = t0;
+        while t < t1 {
+            let step = (0.9 * self.distance(o + d * t).abs()).max(self.min_step);
+            let next = (t + step).min(t1);
+            if side(next) {
+                let (mut a, mut b) = (t, next);
+                for _ in 0..48 {
+                    let m = 0.5 * (a + b);
+                    if side(m) { b = m } else { a = m }
+                }
+                return Some(b);
+            }
+            if next >= t1 {
+                break;
+            }
+            t = next;
+        }
+        None
+    }
+
+    /// Reflects or refracts a particle that reached the surface at `p` travelling along `d`;
+    /// returns the new position (nudged off the surface) and direction.
+    fn interact(&self, p: DVec3, d: DVec3, u: f64) -> (DVec3, DVec3) {
+        let h = 0.5 * self.sdf.geometry().spacing().min_element();
+        let gradient = DVec3::new(
+            self.distance(p + DVec3::X * h) - self.distance(p - DVec3::X * h),
+            self.distance(p + DVec3::Y * h) - self.distance(p - DVec3::Y * h),
+            self.distance(p + DVec3::Z * h) - self.distance(p - DVec3::Z * h),
+        );
+        let n = gradient.normalize_or_zero();
+        let Some(dielectric) = self.dielectric.filter(|_| n != DVec3::ZERO) else {
+            return (p + d * self.epsilon, d);
+        };
+        let cos = d.dot(n); // > 0: leaving the object
+        let reflect = u < dielectric.reflectance(-cos);
+        let out = if reflect {
+            d - n * (2.0 * cos)
+        } else {
+            // Snell: ratio n_incident / n_transmitted, normal facing the incident side.
+            let (ratio, facing) = if cos > 0.0 {
+                (dielectric.eta(), -n)
+            } else {
+                (1.0 / dielectric.eta(), n)
+            };
+            let cos_i = -d.dot(facing);
+            let sin2_t = ratio * ratio * (1.0 - cos_i * cos_i);
+            (d * ratio + facing * (ratio * cos_i - (1.0 - sin2_t).max(0.0).sqrt())).normalize()
+        };
+        (p + out * self.epsilon, out)
+    }
 }
