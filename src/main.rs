@@ -210,6 +210,20 @@ fn render(
                     .unwrap_or((glam::DVec3::ZERO, glam::DVec3::Z))
             },
         )?;
+        // The per-pixel standard error, linear, beside the picture.
+        let error_path = output.with_extension("stderr.exr");
+        lucent::render::Image {
+            width: estimate.width,
+            height: estimate.height,
+            pixels: estimate.std_error,
+        }
+        .write_exr(&error_path)?;
+        if !quiet {
+            println!(
+                "lucent: per-pixel standard error in {}",
+                error_path.display()
+            );
+        }
         let image = lucent::render::Image {
             width: estimate.width,
             height: estimate.height,

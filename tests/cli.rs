@@ -251,3 +251,26 @@ fn bad_output_formats_and_sizes() {
     );
     assert_clean_failure(&out, ".npy or .vol");
 }
+
+#[test]
+fn monte_carlo_renders_with_a_standard_error_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = lucent(
+        &[
+            "render",
+            &scene("rgb_medium.toml"),
+            "--solver",
+            "mc",
+            "--size",
+            "24x18",
+            "-o",
+            "mc.png",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(image::open(dir.path().join("mc.png")).unwrap().width(), 24);
+    let error = std::fs::read(dir.path().join("mc.stderr.exr")).unwrap();
+    assert_eq!(&error[..4], &[0x76, 0x2f, 0x31, 0x01], "OpenEXR magic");
+}

@@ -54,10 +54,14 @@ pub fn camera_image(
             ),
         });
     }
-    if problem.embedded().is_some() {
+    if problem.embedded().is_some()
+        && matches!(problem.boundary(), lucent_core::Boundary::Robin { eta } if eta != 1.0)
+    {
+        // Light from point-like sources reaches a camera path through a refracting surface
+        // only along one specular chain, which next-event estimation cannot sample.
         return Err(SolveError::Unsupported {
             solver: "mc".into(),
-            feature: "camera images of embedded geometry (the particle tracer handles it; the camera tracer does not yet)".into(),
+            feature: "camera images through a refracting embedded surface (needs manifold next-event estimation)".into(),
         });
     }
     let medium = problem.medium();
@@ -147,9 +151,21 @@ pub fn camera_image(
     })
 }
 
+/// σ_t at `x`, zero outside the embedded geometry (an index-matched embedded surface only
+/// says where the medium is).
+#[inline]
+fn extinction(sigma_t: &Grid, embedded: Option<&Grid>, x: DVec3) -> f64 {
+    if embedded.is_some_and(|sdf| sdf.sample_trilinear(x) >= 0.0) {
+        0.0
+    } else {
+        f64::from(sigma_t.sample_trilinear(x))
+    }
+}
+
 /// Ratio-tracking transmittance along `origin + t·dir`, t ∈ [0, t_max].
 fn ratio_transmittance(
     sigma_t: &Grid,
+    embedded: Option<&Grid>,
     majorant: &MajorantGrid,
     origin: DVec3,
     dir: DVec3,
@@ -167,8 +183,7 @@ fn ratio_transmittance(
             if t >= t1 {
                 return true;
             }
-            transmittance *=
-                1.0 - f64::from(sigma_t.sample_trilinear(origin + dir * t)) / sigma_max;
+            transmittance *= 1.0 - extinction(sigma_t, embedded, origin + dir * t) / sigma_max;
             if transmittance < 1e-3 {
                 // Russian roulette on faint shadow rays.
                 if rng.uniform() >= 0.5 {
@@ -224,7 +239,9 @@ fn trace_path(
                 if t >= t1 {
                     return true;
                 }
-                if rng.uniform() * sigma_max < f64::from(sigma_t.sample_trilinear(pos + dir * t)) {
+                if rng.uniform() * sigma_max
+                    < extinction(sigma_t, problem.embedded(), pos + dir * t)
+                {
                     collision = Some(t);
                     return false;
                 }
@@ -266,7 +283,15 @@ fn trace_path(
             if p <= 0.0 {
                 continue;
             }
-            let shadow = ratio_transmittance(sigma_t, majorant, pos, -w_light, distance, rng);
+            let shadow = ratio_transmittance(
+                sigma_t,
+                problem.embedded(),
+                majorant,
+                pos,
+                -w_light,
+                distance,
+                rng,
+            );
             if shadow > 0.0 {
                 for (m, &c) in members.iter().enumerate() {
                     result[m] +=
@@ -313,7 +338,7 @@ fn trace_path_spectral(
     let far = 4.0 * (hi - lo).length() + 1.0;
     let hero = ((rng.uniform() * 3.0) as usize).min(2);
     let sigma = |x: DVec3| -> [f64; 3] {
-        std::array::from_fn(|c| f64::from(medium.sigma_t(c).sample_trilinear(x)))
+        std::array::from_fn(|c| extinction(medium.sigma_t(c), problem.embedded(), x))
     };
     let mut f = [1.0f64; 3];
     let mut p = [1.0f64; 3];

@@ -37,7 +37,9 @@
 //! inside of its zero level, found by sphere tracing the trilinear SDF with bisection; a
 //! Robin boundary of relative index η there becomes, for transport, a smooth dielectric
 //! interface: Fresnel reflection (total internal reflection included) or Snell refraction.
-//! Camera images do not handle embedded geometry yet. The energy balance (emitted =
+//! Camera images handle index-matched embedded geometry (the surface only bounds the
+//! medium); through a refracting one they would need manifold next-event estimation and
+//! are refused. The energy balance (emitted =
 //! absorbed + escaped + truncated) holds per path in expectation.
 //!
 //! ## Example
