@@ -19,12 +19,13 @@
 //! inside each cell it crosses (an exact DDA), so every particle informs every cell it
 //! passes, not only those it collides in. Independent **batches** give the per-cell standard
 //! error. A grey extinction traces every channel at once (RGB albedo and light colours ride
-//! on per-channel weights); an RGB extinction traces its channels separately for the
-//! fluence, and with **spectral MIS** for camera images: one hero channel per path picks
-//! distances and real or null collisions against a shared majorant (the largest of the
-//! three extinctions), and every channel is weighted by the balance heuristic over the
-//! three heroes (one path instead of three, unbiased; `tests/camera.rs` checks it against
-//! per-channel tracing).
+//! on per-channel weights); an RGB extinction is traced with **spectral MIS**: one hero
+//! channel per path picks distances and real or null collisions against a shared majorant
+//! (the largest of the three extinctions), and every channel is weighted by the balance
+//! heuristic over the three heroes — one path instead of three, unbiased; the fluence
+//! tallies every piece between tentative collisions with the weights of its start
+//! (`tests/transport.rs` and `tests/camera.rs` check both estimators against per-channel
+//! tracing). With embedded geometry the fluence falls back to per-channel tracing.
 //!
 //! ## Determinism
 //! Every path draws from a counter-based stream keyed by (seed, batch, light, path), and

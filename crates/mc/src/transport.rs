@@ -244,9 +244,14 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
         .iter()
         .filter(|l| !matches!(l, Light::Emission { .. }))
         .collect();
-    // Tracing groups: one per extinction grid; a grey extinction carries every channel.
+    // Tracing groups: one per extinction grid; a grey extinction carries every channel, and
+    // an RGB one too with spectral MIS (`SPECTRAL` marks that group).
+    const SPECTRAL: usize = usize::MAX;
+    let spectral = medium.sigma_t.len() == 3 && config.spectral_mis && problem.embedded().is_none();
     let groups: Vec<(usize, Vec<usize>)> = if medium.sigma_t.len() == 1 {
         vec![(0, (0..channels).collect())]
+    } else if spectral {
+        vec![(SPECTRAL, vec![0, 1, 2])]
     } else {
         (0..3).map(|c| (c, vec![c])).collect()
     };
@@ -256,7 +261,20 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
     let batch_ids: Vec<usize> = (0..config.batches).collect();
     let group_size = rayon::current_num_threads().max(1);
     for (extinction, members) in &groups {
-        let sigma_t = medium.sigma_t(*extinction);
+        let max_extinction;
+        let sigma_t = if *extinction == SPECTRAL {
+            // The shared majorant bounds all three channels.
+            let mut max = medium.sigma_t[0].clone();
+            for other in &medium.sigma_t[1..] {
+                for (m, v) in max.data_mut().iter_mut().zip(other.data()) {
+                    *m = m.max(*v);
+                }
+            }
+            max_extinction = max;
+            &max_extinction
+        } else {
+            medium.sigma_t(*extinction)
+        };
         let majorant = if config.global_majorant {
             MajorantGrid::global(sigma_t)
         } else {
@@ -266,15 +284,19 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
             let tallies: Vec<Tally> = chunk
                 .par_iter()
                 .map(|&batch| {
-                    trace_batch(
-                        problem,
-                        &lights,
-                        sigma_t,
-                        &majorant,
-                        members,
-                        config,
-                        batch as u64 + 1000 * *extinction as u64,
-                    )
+                    if *extinction == SPECTRAL {
+                        trace_batch_spectral(problem, &lights, &majorant, config, batch as u64)
+                    } else {
+                        trace_batch(
+                            problem,
+                            &lights,
+                            sigma_t,
+                            &majorant,
+                            members,
+                            config,
+                            batch as u64 + 1000 * *extinction as u64,
+                        )
+                    }
                 })
                 .collect();
             // Accumulate in batch order: the result does not depend on the thread count.
@@ -480,6 +502,151 @@ fn trace_batch(
                         break;
                     }
                     for w in &mut weight {
+                        *w /= survive;
+                    }
+                }
+                dir = phase.sample(dir, rng.uniform2()).omega_out;
+            }
+        }
+    }
+    tally
+}
+
+/// One batch for an RGB extinction with spectral MIS: one hero channel per particle decides
+/// distances and real or null collisions against the shared majorant; `f` is each channel's
+/// weight and `p` the path's probability under each hero, renormalised so that the mean of
+/// `p` is 1 (the balance heuristic over the three heroes). The track-length tally adds
+/// every piece between tentative collisions with the weights of the path up to its start:
+/// the next tentative point is drawn from the shared majorant, the same for every channel,
+/// so no weight is owed for it.
+fn trace_batch_spectral(
+    problem: &Problem,
+    lights: &[&Light],
+    majorant: &MajorantGrid,
+    config: &McConfig,
+    batch: u64,
+) -> Tally {
+    let geometry = *problem.geometry();
+    let (lo, hi) = geometry.bounds();
+    let medium = problem.medium();
+    let phase = medium.phase;
+    let mut tally = Tally::new(3, geometry.voxel_count());
+    let n = config.particles as f64;
+    let sigma = |x: DVec3| -> [f64; 3] {
+        std::array::from_fn(|c| f64::from(medium.sigma_t(c).sample_trilinear(x)))
+    };
+    for (l, light) in lights.iter().enumerate() {
+        for path in 0..config.particles {
+            let mut rng = PathRng::new(config.seed, batch + 5000, (l as u64) << 40 | path);
+            let Some((mut pos, mut dir, power)) = emit(light, lo, hi, &mut rng) else {
+                continue;
+            };
+            let hero = ((rng.uniform() * 3.0) as usize).min(2);
+            let mut f: [f64; 3] = std::array::from_fn(|c| light.spectrum().channel(c) * power / n);
+            let mut p = [1.0f64; 3];
+            if f.iter().all(|&w| w == 0.0) {
+                continue;
+            }
+            let initial = f.iter().copied().fold(0.0, f64::max);
+            let mut entered = false;
+            let mut depth = 0;
+            'path: loop {
+                let Some((t_in, t_out)) = clip(pos, dir, lo, hi) else {
+                    if entered {
+                        for c in 0..3 {
+                            tally.escaped[c] += f[c];
+                        }
+                    }
+                    break;
+                };
+                if !entered {
+                    entered = true;
+                    for c in 0..3 {
+                        tally.emitted[c] += f[c];
+                    }
+                }
+                // Walk tentative collisions; tally each piece, then apply its event.
+                let mut start = t_in;
+                let mut collision = None;
+                majorant.walk(pos, dir, t_out, |t0, t1, sigma_max| {
+                    if t1 <= t_in {
+                        return true;
+                    }
+                    if sigma_max <= 0.0 {
+                        return true;
+                    }
+                    let mut t = t0.max(t_in);
+                    loop {
+                        t -= (1.0 - rng.uniform()).ln() / sigma_max;
+                        if t >= t1 {
+                            return true;
+                        }
+                        let piece = (pos + dir * start, pos + dir * t);
+                        geometry.traverse(piece.0, piece.1, |index, enter, exit| {
+                            for c in 0..3 {
+                                tally.fluence[c][index] += f[c] * (exit - enter);
+                            }
+                        });
+                        start = t;
+                        let s = sigma(pos + dir * t);
+                        let real = rng.uniform() * sigma_max < s[hero];
+                        for c in 0..3 {
+                            let q = (s[c] / sigma_max).min(1.0);
+                            let factor = if real { q } else { 1.0 - q };
+                            f[c] *= factor;
+                            p[c] *= factor;
+                        }
+                        // Keep the mean of p at 1: f is then the balance-heuristic weight.
+                        let mean = (p[0] + p[1] + p[2]) / 3.0;
+                        if mean > 0.0 {
+                            for c in 0..3 {
+                                f[c] /= mean;
+                                p[c] /= mean;
+                            }
+                        }
+                        if real {
+                            collision = Some(t);
+                            return false;
+                        }
+                    }
+                });
+                let Some(t) = collision else {
+                    geometry.traverse(
+                        pos + dir * start,
+                        pos + dir * t_out,
+                        |index, enter, exit| {
+                            for c in 0..3 {
+                                tally.fluence[c][index] += f[c] * (exit - enter);
+                            }
+                        },
+                    );
+                    for c in 0..3 {
+                        tally.escaped[c] += f[c];
+                    }
+                    break;
+                };
+                pos += dir * t;
+                // The real-collision factor σ_c/σ̄ is in f already; the scattered share is
+                // the albedo of σ_c, the rest is absorbed.
+                for c in 0..3 {
+                    let albedo = f64::from(medium.albedo(c).sample(pos)).clamp(0.0, 1.0);
+                    tally.absorbed[c] += f[c] * (1.0 - albedo);
+                    f[c] *= albedo;
+                }
+                depth += 1;
+                if depth >= config.max_depth {
+                    for c in 0..3 {
+                        tally.truncated[c] += f[c];
+                    }
+                    break 'path;
+                }
+                let strongest = f.iter().copied().fold(0.0, f64::max);
+                if strongest < 0.1 * initial {
+                    let survive = strongest / (0.1 * initial);
+                    if strongest == 0.0 || rng.uniform() >= survive {
+                        break 'path;
+                    }
+                    for w in &mut f {
                         *w /= survive;
                     }
                 }
