@@ -244,3 +244,22 @@ impl GridGeometry {
         }
     }
 }
+
+/// The parametric interval [t0, t1] (t ≥ 0) in which the ray `origin + t·dir` lies inside
+/// the box [`lo`, `hi`], if it meets it (slab method; axis-parallel rays outside a slab
+/// miss). The one ray–box clip that renderers and tracers share.
+pub fn ray_box(origin: DVec3, dir: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
+    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+    for a in 0..3 {
+        if dir[a] == 0.0 {
+            if origin[a] < lo[a] || origin[a] > hi[a] {
+                return None;
+            }
+        } else {
+            let (ta, tb) = ((lo[a] - origin[a]) / dir[a], (hi[a] - origin[a]) / dir[a]);
+            t0 = t0.max(ta.min(tb));
+            t1 = t1.min(ta.max(tb));
+        }
+    }
+    (t0 < t1).then_some((t0, t1))
+}

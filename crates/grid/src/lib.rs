@@ -62,4 +62,4 @@ pub mod transfer;
 pub use bricked::BrickedGrid;
 pub use dense::{Grid, GridStats};
 pub use error::GridError;
-pub use geometry::{GridGeometry, MAX_VOXELS};
+pub use geometry::{GridGeometry, MAX_VOXELS, ray_box};

@@ -12,13 +12,13 @@ use std::f64::consts::PI;
 
 use glam::DVec3;
 use lucent_core::{Light, Problem, SolveError};
-use lucent_grid::Grid;
+use lucent_grid::{Grid, ray_box};
 use lucent_optics::PhaseFunction;
 use rayon::prelude::*;
 
 use crate::majorant::MajorantGrid;
 use crate::rng::PathRng;
-use crate::transport::{McConfig, clip};
+use crate::transport::{McConfig, roulette};
 
 /// A path-traced image: linear RGB radiance and its standard error per pixel.
 #[derive(Debug, Clone, PartialEq)]
@@ -220,7 +220,7 @@ fn trace_path(
     let (mut pos, mut dir) = (origin, dir);
     let mut depth = 0u32;
     loop {
-        let Some((t_in, t_out)) = clip(pos, dir, lo, hi) else {
+        let Some((t_in, t_out)) = ray_box(pos, dir, lo, hi) else {
             if depth == 0 {
                 for (m, &c) in members.iter().enumerate() {
                     result[m] += background[c];
@@ -264,20 +264,8 @@ fn trace_path(
         // scattered light travels along −dir).
         let toward_eye = -dir;
         for light in problem.lights() {
-            let (w_light, irradiance, distance) = match light {
-                Light::Sky { .. } => {
-                    // One uniformly sampled sky direction, pdf 1/(4π).
-                    let [u, v] = rng.uniform2();
-                    let z = 1.0 - 2.0 * u;
-                    let r = (1.0 - z * z).max(0.0).sqrt();
-                    let w = DVec3::new(r * (2.0 * PI * v).cos(), r * (2.0 * PI * v).sin(), z);
-                    (w, 4.0 * PI, far)
-                }
-                Light::Emission { .. } => continue,
-                _ => match light.arrival(pos, far, 0.0) {
-                    Some((w, e, from)) if e > 0.0 => (w, e, (pos - from).length()),
-                    _ => continue,
-                },
+            let Some((w_light, irradiance, distance)) = next_event(light, pos, far, rng) else {
+                continue;
             };
             let p = phase.eval(w_light, toward_eye);
             if p <= 0.0 {
@@ -303,15 +291,8 @@ fn trace_path(
         if depth >= config.max_depth {
             return result;
         }
-        let strongest = throughput.iter().copied().fold(0.0, f64::max);
-        if strongest < 0.1 {
-            let survive = strongest / 0.1;
-            if strongest == 0.0 || rng.uniform() >= survive {
-                return result;
-            }
-            for t in &mut throughput {
-                *t /= survive;
-            }
+        if !roulette(&mut throughput, 1.0, rng) {
+            return result;
         }
         dir = phase.sample(dir, rng.uniform2()).omega_out;
     }
@@ -362,7 +343,7 @@ fn trace_path_spectral(
                 }
             }
         };
-        let Some((t_in, t_out)) = clip(pos, dir, lo, hi) else {
+        let Some((t_in, t_out)) = ray_box(pos, dir, lo, hi) else {
             escape(&f, &mut result);
             return result;
         };
@@ -402,22 +383,8 @@ fn trace_path_spectral(
         }
         let toward_eye = -dir;
         for light in problem.lights() {
-            let (w_light, irradiance, distance) = match light {
-                Light::Sky { .. } => {
-                    let [u, v] = rng.uniform2();
-                    let z = 1.0 - 2.0 * u;
-                    let r = (1.0 - z * z).max(0.0).sqrt();
-                    (
-                        DVec3::new(r * (2.0 * PI * v).cos(), r * (2.0 * PI * v).sin(), z),
-                        4.0 * PI,
-                        far,
-                    )
-                }
-                Light::Emission { .. } => continue,
-                _ => match light.arrival(pos, far, 0.0) {
-                    Some((w, e, from)) if e > 0.0 => (w, e, (pos - from).length()),
-                    _ => continue,
-                },
+            let Some((w_light, irradiance, distance)) = next_event(light, pos, far, rng) else {
+                continue;
             };
             let phase_value = phase.eval(w_light, toward_eye);
             if phase_value <= 0.0 {
@@ -453,16 +420,33 @@ fn trace_path_spectral(
         if depth >= config.max_depth {
             return result;
         }
-        let strongest = f.iter().copied().fold(0.0, f64::max);
-        if strongest < 0.1 {
-            let survive = strongest / 0.1;
-            if strongest == 0.0 || rng.uniform() >= survive {
-                return result;
-            }
-            for v in &mut f {
-                *v /= survive;
-            }
+        if !roulette(&mut f, 1.0, rng) {
+            return result;
         }
         dir = phase.sample(dir, rng.uniform2()).omega_out;
+    }
+}
+
+/// Samples the light's direction at `pos` for next-event estimation: the unit direction the
+/// light travels, its irradiance per unit of its spectrum divided by the sampling pdf, and
+/// the distance to march the shadow ray. Sky: one uniform direction (pdf 1/4π). `None` for
+/// emission and for points a spot light does not reach.
+fn next_event(light: &Light, pos: DVec3, far: f64, rng: &mut PathRng) -> Option<(DVec3, f64, f64)> {
+    match light {
+        Light::Sky { .. } => {
+            let [u, v] = rng.uniform2();
+            let z = 1.0 - 2.0 * u;
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            Some((
+                DVec3::new(r * (2.0 * PI * v).cos(), r * (2.0 * PI * v).sin(), z),
+                4.0 * PI,
+                far,
+            ))
+        }
+        Light::Emission { .. } => None,
+        _ => light
+            .arrival(pos, far, 0.0)
+            .filter(|&(_, e, _)| e > 0.0)
+            .map(|(w, e, from)| (w, e, (pos - from).length())),
     }
 }

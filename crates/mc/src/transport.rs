@@ -6,7 +6,7 @@ use std::f64::consts::PI;
 
 use glam::DVec3;
 use lucent_core::{Boundary, Light, Problem, SolveError};
-use lucent_grid::Grid;
+use lucent_grid::{Grid, ray_box};
 use lucent_optics::{Dielectric, PhaseFunction};
 use rayon::prelude::*;
 
@@ -106,21 +106,22 @@ impl Tally {
     }
 }
 
-/// The parametric interval of `o + t d` inside [lo, hi], t ≥ 0.
-pub(crate) fn clip(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
-    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
-    for a in 0..3 {
-        if d[a] == 0.0 {
-            if o[a] < lo[a] || o[a] > hi[a] {
-                return None;
-            }
-        } else {
-            let (ta, tb) = ((lo[a] - o[a]) / d[a], (hi[a] - o[a]) / d[a]);
-            t0 = t0.max(ta.min(tb));
-            t1 = t1.min(ta.max(tb));
-        }
+/// Russian roulette: once the largest weight falls below a tenth of `start`, the path
+/// survives with probability (largest / (start/10)) and its weights are divided by it.
+/// Returns false when the path ends. Unbiased; it keeps dim paths from costing time.
+pub(crate) fn roulette(weights: &mut [f64], start: f64, rng: &mut PathRng) -> bool {
+    let strongest = weights.iter().copied().fold(0.0, f64::max);
+    if strongest >= 0.1 * start {
+        return true;
     }
-    (t0 < t1).then_some((t0, t1))
+    let survive = strongest / (0.1 * start);
+    if strongest == 0.0 || rng.uniform() >= survive {
+        return false;
+    }
+    for w in weights {
+        *w /= survive;
+    }
+    true
 }
 
 fn uniform_sphere(u: [f64; 2]) -> DVec3 {
@@ -410,7 +411,7 @@ fn trace_batch(
             let mut depth = 0;
             let mut crossings = 0u32;
             loop {
-                let Some((t_in, t_out)) = clip(pos, dir, lo, hi) else {
+                let Some((t_in, t_out)) = ray_box(pos, dir, lo, hi) else {
                     if entered {
                         for (m, w) in weight.iter().enumerate() {
                             tally.escaped[m] += w;
@@ -488,7 +489,6 @@ fn trace_batch(
                     weight[m] *= albedo;
                 }
                 depth += 1;
-                let strongest = weight.iter().copied().fold(0.0, f64::max);
                 if depth >= config.max_depth {
                     for (m, w) in weight.iter().enumerate() {
                         tally.truncated[m] += w;
@@ -496,14 +496,8 @@ fn trace_batch(
                     break;
                 }
                 // Russian roulette once a path carries less than a tenth of its start.
-                if strongest < 0.1 * initial {
-                    let survive = strongest / (0.1 * initial);
-                    if strongest == 0.0 || rng.uniform() >= survive {
-                        break;
-                    }
-                    for w in &mut weight {
-                        *w /= survive;
-                    }
+                if !roulette(&mut weight, initial, &mut rng) {
+                    break;
                 }
                 dir = phase.sample(dir, rng.uniform2()).omega_out;
             }
@@ -551,7 +545,7 @@ fn trace_batch_spectral(
             let mut entered = false;
             let mut depth = 0;
             'path: loop {
-                let Some((t_in, t_out)) = clip(pos, dir, lo, hi) else {
+                let Some((t_in, t_out)) = ray_box(pos, dir, lo, hi) else {
                     if entered {
                         for c in 0..3 {
                             tally.escaped[c] += f[c];
@@ -640,15 +634,8 @@ fn trace_batch_spectral(
                     }
                     break 'path;
                 }
-                let strongest = f.iter().copied().fold(0.0, f64::max);
-                if strongest < 0.1 * initial {
-                    let survive = strongest / (0.1 * initial);
-                    if strongest == 0.0 || rng.uniform() >= survive {
-                        break 'path;
-                    }
-                    for w in &mut f {
-                        *w /= survive;
-                    }
+                if !roulette(&mut f, initial, &mut rng) {
+                    break 'path;
                 }
                 dir = phase.sample(dir, rng.uniform2()).omega_out;
             }

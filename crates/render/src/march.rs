@@ -1,6 +1,5 @@
 //! Ray marching through the medium.
 
-use glam::DVec3;
 use lucent_core::{Light, Problem, Solution};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -104,7 +103,7 @@ pub fn render(
                 let (origin, dir) = camera.ray(u, v, aspect)?;
                 let mut radiance = [0f64; 3];
                 let mut transmittance = [1f64; 3];
-                if let Some((t0, t1)) = clip(origin, dir, lo, hi) {
+                if let Some((t0, t1)) = lucent_grid::ray_box(origin, dir, lo, hi) {
                     let mut t = t0 + step * jitter(x, y);
                     // March; the first (jittered) partial step starts at t0.
                     let mut previous = t0;
@@ -156,21 +155,4 @@ pub fn render(
         height: settings.height,
         pixels,
     })
-}
-
-/// The parametric interval where the ray o + t d (t ≥ 0) is inside the box, if any.
-fn clip(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
-    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
-    for a in 0..3 {
-        if d[a] == 0.0 {
-            if o[a] < lo[a] || o[a] > hi[a] {
-                return None;
-            }
-        } else {
-            let (ta, tb) = ((lo[a] - o[a]) / d[a], (hi[a] - o[a]) / d[a]);
-            t0 = t0.max(ta.min(tb));
-            t1 = t1.min(ta.max(tb));
-        }
-    }
-    (t0 < t1).then_some((t0, t1))
 }
