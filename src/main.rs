@@ -197,7 +197,9 @@ fn render(
         let camera = built.camera;
         camera.validate()?;
         let aspect = s.width as f64 / s.height as f64;
-        let estimate = lucent::mc::camera_image(
+        let progress = bar(quiet, "trace");
+        let callback = progress.clone();
+        let estimate = lucent::mc::camera_image_with_progress(
             &built.problem,
             s.width,
             s.height,
@@ -209,7 +211,9 @@ fn render(
                     .ray(u, v, aspect)
                     .unwrap_or((glam::DVec3::ZERO, glam::DVec3::Z))
             },
+            Some(&move |f: f64| callback.set_position((f * 1000.0) as u64)),
         )?;
+        progress.finish_and_clear();
         // The per-pixel standard error, linear, beside the picture.
         let error_path = output.with_extension("stderr.exr");
         lucent::render::Image {

@@ -46,6 +46,24 @@ pub fn camera_image(
     config: &McConfig,
     ray: impl Fn(f64, f64) -> (DVec3, DVec3) + Sync,
 ) -> Result<CameraEstimate, SolveError> {
+    camera_image_with_progress(
+        problem, width, height, samples, background, config, ray, None,
+    )
+}
+
+/// [`camera_image`], calling `progress` with the fraction of rows done.
+#[allow(clippy::too_many_arguments)]
+pub fn camera_image_with_progress(
+    problem: &Problem,
+    width: usize,
+    height: usize,
+    samples: usize,
+    background: [f64; 3],
+    config: &McConfig,
+    ray: impl Fn(f64, f64) -> (DVec3, DVec3) + Sync,
+    progress: Option<&(dyn Fn(f64) + Sync)>,
+) -> Result<CameraEstimate, SolveError> {
+    let rows_done = std::sync::atomic::AtomicUsize::new(0);
     if width == 0 || height == 0 || samples < 2 || width * height > 1 << 26 {
         return Err(SolveError::InvalidParameter {
             name: "image".into(),
@@ -141,6 +159,10 @@ pub fn camera_image(
                     row[x][c] = mean as f32;
                     row_err[x][c] = (var / n).sqrt() as f32;
                 }
+            }
+            let done = rows_done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if let Some(callback) = progress {
+                callback(done as f64 / height as f64);
             }
         });
     Ok(CameraEstimate {

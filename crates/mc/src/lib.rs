@@ -69,7 +69,7 @@ mod rng;
 mod solver;
 mod transport;
 
-pub use camera::{CameraEstimate, camera_image};
+pub use camera::{CameraEstimate, camera_image, camera_image_with_progress};
 pub use majorant::MajorantGrid;
 pub use rng::PathRng;
 pub use solver::McSolver;
