@@ -84,10 +84,30 @@ pub fn camera_image_with_progress(
     }
     let medium = problem.medium();
     let channels = problem.channels();
+    // Emission is picked up at tentative collisions (Q/σ̄ each), so the majorant must be
+    // positive wherever something emits, even in empty space: floor it at one per cell.
+    let floor = 1.0 / problem.geometry().spacing().min_element();
+    let emits: Vec<bool> = (0..problem.geometry().voxel_count())
+        .map(|i| {
+            problem
+                .lights()
+                .iter()
+                .any(|l| matches!(l, Light::Emission { grid, .. } if grid.data()[i] > 0.0))
+        })
+        .collect();
+    let floored = |g: &Grid| {
+        let mut out = g.clone();
+        for (v, &e) in out.data_mut().iter_mut().zip(&emits) {
+            if e {
+                *v = v.max(floor as f32);
+            }
+        }
+        out
+    };
     let majorants: Vec<MajorantGrid> = medium
         .sigma_t
         .iter()
-        .map(|s| MajorantGrid::new(s, config.majorant_cells))
+        .map(|s| MajorantGrid::new(&floored(s), config.majorant_cells))
         .collect();
     let groups: Vec<(usize, Vec<usize>)> = if medium.sigma_t.len() == 1 {
         vec![(0, (0..channels).collect())]
@@ -103,7 +123,7 @@ pub fn camera_image_with_progress(
                 *m = m.max(*v);
             }
         }
-        MajorantGrid::new(&max, config.majorant_cells)
+        MajorantGrid::new(&floored(&max), config.majorant_cells)
     });
     let mut radiance = vec![[0f32; 3]; width * height];
     let mut std_error = vec![[0f32; 3]; width * height];
@@ -171,6 +191,22 @@ pub fn camera_image_with_progress(
         radiance,
         std_error,
     })
+}
+
+/// The volumetric emission Σ scale·Q(x) of the problem's emission lights in `channel`
+/// (W/m³/sr).
+#[inline]
+fn emitted(problem: &Problem, channel: usize, x: DVec3) -> f64 {
+    problem
+        .lights()
+        .iter()
+        .map(|l| match l {
+            Light::Emission { grid, scale } => {
+                scale.channel(channel) * f64::from(grid.sample_trilinear(x))
+            }
+            _ => 0.0,
+        })
+        .sum()
 }
 
 /// σ_t at `x`, zero outside the embedded geometry (an index-matched embedded surface only
@@ -260,6 +296,13 @@ fn trace_path(
                 t -= (1.0 - rng.uniform()).ln() / sigma_max;
                 if t >= t1 {
                     return true;
+                }
+                // Emission: each tentative point contributes Q(x)/σ̄ (unbiased for ∫ T Q ds).
+                for (m, &c) in members.iter().enumerate() {
+                    let q = emitted(problem, c, pos + dir * t);
+                    if q > 0.0 {
+                        result[m] += throughput[m] * q / sigma_max;
+                    }
                 }
                 if rng.uniform() * sigma_max
                     < extinction(sigma_t, problem.embedded(), pos + dir * t)
@@ -379,6 +422,12 @@ fn trace_path_spectral(
                 t -= (1.0 - rng.uniform()).ln() / sigma_max;
                 if t >= t1 {
                     return true;
+                }
+                for c in 0..3 {
+                    let q = emitted(problem, c, pos + dir * t);
+                    if q > 0.0 {
+                        result[c] += f[c] * q / sigma_max;
+                    }
                 }
                 let s = sigma(pos + dir * t);
                 let real = rng.uniform() * sigma_max < s[hero];

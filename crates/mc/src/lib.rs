@@ -7,7 +7,8 @@
 //! Light is traced *forward* from the lights (particle tracing): each light emits particles
 //! carrying its power (directional: the faces facing the beam, by projected area, power E·A_⊥; point: 4πI;
 //! spot: uniform in the outer cone, weighted by the fall-off; sky: πL·A through the box
-//! faces, cosine-weighted). A particle flies by **delta tracking** against a coarse
+//! faces, cosine-weighted; emission: cells proposed by the largest neighbouring value, a
+//! uniform point, power weighted by the trilinear Q(x) over the proposal). A particle flies by **delta tracking** against a coarse
 //! **majorant grid** walked by a 3D DDA (the majorant of a coarse cell bounds the trilinear
 //! extinction inside it, so tracking is exact, and thin regions are crossed in long steps):
 //! tentative collisions at rate σ̄, accepted with probability σ_t(x)/σ̄. At a real collision
@@ -38,7 +39,9 @@
 //! inside of its zero level, found by sphere tracing the trilinear SDF with bisection; a
 //! Robin boundary of relative index η there becomes, for transport, a smooth dielectric
 //! interface: Fresnel reflection (total internal reflection included) or Snell refraction.
-//! Camera images handle index-matched embedded geometry (the surface only bounds the
+//! Camera paths pick up volumetric emission at every tentative collision (Q(x)/σ̄, with the
+//! majorant floored at one per cell wherever something emits, so empty emitting space is
+//! seen too). Camera images handle index-matched embedded geometry (the surface only bounds the
 //! medium); through a refracting one they would need manifold next-event estimation and
 //! are refused. The energy balance (emitted =
 //! absorbed + escaped + truncated) holds per path in expectation.

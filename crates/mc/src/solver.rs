@@ -52,6 +52,7 @@ impl McSolver {
                 "max_depth",
                 "majorant_cells",
                 "global_majorant",
+                "spp",
             ],
         )?;
         let d = McConfig::default();
@@ -97,6 +98,7 @@ impl Solver for McSolver {
                 LightKind::Point,
                 LightKind::Spot,
                 LightKind::Sky,
+                LightKind::Emission,
             ],
             output: OutputKind::Fluence,
             fluence: FluenceKind::Total,

@@ -133,7 +133,77 @@ fn uniform_sphere(u: [f64; 2]) -> DVec3 {
 
 /// Samples a particle leaving `light`: origin, unit direction, and the light's power per
 /// unit of its spectrum carried by the particle before dividing by the particle count.
-fn emit(light: &Light, lo: DVec3, hi: DVec3, rng: &mut PathRng) -> Option<(DVec3, DVec3, f64)> {
+/// Sampling table of a volumetric emission light. The emission between cell centres is the
+/// trilinear interpolant of the cell values (as for σ_t), which reaches into cells whose own
+/// value is zero; so cells are proposed by the largest value among their 27 neighbours
+/// (which bounds the interpolant inside them), a point is drawn uniformly in the cell, and
+/// the particle's power is weighted by Q(x)/proposal — unbiased for the trilinear field.
+pub(crate) struct EmissionCdf {
+    proposal: Vec<f32>,
+    cumulative: Vec<f64>,
+    /// Σ proposal_i V_i.
+    total: f64,
+}
+
+impl EmissionCdf {
+    pub(crate) fn new(grid: &Grid) -> Self {
+        let g = grid.geometry();
+        let [nx, ny, nz] = g.dims();
+        let volume = g.cell_volume();
+        let mut proposal = vec![0f32; g.voxel_count()];
+        for (index, p) in proposal.iter_mut().enumerate() {
+            let [i, j, k] = g.coords(index);
+            for kk in k.saturating_sub(1)..(k + 2).min(nz) {
+                for jj in j.saturating_sub(1)..(j + 2).min(ny) {
+                    for ii in i.saturating_sub(1)..(i + 2).min(nx) {
+                        *p = p.max(grid.data()[g.index(ii, jj, kk)].max(0.0));
+                    }
+                }
+            }
+        }
+        let mut total = 0.0;
+        let cumulative = proposal
+            .iter()
+            .map(|&q| {
+                total += f64::from(q) * volume;
+                total
+            })
+            .collect();
+        Self {
+            proposal,
+            cumulative,
+            total,
+        }
+    }
+
+    /// A point and the weight Q(x)/proposal that corrects for proposing it.
+    fn sample(&self, grid: &Grid, rng: &mut PathRng) -> (DVec3, f64) {
+        let target = rng.uniform() * self.total;
+        let index = self
+            .cumulative
+            .partition_point(|&c| c <= target)
+            .min(self.cumulative.len() - 1);
+        let g = grid.geometry();
+        let [i, j, k] = g.coords(index);
+        let offset = DVec3::new(rng.uniform(), rng.uniform(), rng.uniform());
+        let x = g.origin() + (DVec3::new(i as f64, j as f64, k as f64) + offset) * g.spacing();
+        let proposal = f64::from(self.proposal[index]);
+        let weight = if proposal > 0.0 {
+            f64::from(grid.sample_trilinear(x)).max(0.0) / proposal
+        } else {
+            0.0
+        };
+        (x, weight)
+    }
+}
+
+fn emit(
+    light: &Light,
+    emission: Option<&EmissionCdf>,
+    lo: DVec3,
+    hi: DVec3,
+    rng: &mut PathRng,
+) -> Option<(DVec3, DVec3, f64)> {
     match *light {
         Light::Directional { direction, .. } => {
             // Start on the box faces that face the beam, chosen by projected area |n·d| A:
@@ -219,7 +289,16 @@ fn emit(light: &Light, lo: DVec3, hi: DVec3, rng: &mut PathRng) -> Option<(DVec3
             // Start a hair outside so that the first clip finds the face.
             Some((p - d * 1e-9 * e.max_element(), d, PI * total))
         }
-        Light::Emission { .. } => None,
+        Light::Emission { ref grid, .. } => {
+            // A point drawn by (bounding) emitted power, an isotropic direction.
+            let cdf = emission.filter(|c| c.total > 0.0)?;
+            let (origin, weight) = cdf.sample(grid, rng);
+            Some((
+                origin,
+                uniform_sphere(rng.uniform2()),
+                4.0 * PI * cdf.total * weight,
+            ))
+        }
     }
 }
 
@@ -240,10 +319,13 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
     let medium = problem.medium();
     let channels = problem.channels();
     let voxels = geometry.voxel_count();
-    let lights: Vec<&Light> = problem
-        .lights()
+    let lights: Vec<&Light> = problem.lights().iter().collect();
+    let emission: Vec<Option<EmissionCdf>> = lights
         .iter()
-        .filter(|l| !matches!(l, Light::Emission { .. }))
+        .map(|l| match l {
+            Light::Emission { grid, .. } => Some(EmissionCdf::new(grid)),
+            _ => None,
+        })
         .collect();
     // Tracing groups: one per extinction grid; a grey extinction carries every channel, and
     // an RGB one too with spectral MIS (`SPECTRAL` marks that group).
@@ -286,11 +368,19 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
                 .par_iter()
                 .map(|&batch| {
                     if *extinction == SPECTRAL {
-                        trace_batch_spectral(problem, &lights, &majorant, config, batch as u64)
+                        trace_batch_spectral(
+                            problem,
+                            &lights,
+                            &emission,
+                            &majorant,
+                            config,
+                            batch as u64,
+                        )
                     } else {
                         trace_batch(
                             problem,
                             &lights,
+                            &emission,
                             sigma_t,
                             &majorant,
                             members,
@@ -375,9 +465,11 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
 }
 
 /// One batch of one tracing group: every light emits `config.particles` particles.
+#[allow(clippy::too_many_arguments)]
 fn trace_batch(
     problem: &Problem,
     lights: &[&Light],
+    emission: &[Option<EmissionCdf>],
     sigma_t: &Grid,
     majorant: &MajorantGrid,
     members: &[usize],
@@ -396,7 +488,9 @@ fn trace_batch(
     for (l, light) in lights.iter().enumerate() {
         for path in 0..config.particles {
             let mut rng = PathRng::new(config.seed, batch, (l as u64) << 40 | path);
-            let Some((mut pos, mut dir, power)) = emit(light, lo, hi, &mut rng) else {
+            let Some((mut pos, mut dir, power)) =
+                emit(light, emission[l].as_ref(), lo, hi, &mut rng)
+            else {
                 continue;
             };
             let mut weight: Vec<f64> = members
@@ -516,6 +610,7 @@ fn trace_batch(
 fn trace_batch_spectral(
     problem: &Problem,
     lights: &[&Light],
+    emission: &[Option<EmissionCdf>],
     majorant: &MajorantGrid,
     config: &McConfig,
     batch: u64,
@@ -532,7 +627,9 @@ fn trace_batch_spectral(
     for (l, light) in lights.iter().enumerate() {
         for path in 0..config.particles {
             let mut rng = PathRng::new(config.seed, batch + 5000, (l as u64) << 40 | path);
-            let Some((mut pos, mut dir, power)) = emit(light, lo, hi, &mut rng) else {
+            let Some((mut pos, mut dir, power)) =
+                emit(light, emission[l].as_ref(), lo, hi, &mut rng)
+            else {
                 continue;
             };
             let hero = ((rng.uniform() * 3.0) as usize).min(2);
