@@ -231,26 +231,17 @@ fn ratio_transmittance(
     rng: &mut PathRng,
 ) -> f64 {
     let mut transmittance = 1.0;
-    majorant.walk(origin, dir, t_max, |t0, t1, sigma_max| {
-        if sigma_max <= 0.0 {
-            return true;
-        }
-        let mut t = t0;
-        loop {
-            t -= (1.0 - rng.uniform()).ln() / sigma_max;
-            if t >= t1 {
-                return true;
+    majorant.tentative_collisions(origin, dir, 0.0, t_max, rng, |t, sigma_max, rng| {
+        transmittance *= 1.0 - extinction(sigma_t, embedded, origin + dir * t) / sigma_max;
+        if transmittance < 1e-3 {
+            // Russian roulette on faint shadow rays.
+            if rng.uniform() >= 0.5 {
+                transmittance = 0.0;
+                return false;
             }
-            transmittance *= 1.0 - extinction(sigma_t, embedded, origin + dir * t) / sigma_max;
-            if transmittance < 1e-3 {
-                // Russian roulette on faint shadow rays.
-                if rng.uniform() >= 0.5 {
-                    transmittance = 0.0;
-                    return false;
-                }
-                transmittance *= 2.0;
-            }
+            transmittance *= 2.0;
         }
+        true
     });
     transmittance
 }
@@ -287,30 +278,19 @@ fn trace_path(
             return result;
         };
         let mut collision = None;
-        majorant.walk(pos, dir, t_out, |t0, t1, sigma_max| {
-            if sigma_max <= 0.0 || t1 <= t_in {
-                return true;
-            }
-            let mut t = t0.max(t_in);
-            loop {
-                t -= (1.0 - rng.uniform()).ln() / sigma_max;
-                if t >= t1 {
-                    return true;
-                }
-                // Emission: each tentative point contributes Q(x)/σ̄ (unbiased for ∫ T Q ds).
-                for (m, &c) in members.iter().enumerate() {
-                    let q = emitted(problem, c, pos + dir * t);
-                    if q > 0.0 {
-                        result[m] += throughput[m] * q / sigma_max;
-                    }
-                }
-                if rng.uniform() * sigma_max
-                    < extinction(sigma_t, problem.embedded(), pos + dir * t)
-                {
-                    collision = Some(t);
-                    return false;
+        majorant.tentative_collisions(pos, dir, t_in, t_out, rng, |t, sigma_max, rng| {
+            // Emission: each tentative point contributes Q(x)/σ̄ (unbiased for ∫ T Q ds).
+            for (m, &c) in members.iter().enumerate() {
+                let q = emitted(problem, c, pos + dir * t);
+                if q > 0.0 {
+                    result[m] += throughput[m] * q / sigma_max;
                 }
             }
+            if rng.uniform() * sigma_max < extinction(sigma_t, problem.embedded(), pos + dir * t) {
+                collision = Some(t);
+                return false;
+            }
+            true
         });
         let Some(t) = collision else {
             if depth == 0 {
@@ -413,36 +393,27 @@ fn trace_path_spectral(
             return result;
         };
         let mut collision = None;
-        majorant.walk(pos, dir, t_out, |t0, t1, sigma_max| {
-            if sigma_max <= 0.0 || t1 <= t_in {
-                return true;
-            }
-            let mut t = t0.max(t_in);
-            loop {
-                t -= (1.0 - rng.uniform()).ln() / sigma_max;
-                if t >= t1 {
-                    return true;
-                }
-                for c in 0..3 {
-                    let q = emitted(problem, c, pos + dir * t);
-                    if q > 0.0 {
-                        result[c] += f[c] * q / sigma_max;
-                    }
-                }
-                let s = sigma(pos + dir * t);
-                let real = rng.uniform() * sigma_max < s[hero];
-                for c in 0..3 {
-                    let q = (s[c] / sigma_max).min(1.0);
-                    let factor = if real { q } else { 1.0 - q };
-                    f[c] *= factor;
-                    p[c] *= factor;
-                }
-                normalise(&mut f, &mut p);
-                if real {
-                    collision = Some(t);
-                    return false;
+        majorant.tentative_collisions(pos, dir, t_in, t_out, rng, |t, sigma_max, rng| {
+            for c in 0..3 {
+                let q = emitted(problem, c, pos + dir * t);
+                if q > 0.0 {
+                    result[c] += f[c] * q / sigma_max;
                 }
             }
+            let s = sigma(pos + dir * t);
+            let real = rng.uniform() * sigma_max < s[hero];
+            for c in 0..3 {
+                let q = (s[c] / sigma_max).min(1.0);
+                let factor = if real { q } else { 1.0 - q };
+                f[c] *= factor;
+                p[c] *= factor;
+            }
+            normalise(&mut f, &mut p);
+            if real {
+                collision = Some(t);
+                return false;
+            }
+            true
         });
         let Some(t) = collision else {
             escape(&f, &mut result);
@@ -463,24 +434,15 @@ fn trace_path_spectral(
             }
             // Ratio tracking against the shared majorant is unbiased for every channel.
             let mut shadow = [1.0f64; 3];
-            majorant.walk(pos, -w_light, distance, |t0, t1, sigma_max| {
-                if sigma_max <= 0.0 {
-                    return true;
+            majorant.tentative_collisions(pos, -w_light, 0.0, distance, rng, |t, sigma_max, _| {
+                let s = sigma(pos - w_light * t);
+                for c in 0..3 {
+                    shadow[c] *= 1.0 - (s[c] / sigma_max).min(1.0);
                 }
-                let mut t = t0;
-                loop {
-                    t -= (1.0 - rng.uniform()).ln() / sigma_max;
-                    if t >= t1 {
-                        return true;
-                    }
-                    let s = sigma(pos - w_light * t);
-                    for c in 0..3 {
-                        shadow[c] *= 1.0 - (s[c] / sigma_max).min(1.0);
-                    }
-                    if shadow.iter().all(|&v| v < 1e-6) {
-                        return false;
-                    }
+                if shadow.iter().all(|&v| v < 1e-6) {
+                    return false;
                 }
+                true
             });
             for c in 0..3 {
                 result[c] +=

@@ -101,4 +101,34 @@ impl MajorantGrid {
                 }
             });
     }
+
+    /// Tentative collisions along `origin + t·dir` for t ∈ [`t_start`, `t_end`]: points of a
+    /// Poisson process with the local majorant σ̄ as its rate, in order, each passed to
+    /// `visit(t, σ̄, rng)` until it returns `false`. Delta tracking, ratio tracking and the
+    /// null-collision estimators are all built on this one walk.
+    pub fn tentative_collisions(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        t_start: f64,
+        t_end: f64,
+        rng: &mut crate::rng::PathRng,
+        mut visit: impl FnMut(f64, f64, &mut crate::rng::PathRng) -> bool,
+    ) {
+        self.walk(origin, dir, t_end, |t0, t1, sigma_max| {
+            if sigma_max <= 0.0 || t1 <= t_start {
+                return true;
+            }
+            let mut t = t0.max(t_start);
+            loop {
+                t -= (1.0 - rng.uniform()).ln() / sigma_max;
+                if t >= t1 {
+                    return true;
+                }
+                if !visit(t, sigma_max, rng) {
+                    return false;
+                }
+            }
+        });
+    }
 }

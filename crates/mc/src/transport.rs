@@ -529,23 +529,21 @@ fn trace_batch(
                 // Delta tracking between t_in and t_stop.
                 let mut collision = None;
                 if inside {
-                    majorant.walk(pos, dir, t_stop, |t0, t1, sigma_max| {
-                        if sigma_max <= 0.0 || t1 <= t_in {
-                            return true;
-                        }
-                        let mut t = t0.max(t_in);
-                        loop {
-                            t -= (1.0 - rng.uniform()).ln() / sigma_max;
-                            if t >= t1 {
-                                return true;
-                            }
+                    majorant.tentative_collisions(
+                        pos,
+                        dir,
+                        t_in,
+                        t_stop,
+                        &mut rng,
+                        |t, sigma_max, rng| {
                             let sigma = f64::from(sigma_t.sample_trilinear(pos + dir * t));
                             if rng.uniform() * sigma_max < sigma {
                                 collision = Some(t);
                                 return false;
                             }
-                        }
-                    });
+                            true
+                        },
+                    );
                 }
                 let t_end = collision.unwrap_or(t_stop);
                 // Track-length estimator: w·ℓ in every cell the free flight crosses.
@@ -659,19 +657,13 @@ fn trace_batch_spectral(
                 // Walk tentative collisions; tally each piece, then apply its event.
                 let mut start = t_in;
                 let mut collision = None;
-                majorant.walk(pos, dir, t_out, |t0, t1, sigma_max| {
-                    if t1 <= t_in {
-                        return true;
-                    }
-                    if sigma_max <= 0.0 {
-                        return true;
-                    }
-                    let mut t = t0.max(t_in);
-                    loop {
-                        t -= (1.0 - rng.uniform()).ln() / sigma_max;
-                        if t >= t1 {
-                            return true;
-                        }
+                majorant.tentative_collisions(
+                    pos,
+                    dir,
+                    t_in,
+                    t_out,
+                    &mut rng,
+                    |t, sigma_max, rng| {
                         let piece = (pos + dir * start, pos + dir * t);
                         geometry.traverse(piece.0, piece.1, |index, enter, exit| {
                             for c in 0..3 {
@@ -699,8 +691,9 @@ fn trace_batch_spectral(
                             collision = Some(t);
                             return false;
                         }
-                    }
-                });
+                        true
+                    },
+                );
                 let Some(t) = collision else {
                     geometry.traverse(
                         pos + dir * start,
