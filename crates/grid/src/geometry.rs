@@ -169,10 +169,10 @@ pub(crate) fn voxel_count(dims: [usize; 3]) -> Option<usize> {
 impl GridGeometry {
     /// Walks the cells that the segment from `a` to `b` crosses, in order, calling
     /// `visit(index, enter, exit)` with each cell's linear index and the distances from `a`
-    /// at which the segment enters and leaves it (Amanatides–Woo 3D DDA). Parts of the
-    /// segment outside the grid's box are skipped. Track-length estimators, majorant walks
-    /// and voxel-exact ray casts use it.
-    pub fn traverse(&self, a: DVec3, b: DVec3, mut visit: impl FnMut(usize, f64, f64)) {
+    /// at which the segment enters and leaves it (Amanatides–Woo 3D DDA), until `visit`
+    /// returns `false`. Parts of the segment outside the grid's box are skipped.
+    /// Track-length estimators, majorant walks and exact line integrals use it.
+    pub fn traverse(&self, a: DVec3, b: DVec3, mut visit: impl FnMut(usize, f64, f64) -> bool) {
         let d = b - a;
         let length = d.length();
         if !(length > 0.0 && length.is_finite()) {
@@ -225,12 +225,14 @@ impl GridGeometry {
                 2
             };
             let t_end = t_next[axis].min(t1);
-            if t_end > t {
-                visit(
+            if t_end > t
+                && !visit(
                     self.index(cell[0] as usize, cell[1] as usize, cell[2] as usize),
                     t * length,
                     t_end * length,
-                );
+                )
+            {
+                return;
             }
             if t_end >= t1 {
                 return;

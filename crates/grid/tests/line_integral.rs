@@ -97,7 +97,10 @@ proptest! {
         let geometry = GridGeometry::new(dims, DVec3::from_array(h), DVec3::ZERO).unwrap();
         let (a, b) = (DVec3::from_array(a), DVec3::from_array(b));
         let mut per_cell = vec![0.0f64; geometry.voxel_count()];
-        geometry.traverse(a, b, |i, enter, exit| per_cell[i] += exit - enter);
+        geometry.traverse(a, b, |i, enter, exit| {
+            per_cell[i] += exit - enter;
+            true
+        });
         // Reference: midpoint sampling of the cell index along the segment.
         let n = 20_000;
         let (lo, hi) = geometry.bounds();

@@ -92,13 +92,10 @@ impl MajorantGrid {
         t_max: f64,
         mut visit: impl FnMut(f64, f64, f64) -> bool,
     ) {
-        let mut stop = false;
         let values = &self.values;
         self.geometry
             .traverse(origin, origin + dir * t_max, |index, enter, exit| {
-                if !stop && !visit(enter, exit, values[index]) {
-                    stop = true;
-                }
+                visit(enter, exit, values[index])
             });
     }
 

@@ -551,6 +551,7 @@ fn trace_batch(
                     for (m, w) in weight.iter().enumerate() {
                         tally.fluence[m][index] += w * (exit - enter);
                     }
+                    true
                 });
                 let Some(t) = collision else {
                     if let (Some(s), Some(t)) = (&surface, t_surface) {
@@ -669,6 +670,7 @@ fn trace_batch_spectral(
                             for c in 0..3 {
                                 tally.fluence[c][index] += f[c] * (exit - enter);
                             }
+                            true
                         });
                         start = t;
                         let s = sigma(pos + dir * t);
@@ -702,6 +704,7 @@ fn trace_batch_spectral(
                             for c in 0..3 {
                                 tally.fluence[c][index] += f[c] * (exit - enter);
                             }
+                            true
                         },
                     );
                     for c in 0..3 {
