@@ -43,9 +43,10 @@ fn every_solver_meets_its_tolerance_on_the_suite() {
 #[test]
 fn the_marble_sphere_reference_is_the_t7_solution_for_the_scene_as_written() {
     // The analytic reference must describe the scene file's light and medium: a unit-power
-    // source (intensity 1/4π) in marble red. Its absorbed power ∫ σ_a φ dV over the sphere
-    // must then be T7's absorbed fraction 0.223790; the cell sum is a midpoint rule, good to
-    // a few percent on 32³ cells (φ ~ 1/r near the source).
+    // source (intensity 1/4π) in marble red, with the partial-current A = 2.341 of η = 1.3.
+    // Its absorbed power ∫ σ_a φ dV over the sphere must then be that solution's absorbed
+    // fraction, 0.221258 (T7's 0.223790 is for the Groenhuis A); the cell sum is a midpoint
+    // rule, good to a few percent on 32³ cells (φ ~ 1/r near the source).
     use lucent::core::FluenceKind;
     use lucent::crosscheck::{load_suite, reference};
     let suite = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/suite");
@@ -61,7 +62,7 @@ fn the_marble_sphere_reference_is_the_t7_solution_for_the_scene_as_written() {
         .map(|&phi| sigma_a * f64::from(phi) * g.cell_volume())
         .sum();
     assert!(
-        (absorbed - 0.223790).abs() < 0.05 * 0.223790,
+        (absorbed - 0.221258).abs() < 0.05 * 0.221258,
         "absorbed {absorbed}"
     );
     match &scene.built.problem.lights()[0] {
@@ -106,19 +107,18 @@ fn pareto_sweep_shows_each_solvers_convergence_on_the_slab() {
     assert!(lucent::pareto::csv(&points).lines().count() == points.len() + 1);
 }
 
-#[test]
-fn monte_carlo_matches_diffusion_in_an_index_matched_marble_sphere() {
-    // With η = 1 the interface is invisible and diffusion (A = 1) is accurate away from the
-    // source and the surface: shell averages of the Monte Carlo fluence must agree with the
-    // T7-type analytic solution within 3% between 3 transport mean free paths from the
-    // source and 3 from the surface (measured: within 2.2%).
+/// Monte Carlo over analytic diffusion (the harness's reference, Robin condition with the
+/// partial-current A), averaged over 1 mm shells of the compared region (3 transport mean
+/// free paths from the source and from the surface), for the suite's marble sphere with its
+/// boundary index replaced by `eta`.
+fn marble_shell_ratios(eta: &str, particles: i64) -> Vec<f64> {
     use lucent::core::{FluenceKind, SolveOptions, Solver};
     use lucent::crosscheck::{load_suite, reference};
     let suite = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/suite");
     let text = std::fs::read_to_string(suite.join("marble_sphere.toml"))
         .unwrap()
-        .replace("eta = 1.3", "eta = 1.0");
-    assert!(text.contains("eta = 1.0"));
+        .replace("eta = 1.3", &format!("eta = {eta}"));
+    assert!(text.contains(&format!("eta = {eta}")));
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("marble_sphere.toml"), text).unwrap();
     std::fs::write(dir.path().join("tolerances.toml"), "entry = []\n").unwrap();
@@ -128,7 +128,7 @@ fn monte_carlo_matches_diffusion_in_an_index_matched_marble_sphere() {
     let mut params = lucent::core::Params::default();
     params
         .0
-        .insert("particles".into(), lucent::core::ParamValue::Int(1000));
+        .insert("particles".into(), lucent::core::ParamValue::Int(particles));
     params
         .0
         .insert("batches".into(), lucent::core::ParamValue::Int(8));
@@ -148,11 +148,33 @@ fn monte_carlo_matches_diffusion_in_an_index_matched_marble_sphere() {
             s.1 += f64::from(analytic.fluence[0].data()[index]);
         }
     }
-    let ratios: Vec<f64> = shells
+    shells
         .iter()
         .filter(|s| s.1 > 0.0)
         .map(|s| s.0 / s.1)
-        .collect();
+        .collect()
+}
+
+#[test]
+fn monte_carlo_matches_diffusion_in_an_index_matched_marble_sphere() {
+    // With η = 1 the interface is invisible and diffusion (A = 1) is accurate away from the
+    // source and the surface: shell averages must agree within 3% (measured: within 2.2%).
+    let ratios = marble_shell_ratios("1.0", 1000);
+    assert!(ratios.len() >= 6, "{ratios:?}");
+    assert!(
+        ratios.iter().all(|r| (r - 1.0).abs() < 0.03),
+        "mc / diffusion per 1 mm shell: {ratios:?}"
+    );
+}
+
+#[test]
+fn monte_carlo_matches_diffusion_through_a_fresnel_interface() {
+    // η = 1.3: Monte Carlo refracts and reflects at the sphere, diffusion applies the Robin
+    // condition with the partial-current A = 2.341. The criterion is 3% three mean
+    // free paths from source and surface; measured with 16k paths/batch the shells stay
+    // within 2.8% (the outermost, 8–8.6 mm, is the worst; the Groenhuis A = 2.600 would be
+    // 5.3% off there). At 4000 paths/batch the shell averages' own noise is about 0.3%.
+    let ratios = marble_shell_ratios("1.3", 4000);
     assert!(ratios.len() >= 6, "{ratios:?}");
     assert!(
         ratios.iter().all(|r| (r - 1.0).abs() < 0.03),

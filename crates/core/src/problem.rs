@@ -207,7 +207,9 @@ pub enum Boundary {
     /// Nothing comes in; light leaves freely (index-matched).
     #[default]
     Vacuum,
-    /// The diffusion Robin condition φ + 2AD ∂φ/∂n = 0 with A from the relative index η.
+    /// The diffusion Robin condition φ + 2AD ∂φ/∂n = 0 with A from the relative index η
+    /// ([`Boundary::robin_factor`]). Transport solvers treat it as a smooth dielectric
+    /// interface of index η.
     Robin {
         /// Relative refractive index.
         eta: f64,
@@ -246,6 +248,19 @@ impl Boundary {
             Boundary::Robin { .. } => BoundaryKind::Robin,
             Boundary::Dirichlet { .. } => BoundaryKind::Dirichlet,
             Boundary::Neumann { .. } => BoundaryKind::Neumann,
+        }
+    }
+
+    /// The boundary factor A of a [`Boundary::Robin`] condition: Haskell et al.'s partial-
+    /// current A ([`lucent_optics::DiffuseFresnel::PartialCurrent`]; 1 when η = 1, 2.341
+    /// at η = 1.3), the one Monte Carlo through a Fresnel interface agrees with. `None` for
+    /// the other kinds.
+    pub fn robin_factor(&self) -> Option<f64> {
+        match *self {
+            Boundary::Robin { eta } => lucent_optics::Dielectric::new(eta)
+                .and_then(|d| d.boundary_factor(lucent_optics::DiffuseFresnel::PartialCurrent))
+                .ok(),
+            _ => None,
         }
     }
 }
