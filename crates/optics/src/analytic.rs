@@ -112,6 +112,12 @@ impl DiffusionMedium {
         RobinHalfSpace::new(*self, source_depth)
     }
 
+    /// A disc of radius R > 0 (2D: an infinite cylinder) with a unit line source on its
+    /// axis (note 002 T8, the analogue of Mertens' Figure 4.1). Needs σ_a > 0.
+    pub fn disc(&self, radius: f64) -> Result<RobinDisc, OpticsError> {
+        RobinDisc::new(*self, radius)
+    }
+
     /// A slab of thickness d > 0 lit by the dipole source at depth z_r, with extrapolated
     /// boundaries (the multipole's model). Needs σ_a > 0.
     pub fn slab(&self, thickness: f64) -> Result<ExtrapolatedSlab, OpticsError> {
@@ -226,6 +232,131 @@ impl RobinSphere {
         let s = self.medium.sigma_tr() * self.radius;
         let e2 = (-2.0 * s).exp();
         1.0 - (-s).exp() * (1.0 + s) + self.b * (s * (1.0 + e2) - (1.0 - e2))
+    }
+}
+
+/// A disc (2D) of radius R with a unit line source at its centre and the Robin condition at
+/// r = R (note 002, T8): φ(r) = K₀(σr)/(2πD) + C I₀(σr), C from φ + 2AD φ′ = 0 at R.
+/// Valid for any r > 0, also beyond R (the analytic continuation a cut-cell unknown whose
+/// centre lies outside the disc represents).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RobinDisc {
+    medium: DiffusionMedium,
+    radius: f64,
+    c: f64,
+}
+
+impl RobinDisc {
+    fn new(medium: DiffusionMedium, radius: f64) -> Result<Self, OpticsError> {
+        let radius = in_range("radius", radius, "(0, inf)", |r| r > 0.0)?;
+        let sigma = medium.require_absorption()?;
+        let d = medium.d();
+        let zb = medium.extrapolation_distance();
+        let x = sigma * radius;
+        let source = 1.0 / (2.0 * PI * d);
+        let c = -source * (bessel_k0(x) - zb * sigma * bessel_k1(x))
+            / (bessel_i0(x) + zb * sigma * bessel_i1(x));
+        Ok(Self { medium, radius, c })
+    }
+
+    /// Fluence φ(r) for r > 0 (1/length per unit source strength per length).
+    pub fn fluence(&self, r: f64) -> Result<f64, OpticsError> {
+        let r = in_range("r", r, "(0, inf)", |r| r > 0.0)?;
+        let x = self.medium.sigma_tr() * r;
+        Ok(bessel_k0(x) / (2.0 * PI * self.medium.d()) + self.c * bessel_i0(x))
+    }
+
+    /// Fraction of the source's power that leaves through the rim, 2πR φ(R)/(2A).
+    pub fn escaped_fraction(&self) -> f64 {
+        let phi = self.fluence(self.radius).unwrap_or(0.0);
+        2.0 * PI * self.radius * phi / (2.0 * self.medium.a)
+    }
+}
+
+/// Modified Bessel function I₀ (Abramowitz & Stegun 9.8.1–9.8.2, |ε| < 2e-7 relative).
+fn bessel_i0(x: f64) -> f64 {
+    let ax = x.abs();
+    if ax < 3.75 {
+        let t = (x / 3.75).powi(2);
+        1.0 + t
+            * (3.5156229
+                + t * (3.0899424
+                    + t * (1.2067492 + t * (0.2659732 + t * (0.0360768 + t * 0.0045813)))))
+    } else {
+        let t = 3.75 / ax;
+        (ax.exp() / ax.sqrt())
+            * (0.39894228
+                + t * (0.01328592
+                    + t * (0.00225319
+                        + t * (-0.00157565
+                            + t * (0.00916281
+                                + t * (-0.02057706
+                                    + t * (0.02635537 + t * (-0.01647633 + t * 0.00392377))))))))
+    }
+}
+
+/// Modified Bessel function I₁ (A&S 9.8.3–9.8.4).
+fn bessel_i1(x: f64) -> f64 {
+    let ax = x.abs();
+    let v = if ax < 3.75 {
+        let t = (x / 3.75).powi(2);
+        ax * (0.5
+            + t * (0.87890594
+                + t * (0.51498869
+                    + t * (0.15084934 + t * (0.02658733 + t * (0.00301532 + t * 0.00032411))))))
+    } else {
+        let t = 3.75 / ax;
+        (ax.exp() / ax.sqrt())
+            * (0.39894228
+                + t * (-0.03988024
+                    + t * (-0.00362018
+                        + t * (0.00163801
+                            + t * (-0.01031555
+                                + t * (0.02282967
+                                    + t * (-0.02895312 + t * (0.01787654 - t * 0.00420059))))))))
+    };
+    if x < 0.0 { -v } else { v }
+}
+
+/// Modified Bessel function K₀ for x > 0 (A&S 9.8.5–9.8.6).
+fn bessel_k0(x: f64) -> f64 {
+    if x <= 2.0 {
+        let t = x * x / 4.0;
+        -(x / 2.0).ln() * bessel_i0(x)
+            + (-0.57721566
+                + t * (0.42278420
+                    + t * (0.23069756
+                        + t * (0.03488590 + t * (0.00262698 + t * (0.00010750 + t * 0.0000074))))))
+    } else {
+        let t = 2.0 / x;
+        ((-x).exp() / x.sqrt())
+            * (1.25331414
+                + t * (-0.07832358
+                    + t * (0.02189568
+                        + t * (-0.01062446
+                            + t * (0.00587872 + t * (-0.00251540 + t * 0.00053208))))))
+    }
+}
+
+/// Modified Bessel function K₁ for x > 0 (A&S 9.8.7–9.8.8).
+fn bessel_k1(x: f64) -> f64 {
+    if x <= 2.0 {
+        let t = x * x / 4.0;
+        (x / 2.0).ln() * bessel_i1(x)
+            + (1.0 / x)
+                * (1.0
+                    + t * (0.15443144
+                        + t * (-0.67278579
+                            + t * (-0.18156897
+                                + t * (-0.01919402 + t * (-0.00110404 - t * 0.00004686))))))
+    } else {
+        let t = 2.0 / x;
+        ((-x).exp() / x.sqrt())
+            * (1.25331414
+                + t * (0.23498619
+                    + t * (-0.03655620
+                        + t * (0.01504268
+                            + t * (-0.00780353 + t * (0.00325614 - t * 0.00068245))))))
     }
 }
 

@@ -81,7 +81,7 @@ pub mod materials;
 pub mod phase;
 pub mod quadrature;
 
-pub use analytic::DiffusionMedium;
+pub use analytic::{DiffusionMedium, RobinDisc};
 pub use coefficients::OpticalCoefficients;
 pub use error::OpticsError;
 pub use fresnel::{Dielectric, DiffuseFresnel};

@@ -358,3 +358,49 @@ fn measured_table_matches_the_anchors() {
         .unwrap();
     assert!((cm[0].sigma_a() - 0.021).abs() < 1e-15);
 }
+
+#[test]
+fn t8_robin_disc() {
+    // Note 002 T8: the 2D disc R = 4.37 mm, marble red (σ_a = .0021, σ′_s = 2.19), η = 1.3
+    // with the Groenhuis A, per unit line source; the A&S Bessel polynomials are good to
+    // 2e-7, the printed values to 7 digits. And the second material (σ_a = .1, σ′_s = .9).
+    let disc = |sigma_a: f64, sigma_s: f64| {
+        let c = OpticalCoefficients::from_extinction_albedo(
+            sigma_a + sigma_s,
+            sigma_s / (sigma_a + sigma_s),
+            0.0,
+        )
+        .unwrap();
+        DiffusionMedium::with_boundary(c, Dielectric::new(1.3).unwrap(), DiffuseFresnel::Groenhuis)
+            .unwrap()
+            .disc(4.37)
+            .unwrap()
+    };
+    let marble = disc(0.0021, 2.19);
+    for (r, phi) in [
+        (1.0, 1.649267),
+        (2.0, 0.941701),
+        (3.0, 0.538369),
+        (4.0, 0.258627),
+        (4.3, 0.189101),
+        (4.37, 0.173613),
+    ] {
+        let v = marble.fluence(r).unwrap();
+        assert!(
+            (v - phi).abs() < 2e-6 * phi.max(1.0),
+            "φ({r}) = {v}, T8 {phi}"
+        );
+    }
+    assert!((marble.escaped_fraction() - 0.916000).abs() < 1e-6);
+    let other = disc(0.1, 0.9);
+    for (r, phi) in [
+        (1.0, 0.406734),
+        (2.0, 0.176821),
+        (3.0, 0.086486),
+        (4.37, 0.036412),
+    ] {
+        let v = other.fluence(r).unwrap();
+        assert!((v - phi).abs() < 2e-6, "φ({r}) = {v}, T8 {phi}");
+    }
+    assert!((other.escaped_fraction() - 0.192115).abs() < 1e-6);
+}

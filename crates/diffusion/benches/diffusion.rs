@@ -1,0 +1,3 @@
+//! Criterion benchmarks of lucent-diffusion (filled in below).
+
+fn main() {}

@@ -1,0 +1,498 @@
+//! One level of the discrete operator, stored matrix-free as face couplings, and the kernels
+//! that run on it: matrix–vector products, residuals, red–black Gauss–Seidel and weighted
+//! Jacobi sweeps, and the transfers between levels.
+//!
+//! The operator is the integrated (conservative) form of −∇·(D∇φ) + σ_a φ over each cell:
+//!
+//! (Aφ)_i = d_i φ_i − Σ_f c_f φ_{j(f)},  d_i = Σ_f c_f + σ_a κ_i V + Σ_patches b_p,
+//!
+//! with c_f = α_f A_f D_f / h the coupling through face f (aperture α_f, area A_f, harmonic
+//! mean D_f of the two cells' D) and b_p the boundary patches' couplings. A is a symmetric
+//! M-matrix. Each cell stores the coupling through its *low* face on each axis (zero on the
+//! box), so a row reads c[g] and c[g + stride] for its two faces on an axis.
+//!
+//! Storage is f32 (5 arrays: three couplings, the diagonal and its inverse); sweeps run in
+//! parallel over z-slabs. Red–black Gauss–Seidel is done in three passes over slabs that
+//! never conflict: red on even slabs; red then black on odd slabs (their red neighbours
+//! above and below are final by then); black on even slabs. The result equals a plain red
+//! sweep followed by a black sweep.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// A level's operator.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Level {
+    pub(crate) dims: [usize; 3],
+    pub(crate) spacing: DVec3,
+    /// Coupling through each cell's low x, y and z face (0 on the box and where closed).
+    pub(crate) couplings: [Vec<f32>; 3],
+    /// The diagonal d_i (0 for cells outside the medium).
+    pub(crate) diag: Vec<f32>,
+    /// The diagonal's part that is not a face coupling: absorption and boundary couplings.
+    pub(crate) extra: Vec<f32>,
+    /// 1/d_i, or 0 outside the medium.
+    pub(crate) inv_diag: Vec<f32>,
+}
+
+impl Level {
+    pub(crate) fn len(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+
+    pub(crate) fn slab(&self) -> usize {
+        self.dims[0] * self.dims[1]
+    }
+
+    /// Σ_f c_f (x_i − x_{j(f)}) in f64 for cell g = (i, j, k) of slab-local index l, with
+    /// the slab's own values in `x` and the slabs below and above: the flux form, which
+    /// keeps the tiny absorption term from drowning in a rounded diagonal.
+    #[inline(always)]
+    fn outflow<T: Copy + Into<f64>>(
+        &self,
+        g: usize,
+        l: usize,
+        [i, j]: [usize; 2],
+        x: &[T],
+        below: Option<&[T]>,
+        above: Option<&[T]>,
+    ) -> f64 {
+        let [nx, ny, _] = self.dims;
+        let slab = nx * ny;
+        let [cx, cy, cz] = &self.couplings;
+        let xi: f64 = x[l].into();
+        let mut s = 0.0f64;
+        if i > 0 {
+            s += f64::from(cx[g]) * (xi - x[l - 1].into());
+        }
+        if i + 1 < nx {
+            s += f64::from(cx[g + 1]) * (xi - x[l + 1].into());
+        }
+        if j > 0 {
+            s += f64::from(cy[g]) * (xi - x[l - nx].into());
+        }
+        if j + 1 < ny {
+            s += f64::from(cy[g + nx]) * (xi - x[l + nx].into());
+        }
+        if let Some(b) = below {
+            s += f64::from(cz[g]) * (xi - b[l].into());
+        }
+        if let Some(a) = above {
+            s += f64::from(cz[g + slab]) * (xi - a[l].into());
+        }
+        s
+    }
+
+    /// [`Level::neighbours`] in the arithmetic of the vectors (f32 in the cycles, f64 in the
+    /// baselines).
+    #[inline(always)]
+    fn neighbour_sum<T: Real>(
+        &self,
+        g: usize,
+        l: usize,
+        [i, j]: [usize; 2],
+        x: &[T],
+        below: Option<&[T]>,
+        above: Option<&[T]>,
+    ) -> T {
+        let [nx, ny, _] = self.dims;
+        let slab = nx * ny;
+        let [cx, cy, cz] = &self.couplings;
+        let c = |v: f32| T::from(v);
+        let mut s = T::default();
+        if i > 0 {
+            s += c(cx[g]) * x[l - 1];
+        }
+        if i + 1 < nx {
+            s += c(cx[g + 1]) * x[l + 1];
+        }
+        if j > 0 {
+            s += c(cy[g]) * x[l - nx];
+        }
+        if j + 1 < ny {
+            s += c(cy[g + nx]) * x[l + nx];
+        }
+        if let Some(b) = below {
+            s += c(cz[g]) * b[l];
+        }
+        if let Some(a) = above {
+            s += c(cz[g + slab]) * a[l];
+        }
+        s
+    }
+
+    /// y = A x in f64 (x may be f32 or f64).
+    pub(crate) fn apply<T: Copy + Into<f64> + Sync>(&self, x: &[T], y: &mut [f64]) {
+        let slab = self.slab();
+        let nz = self.dims[2];
+        y.par_chunks_mut(slab).enumerate().for_each(|(k, y)| {
+            let xs = &x[k * slab..(k + 1) * slab];
+            let below = (k > 0).then(|| &x[(k - 1) * slab..k * slab]);
+            let above = (k + 1 < nz).then(|| &x[(k + 1) * slab..(k + 2) * slab]);
+            for j in 0..self.dims[1] {
+                for i in 0..self.dims[0] {
+                    let l = i + self.dims[0] * j;
+                    let g = k * slab + l;
+                    y[l] = f64::from(self.extra[g]) * xs[l].into()
+                        + self.outflow(g, l, [i, j], xs, below, above);
+                }
+            }
+        });
+    }
+
+    /// r = b − A x in f64.
+    pub(crate) fn residual<T: Copy + Into<f64> + Sync>(&self, b: &[f64], x: &[T], r: &mut [f64]) {
+        self.apply(x, r);
+        r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| {
+            *r = b - *r;
+        });
+    }
+
+    /// One red–black Gauss–Seidel sweep for A x = b, colours in the order `first`, then
+    /// the other (0 = red: (i + j + k) even).
+    pub(crate) fn gauss_seidel(&self, b: &[f32], x: &mut [f32], first: usize) {
+        self.sor(b, x, first, 1.0);
+    }
+
+    /// One red–black SOR sweep with relaxation ω (ω = 1: Gauss–Seidel).
+    pub(crate) fn sor<T: Real>(&self, b: &[T], x: &mut [T], first: usize, omega: T) {
+        let second = 1 - first;
+        // Pass 1: the first colour on even slabs.
+        self.on_slabs(x, 0, |k, xs, below, above| {
+            self.colour(b, k, first, omega, xs, below, above);
+        });
+        // Pass 2: both colours on odd slabs.
+        self.on_slabs(x, 1, |k, xs, below, above| {
+            self.colour(b, k, first, omega, xs, below, above);
+            self.colour(b, k, second, omega, xs, below, above);
+        });
+        // Pass 3: the second colour on even slabs.
+        self.on_slabs(x, 0, |k, xs, below, above| {
+            self.colour(b, k, second, omega, xs, below, above);
+        });
+    }
+
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    fn colour<T: Real>(
+        &self,
+        b: &[T],
+        k: usize,
+        colour: usize,
+        omega: T,
+        x: &mut [T],
+        below: Option<&[T]>,
+        above: Option<&[T]>,
+    ) {
+        let [nx, ny, _] = self.dims;
+        let base = k * nx * ny;
+        let one = T::from(1.0);
+        let relaxed = omega != one;
+        for j in 0..ny {
+            let mut i = (colour + j + k) % 2;
+            while i < nx {
+                let l = i + nx * j;
+                let g = base + l;
+                let s = b[g] + self.neighbour_sum(g, l, [i, j], x, below, above);
+                let new = s * T::from(self.inv_diag[g]);
+                x[l] = if relaxed {
+                    x[l] + omega * (new - x[l])
+                } else {
+                    new
+                };
+                i += 2;
+            }
+        }
+    }
+
+    /// Runs `f(k, slab, below, above)` in parallel on the slabs k ≡ `parity` (mod 2), each
+    /// with mutable access to its own slab and shared access to its neighbours.
+    fn on_slabs<T: Real>(
+        &self,
+        x: &mut [T],
+        parity: usize,
+        f: impl Fn(usize, &mut [T], Option<&[T]>, Option<&[T]>) + Sync,
+    ) {
+        let slab = self.slab();
+        let nz = self.dims[2];
+        let mut mine = Vec::with_capacity(nz / 2 + 1);
+        let mut others: Vec<Option<&[T]>> = vec![None; nz];
+        for (k, s) in x.chunks_mut(slab).enumerate() {
+            if k % 2 == parity {
+                mine.push((k, s));
+            } else {
+                others[k] = Some(&*s);
+            }
+        }
+        mine.into_par_iter().for_each(|(k, s)| {
+            let below = if k > 0 { others[k - 1] } else { None };
+            let above = others.get(k + 1).copied().flatten();
+            f(k, s, below, above);
+        });
+    }
+
+    /// One weighted Jacobi sweep x ← x + ω D⁻¹(b − A x), using `scratch` (len n).
+    pub(crate) fn jacobi(&self, b: &[f32], x: &mut [f32], omega: f32, scratch: &mut [f32]) {
+        let slab = self.slab();
+        let nz = self.dims[2];
+        let [nx, ny, _] = self.dims;
+        {
+            let x: &[f32] = x;
+            scratch
+                .par_chunks_mut(slab)
+                .enumerate()
+                .for_each(|(k, out)| {
+                    let xs = &x[k * slab..(k + 1) * slab];
+                    let below = (k > 0).then(|| &x[(k - 1) * slab..k * slab]);
+                    let above = (k + 1 < nz).then(|| &x[(k + 1) * slab..(k + 2) * slab]);
+                    for j in 0..ny {
+                        for i in 0..nx {
+                            let l = i + nx * j;
+                            let g = k * slab + l;
+                            let r = b[g] + self.neighbour_sum(g, l, [i, j], xs, below, above)
+                                - self.diag[g] * xs[l];
+                            out[l] = xs[l] + omega * self.inv_diag[g] * r;
+                        }
+                    }
+                });
+        }
+        x.copy_from_slice(scratch);
+    }
+
+    /// The coarse right-hand side Σ_children (b − A x): residual and restriction in one pass.
+    pub(crate) fn restrict_residual(&self, b: &[f32], x: &[f32], coarse: &Level, out: &mut [f32]) {
+        let [nx, ny, nz] = self.dims;
+        let [cx, cy, _] = coarse.dims;
+        let slab = nx * ny;
+        out.par_chunks_mut(cx * cy)
+            .enumerate()
+            .for_each(|(kc, out)| {
+                out.fill(0.0);
+                for k in 2 * kc..(2 * kc + 2).min(nz) {
+                    let xs = &x[k * slab..(k + 1) * slab];
+                    let below = (k > 0).then(|| &x[(k - 1) * slab..k * slab]);
+                    let above = (k + 1 < nz).then(|| &x[(k + 1) * slab..(k + 2) * slab]);
+                    for j in 0..ny {
+                        let row = (j / 2) * cx;
+                        for i in 0..nx {
+                            let l = i + nx * j;
+                            let g = k * slab + l;
+                            let r = b[g] + self.neighbour_sum(g, l, [i, j], xs, below, above)
+                                - self.diag[g] * xs[l];
+                            out[row + i / 2] += r;
+                        }
+                    }
+                }
+            });
+    }
+
+    /// x_fine += x_coarse of the parent (piecewise-constant prolongation).
+    pub(crate) fn prolong_add(&self, coarse: &Level, xc: &[f32], x: &mut [f32]) {
+        let [nx, ny, _] = self.dims;
+        let [cx, cy, _] = coarse.dims;
+        x.par_chunks_mut(nx * ny).enumerate().for_each(|(k, xs)| {
+            let base = (k / 2) * cx * cy;
+            for j in 0..ny {
+                let row = base + (j / 2) * cx;
+                for i in 0..nx {
+                    if self.inv_diag[k * nx * ny + i + nx * j] != 0.0 {
+                        xs[i + nx * j] += xc[row + i / 2];
+                    }
+                }
+            }
+        });
+    }
+
+    /// x_fine += trilinear interpolation of the coarse correction: each child takes 27/64 of
+    /// its parent, 9/64 of each of the three parent's neighbours on its side, 3/64 of the
+    /// three edge neighbours and 1/64 of the corner one, renormalised over the coarse cells
+    /// in the medium (so it falls back to copying near boundaries).
+    pub(crate) fn prolong_trilinear_add(&self, coarse: &Level, xc: &[f32], x: &mut [f32]) {
+        let [nx, ny, _] = self.dims;
+        let [cx, cy, cz] = coarse.dims;
+        x.par_chunks_mut(nx * ny).enumerate().for_each(|(k, xs)| {
+            let kc = k / 2;
+            let kn = if k % 2 == 0 {
+                kc.checked_sub(1)
+            } else {
+                Some(kc + 1).filter(|&v| v < cz)
+            };
+            for j in 0..ny {
+                let jc = j / 2;
+                let jn = if j % 2 == 0 {
+                    jc.checked_sub(1)
+                } else {
+                    Some(jc + 1).filter(|&v| v < cy)
+                };
+                for i in 0..nx {
+                    let l = i + nx * j;
+                    if self.inv_diag[k * nx * ny + l] == 0.0 {
+                        continue;
+                    }
+                    let ic = i / 2;
+                    let inb = if i % 2 == 0 {
+                        ic.checked_sub(1)
+                    } else {
+                        Some(ic + 1).filter(|&v| v < cx)
+                    };
+                    let (mut sum, mut weight) = (0.0f32, 0.0f32);
+                    for (kk, wk) in [(Some(kc), 0.75f32), (kn, 0.25)] {
+                        let Some(kk) = kk else { continue };
+                        for (jj, wj) in [(Some(jc), 0.75f32), (jn, 0.25)] {
+                            let Some(jj) = jj else { continue };
+                            let row = cx * (jj + cy * kk);
+                            for (ii, wi) in [(Some(ic), 0.75f32), (inb, 0.25)] {
+                                let Some(ii) = ii else { continue };
+                                let c = row + ii;
+                                if coarse.inv_diag[c] != 0.0 {
+                                    let w = wk * wj * wi;
+                                    sum += w * xc[c];
+                                    weight += w;
+                                }
+                            }
+                        }
+                    }
+                    if weight > 0.0 {
+                        xs[l] += sum / weight;
+                    }
+                }
+            }
+        });
+    }
+
+    /// Dims and spacing of the next coarser level.
+    pub(crate) fn coarse_shape(&self) -> ([usize; 3], DVec3) {
+        (self.dims.map(|n| n.div_ceil(2)), self.spacing * 2.0)
+    }
+}
+
+/// The arithmetic the kernels run in: f32 (cycles) or f64 (baselines).
+pub(crate) trait Real:
+    Copy
+    + Default
+    + Send
+    + Sync
+    + PartialEq
+    + From<f32>
+    + Into<f64>
+    + std::ops::Add<Output = Self>
+    + std::ops::Sub<Output = Self>
+    + std::ops::Mul<Output = Self>
+    + std::ops::AddAssign
+{
+}
+
+impl Real for f32 {}
+impl Real for f64 {}
+
+/// Σ x² in f64.
+pub(crate) fn norm2<T: Copy + Into<f64> + Sync>(x: &[T]) -> f64 {
+    x.par_iter()
+        .map(|&v| {
+            let v: f64 = v.into();
+            v * v
+        })
+        .sum::<f64>()
+        .sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A random-ish symmetric level with a diagonal that dominates strictly.
+    fn level(dims: [usize; 3]) -> Level {
+        let n = dims[0] * dims[1] * dims[2];
+        let mut couplings = [vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]];
+        let strides = [1, dims[0], dims[0] * dims[1]];
+        let mut diag = vec![0.1f32; n];
+        for g in 0..n {
+            let at = [
+                g % dims[0],
+                (g / dims[0]) % dims[1],
+                g / (dims[0] * dims[1]),
+            ];
+            for a in 0..3 {
+                if at[a] > 0 {
+                    let c = 1.0 + ((g * 7 + a * 13) % 5) as f32 * 0.3;
+                    couplings[a][g] = c;
+                    diag[g] += c;
+                    diag[g - strides[a]] += c;
+                }
+            }
+        }
+        let inv_diag = diag.iter().map(|d| 1.0 / d).collect();
+        Level {
+            dims,
+            spacing: DVec3::ONE,
+            couplings,
+            diag,
+            extra: vec![0.1; n],
+            inv_diag,
+        }
+    }
+
+    #[test]
+    fn red_black_in_three_passes_equals_red_then_black() {
+        let lv = level([5, 4, 7]);
+        let n = lv.len();
+        let b: Vec<f32> = (0..n).map(|g| ((g * 31) % 17) as f32 - 8.0).collect();
+        let mut x = vec![0.5f32; n];
+        lv.gauss_seidel(&b, &mut x, 0);
+        // Reference: a serial red sweep, then a serial black sweep.
+        let mut y = vec![0.5f32; n];
+        let [nx, ny, nz] = lv.dims;
+        for colour in [0, 1] {
+            for k in 0..nz {
+                for j in 0..ny {
+                    for i in 0..nx {
+                        if (i + j + k) % 2 != colour {
+                            continue;
+                        }
+                        let g = i + nx * (j + ny * k);
+                        let at = [i, j, k];
+                        let strides = [1, nx, nx * ny];
+                        let mut s = b[g];
+                        for a in 0..3 {
+                            if at[a] > 0 {
+                                s += lv.couplings[a][g] * y[g - strides[a]];
+                            }
+                            if at[a] + 1 < lv.dims[a] {
+                                s += lv.couplings[a][g + strides[a]] * y[g + strides[a]];
+                            }
+                        }
+                        y[g] = s / lv.diag[g];
+                    }
+                }
+            }
+        }
+        for (a, b) in x.iter().zip(&y) {
+            assert!((a - b).abs() <= 1e-6 * b.abs().max(1.0), "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn restriction_sums_the_residual() {
+        let lv = level([5, 6, 3]);
+        let (dims, spacing) = lv.coarse_shape();
+        let coarse = Level {
+            dims,
+            spacing,
+            couplings: [vec![], vec![], vec![]],
+            diag: vec![],
+            extra: vec![],
+            inv_diag: vec![],
+        };
+        let n = lv.len();
+        let b: Vec<f32> = (0..n).map(|g| (g % 3) as f32).collect();
+        let x: Vec<f32> = (0..n).map(|g| (g % 5) as f32 * 0.1).collect();
+        let mut out = vec![0.0f32; coarse.len()];
+        lv.restrict_residual(&b, &x, &coarse, &mut out);
+        let b64: Vec<f64> = b.iter().map(|&v| f64::from(v)).collect();
+        let mut r = vec![0.0; n];
+        lv.residual(&b64, &x, &mut r);
+        let total: f64 = r.iter().sum();
+        let coarse_total: f64 = out.iter().map(|&v| f64::from(v)).sum();
+        assert!((total - coarse_total).abs() < 1e-4 * total.abs().max(1.0));
+    }
+}

@@ -1,0 +1,77 @@
+//! Steady diffusion of light with an embedded boundary, solved by geometric multigrid
+//! (Mertens 2005, chapter 4; `shared/notes/002_mertens.md` §2.11–2.14).
+//!
+//! # What it solves
+//!
+//! −∇·(D∇φ) + σ_a φ = Q₀ − 3∇·(D Q₁) in the medium Ω, for the fluence φ (W/length²), with
+//! D = 1/(3σ_t′) (length), σ_t′ = σ_a + (1 − g)σ_s, σ_a (1/length), an isotropic source
+//! density Q₀ and first moment Q₁ (W/length³). The Q₁ sign is the one derived from the P1
+//! moment equations (Jensen et al. 2001, eq. 6); Mertens' thesis prints it reversed
+//! (note 002 §2.2, §8.1).
+//!
+//! Boundaries, on an embedded surface given by a signed distance function and on the
+//! grid's box, each with its own condition:
+//! - Robin φ + 2AD ∂φ/∂n = 6AD Q₁·n (the extrapolated boundary; A ≥ 1 from the relative
+//!   index, `lucent_core::Boundary::robin_factor`), exitance φ/(2A);
+//! - Dirichlet φ = g; Neumann (given outward flux, 0 reflecting).
+//!
+//! # How
+//!
+//! Cell-centred finite volumes on cut cells ([`geometry`]): volume fractions, face
+//! apertures and boundary facets from the SDF, the Robin flux substituted into the facet
+//! (Johansen & Colella 1998; Schwartz et al. 2006). The equations are kept in integrated
+//! form (multiplied by the cell volume), so A is a symmetric M-matrix, conservation is exact
+//! (emitted = absorbed + escaped to solver tolerance) and **tiny cut cells need no special
+//! treatment**: their rows shrink with them, there is no explicit time step for them to
+//! limit, and the implicit solvers converge regardless (no cell merging, no small-cell
+//! CFL). [`Discretisation::Staircase`] is the plain finite-difference alternative, to
+//! reproduce Mertens' Figure 4.1.
+//!
+//! Solvers ([`Method`]): matrix-free geometric multigrid (V, W, F cycles, full multigrid,
+//! red–black Gauss–Seidel or weighted Jacobi smoothers, rediscretised coarse operators,
+//! f32 cycles on an f64 correction), and on the same operator the baselines Jacobi,
+//! red–black SOR, Jacobi-preconditioned CG and multigrid-preconditioned CG.
+//!
+//! # Accuracy and limits
+//!
+//! Second order in h away from sources (point sources are spread over eight cells by
+//! trilinear weights). Diffusion itself holds a few transport mean free paths from
+//! sources and boundaries in media with α′ ≈ 1. Implicit: no stability limit on h.
+//!
+//! ```
+//! use glam::DVec3;
+//! use lucent_diffusion::{Boundaries, CellGeometry, Condition, Discretisation,
+//!     DiffusionProblem, Method, Sources, Stopping, solve};
+//! use lucent_grid::GridGeometry;
+//!
+//! // A marble sphere of radius 5 mm with a unit point source at its centre.
+//! let grid = GridGeometry::from_bounds([24; 3], DVec3::splat(-6.0), DVec3::splat(6.0))?;
+//! let cells = CellGeometry::from_sdf(grid, |p| p.length() - 5.0, Discretisation::EmbeddedBoundary);
+//! let n = grid.voxel_count();
+//! let (sigma_a, sigma_s_reduced) = (0.0021f32, 2.19f32);
+//! let d = 1.0 / (3.0 * (sigma_a + sigma_s_reduced));
+//! let problem = DiffusionProblem::new(cells, vec![d; n], vec![sigma_a; n],
+//!     Boundaries::uniform(Condition::Robin { a: 2.341 }))?;
+//! let sources = Sources { points: vec![(DVec3::new(0.1, 0.05, -0.02), 1.0)], ..Sources::default() };
+//! let solution = solve(&problem, &sources, Method::default(), &Stopping::default())?;
+//! assert!(solution.convergence.stop_reason.is_converged());
+//! assert!(solution.balance.relative_imbalance() < 1e-6);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+mod error;
+pub mod geometry;
+mod krylov;
+mod level;
+mod multigrid;
+mod problem;
+mod solve;
+
+pub use error::DiffusionError;
+pub use geometry::{CellGeometry, Discretisation, Patch, Side};
+pub use krylov::optimal_sor_factor;
+pub use multigrid::{
+    Convergence, Cycle, Multigrid, MultigridSettings, Prolongation, Smoother, Stopping,
+};
+pub use problem::{Balance, Boundaries, Condition, DiffusionProblem, Sources};
+pub use solve::{DiffusionSolution, Method, solve};

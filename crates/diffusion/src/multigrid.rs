@@ -1,0 +1,407 @@
+//! Geometric multigrid on the cut-cell hierarchy, matrix-free, in mixed precision.
+//!
+//! Levels halve the grid (cells covering 2×2×2 children, rounded up) until a dimension would
+//! drop below 4; the coarsest level is solved by conjugate gradients to 1e-10 in f64.
+//! Restriction sums the children's residuals (the equations are integrated over cells, so
+//! the sum is the volume-weighted average Mertens asks for), prolongation copies the parent's
+//! correction to its children (Mertens' piecewise-constant choice), and coarse operators are
+//! rediscretised on the coarsened geometry ([`crate::problem`]).
+//!
+//! Precision: the solution and the fine residual are f64; each cycle runs in f32 on the
+//! correction equation A e = r. Pure f32 stalls near a 1e-6 relative residual; this
+//! iterative refinement reaches 1e-10 at the cost of one f64 residual per cycle.
+
+use lucent_core::StopReason;
+use rayon::prelude::*;
+
+use crate::level::{Level, norm2};
+use crate::problem::{Boundaries, LevelData, coarsen};
+
+/// The shape of a multigrid cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Cycle {
+    /// One coarse-grid correction per level.
+    #[default]
+    V,
+    /// Two coarse-grid corrections per level.
+    W,
+    /// An F-cycle: an F-cycle then a V-cycle on the coarser level.
+    F,
+}
+
+/// The smoother.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Smoother {
+    /// Red–black Gauss–Seidel (pre-smoothing red first, post-smoothing black first, so
+    /// the cycle is symmetric and can precondition CG).
+    #[default]
+    RedBlackGaussSeidel,
+    /// Weighted Jacobi with damping ω (6/7 is optimal for the 7-point Laplacian).
+    Jacobi {
+        /// Damping factor in (0, 1].
+        omega: f32,
+    },
+}
+
+/// How to run the multigrid solver.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MultigridSettings {
+    /// Cycle shape.
+    pub cycle: Cycle,
+    /// Smoother.
+    pub smoother: Smoother,
+    /// Sweeps before the coarse-grid correction.
+    pub pre_sweeps: usize,
+    /// Sweeps after it.
+    pub post_sweeps: usize,
+    /// Start from full multigrid (nested iteration) instead of zero.
+    pub full_multigrid: bool,
+    /// How corrections go from coarse to fine.
+    pub prolongation: Prolongation,
+}
+
+/// Coarse-to-fine interpolation of corrections.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Prolongation {
+    /// Copy the parent's value (Mertens' choice): with summed restriction and
+    /// rediscretised coarse operators the faster of the two here (0.09 against 0.16 per
+    /// V(2,2) cycle on the embedded sphere).
+    #[default]
+    Constant,
+    /// Trilinear interpolation between coarse cell centres, renormalised at boundaries.
+    Trilinear,
+}
+
+impl Default for MultigridSettings {
+    fn default() -> Self {
+        Self {
+            cycle: Cycle::V,
+            smoother: Smoother::RedBlackGaussSeidel,
+            pre_sweeps: 2,
+            post_sweeps: 2,
+            full_multigrid: true,
+            prolongation: Prolongation::Constant,
+        }
+    }
+}
+
+/// When an iterative solve stops.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stopping {
+    /// Relative residual ‖b − Aφ‖/‖b‖ to reach.
+    pub relative_tolerance: f64,
+    /// Absolute residual to reach.
+    pub absolute_tolerance: f64,
+    /// Most iterations (cycles).
+    pub max_iterations: usize,
+    /// Wall-time budget.
+    pub time_budget: Option<std::time::Duration>,
+}
+
+impl Default for Stopping {
+    fn default() -> Self {
+        Self {
+            relative_tolerance: 1e-8,
+            absolute_tolerance: 0.0,
+            max_iterations: 200,
+            time_budget: None,
+        }
+    }
+}
+
+/// The history of an iterative solve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Convergence {
+    /// Relative residual after each iteration (the first entry is before any).
+    pub residuals: Vec<f64>,
+    /// Why it stopped.
+    pub stop_reason: StopReason,
+}
+
+impl Convergence {
+    /// Iterations run.
+    pub fn iterations(&self) -> usize {
+        self.residuals.len().saturating_sub(1)
+    }
+
+    /// Residual reduction of each iteration.
+    pub fn factors(&self) -> Vec<f64> {
+        self.residuals.windows(2).map(|w| w[1] / w[0]).collect()
+    }
+
+    /// Geometric mean of the reduction factors (the asymptotic rate's estimate).
+    pub fn mean_factor(&self) -> f64 {
+        let f = self.factors();
+        if f.is_empty() {
+            return 0.0;
+        }
+        (f.iter().map(|v| v.max(1e-300).ln()).sum::<f64>() / f.len() as f64).exp()
+    }
+}
+
+/// One vector per level.
+type Work = Vec<Vec<f32>>;
+
+/// The level hierarchy with its work vectors.
+#[derive(Debug, Clone)]
+pub struct Multigrid {
+    levels: Vec<Level>,
+    settings: MultigridSettings,
+}
+
+/// Checks a residual for the stopping rules; `Some(reason)` means stop.
+pub(crate) fn check_stop(
+    stopping: &Stopping,
+    iteration: usize,
+    relative: f64,
+    absolute: f64,
+    initial: f64,
+    started: std::time::Instant,
+) -> Option<StopReason> {
+    if !relative.is_finite() {
+        return Some(StopReason::DivergedNonFinite { iteration });
+    }
+    if relative <= stopping.relative_tolerance {
+        return Some(StopReason::ConvergedRelative { residual: relative });
+    }
+    if absolute <= stopping.absolute_tolerance {
+        return Some(StopReason::ConvergedAbsolute { residual: absolute });
+    }
+    if relative > 1e6 * initial.max(1.0) {
+        return Some(StopReason::DivergedGrowth {
+            growth: relative / initial.max(f64::MIN_POSITIVE),
+            iteration,
+        });
+    }
+    if iteration >= stopping.max_iterations {
+        return Some(StopReason::IterationLimit { residual: relative });
+    }
+    if stopping.time_budget.is_some_and(|t| started.elapsed() >= t) {
+        return Some(StopReason::TimeLimit { residual: relative });
+    }
+    None
+}
+
+impl Multigrid {
+    /// The hierarchy for a fine level.
+    pub(crate) fn new(
+        fine: LevelData,
+        boundaries: &Boundaries,
+        settings: MultigridSettings,
+    ) -> Self {
+        let mut data = vec![fine];
+        while data.len() < 24 {
+            let last = &data[data.len() - 1];
+            if last.level.dims.iter().any(|&n| n < 4) {
+                break;
+            }
+            let next = coarsen(last, boundaries);
+            data.push(next);
+        }
+        Self {
+            levels: data.into_iter().map(|d| d.level).collect(),
+            settings,
+        }
+    }
+
+    /// The finest level.
+    pub(crate) fn fine(&self) -> &Level {
+        &self.levels[0]
+    }
+
+    /// Number of levels.
+    pub fn depth(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Bytes of the operator and work vectors over all levels.
+    pub fn memory_bytes(&self) -> u64 {
+        self.levels.iter().map(|l| l.len() as u64 * 4 * 8).sum()
+    }
+
+    fn work(&self) -> (Work, Work, Work) {
+        let b = self.levels.iter().map(|l| vec![0.0f32; l.len()]).collect();
+        let x = self.levels.iter().map(|l| vec![0.0f32; l.len()]).collect();
+        let s = self
+            .levels
+            .iter()
+            .map(|l| match self.settings.smoother {
+                Smoother::Jacobi { .. } => vec![0.0f32; l.len()],
+                Smoother::RedBlackGaussSeidel => Vec::new(),
+            })
+            .collect();
+        (b, x, s)
+    }
+
+    fn smooth(&self, l: usize, b: &[f32], x: &mut [f32], scratch: &mut [f32], post: bool) {
+        let level = &self.levels[l];
+        let sweeps = if post {
+            self.settings.post_sweeps
+        } else {
+            self.settings.pre_sweeps
+        };
+        for _ in 0..sweeps {
+            match self.settings.smoother {
+                Smoother::RedBlackGaussSeidel => {
+                    level.gauss_seidel(b, x, usize::from(post));
+                }
+                Smoother::Jacobi { omega } => level.jacobi(b, x, omega, scratch),
+            }
+        }
+    }
+
+    /// Solves the coarsest level by Jacobi-preconditioned CG in f64.
+    fn coarsest(&self, b: &[f32], x: &mut [f32]) {
+        let level = &self.levels[self.levels.len() - 1];
+        let b64: Vec<f64> = b.iter().map(|&v| f64::from(v)).collect();
+        let mut x64: Vec<f64> = x.iter().map(|&v| f64::from(v)).collect();
+        let stopping = Stopping {
+            relative_tolerance: 1e-10,
+            max_iterations: 10 * level.len().max(50),
+            ..Stopping::default()
+        };
+        let _ = crate::krylov::conjugate_gradient(level, &b64, &mut x64, &stopping, |r, z| {
+            z.iter_mut()
+                .zip(r)
+                .zip(&level.inv_diag)
+                .for_each(|((z, r), d)| *z = r * f64::from(*d));
+        });
+        for (x, v) in x.iter_mut().zip(x64) {
+            *x = v as f32;
+        }
+    }
+
+    /// One cycle on level `l` for A x = b (x holds the initial guess).
+    fn cycle(
+        &self,
+        l: usize,
+        cycle: Cycle,
+        b: &mut [Vec<f32>],
+        x: &mut [Vec<f32>],
+        s: &mut [Vec<f32>],
+    ) {
+        if l + 1 == self.levels.len() {
+            self.coarsest(&b[l], &mut x[l]);
+            return;
+        }
+        {
+            let (bl, xl, sl) = (&b[l], &mut x[l], &mut s[l]);
+            self.smooth(l, bl, xl, sl, false);
+        }
+        {
+            let (bf, bc) = b.split_at_mut(l + 1);
+            self.levels[l].restrict_residual(&bf[l], &x[l], &self.levels[l + 1], &mut bc[0]);
+        }
+        x[l + 1].fill(0.0);
+        match cycle {
+            Cycle::V => self.cycle(l + 1, Cycle::V, b, x, s),
+            Cycle::W => {
+                self.cycle(l + 1, Cycle::W, b, x, s);
+                self.cycle(l + 1, Cycle::W, b, x, s);
+            }
+            Cycle::F => {
+                self.cycle(l + 1, Cycle::F, b, x, s);
+                self.cycle(l + 1, Cycle::V, b, x, s);
+            }
+        }
+        {
+            let (xf, xc) = x.split_at_mut(l + 1);
+            self.prolong(l, &xc[0], &mut xf[l]);
+        }
+        let (bl, xl, sl) = (&b[l], &mut x[l], &mut s[l]);
+        self.smooth(l, bl, xl, sl, true);
+    }
+
+    fn prolong(&self, l: usize, coarse: &[f32], fine: &mut [f32]) {
+        match self.settings.prolongation {
+            Prolongation::Constant => self.levels[l].prolong_add(&self.levels[l + 1], coarse, fine),
+            Prolongation::Trilinear => {
+                self.levels[l].prolong_trilinear_add(&self.levels[l + 1], coarse, fine)
+            }
+        }
+    }
+
+    /// Applies one cycle from zero to `r`: z ≈ A⁻¹ r (the preconditioner of CG).
+    pub(crate) fn precondition(&self, r: &[f64], z: &mut [f64]) {
+        let (mut b, mut x, mut s) = self.work();
+        b[0].par_iter_mut()
+            .zip(r.par_iter())
+            .for_each(|(b, r)| *b = *r as f32);
+        self.cycle(0, self.settings.cycle, &mut b, &mut x, &mut s);
+        z.par_iter_mut()
+            .zip(x[0].par_iter())
+            .for_each(|(z, x)| *z = f64::from(*x));
+    }
+
+    /// Full multigrid: sums the right-hand side down every level, solves the coarsest, then
+    /// on each finer level starts from the prolonged coarse solution and runs one cycle.
+    fn full_multigrid(
+        &self,
+        rhs: &[f64],
+        b: &mut [Vec<f32>],
+        x: &mut [Vec<f32>],
+        s: &mut [Vec<f32>],
+    ) {
+        b[0].par_iter_mut()
+            .zip(rhs.par_iter())
+            .for_each(|(b, r)| *b = *r as f32);
+        for l in 0..self.levels.len() - 1 {
+            let zeros = vec![0.0f32; self.levels[l].len()];
+            let (bf, bc) = b.split_at_mut(l + 1);
+            self.levels[l].restrict_residual(&bf[l], &zeros, &self.levels[l + 1], &mut bc[0]);
+        }
+        let last = self.levels.len() - 1;
+        x[last].fill(0.0);
+        self.coarsest(&b[last], &mut x[last]);
+        for l in (0..last).rev() {
+            x[l].fill(0.0);
+            {
+                let (xf, xc) = x.split_at_mut(l + 1);
+                self.prolong(l, &xc[0], &mut xf[l]);
+            }
+            self.cycle(l, self.settings.cycle, b, x, s);
+        }
+    }
+
+    /// Solves A φ = b to the stopping rule: f64 solution and residual, f32 cycles on the
+    /// correction. `phi` holds the initial guess (ignored when full multigrid is on).
+    pub fn solve(&self, rhs: &[f64], phi: &mut [f64], stopping: &Stopping) -> Convergence {
+        let started = std::time::Instant::now();
+        let fine = self.fine();
+        let (mut b, mut x, mut s) = self.work();
+        let b_norm = norm2(rhs).max(f64::MIN_POSITIVE);
+        if self.settings.full_multigrid {
+            self.full_multigrid(rhs, &mut b, &mut x, &mut s);
+            phi.par_iter_mut()
+                .zip(x[0].par_iter())
+                .for_each(|(p, x)| *p = f64::from(*x));
+        }
+        let mut r = vec![0.0f64; rhs.len()];
+        fine.residual(rhs, phi, &mut r);
+        let mut norm = norm2(&r);
+        let mut residuals = vec![norm / b_norm];
+        let initial = residuals[0];
+        loop {
+            let iteration = residuals.len() - 1;
+            if let Some(stop_reason) =
+                check_stop(stopping, iteration, norm / b_norm, norm, initial, started)
+            {
+                return Convergence {
+                    residuals,
+                    stop_reason,
+                };
+            }
+            b[0].par_iter_mut()
+                .zip(r.par_iter())
+                .for_each(|(b, r)| *b = *r as f32);
+            x[0].fill(0.0);
+            self.cycle(0, self.settings.cycle, &mut b, &mut x, &mut s);
+            phi.par_iter_mut()
+                .zip(x[0].par_iter())
+                .for_each(|(p, e)| *p += f64::from(*e));
+            fine.residual(rhs, phi, &mut r);
+            norm = norm2(&r);
+            residuals.push(norm / b_norm);
+        }
+    }
+}

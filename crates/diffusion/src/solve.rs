@@ -1,0 +1,146 @@
+//! One call to solve a [`DiffusionProblem`] with a chosen method.
+
+use std::time::Instant;
+
+use crate::error::DiffusionError;
+use crate::krylov;
+use crate::multigrid::{Convergence, Multigrid, MultigridSettings, Stopping};
+use crate::problem::{Balance, DiffusionProblem, Sources};
+
+/// The iterative method.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Method {
+    /// Geometric multigrid cycles (the default).
+    Multigrid(MultigridSettings),
+    /// Conjugate gradients preconditioned by one multigrid cycle.
+    MultigridCg(MultigridSettings),
+    /// Conjugate gradients with the diagonal (Jacobi) preconditioner.
+    ConjugateGradient,
+    /// Jacobi iteration with damping ω.
+    Jacobi {
+        /// Damping in (0, 1].
+        omega: f64,
+    },
+    /// Red–black SOR with factor ω in (0, 2) (1: Gauss–Seidel).
+    Sor {
+        /// Relaxation factor.
+        omega: f64,
+    },
+}
+
+impl Default for Method {
+    fn default() -> Self {
+        Method::Multigrid(MultigridSettings::default())
+    }
+}
+
+/// A solved problem.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DiffusionSolution {
+    /// Fluence φ per cell (W/length²; 0 outside the medium), f64.
+    pub fluence: Vec<f64>,
+    /// Residual history and stop reason.
+    pub convergence: Convergence,
+    /// Emitted, absorbed and escaped power.
+    pub balance: Balance,
+    /// Seconds spent building the operator (and the hierarchy).
+    pub setup_seconds: f64,
+    /// Seconds spent iterating.
+    pub solve_seconds: f64,
+    /// Multigrid levels (1 for the single-level methods).
+    pub levels: usize,
+    /// Bytes of operator and work vectors.
+    pub memory_bytes: u64,
+}
+
+/// Solves `problem` with `sources` by `method` until `stopping` says so.
+pub fn solve(
+    problem: &DiffusionProblem,
+    sources: &Sources,
+    method: Method,
+    stopping: &Stopping,
+) -> Result<DiffusionSolution, DiffusionError> {
+    let started = Instant::now();
+    let rhs = problem.rhs(sources)?;
+    let fine = problem.fine_level();
+    let n = rhs.len();
+    let mut phi = vec![0.0f64; n];
+    let (convergence, levels, memory, setup) = match method {
+        Method::Multigrid(settings) | Method::MultigridCg(settings) => {
+            check_sweeps(&settings)?;
+            let mg = Multigrid::new(fine, problem.boundaries(), settings);
+            let setup = started.elapsed().as_secs_f64();
+            let convergence = if matches!(method, Method::Multigrid(_)) {
+                mg.solve(&rhs, &mut phi, stopping)
+            } else {
+                krylov::conjugate_gradient(mg.fine(), &rhs, &mut phi, stopping, |r, z| {
+                    mg.precondition(r, z)
+                })
+            };
+            (
+                convergence,
+                mg.depth(),
+                mg.memory_bytes() + n as u64 * 24,
+                setup,
+            )
+        }
+        Method::ConjugateGradient => {
+            let setup = started.elapsed().as_secs_f64();
+            let level = fine.level;
+            let c = krylov::conjugate_gradient(&level, &rhs, &mut phi, stopping, |r, z| {
+                z.iter_mut()
+                    .zip(r)
+                    .zip(&level.inv_diag)
+                    .for_each(|((z, r), d)| *z = r * f64::from(*d));
+            });
+            (c, 1, n as u64 * (20 + 40), setup)
+        }
+        Method::Jacobi { omega } => {
+            if !(omega > 0.0 && omega <= 1.0) {
+                return Err(DiffusionError::Invalid(format!(
+                    "Jacobi damping {omega} outside (0, 1]"
+                )));
+            }
+            let setup = started.elapsed().as_secs_f64();
+            let c = krylov::jacobi(&fine.level, &rhs, &mut phi, omega, stopping);
+            (c, 1, n as u64 * (20 + 24), setup)
+        }
+        Method::Sor { omega } => {
+            if !(omega > 0.0 && omega < 2.0) {
+                return Err(DiffusionError::Invalid(format!(
+                    "SOR factor {omega} outside (0, 2)"
+                )));
+            }
+            let setup = started.elapsed().as_secs_f64();
+            let c = krylov::sor(&fine.level, &rhs, &mut phi, omega, stopping);
+            (c, 1, n as u64 * (20 + 24), setup)
+        }
+    };
+    let solve_seconds = started.elapsed().as_secs_f64() - setup;
+    let balance = problem.balance(sources, &phi);
+    Ok(DiffusionSolution {
+        fluence: phi,
+        convergence,
+        balance,
+        setup_seconds: setup,
+        solve_seconds,
+        levels,
+        memory_bytes: memory,
+    })
+}
+
+fn check_sweeps(settings: &MultigridSettings) -> Result<(), DiffusionError> {
+    if settings.pre_sweeps + settings.post_sweeps == 0 {
+        return Err(DiffusionError::Invalid(
+            "multigrid needs at least one smoothing sweep".into(),
+        ));
+    }
+    if let crate::multigrid::Smoother::Jacobi { omega } = settings.smoother
+        && !(omega > 0.0 && omega <= 1.0)
+    {
+        return Err(DiffusionError::Invalid(format!(
+            "Jacobi smoother damping {omega} outside (0, 1]"
+        )));
+    }
+    Ok(())
+}
