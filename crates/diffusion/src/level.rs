@@ -121,6 +121,25 @@ impl Level {
         s
     }
 
+    /// Σ_f c_f of cell g = (i, j, k) in the vectors' arithmetic.
+    #[inline(always)]
+    fn coupling_sum<T: Real>(&self, g: usize, [i, j, k]: [usize; 3]) -> T {
+        let [nx, ny, nz] = self.dims;
+        let slab = nx * ny;
+        let [cx, cy, cz] = &self.couplings;
+        let mut s = T::from(cx[g]) + T::from(cy[g]) + T::from(cz[g]);
+        if i + 1 < nx {
+            s += T::from(cx[g + 1]);
+        }
+        if j + 1 < ny {
+            s += T::from(cy[g + nx]);
+        }
+        if k + 1 < nz {
+            s += T::from(cz[g + slab]);
+        }
+        s
+    }
+
     /// y = A x in f64 (x may be f32 or f64).
     pub(crate) fn apply<T: Copy + Into<f64> + Sync>(&self, x: &[T], y: &mut [f64]) {
         let slab = self.slab();
@@ -193,13 +212,12 @@ impl Level {
             while i < nx {
                 let l = i + nx * j;
                 let g = base + l;
+                // Residual form r = b − e x_i − Σ c (x_i − x_j): its fixed point is the
+                // operator's solution exactly, not that of a rounded diagonal.
                 let s = b[g] + self.neighbour_sum(g, l, [i, j], x, below, above);
-                let new = s * T::from(self.inv_diag[g]);
-                x[l] = if relaxed {
-                    x[l] + omega * (new - x[l])
-                } else {
-                    new
-                };
+                let r = s - (T::from(self.extra[g]) + self.coupling_sum(g, [i, j, k])) * x[l];
+                let step = r * T::from(self.inv_diag[g]);
+                x[l] += if relaxed { omega * step } else { step };
                 i += 2;
             }
         }
@@ -361,8 +379,11 @@ impl Level {
     }
 
     /// Dims and spacing of the next coarser level.
+    /// Axes with a single cell stay single (a 2D problem is one cell thick).
     pub(crate) fn coarse_shape(&self) -> ([usize; 3], DVec3) {
-        (self.dims.map(|n| n.div_ceil(2)), self.spacing * 2.0)
+        let dims = self.dims.map(|n| if n == 1 { 1 } else { n.div_ceil(2) });
+        let scale = DVec3::from_array(self.dims.map(|n| if n == 1 { 1.0 } else { 2.0 }));
+        (dims, self.spacing * scale)
     }
 }
 

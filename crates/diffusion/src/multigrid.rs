@@ -1,7 +1,7 @@
 //! Geometric multigrid on the cut-cell hierarchy, matrix-free, in mixed precision.
 //!
-//! Levels halve the grid (cells covering 2×2×2 children, rounded up) until a dimension would
-//! drop below 4; the coarsest level is solved by conjugate gradients to 1e-10 in f64.
+//! Levels halve the grid (cells covering 2×2×2 children, rounded up; single-cell axes of a
+//! 2D problem stay single) until an axis would drop below 4 cells; the coarsest level is solved by conjugate gradients to 1e-10 in f64.
 //! Restriction sums the children's residuals (the equations are integrated over cells, so
 //! the sum is the volume-weighted average Mertens asks for), prolongation copies the parent's
 //! correction to its children (Mertens' piecewise-constant choice), and coarse operators are
@@ -192,7 +192,9 @@ impl Multigrid {
         let mut data = vec![fine];
         while data.len() < 24 {
             let last = &data[data.len() - 1];
-            if last.level.dims.iter().any(|&n| n < 4) {
+            // Coarsen while every axis that has more than one cell has at least four.
+            let dims = last.level.dims;
+            if dims.iter().any(|&n| n > 1 && n < 4) || dims.iter().all(|&n| n == 1) {
                 break;
             }
             let next = coarsen(last, boundaries);

@@ -648,12 +648,11 @@ pub(crate) fn coarsen(fine: &LevelData, boundaries: &Boundaries) -> LevelData {
     for p in &fine.patches {
         // The patch's plane seen from the coarse centre: d_c = d + n·(x_fine − x_coarse).
         let at = [p.cell % nx, (p.cell / nx) % ny, p.cell / (nx * ny)];
-        let offset =
-            DVec3::from_array(std::array::from_fn(
-                |a| {
-                    if at[a] % 2 == 0 { -0.5 } else { 0.5 }
-                },
-            )) * lv.spacing;
+        let offset = DVec3::from_array(std::array::from_fn(|a| match (lv.dims[a], at[a] % 2) {
+            (1, _) => 0.0,
+            (_, 0) => -0.5,
+            _ => 0.5,
+        })) * lv.spacing;
         let extra = p.normal.dot(offset);
         let e = merged.entry((parent(p.cell), p.side)).or_insert([0.0; 6]);
         e[0] += p.area;
