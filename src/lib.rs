@@ -31,6 +31,7 @@ pub mod scene;
 use std::path::PathBuf;
 
 pub use lucent_core as core;
+pub use lucent_diffusion as diffusion;
 pub use lucent_grid as grid;
 pub use lucent_mc as mc;
 pub use lucent_optics as optics;
@@ -40,6 +41,9 @@ pub use lucent_render as render;
 pub fn registry() -> lucent_core::Registry {
     let mut registry = lucent_core::Registry::with_core_solvers();
     registry.register(lucent_mc::McSolver::ENTRY);
+    for entry in lucent_diffusion::DiffusionSolver::ENTRIES {
+        registry.register(entry);
+    }
     registry
 }
 

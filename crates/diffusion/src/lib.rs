@@ -66,6 +66,7 @@ mod level;
 mod multigrid;
 mod problem;
 mod solve;
+mod solver;
 
 pub use error::DiffusionError;
 pub use geometry::{CellGeometry, Discretisation, Patch, Side};
@@ -75,3 +76,4 @@ pub use multigrid::{
 };
 pub use problem::{Balance, Boundaries, Condition, DiffusionProblem, Sources};
 pub use solve::{DiffusionSolution, Method, solve};
+pub use solver::DiffusionSolver;
