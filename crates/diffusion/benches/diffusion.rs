@@ -16,7 +16,8 @@ fn sphere(n: usize) -> DiffusionProblem {
         grid,
         |p| p.length() - 10.0,
         Discretisation::EmbeddedBoundary,
-    );
+    )
+    .unwrap();
     let count = grid.voxel_count();
     DiffusionProblem::new(
         cells,

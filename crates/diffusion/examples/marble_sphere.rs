@@ -25,7 +25,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         grid,
         |p| (p - centre).length() - 10.0,
         Discretisation::EmbeddedBoundary,
-    );
+    )?;
     let geometry_seconds = started.elapsed().as_secs_f64();
     let d = 1.0 / (3.0 * (sigma_a + sigma_s));
     let count = grid.voxel_count();

@@ -11,8 +11,8 @@
 //! The boundary facet of a cut cell follows from the closed-surface identity
 //! Σ_f α_f A_f n_f + a_B n_B = 0: its area a_B and outward normal n_B are
 //! a_B n_B = Σ_axes (A_low − A_high) ê (note 002 §2.11), consistent with the apertures by
-//! construction, so the discrete divergence theorem holds cell by cell. Its distance from
-//! the cell's centroid is −s(centroid).
+//! construction, so the discrete divergence theorem holds cell by cell. Its signed distance
+//! from the cell's centre is −s(centre).
 //!
 //! [`Discretisation::Staircase`] is the finite-difference alternative: a cell is in or out
 //! by the sign of s at its centre, and the boundary is made of whole cell faces. Its surface
@@ -21,7 +21,11 @@
 
 use glam::DVec3;
 use lucent_grid::GridGeometry;
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use rayon::prelude::*;
+
+use crate::error::DiffusionError;
 
 /// How the boundary of the medium is discretised.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -69,13 +73,10 @@ pub struct CellGeometry {
     volume_fraction: Vec<f32>,
     apertures: [Vec<f32>; 3],
     patches: Vec<Patch>,
-    /// Centroid of each cut cell as an offset from its centre in cell units (empty when
-    /// every cell is whole).
-    centroids: Vec<[f32; 3]>,
     discretisation: Discretisation,
 }
 
-/// Midpoint samples per axis for the volume and first moment of a cut cell.
+/// Midpoint samples per axis for the volume of a cut cell.
 const VOLUME_SAMPLES: usize = 12;
 /// Midpoint samples along a face for its aperture.
 const FACE_SAMPLES: usize = 32;
@@ -94,24 +95,40 @@ impl CellGeometry {
                 vec![1.0; nx * ny * (nz + 1)],
             ],
             patches: Vec::new(),
-            centroids: Vec::new(),
             discretisation: Discretisation::EmbeddedBoundary,
         };
-        g.add_box_patches(&[]);
+        g.add_box_patches();
         g
     }
 
     /// The medium {s < 0} inside the box, discretised as asked. `sdf` is evaluated at cell
-    /// corners (embedded boundary) or centres (staircase) and at cut-cell centroids.
+    /// corners and at the centres of cut cells (embedded boundary) or at cell centres
+    /// (staircase). A NaN or infinite value anywhere is refused.
     pub fn from_sdf(
         geometry: GridGeometry,
         sdf: impl Fn(DVec3) -> f64 + Sync,
         discretisation: Discretisation,
-    ) -> Self {
-        match discretisation {
-            Discretisation::EmbeddedBoundary => Self::embedded(geometry, &sdf),
-            Discretisation::Staircase => Self::staircase(geometry, &sdf),
+    ) -> Result<Self, DiffusionError> {
+        let bad = AtomicBool::new(false);
+        let checked = |p: DVec3| {
+            let v = sdf(p);
+            if v.is_finite() {
+                v
+            } else {
+                bad.store(true, Ordering::Relaxed);
+                1.0
+            }
+        };
+        let cells = match discretisation {
+            Discretisation::EmbeddedBoundary => Self::embedded(geometry, &checked),
+            Discretisation::Staircase => Self::staircase(geometry, &checked),
+        };
+        if bad.load(Ordering::Relaxed) {
+            return Err(DiffusionError::Invalid(
+                "the signed distance function is not finite everywhere".into(),
+            ));
         }
+        Ok(cells)
     }
 
     fn embedded(geometry: GridGeometry, sdf: &(impl Fn(DVec3) -> f64 + Sync)) -> Self {
@@ -166,8 +183,8 @@ impl CellGeometry {
             })
             .collect();
 
-        // Volume fractions and centroids (offsets from the centre, in cell units).
-        let cells: Vec<(f32, Option<DVec3>)> = (0..geometry.voxel_count())
+        // Volume fractions; `true` marks a cut cell.
+        let cells: Vec<(f32, bool)> = (0..geometry.voxel_count())
             .into_par_iter()
             .map(|c| {
                 let [i, j, k] = geometry.coords(c);
@@ -183,12 +200,9 @@ impl CellGeometry {
                 ];
                 let inside = corners.iter().filter(|v| **v < 0.0).count();
                 match inside {
-                    8 => (1.0, None),
-                    0 => (0.0, None),
-                    _ => {
-                        let (kappa, centroid) = cell_fraction(corners);
-                        (kappa as f32, Some(centroid))
-                    }
+                    8 => (1.0, false),
+                    0 => (0.0, false),
+                    _ => (cell_fraction(corners) as f32, true),
                 }
             })
             .collect();
@@ -199,9 +213,7 @@ impl CellGeometry {
         // volume rounds to zero (otherwise flux leaks into inactive cells: note 002 §2.11).
         let areas = [h.y * h.z, h.x * h.z, h.x * h.y];
         let mut patches = Vec::new();
-        let mut centroids: Vec<Option<DVec3>> = vec![None; geometry.voxel_count()];
-        for (c, (_, centroid)) in cells.iter().enumerate() {
-            let Some(offset) = centroid else { continue };
+        for (c, _) in cells.iter().enumerate().filter(|(_, cell)| cell.1) {
             let [i, j, k] = geometry.coords(c);
             let faces = face_indices(geometry.dims(), i, j, k);
             let mut vector = DVec3::ZERO;
@@ -218,8 +230,6 @@ impl CellGeometry {
             if volume_fraction[c] <= 0.0 {
                 continue;
             }
-            let centre = geometry.cell_centre(i, j, k) + *offset * h;
-            centroids[c] = Some(centre);
             let area = vector.length();
             // A surface that only touches the cell leaves no facet worth a flux.
             if area <= 1e-9 * areas.iter().copied().fold(f64::INFINITY, f64::min) {
@@ -233,19 +243,14 @@ impl CellGeometry {
                 side: Side::Surface,
             });
         }
-        let offsets = cells
-            .iter()
-            .map(|(_, c)| c.map_or([0.0; 3], |c| c.as_vec3().to_array()))
-            .collect();
         let mut g = Self {
             geometry,
             volume_fraction,
             apertures,
             patches,
-            centroids: offsets,
             discretisation: Discretisation::EmbeddedBoundary,
         };
-        g.add_box_patches(&centroids);
+        g.add_box_patches();
         g
     }
 
@@ -313,16 +318,15 @@ impl CellGeometry {
             volume_fraction,
             apertures,
             patches,
-            centroids: Vec::new(),
             discretisation: Discretisation::Staircase,
         };
-        g.add_box_patches(&[]);
+        g.add_box_patches();
         g
     }
 
     /// Patches on the box's faces, one per open face of a cell in the medium; the distance is
-    /// from the cell's centroid (its centre for full cells) to the face's plane.
-    fn add_box_patches(&mut self, centroids: &[Option<DVec3>]) {
+    /// from the cell's centre (where its unknown lives) to the face's plane: h/2.
+    fn add_box_patches(&mut self) {
         let g = self.geometry;
         let [nx, ny, nz] = g.dims();
         let h = g.spacing();
@@ -338,11 +342,7 @@ impl CellGeometry {
                     let at = [i, j, k];
                     let n = [nx, ny, nz];
                     let faces = face_indices(n, i, j, k);
-                    let centre = centroids
-                        .get(c)
-                        .copied()
-                        .flatten()
-                        .unwrap_or_else(|| g.cell_centre(i, j, k));
+                    let centre = g.cell_centre(i, j, k);
                     for axis in 0..3 {
                         for (end, on_box) in [(0, at[axis] == 0), (1, at[axis] + 1 == n[axis])] {
                             if !on_box {
@@ -399,16 +399,6 @@ impl CellGeometry {
         &self.patches
     }
 
-    /// The centroid of the medium's part of a cell (its centre when whole).
-    pub fn centroid(&self, cell: usize) -> DVec3 {
-        let [i, j, k] = self.geometry.coords(cell);
-        let centre = self.geometry.cell_centre(i, j, k);
-        match self.centroids.get(cell) {
-            Some(offset) => centre + DVec3::from(offset.map(f64::from)) * self.geometry.spacing(),
-            None => centre,
-        }
-    }
-
     /// Whether a cell is an unknown.
     pub fn is_active(&self, cell: usize) -> bool {
         self.volume_fraction[cell] > 0.0
@@ -435,24 +425,23 @@ impl CellGeometry {
 
 /// Indices of a cell's low and high faces along each axis in the face arrays.
 pub(crate) fn face_indices(dims: [usize; 3], i: usize, j: usize, k: usize) -> [[usize; 2]; 3] {
-    let [nx, ny, nz] = dims;
-    let _ = nz;
+    let [nx, ny, _] = dims;
     let x = i + (nx + 1) * (j + ny * k);
     let y = i + nx * (j + (ny + 1) * k);
     let z = i + nx * (j + ny * k);
     [[x, x + 1], [y, y + nx], [z, z + nx * ny]]
 }
 
-/// Length and first moment of {w ∈ [0, 1] : a + b w < 0}.
+/// Length of {w ∈ [0, 1] : a + b w < 0}.
 #[inline]
-fn negative_interval(a: f64, b: f64) -> (f64, f64) {
+fn negative_interval(a: f64, b: f64) -> f64 {
     let (w0, w1) = if b == 0.0 {
         if a < 0.0 { (0.0, 1.0) } else { (0.0, 0.0) }
     } else {
         let root = (-a / b).clamp(0.0, 1.0);
         if b > 0.0 { (0.0, root) } else { (root, 1.0) }
     };
-    (w1 - w0, 0.5 * (w1 * w1 - w0 * w0))
+    w1 - w0
 }
 
 /// Fraction of the unit square where the bilinear interpolant of the corner values
@@ -470,18 +459,17 @@ fn face_fraction(v: [f64; 4]) -> f64 {
             let u = (s as f64 + 0.5) / m as f64;
             let a = v[0] + (v[1] - v[0]) * u;
             let top = v[2] + (v[3] - v[2]) * u;
-            negative_interval(a, top - a).0
+            negative_interval(a, top - a)
         })
         .sum::<f64>()
         / m as f64
 }
 
-/// Volume fraction and centroid offset (from the cell centre, in cell units) of the part of
-/// the unit cube where the trilinear interpolant of the corner values (x fastest) is
-/// negative.
-fn cell_fraction(v: [f64; 8]) -> (f64, DVec3) {
+/// Volume fraction of the part of the unit cube where the trilinear interpolant of the
+/// corner values (x fastest) is negative.
+fn cell_fraction(v: [f64; 8]) -> f64 {
     let m = VOLUME_SAMPLES;
-    let (mut volume, mut moment) = (0.0, DVec3::ZERO);
+    let mut volume = 0.0;
     for sv in 0..m {
         let y = (sv as f64 + 0.5) / m as f64;
         for su in 0..m {
@@ -493,16 +481,10 @@ fn cell_fraction(v: [f64; 8]) -> (f64, DVec3) {
             };
             let a = bilinear(&v[0..4]);
             let b = bilinear(&v[4..8]) - a;
-            let (length, first) = negative_interval(a, b);
-            volume += length;
-            moment += DVec3::new(x * length, y * length, first);
+            volume += negative_interval(a, b);
         }
     }
-    let cells = (m * m) as f64;
-    if volume <= 0.0 {
-        return (0.0, DVec3::ZERO);
-    }
-    (volume / cells, moment / volume - DVec3::splat(0.5))
+    volume / (m * m) as f64
 }
 
 #[cfg(test)]
@@ -517,6 +499,7 @@ mod tests {
             |p| (p - centre).length() - radius,
             Discretisation::EmbeddedBoundary,
         )
+        .unwrap()
     }
 
     #[test]
@@ -553,7 +536,8 @@ mod tests {
             geometry,
             |p| (p - DVec3::new(0.31, -0.17, 0.23)).length() - 10.0,
             Discretisation::Staircase,
-        );
+        )
+        .unwrap();
         let ratio = g.area(Side::Surface) / (4.0 * std::f64::consts::PI * 100.0);
         assert!((ratio - 1.5).abs() < 0.02, "ratio {ratio}");
     }
@@ -579,14 +563,30 @@ mod tests {
     }
 
     #[test]
-    fn a_plane_cuts_exactly() {
-        // A plane is reproduced exactly by trilinear interpolation: every volume fraction
-        // and aperture is exact up to the midpoint rule across the cut (a linear integrand
-        // there, so exact too), and the facets' normals are the plane's.
+    fn non_finite_distances_are_refused() {
+        let geometry =
+            GridGeometry::from_bounds([4; 3], DVec3::splat(0.0), DVec3::splat(4.0)).unwrap();
+        for discretisation in [Discretisation::EmbeddedBoundary, Discretisation::Staircase] {
+            let r = CellGeometry::from_sdf(
+                geometry,
+                |p| if p.x > 3.0 { f64::NAN } else { p.x - 2.0 },
+                discretisation,
+            );
+            assert!(matches!(r, Err(DiffusionError::Invalid(_))), "{discretisation:?}");
+        }
+    }
+
+    #[test]
+    fn a_plane_is_cut_to_quadrature_accuracy() {
+        // A plane is reproduced exactly by trilinear interpolation; what remains is the
+        // midpoint rule across the cut, which is exact for the volume here (the plane never
+        // leaves a cell through its top or bottom) but not for the apertures, whose error
+        // shows in the facets' normals.
         let geometry =
             GridGeometry::from_bounds([8; 3], DVec3::splat(0.0), DVec3::splat(8.0)).unwrap();
         let n = DVec3::new(0.3, 0.2, 1.0).normalize();
-        let g = CellGeometry::from_sdf(geometry, |p| n.dot(p) - 4.1, Discretisation::default());
+        let g = CellGeometry::from_sdf(geometry, |p| n.dot(p) - 4.1, Discretisation::default())
+            .unwrap();
         let volume = g.volume();
         // Exact volume of {n·x < 4.1} in the cube [0, 8]³: the plane stays inside the
         // box's vertical extent, so it is 64 × the mean depth (4.1 − n·(4,4,0)·..)/n_z.

@@ -19,7 +19,7 @@ pub(crate) fn conjugate_gradient(
     b: &[f64],
     x: &mut [f64],
     stopping: &Stopping,
-    precondition: impl Fn(&[f64], &mut [f64]),
+    mut precondition: impl FnMut(&[f64], &mut [f64]),
 ) -> Convergence {
     let started = std::time::Instant::now();
     let n = b.len();
@@ -72,15 +72,17 @@ pub(crate) fn conjugate_gradient(
     }
 }
 
-/// Jacobi iteration x ← x + ω D⁻¹(b − A x).
-pub(crate) fn jacobi(
+/// The loop every residual-driven iteration shares: compute r = b − A x, stop by the rules,
+/// else let `step(x, r)` improve x and go round. `started` is when the solve began (so a
+/// time budget counts any set-up done before the loop).
+pub(crate) fn residual_iteration(
     level: &Level,
     b: &[f64],
     x: &mut [f64],
-    omega: f64,
     stopping: &Stopping,
+    started: std::time::Instant,
+    mut step: impl FnMut(&mut [f64], &[f64]),
 ) -> Convergence {
-    let started = std::time::Instant::now();
     let b_norm = norm2(b).max(f64::MIN_POSITIVE);
     let mut r = vec![0.0; b.len()];
     level.residual(b, x, &mut r);
@@ -97,14 +99,28 @@ pub(crate) fn jacobi(
                 stop_reason,
             };
         }
-        x.par_iter_mut()
-            .zip(r.par_iter())
-            .zip(level.inv_diag.par_iter())
-            .for_each(|((x, r), d)| *x += omega * f64::from(*d) * r);
+        step(x, &r);
         level.residual(b, x, &mut r);
         norm = norm2(&r);
         residuals.push(norm / b_norm);
     }
+}
+
+/// Jacobi iteration x ← x + ω D⁻¹(b − A x).
+pub(crate) fn jacobi(
+    level: &Level,
+    b: &[f64],
+    x: &mut [f64],
+    omega: f64,
+    stopping: &Stopping,
+) -> Convergence {
+    let started = std::time::Instant::now();
+    residual_iteration(level, b, x, stopping, started, |x, r| {
+        x.par_iter_mut()
+            .zip(r.par_iter())
+            .zip(level.inv_diag.par_iter())
+            .for_each(|((x, r), d)| *x += omega * f64::from(*d) * r);
+    })
 }
 
 /// Red–black successive over-relaxation with factor ω (1: Gauss–Seidel).
@@ -116,27 +132,9 @@ pub(crate) fn sor(
     stopping: &Stopping,
 ) -> Convergence {
     let started = std::time::Instant::now();
-    let b_norm = norm2(b).max(f64::MIN_POSITIVE);
-    let mut r = vec![0.0; b.len()];
-    level.residual(b, x, &mut r);
-    let mut norm = norm2(&r);
-    let mut residuals = vec![norm / b_norm];
-    let initial = residuals[0];
-    loop {
-        let iteration = residuals.len() - 1;
-        if let Some(stop_reason) =
-            check_stop(stopping, iteration, norm / b_norm, norm, initial, started)
-        {
-            return Convergence {
-                residuals,
-                stop_reason,
-            };
-        }
-        level.sor(b, x, 0, omega);
-        level.residual(b, x, &mut r);
-        norm = norm2(&r);
-        residuals.push(norm / b_norm);
-    }
+    residual_iteration(level, b, x, stopping, started, |x, _| {
+        level.sor(b, x, 0, omega)
+    })
 }
 
 /// The optimal SOR factor 2/(1 + √(1 − ρ_J²)) for a Jacobi spectral radius ρ_J.

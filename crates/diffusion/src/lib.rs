@@ -46,7 +46,7 @@
 //!
 //! // A marble sphere of radius 5 mm with a unit point source at its centre.
 //! let grid = GridGeometry::from_bounds([24; 3], DVec3::splat(-6.0), DVec3::splat(6.0))?;
-//! let cells = CellGeometry::from_sdf(grid, |p| p.length() - 5.0, Discretisation::EmbeddedBoundary);
+//! let cells = CellGeometry::from_sdf(grid, |p| p.length() - 5.0, Discretisation::EmbeddedBoundary)?;
 //! let n = grid.voxel_count();
 //! let (sigma_a, sigma_s_reduced) = (0.0021f32, 2.19f32);
 //! let d = 1.0 / (3.0 * (sigma_a + sigma_s_reduced));

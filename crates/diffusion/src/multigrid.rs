@@ -14,7 +14,7 @@
 use lucent_core::StopReason;
 use rayon::prelude::*;
 
-use crate::level::{Level, norm2};
+use crate::level::Level;
 use crate::problem::{Boundaries, LevelData, coarsen};
 
 /// The shape of a multigrid cycle.
@@ -323,13 +323,19 @@ impl Multigrid {
         }
     }
 
+    /// Work vectors for [`Multigrid::precondition`], allocated once per solve.
+    pub(crate) fn preconditioner_work(&self) -> (Work, Work, Work) {
+        self.work()
+    }
+
     /// Applies one cycle from zero to `r`: z ≈ A⁻¹ r (the preconditioner of CG).
-    pub(crate) fn precondition(&self, r: &[f64], z: &mut [f64]) {
-        let (mut b, mut x, mut s) = self.work();
+    pub(crate) fn precondition(&self, work: &mut (Work, Work, Work), r: &[f64], z: &mut [f64]) {
+        let (b, x, s) = work;
         b[0].par_iter_mut()
             .zip(r.par_iter())
             .for_each(|(b, r)| *b = *r as f32);
-        self.cycle(0, self.settings.cycle, &mut b, &mut x, &mut s);
+        x[0].fill(0.0);
+        self.cycle(0, self.settings.cycle, b, x, s);
         z.par_iter_mut()
             .zip(x[0].par_iter())
             .for_each(|(z, x)| *z = f64::from(*x));
@@ -371,28 +377,13 @@ impl Multigrid {
         let started = std::time::Instant::now();
         let fine = self.fine();
         let (mut b, mut x, mut s) = self.work();
-        let b_norm = norm2(rhs).max(f64::MIN_POSITIVE);
         if self.settings.full_multigrid {
             self.full_multigrid(rhs, &mut b, &mut x, &mut s);
             phi.par_iter_mut()
                 .zip(x[0].par_iter())
                 .for_each(|(p, x)| *p = f64::from(*x));
         }
-        let mut r = vec![0.0f64; rhs.len()];
-        fine.residual(rhs, phi, &mut r);
-        let mut norm = norm2(&r);
-        let mut residuals = vec![norm / b_norm];
-        let initial = residuals[0];
-        loop {
-            let iteration = residuals.len() - 1;
-            if let Some(stop_reason) =
-                check_stop(stopping, iteration, norm / b_norm, norm, initial, started)
-            {
-                return Convergence {
-                    residuals,
-                    stop_reason,
-                };
-            }
+        crate::krylov::residual_iteration(fine, rhs, phi, stopping, started, |phi, r| {
             b[0].par_iter_mut()
                 .zip(r.par_iter())
                 .for_each(|(b, r)| *b = *r as f32);
@@ -401,9 +392,6 @@ impl Multigrid {
             phi.par_iter_mut()
                 .zip(x[0].par_iter())
                 .for_each(|(p, e)| *p += f64::from(*e));
-            fine.residual(rhs, phi, &mut r);
-            norm = norm2(&r);
-            residuals.push(norm / b_norm);
-        }
+        })
     }
 }

@@ -280,6 +280,32 @@ impl DiffusionProblem {
             .collect()
     }
 
+    /// Calls `f(cell, lower neighbour, axis, open area)` for every interior face with a
+    /// non-zero aperture.
+    fn open_faces(&self, mut f: impl FnMut(usize, usize, usize, f64)) {
+        let g = self.cells.geometry();
+        let dims = g.dims();
+        let [nx, ny, nz] = dims;
+        let h = g.spacing();
+        let strides = [1, nx, nx * ny];
+        let face_area = [h.y * h.z, h.x * h.z, h.x * h.y];
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let c = g.index(i, j, k);
+                    let at = [i, j, k];
+                    let faces = face_indices(dims, i, j, k);
+                    for axis in 0..3 {
+                        let alpha = f64::from(self.cells.apertures(axis)[faces[axis][0]]);
+                        if at[axis] > 0 && alpha > 0.0 {
+                            f(c, c - strides[axis], axis, alpha * face_area[axis]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
     fn first_moment_along(&self, sources: &Sources, p: &LevelPatch) -> f64 {
         if sources.first_moment.is_empty() {
             0.0
@@ -292,36 +318,13 @@ impl DiffusionProblem {
     pub(crate) fn fine_level(&self) -> LevelData {
         let g = *self.cells.geometry();
         let dims = g.dims();
-        let [nx, ny, nz] = dims;
         let h = g.spacing();
         let n = g.voxel_count();
-        let strides = [1, nx, nx * ny];
-        let face_area = [h.y * h.z, h.x * h.z, h.x * h.y];
         let mut couplings = [vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]];
-        for k in 0..nz {
-            for j in 0..ny {
-                for i in 0..nx {
-                    let c = g.index(i, j, k);
-                    let at = [i, j, k];
-                    let faces = face_indices(dims, i, j, k);
-                    for axis in 0..3 {
-                        if at[axis] == 0 {
-                            continue;
-                        }
-                        let alpha = f64::from(self.cells.apertures(axis)[faces[axis][0]]);
-                        if alpha <= 0.0 {
-                            continue;
-                        }
-                        let other = c - strides[axis];
-                        // The distance between the two unknowns along the axis: h between
-                        // whole cells, shorter or longer where a centroid has moved.
-                        let gap = h[axis];
-                        couplings[axis][c] =
-                            (alpha * face_area[axis] * self.face_diffusion(c, other) / gap) as f32;
-                    }
-                }
-            }
-        }
+        // Unknowns sit at cell centres, so every face flux spans exactly h.
+        self.open_faces(|c, other, axis, area| {
+            couplings[axis][c] = (area * self.face_diffusion(c, other) / h[axis]) as f32;
+        });
         let volume = g.cell_volume();
         let absorption: Vec<f32> = (0..n)
             .map(|c| {
@@ -338,9 +341,6 @@ impl DiffusionProblem {
     pub fn rhs(&self, sources: &Sources) -> Result<Vec<f64>, DiffusionError> {
         let g = *self.cells.geometry();
         let n = g.voxel_count();
-        let dims = g.dims();
-        let [nx, ny, nz] = dims;
-        let h = g.spacing();
         let volume = g.cell_volume();
         let kappa = self.cells.volume_fraction();
         for (name, len) in [
@@ -370,33 +370,13 @@ impl DiffusionProblem {
                 return Err(DiffusionError::Invalid("non-finite first moment".into()));
             }
             let q1 = |c: usize| DVec3::from(sources.first_moment[c].map(f64::from));
-            let strides = [1, nx, nx * ny];
-            let face_area = [h.y * h.z, h.x * h.z, h.x * h.y];
-            for k in 0..nz {
-                for j in 0..ny {
-                    for i in 0..nx {
-                        let c = g.index(i, j, k);
-                        let at = [i, j, k];
-                        let faces = face_indices(dims, i, j, k);
-                        for axis in 0..3 {
-                            if at[axis] == 0 {
-                                continue;
-                            }
-                            let alpha = f64::from(self.cells.apertures(axis)[faces[axis][0]]);
-                            if alpha <= 0.0 {
-                                continue;
-                            }
-                            let other = c - strides[axis];
-                            // Flux 3 D_f Q₁·ê through the face from `other` into `c`.
-                            let q = 0.5 * (q1(c)[axis] + q1(other)[axis]);
-                            let flux =
-                                3.0 * self.face_diffusion(c, other) * alpha * face_area[axis] * q;
-                            b[other] -= flux;
-                            b[c] += flux;
-                        }
-                    }
-                }
-            }
+            self.open_faces(|c, other, axis, area| {
+                // Flux 3 D_f Q₁·ê through the face from `other` into `c`.
+                let q = 0.5 * (q1(c)[axis] + q1(other)[axis]);
+                let flux = 3.0 * self.face_diffusion(c, other) * area * q;
+                b[other] -= flux;
+                b[c] += flux;
+            });
         }
         for p in self.fine_patches() {
             let q = self.first_moment_along(sources, &p);
@@ -577,7 +557,6 @@ pub(crate) fn finish_level(
             }
         }
     }
-    let _ = nz;
     let diag32: Vec<f32> = diag.iter().map(|&d| d as f32).collect();
     let inv_diag = diag
         .iter()

@@ -73,8 +73,9 @@ pub fn solve(
             let convergence = if matches!(method, Method::Multigrid(_)) {
                 mg.solve(&rhs, &mut phi, stopping)
             } else {
+                let mut work = mg.preconditioner_work();
                 krylov::conjugate_gradient(mg.fine(), &rhs, &mut phi, stopping, |r, z| {
-                    mg.precondition(r, z)
+                    mg.precondition(&mut work, r, z)
                 })
             };
             (

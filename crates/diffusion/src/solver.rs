@@ -284,7 +284,8 @@ impl Solver for DiffusionSolver {
                 geometry,
                 |p| f64::from(grid.sample_trilinear(p)),
                 self.discretisation,
-            ),
+            )
+            .map_err(|e| invalid("embedded", e.to_string()))?,
             None => CellGeometry::full_box(geometry),
         };
         let inside = |p: DVec3| sdf.is_none_or(|g| g.sample_trilinear(p) < 0.0);

@@ -44,7 +44,8 @@ fn sphere(n: usize, radius: f64, m: &DiffusionMedium) -> Sphere {
         grid,
         |p| (p - centre).length() - radius,
         Discretisation::EmbeddedBoundary,
-    );
+    )
+    .unwrap();
     let cells_n = grid.voxel_count();
     let c = m.coefficients();
     let problem = DiffusionProblem::new(
@@ -217,7 +218,8 @@ fn tilted_half_space_with_a_plane_source() {
     let mid = DVec3::new(16.0, 16.0, 10.0);
     let c = n.dot(mid);
     let depth = |p: DVec3| c - n.dot(p);
-    let cells = CellGeometry::from_sdf(grid, |p| -depth(p), Discretisation::EmbeddedBoundary);
+    let cells =
+        CellGeometry::from_sdf(grid, |p| -depth(p), Discretisation::EmbeddedBoundary).unwrap();
     let cells_n = grid.voxel_count();
     let mut boundaries = Boundaries::uniform(Condition::Neumann { flux: 0.0 });
     boundaries.surface = Condition::Robin {
@@ -317,7 +319,8 @@ fn disc_boundary_error(n: usize, discretisation: Discretisation) -> (f64, f64) {
         grid,
         |p| (DVec2::new(p.x, p.y) - centre).length() - radius,
         discretisation,
-    );
+    )
+    .unwrap();
     let count = grid.voxel_count();
     let mut boundaries = Boundaries::uniform(Condition::Robin {
         a: m.boundary_factor(),

@@ -24,7 +24,8 @@ fn sphere_rates(
         grid,
         |p| (p - centre).length() - 10.0,
         Discretisation::EmbeddedBoundary,
-    );
+    )
+    .unwrap();
     let at = |c: usize| {
         let [i, j, k] = grid.coords(c);
         grid.cell_centre(i, j, k)
@@ -196,7 +197,8 @@ fn baselines_reach_the_multigrid_solution() {
     // multigrid to 1e-6 relative (all solved to 1e-10); MG-CG must take fewer iterations
     // than CG, and CG fewer than SOR.
     let grid = GridGeometry::from_bounds([16; 3], DVec3::splat(-5.5), DVec3::splat(5.5)).unwrap();
-    let cells = CellGeometry::from_sdf(grid, |p| p.length() - 5.0, Discretisation::default());
+    let cells =
+        CellGeometry::from_sdf(grid, |p| p.length() - 5.0, Discretisation::default()).unwrap();
     let count = grid.voxel_count();
     let problem = DiffusionProblem::new(
         cells,
