@@ -127,10 +127,10 @@ impl Sphere {
 #[test]
 fn t7_spheres_at_64_cubed() {
     // Note 002 T7: marble red R = 10 and 5, skin1 red R = 5, Groenhuis A (η = 1.3). The
-    // issue asks ≤ 2% at R/4, R/2 and R at 64³; measured at most 0.8% (cells within h/2 of
-    // R/4 and R/2, the worst cell) and 0.1% (area-weighted surface fluence; fewer than 1% of
-    // the facets' area, tiny cut cells, are off by more than 5%). Energy balance to 1e-6 and
-    // the escaped fraction within 0.3% of the closed form.
+    // issue asks ≤ 2% at R/4, R/2 and R at 64³; measured at most 0.97% (the worst cell
+    // within h/2 of R/4 or R/2, marble R = 10 at R/4) and 0.05% (area-weighted surface
+    // fluence; the facets' area off by more than 5% is 5e-7 of the total). Energy balance to
+    // 1e-6, and the escaped fraction within 0.1% of T7's (measured 0.02% at worst).
     let marble = medium(0.0021, 2.19);
     let skin1 = MeasuredMaterial::by_name("skin1").unwrap();
     let skin1 = DiffusionMedium::with_boundary(
@@ -174,7 +174,7 @@ fn t7_spheres_at_64_cubed() {
         let escaped = b.escaped_surface + b.escaped_box;
         assert!(b.escaped_box == 0.0);
         assert!(
-            (escaped / printed[3] - 1.0).abs() < 3e-3,
+            (escaped / printed[3] - 1.0).abs() < 1e-3,
             "escaped {escaped}, T7 {}",
             printed[3]
         );
@@ -183,7 +183,7 @@ fn t7_spheres_at_64_cubed() {
 
 #[test]
 fn sphere_converges_at_second_order() {
-    // Relative L2 error over R/4 ≤ r ≤ R, marble R = 10: measured 5.6e-3, 1.8e-3, 4.6e-4
+    // Relative L2 error over R/4 ≤ r ≤ R, marble R = 10: measured 5.8e-3, 1.9e-3, 4.6e-4
     // at 32³, 64³, 128³ (orders 1.6 and 2.0; 1.8 overall). The issue asks ≥ 1.7 from 32³
     // to 128³; each step must at least be 1.5.
     let m = medium(0.0021, 2.19);

@@ -66,7 +66,8 @@ const D_MARBLE: f32 = 0.152_061;
 #[test]
 fn v22_reduces_the_residual_tenfold_per_cycle_at_every_resolution() {
     // The issue: ≤ 0.1 per V(2,2) cycle and a cycle count to 1e-8 that does not grow from
-    // 32³ to 256³. Measured: 0.073–0.093 per cycle, 8 cycles at every size.
+    // 32³ to 256³. Measured: 0.041–0.098 per cycle (the factor creeps up over the eight
+    // cycles; the last is 0.090, 0.094, 0.096, 0.098 at 32³ … 256³), 8 cycles at every size.
     let mut counts = Vec::new();
     for n in [32, 64, 128, 256] {
         let c = sphere_rates(
@@ -89,6 +90,7 @@ fn v22_reduces_the_residual_tenfold_per_cycle_at_every_resolution() {
 #[test]
 fn cycle_count_does_not_depend_on_absorption() {
     // σ_a from 1e-5 (almost pure scattering: the slowest modes are nearly free) to 0.1.
+    // Measured at 64³: 8, 8 and 7 cycles, mean factors 0.080, 0.080, 0.071.
     let counts: Vec<usize> = [1e-5f32, 1e-3, 0.1]
         .iter()
         .map(|&sa| {
@@ -123,10 +125,11 @@ fn blocks(contrast: f32, seed: u64) -> impl Fn(DVec3) -> f32 {
 #[test]
 fn jumps_of_a_thousand_converge_under_multigrid_preconditioned_cg() {
     // The issue asks ≤ 0.3 per V(2,2) cycle with jumps of 10³: NOT MET. Plain V-cycles
-    // with piecewise-constant prolongation stall at 0.92 per cycle once the 2 mm blocks
-    // are a coarse cell wide (the correction is copied across the jumps); as the
-    // preconditioner of CG the same cycle converges, at a mean 0.45 per iteration
-    // (measured). Operator-dependent prolongation is what would fix it.
+    // with piecewise-constant prolongation fall to 0.92 per cycle once the 2 mm blocks are
+    // a coarse cell wide (mean 0.80 over the 60 allowed cycles, which end at 1.6e-6): the
+    // correction is copied across the jumps. As the preconditioner of CG the same cycle
+    // converges to 1e-8 in 21 iterations, a mean 0.40 per iteration (measured). Operator-
+    // dependent prolongation is what would fix it.
     let plain = sphere_rates(
         64,
         blocks(1e3, 7),
@@ -147,13 +150,14 @@ fn jumps_of_a_thousand_converge_under_multigrid_preconditioned_cg() {
         true,
     );
     assert!(c.stop_reason.is_converged(), "{:?}", c.stop_reason);
-    assert!(c.mean_factor() <= 0.6, "factors {:?}", c.factors());
+    assert!(c.mean_factor() <= 0.5, "factors {:?}", c.factors());
 }
 
 #[test]
 fn every_cycle_and_smoother_converges() {
     // W and F cycles reduce at least as much per cycle as V; weighted Jacobi smooths worse
-    // than red–black Gauss–Seidel but still converges at a bounded rate.
+    // than red–black Gauss–Seidel but still converges at a bounded rate (measured at 32³:
+    // V 0.081, Jacobi-smoothed 0.29 per cycle).
     let v = sphere_rates(
         32,
         |_| D_MARBLE,
