@@ -18,15 +18,18 @@
 //!   lights, medium, spp and depth; prints the mean difference, per-pixel z-scores and both
 //!   renderers' paths per second. Not part of the default test run.
 //!
-//! Later issues add the pyamg and scipy comparisons here.
+//! - `bench-diffusion [N...]`: lucent-diffusion's multigrid on the marble sphere at N³
+//!   (64, 128, 256): time to 1e-8, one smoothing sweep's GB/s beside the copy bandwidth
+//!   measured in the same run, and pyamg and scipy CG on the same exported matrix.
 
 // This binary reports to the terminal.
 #![allow(clippy::print_stdout)]
 
+mod bench_diffusion;
+
 use std::process::{Command, ExitCode};
 
-const USAGE: &str =
-    "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP]>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -42,6 +45,23 @@ fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("xtask: mitsuba: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
+    if command.as_deref() == Some("bench-diffusion") {
+        let mut sizes: Vec<usize> = std::env::args()
+            .skip(2)
+            .filter_map(|s| s.parse().ok())
+            .collect();
+        if sizes.is_empty() {
+            sizes = vec![64, 128, 256];
+        }
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        return match bench_diffusion::run(&sizes, &root) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("xtask: bench-diffusion: {e}");
                 ExitCode::FAILURE
             }
         };

@@ -25,13 +25,12 @@ pub(crate) fn conjugate_gradient(
     let n = b.len();
     let b_norm = norm2(b).max(f64::MIN_POSITIVE);
     let mut r = vec![0.0; n];
-    level.residual(b, x, &mut r);
+    let mut norm = level.residual(b, x, &mut r);
     let mut z = vec![0.0; n];
     precondition(&r, &mut z);
     let mut p = z.clone();
     let mut rz = dot(&r, &z);
     let mut ap = vec![0.0; n];
-    let mut norm = norm2(&r);
     let mut residuals = vec![norm / b_norm];
     let initial = residuals[0];
     loop {
@@ -85,8 +84,7 @@ pub(crate) fn residual_iteration(
 ) -> Convergence {
     let b_norm = norm2(b).max(f64::MIN_POSITIVE);
     let mut r = vec![0.0; b.len()];
-    level.residual(b, x, &mut r);
-    let mut norm = norm2(&r);
+    let mut norm = level.residual(b, x, &mut r);
     let mut residuals = vec![norm / b_norm];
     let initial = residuals[0];
     loop {
@@ -100,8 +98,7 @@ pub(crate) fn residual_iteration(
             };
         }
         step(x, &r);
-        level.residual(b, x, &mut r);
-        norm = norm2(&r);
+        norm = level.residual(b, x, &mut r);
         residuals.push(norm / b_norm);
     }
 }

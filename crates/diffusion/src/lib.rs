@@ -74,6 +74,6 @@ pub use krylov::optimal_sor_factor;
 pub use multigrid::{
     Convergence, Cycle, Multigrid, MultigridSettings, Prolongation, Smoother, Stopping,
 };
-pub use problem::{Balance, Boundaries, Condition, DiffusionProblem, Sources};
+pub use problem::{AssembledSystem, Balance, Boundaries, Condition, DiffusionProblem, Sources};
 pub use solve::{DiffusionSolution, Method, solve};
 pub use solver::DiffusionSolver;

@@ -154,6 +154,17 @@ pub(crate) struct LevelData {
     pub(crate) patches: Vec<LevelPatch>,
 }
 
+/// [`DiffusionProblem::assemble`]'s result: A φ = b over the cells of the medium.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AssembledSystem {
+    /// The operator, compressed sparse rows.
+    pub matrix: sprs::CsMat<f64>,
+    /// The right-hand side.
+    pub rhs: Vec<f64>,
+    /// The grid cell of each unknown.
+    pub cells: Vec<usize>,
+}
+
 /// A steady diffusion problem on a cut-cell grid.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DiffusionProblem {
@@ -334,6 +345,49 @@ impl DiffusionProblem {
             .collect();
         let patches = self.fine_patches();
         finish_level(dims, h, couplings, absorption, patches, &self.boundaries)
+    }
+
+    /// The operator as a sparse matrix over the cells of the medium, with the right-hand
+    /// side for `sources`: the system the matrix-free solvers solve, for other solvers
+    /// (scipy, pyamg) to solve too. Symmetric positive definite; entries in the integrated
+    /// form (length units of D·h). `cells[u]` is the grid cell of unknown `u`.
+    pub fn assemble(&self, sources: &Sources) -> Result<AssembledSystem, DiffusionError> {
+        let level = self.fine_level().level;
+        let rhs = self.rhs(sources)?;
+        let n = level.len();
+        let cells: Vec<usize> = (0..n).filter(|&c| level.inv_diag[c] != 0.0).collect();
+        let mut unknown = vec![usize::MAX; n];
+        for (u, &c) in cells.iter().enumerate() {
+            unknown[c] = u;
+        }
+        let [nx, ny, _] = level.dims;
+        let strides = [1, nx, nx * ny];
+        let mut triplets = sprs::TriMat::with_capacity((cells.len(), cells.len()), 7 * cells.len());
+        for (u, &c) in cells.iter().enumerate() {
+            let at = [c % nx, (c / nx) % ny, c / (nx * ny)];
+            let mut diagonal = f64::from(level.extra[c]);
+            for axis in 0..3 {
+                let faces = [
+                    (at[axis] > 0).then(|| (level.couplings[axis][c], c - strides[axis])),
+                    (at[axis] + 1 < level.dims[axis]).then(|| {
+                        let other = c + strides[axis];
+                        (level.couplings[axis][other], other)
+                    }),
+                ];
+                for (coupling, other) in faces.into_iter().flatten() {
+                    if coupling > 0.0 && unknown[other] != usize::MAX {
+                        diagonal += f64::from(coupling);
+                        triplets.add_triplet(u, unknown[other], -f64::from(coupling));
+                    }
+                }
+            }
+            triplets.add_triplet(u, u, diagonal);
+        }
+        Ok(AssembledSystem {
+            matrix: triplets.to_csr(),
+            rhs: cells.iter().map(|&c| rhs[c]).collect(),
+            cells,
+        })
     }
 
     /// The right-hand side of the integrated equations for `sources`, with the boundary

@@ -130,7 +130,7 @@ pub fn solve(
     })
 }
 
-fn check_sweeps(settings: &MultigridSettings) -> Result<(), DiffusionError> {
+pub(crate) fn check_sweeps(settings: &MultigridSettings) -> Result<(), DiffusionError> {
     if settings.pre_sweeps + settings.post_sweeps == 0 {
         return Err(DiffusionError::Invalid(
             "multigrid needs at least one smoothing sweep".into(),

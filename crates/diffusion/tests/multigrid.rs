@@ -162,8 +162,13 @@ fn jumps_of_a_thousand_converge_under_multigrid_preconditioned_cg() {
     // prolongation weights from flux continuity (0.55–0.79 plain, no better under CG),
     // series–parallel coarse couplings (softer than Galerkin: the V-cycle diverges), an
     // energy-minimising step on each coarse correction (0.34–0.67).
-    let cases: [(&str, Box<dyn Fn(DVec3) -> f32>, f64); 3] = [
-        ("diffusive ball", Box::new(ball(D_MARBLE, D_MARBLE / 1e3)), 0.1),
+    type Coefficient = Box<dyn Fn(DVec3) -> f32>;
+    let cases: [(&str, Coefficient, f64); 3] = [
+        (
+            "diffusive ball",
+            Box::new(ball(D_MARBLE, D_MARBLE / 1e3)),
+            0.1,
+        ),
         ("opaque ball", Box::new(ball(D_MARBLE / 1e3, D_MARBLE)), 0.1),
         ("tilted layers", Box::new(tilted_layers(1e3)), 0.3),
     ];
@@ -325,4 +330,58 @@ proptest! {
             MultigridSettings::default(), true);
         prop_assert!(c.stop_reason.is_converged(), "{:?}", c.factors());
     }
+}
+
+#[test]
+fn the_assembled_matrix_is_the_operator_the_solvers_solve() {
+    // The exported system (for scipy and pyamg) must be the matrix-free one: lucent's
+    // solution to 1e-10 leaves a residual of the same size in the assembled matrix, and
+    // the matrix is exactly symmetric with a positive diagonal.
+    let grid = GridGeometry::from_bounds([20; 3], DVec3::splat(-6.0), DVec3::splat(6.0)).unwrap();
+    let cells = CellGeometry::from_sdf(
+        grid,
+        |p| (p - DVec3::new(0.2, -0.1, 0.3)).length() - 5.0,
+        Discretisation::EmbeddedBoundary,
+    )
+    .unwrap();
+    let n = grid.voxel_count();
+    let d: Vec<f32> = (0..n).map(|c| 0.1 + 0.05 * (c % 7) as f32).collect();
+    let problem = DiffusionProblem::new(
+        cells,
+        d,
+        vec![0.01; n],
+        Boundaries::uniform(Condition::Robin { a: 2.341 }),
+    )
+    .unwrap();
+    let sources = Sources {
+        points: vec![(DVec3::new(0.5, 0.3, -0.2), 1.0)],
+        ..Sources::default()
+    };
+    let stopping = Stopping {
+        relative_tolerance: 1e-10,
+        ..Stopping::default()
+    };
+    let solution = solve(&problem, &sources, Method::default(), &stopping).unwrap();
+    let system = problem.assemble(&sources).unwrap();
+    let a = &system.matrix;
+    assert_eq!(a.rows(), system.cells.len());
+    let phi: Vec<f64> = system.cells.iter().map(|&c| solution.fluence[c]).collect();
+    let mut residual = 0.0f64;
+    for (row, vector) in a.outer_iterator().enumerate() {
+        let ax: f64 = vector.iter().map(|(col, v)| v * phi[col]).sum();
+        residual += (system.rhs[row] - ax).powi(2);
+        assert!(
+            a.get(row, row).is_some_and(|&v| v > 0.0),
+            "diagonal of {row}"
+        );
+        for (col, v) in vector.iter() {
+            assert_eq!(a.get(col, row), Some(v), "asymmetric at ({row}, {col})");
+        }
+    }
+    let b_norm = system.rhs.iter().map(|v| v * v).sum::<f64>().sqrt();
+    assert!(
+        residual.sqrt() / b_norm < 1e-9,
+        "{}",
+        residual.sqrt() / b_norm
+    );
 }

@@ -1,0 +1,223 @@
+//! `cargo xtask bench-diffusion [N...]`: lucent-diffusion's multigrid on the marble sphere
+//! (note 002 T7: R = 10 mm, point source, Robin A = 2.341, embedded boundary) at N³ (64,
+//! 128 and 256 by default), against the machine's copy bandwidth measured in the same run,
+//! and side by side with pyamg (Ruge–Stüben AMG + CG) and scipy CG on the same matrix,
+//! exported as NumPy arrays, when `python3 -c "import pyamg, scipy"` works.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::DVec3;
+use lucent::diffusion::{
+    Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Method, Multigrid,
+    MultigridSettings, Sources, Stopping, solve,
+};
+use lucent_grid::GridGeometry;
+use rayon::prelude::*;
+
+/// The benchmark sphere at n³.
+fn sphere(n: usize) -> Result<(DiffusionProblem, Sources), String> {
+    let err = |e: &dyn std::fmt::Display| e.to_string();
+    let grid = GridGeometry::from_bounds([n; 3], DVec3::splat(-10.5), DVec3::splat(10.5))
+        .map_err(|e| err(&e))?;
+    let centre = DVec3::new(0.173, -0.091, 0.057);
+    let cells = CellGeometry::from_sdf(
+        grid,
+        |p| (p - centre).length() - 10.0,
+        Discretisation::EmbeddedBoundary,
+    )
+    .map_err(|e| err(&e))?;
+    let (sigma_a, sigma_s) = (0.0021f32, 2.19f32);
+    let d = 1.0 / (3.0 * (sigma_a + sigma_s));
+    let count = grid.voxel_count();
+    let problem = DiffusionProblem::new(
+        cells,
+        vec![d; count],
+        vec![sigma_a; count],
+        Boundaries::uniform(Condition::Robin { a: 2.341 }),
+    )
+    .map_err(|e| err(&e))?;
+    let sources = Sources {
+        points: vec![(centre, 1.0)],
+        ..Sources::default()
+    };
+    Ok((problem, sources))
+}
+
+/// Best of `runs` wall times of `f`, seconds.
+fn best_of(runs: usize, mut f: impl FnMut()) -> f64 {
+    (0..runs)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Copy bandwidth (bytes read + written per second) of a 256 MiB f32 buffer: single
+/// thread and over rayon's pool.
+fn copy_bandwidth() -> (f64, f64) {
+    let n = 64 << 20;
+    let src: Vec<f32> = (0..n).map(|i| i as f32).collect();
+    let mut dst = vec![0.0f32; n];
+    let bytes = 2.0 * 4.0 * n as f64;
+    let serial = best_of(5, || dst.copy_from_slice(&src));
+    let parallel = best_of(5, || {
+        dst.par_chunks_mut(1 << 16)
+            .zip(src.par_chunks(1 << 16))
+            .for_each(|(d, s)| d.copy_from_slice(s));
+    });
+    std::hint::black_box(&dst);
+    (bytes / serial, bytes / parallel)
+}
+
+/// Writes a 1-D little-endian NumPy array.
+fn write_npy(path: &Path, descr: &str, bytes: &[u8], len: usize) -> Result<(), String> {
+    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({len},), }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut out = b"\x93NUMPY\x01\x00".to_vec();
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    out.extend_from_slice(bytes);
+    std::fs::write(path, out).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+fn f64_bytes(v: impl IntoIterator<Item = f64>) -> Vec<u8> {
+    v.into_iter().flat_map(f64::to_le_bytes).collect()
+}
+
+fn i64_bytes(v: impl IntoIterator<Item = usize>) -> Vec<u8> {
+    v.into_iter()
+        .flat_map(|x| (x as i64).to_le_bytes())
+        .collect()
+}
+
+/// Exports the system and lucent's solution for the Python side.
+fn export(
+    dir: &Path,
+    problem: &DiffusionProblem,
+    sources: &Sources,
+    fluence: &[f64],
+) -> Result<(), String> {
+    std::fs::create_dir_all(dir).map_err(|e| e.to_string())?;
+    let system = problem.assemble(sources).map_err(|e| e.to_string())?;
+    let m = &system.matrix;
+    let rows = system.rhs.len();
+    let indptr: Vec<usize> = m.indptr().raw_storage().to_vec();
+    write_npy(&dir.join("indptr.npy"), "<i8", &i64_bytes(indptr), rows + 1)?;
+    write_npy(
+        &dir.join("indices.npy"),
+        "<i8",
+        &i64_bytes(m.indices().iter().copied()),
+        m.nnz(),
+    )?;
+    write_npy(
+        &dir.join("data.npy"),
+        "<f8",
+        &f64_bytes(m.data().iter().copied()),
+        m.nnz(),
+    )?;
+    write_npy(
+        &dir.join("rhs.npy"),
+        "<f8",
+        &f64_bytes(system.rhs.iter().copied()),
+        rows,
+    )?;
+    let ours = system.cells.iter().map(|&c| fluence[c]);
+    write_npy(&dir.join("lucent.npy"), "<f8", &f64_bytes(ours), rows)
+}
+
+/// Runs the benchmark.
+pub(crate) fn run(sizes: &[usize], root: &Path) -> Result<(), String> {
+    println!("# cargo xtask bench-diffusion");
+    println!();
+    let threads = rayon::current_num_threads();
+    println!(
+        "{threads} threads; copy: a 256 MiB f32 copy on all threads (bytes read + written), \
+         best of 5, measured just before each row's sweep; sweep: {} bytes per cell, best of 10",
+        Multigrid::SWEEP_BYTES_PER_CELL
+    );
+    println!();
+    println!(
+        "| n³ | levels | cycles | final residual | setup s | solve s (best of 3) | sweep ms | sweep GB/s | copy GB/s (1 thread) | sweep / copy |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    let python = Command::new("python3")
+        .args(["-c", "import pyamg, scipy"])
+        .status()
+        .is_ok_and(|s| s.success());
+    let mut exports: Vec<(usize, PathBuf)> = Vec::new();
+    for &n in sizes {
+        let (problem, sources) = sphere(n)?;
+        let stopping = Stopping::default();
+        let method = Method::Multigrid(MultigridSettings::default());
+        let mut best: Option<lucent::diffusion::DiffusionSolution> = None;
+        for _ in 0..3 {
+            let s = solve(&problem, &sources, method, &stopping).map_err(|e| e.to_string())?;
+            if best
+                .as_ref()
+                .is_none_or(|b| s.solve_seconds < b.solve_seconds)
+            {
+                best = Some(s);
+            }
+        }
+        let best = best.ok_or("no run")?;
+        let mg =
+            Multigrid::build(&problem, MultigridSettings::default()).map_err(|e| e.to_string())?;
+        let cells = mg.fine_cells();
+        let b: Vec<f32> = (0..cells).map(|i| (i % 7) as f32 * 1e-3).collect();
+        let mut x = vec![0.0f32; cells];
+        let (serial, parallel) = copy_bandwidth();
+        let sweep = best_of(10, || mg.smoothing_sweep(&b, &mut x).unwrap_or(()));
+        let gbs = (Multigrid::SWEEP_BYTES_PER_CELL * cells as u64) as f64 / sweep / 1e9;
+        println!(
+            "| {n}³ | {} | {} | {:.1e} | {:.3} | {:.3} | {:.2} | {:.1} | {:.1} ({:.1}) | {:.0}% |",
+            best.levels,
+            best.convergence.iterations(),
+            best.convergence
+                .residuals
+                .last()
+                .copied()
+                .unwrap_or(f64::NAN),
+            best.setup_seconds,
+            best.solve_seconds,
+            sweep * 1e3,
+            gbs,
+            parallel / 1e9,
+            serial / 1e9,
+            100.0 * gbs * 1e9 / parallel,
+        );
+        if python && n <= 128 {
+            let dir = root.join(format!("target/bench-diffusion/sphere{n}"));
+            export(&dir, &problem, &sources, &best.fluence)?;
+            exports.push((n, dir));
+        }
+    }
+    println!();
+    if !python {
+        println!("pyamg/scipy: not run (`pip install pyamg scipy` to compare)");
+        return Ok(());
+    }
+    let script = root.join("xtask/src/pyamg_bench.py");
+    for (n, dir) in exports {
+        let out = Command::new("python3")
+            .arg(&script)
+            .arg(&dir)
+            .output()
+            .map_err(|e| e.to_string())?;
+        if !out.status.success() {
+            return Err(format!(
+                "pyamg_bench.py at {n}³: {}",
+                String::from_utf8_lossy(&out.stderr)
+            ));
+        }
+        print!("{n}³: {}", String::from_utf8_lossy(&out.stdout));
+    }
+    Ok(())
+}
+
+use std::process::Command;
