@@ -5,6 +5,8 @@
 //!   that it is the same medium, and the fine solution averaged back onto the scene's cells,
 //!   so that cell averages are compared with cell averages) and the sky quadrature (8 and
 //!   32 directions);
+//! - `diffusion-*`: the stopping tolerance, and 1× and 2× cells for the multigrid methods
+//!   (against the total fluence: the curves flatten at the diffusion model's error);
 //! - `mc`: particles per batch (8 batches).
 //!
 //! `cargo xtask pareto` writes `docs/pareto/<scene>.svg` and `.csv`.
@@ -112,6 +114,50 @@ pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Vec<Point>, Err
             });
         }
     }
+    // Diffusion: every iterative method on the same operator, over the stopping tolerance
+    // and (for the multigrid ones) the grid resolution. Its error against the total
+    // fluence levels off at the diffusion model's own error.
+    let diffusion_runs: [(&str, &[usize], &[f64]); 5] = [
+        ("diffusion-mg", &[1, 2], &[1e-2, 1e-4, 1e-8]),
+        ("diffusion-mgcg", &[1, 2], &[1e-4, 1e-8]),
+        ("diffusion-cg", &[1], &[1e-2, 1e-4, 1e-8]),
+        ("diffusion-sor", &[1], &[1e-2, 1e-4]),
+        ("diffusion-jacobi", &[1], &[1e-2]),
+    ];
+    for (name, factors, tolerances) in diffusion_runs {
+        let solver = registry.build(name, &Params::default())?;
+        if solver
+            .capabilities()
+            .check(name, &scene.built.problem)
+            .is_err()
+        {
+            continue;
+        }
+        for &factor in factors {
+            let problem = refined(scene, factor)?;
+            for &relative_tolerance in tolerances {
+                let options = SolveOptions {
+                    relative_tolerance,
+                    time_budget: Some(std::time::Duration::from_secs(60)),
+                    ..SolveOptions::default()
+                };
+                let start = Instant::now();
+                let solution = solver.solve(&problem, &options)?;
+                let seconds = start.elapsed().as_secs_f64();
+                let averaged: Vec<Grid> = solution
+                    .fluence
+                    .iter()
+                    .map(|g| if factor == 2 { restrict(g) } else { g.clone() })
+                    .collect();
+                points.push(Point {
+                    solver: name.into(),
+                    setting: format!("{factor}x cells, tolerance {relative_tolerance:.0e}"),
+                    seconds,
+                    error: compare(&averaged, &total).relative_l2,
+                });
+            }
+        }
+    }
     for particles in [1000i64, 4000, 16000, 64000] {
         let solver = registry.build("mc", &params(&[("particles", particles), ("batches", 8)]))?;
         if solver
@@ -202,7 +248,9 @@ pub fn svg(title: &str, points: &[Point]) -> String {
         (top + h - bottom) / 2.0,
         (top + h - bottom) / 2.0
     ));
-    let colours = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e"];
+    let colours = [
+        "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf",
+    ];
     let mut solvers: Vec<&str> = points.iter().map(|p| p.solver.as_str()).collect();
     solvers.dedup();
     for (i, solver) in solvers.iter().enumerate() {

@@ -1,12 +1,13 @@
 //! Criterion benchmarks of lucent-diffusion: the marble sphere (R = 10 mm, embedded
-//! boundary, Robin) solved to 1e-8 by multigrid at 32³ and 64³. Larger sizes:
-//! `cargo run --release -p lucent-diffusion --example marble_sphere -- 128`.
+//! boundary, Robin) solved to 1e-8 by multigrid at 64³, 128³ and 256³ (set-up included),
+//! and one smoothing sweep at 128³. `cargo xtask bench-diffusion` adds the copy bandwidth,
+//! pyamg and scipy.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
 use lucent_diffusion::{
-    Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Method, Sources,
-    Stopping, solve,
+    Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Method, Multigrid,
+    MultigridSettings, Sources, Stopping, solve,
 };
 use lucent_grid::GridGeometry;
 
@@ -33,12 +34,19 @@ fn bench(c: &mut Criterion) {
         points: vec![(DVec3::new(0.1, 0.05, -0.02), 1.0)],
         ..Sources::default()
     };
-    for n in [32, 64] {
+    for n in [64, 128, 256] {
         let problem = sphere(n);
         c.bench_function(&format!("diffusion-mg sphere {n}^3 to 1e-8"), |b| {
             b.iter(|| solve(&problem, &sources, Method::default(), &Stopping::default()).unwrap())
         });
     }
+    let mg = Multigrid::build(&sphere(128), MultigridSettings::default()).unwrap();
+    let cells = mg.fine_cells();
+    let rhs: Vec<f32> = (0..cells).map(|i| (i % 7) as f32 * 1e-3).collect();
+    let mut x = vec![0.0f32; cells];
+    c.bench_function("diffusion-mg red-black sweep 128^3", |b| {
+        b.iter(|| mg.smoothing_sweep(&rhs, &mut x).unwrap())
+    });
 }
 
 criterion_group! {
