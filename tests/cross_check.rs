@@ -102,8 +102,25 @@ fn pareto_sweep_shows_each_solvers_convergence_on_the_slab() {
         direct.iter().all(|&e| e < 0.01),
         "direct on the slab: {direct:?}"
     );
+    // The diffusion solvers level off at the diffusion model's error on the slab (7.4%
+    // measured; the suite's tolerance for diffusion there is 15%), whatever the method.
+    let diffusion: Vec<&lucent::pareto::Point> = points
+        .iter()
+        .filter(|p| p.solver.starts_with("diffusion-") && p.setting.contains("1e-8"))
+        .collect();
+    assert!(diffusion.len() >= 3, "{diffusion:?}");
+    assert!(
+        diffusion.iter().all(|p| p.error < 0.15),
+        "diffusion on the slab: {diffusion:?}"
+    );
+    let solvers: std::collections::BTreeSet<&str> =
+        points.iter().map(|p| p.solver.as_str()).collect();
     let svg = lucent::pareto::svg("slab", &points);
-    assert_eq!(svg.matches("<polyline").count(), 2, "one curve per solver");
+    assert_eq!(
+        svg.matches("<polyline").count(),
+        solvers.len(),
+        "one curve per solver"
+    );
     assert!(lucent::pareto::csv(&points).lines().count() == points.len() + 1);
 }
 

@@ -1,0 +1,538 @@
+//! Zhang & Ma's illumination: per light, first-order upwind convection–absorption to
+//! steady state (Eq. 12, scheme Eq. 16), then one implicit diffusion step for the
+//! multiple scattering (Eq. 23), `shared/notes/001_zhangma.md`.
+//!
+//! Per light the energy density ρ obeys ∂ρ/∂t = −c u·∇ρ − σ_a ρ, marched with
+//!
+//! ρ′ = (1 − σ_a)(ρ − C Σ_a |u_a| (ρ − ρ_upwind(a)))                       (Eq. 16)
+//!
+//! where C = cΔt/Δx (the paper uses ½) and σ_a ∈ [0, 1] is the absorption *per step*, as
+//! the paper has it ([`Model::Paper`]). Boundaries: ρ is held at the light's value on
+//! inflow faces (n·u < 0; a ghost layer), outflow faces need nothing (upwind differences
+//! never look downstream). A point light inside the grid holds every cell within 2Δx of
+//! it at G·ρ_P (Eqs. 14–15), G a Gaussian of width `falloff` (or 1).
+//!
+//! [`Model::Conservative`] is the physically consistent variant the note argues for:
+//! ∂ρ/∂t = −∇·(c u ρ) − c σ_a ρ with σ_a a rate (1/length), fluxes through faces with u
+//! at the face centre, so a point light falls off as 1/r² in vacuum, and the absorption
+//! per step is σ_a cΔt, which makes the steady state independent of C.
+//!
+//! Stability (note 001 §2.10, T4): the paper states C ≤ 1, the one-dimensional bound. In
+//! 3D the scheme is monotone and stable only for C·(|u| + |v| + |w|) ≤ 1
+//! ([`crate::stability::upwind`]); `propagate` refuses larger C unless `allow_unstable`.
+
+use glam::DVec3;
+use lucent_core::StopReason;
+use rayon::prelude::*;
+
+use crate::error::ExplicitError;
+use crate::lattice::{GrowthMonitor, Lattice};
+
+/// A light of Zhang & Ma's model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Light {
+    /// A distant light: direction of propagation (normalised here) and energy density.
+    Distant {
+        /// Direction the light travels.
+        direction: DVec3,
+        /// Energy density ρ_D on the inflow faces.
+        density: f64,
+    },
+    /// A point light at `position` (inside or outside the grid).
+    Point {
+        /// Position (length).
+        position: DVec3,
+        /// Energy density ρ_P.
+        density: f64,
+        /// Width of the Gaussian fall-off G (length); `None`: G = 1.
+        falloff: Option<f64>,
+    },
+}
+
+/// The form of the convection–absorption equation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Model {
+    /// Eq. 16 as printed: non-conservative, absorption a factor (1 − σ_a) per step.
+    #[default]
+    Paper,
+    /// Conservative fluxes, absorption a rate σ_a (1/length) times cΔt.
+    Conservative,
+}
+
+/// How the march reaches steady state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sweep {
+    /// Layer by layer along the light (planes across its dominant axis for a distant
+    /// light, cubic shells around a point light), `iterations` Jacobi updates per layer,
+    /// each layer started from its upstream neighbour (`warm_start`) or from zero.
+    Layers {
+        /// Updates per layer per pass (the paper: 4–5).
+        iterations: usize,
+        /// Start a layer from the upstream layer instead of zero.
+        warm_start: bool,
+    },
+    /// Global Jacobi: every cell from the previous step (parallel over slabs).
+    Jacobi,
+}
+
+/// What is outside the grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Edges {
+    /// The light's value on inflow faces (the paper).
+    #[default]
+    Inflow,
+    /// Periodic (for stability studies; distant lights only).
+    Periodic,
+}
+
+/// Settings of [`propagate`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct UpwindSettings {
+    /// Courant number C = cΔt/Δx (the paper: ½).
+    pub courant: f64,
+    /// Paper or conservative form.
+    pub model: Model,
+    /// Layers or global Jacobi.
+    pub sweep: Sweep,
+    /// Boundary treatment.
+    pub edges: Edges,
+    /// Stop when the largest change of a pass is below this fraction of the largest value.
+    pub tolerance: f64,
+    /// Most passes (layer sweeps or Jacobi steps).
+    pub max_iterations: usize,
+    /// Run even beyond the stability bound (for studies); the growth monitor still stops
+    /// a diverging run.
+    pub allow_unstable: bool,
+    /// Starting field (`None`: zero, the paper's initialisation).
+    pub initial: Option<Vec<f64>>,
+}
+
+impl Default for UpwindSettings {
+    fn default() -> Self {
+        Self {
+            courant: 0.5,
+            model: Model::Paper,
+            sweep: Sweep::Layers {
+                iterations: 5,
+                warm_start: true,
+            },
+            edges: Edges::Inflow,
+            tolerance: 1e-10,
+            max_iterations: 10_000,
+            allow_unstable: false,
+            initial: None,
+        }
+    }
+}
+
+/// The result of [`propagate`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Propagation {
+    /// ρ per cell.
+    pub density: Vec<f64>,
+    /// Passes run.
+    pub iterations: usize,
+    /// Largest change of each pass over the largest value.
+    pub residuals: Vec<f64>,
+    /// Why it stopped.
+    pub stop_reason: StopReason,
+}
+
+/// An upwind neighbour: a cell of the grid or a ghost outside it holding a value.
+#[derive(Debug, Clone, Copy)]
+enum Upwind {
+    Cell(usize),
+    Ghost(f64),
+}
+
+struct Setup<'a> {
+    lattice: &'a Lattice,
+    light: Light,
+    model: Model,
+    edges: Edges,
+    courant: f64,
+    absorption: &'a [f64],
+    /// Cells held fixed (seed of an interior point light) and their values.
+    fixed: Vec<Option<f64>>,
+}
+
+impl Setup<'_> {
+    fn direction(&self, x: DVec3) -> DVec3 {
+        match self.light {
+            Light::Distant { direction, .. } => direction,
+            Light::Point { position, .. } => (x - position).normalize_or_zero(),
+        }
+    }
+
+    /// The light's value at a ghost or seed point.
+    fn source_value(&self, x: DVec3) -> f64 {
+        match self.light {
+            Light::Distant { density, .. } => density,
+            Light::Point {
+                position,
+                density,
+                falloff,
+            } => {
+                let d2 = (x - position).length_squared();
+                let g = falloff.map_or(1.0, |w| (-0.5 * d2 / (w * w)).exp());
+                match self.model {
+                    Model::Paper => g * density,
+                    Model::Conservative => {
+                        g * density / d2.max(0.25 * self.lattice.spacing.powi(2))
+                    }
+                }
+            }
+        }
+    }
+
+    /// The neighbour of cell `at` one step along `axis` in direction `sign`.
+    fn neighbour(&self, at: [usize; 3], axis: usize, step: isize) -> Upwind {
+        let n = self.lattice.dims[axis] as isize;
+        let mut to = at.map(|v| v as isize);
+        to[axis] += step;
+        if (0..n).contains(&to[axis]) {
+            let s = self.lattice.strides();
+            return Upwind::Cell((0..3).map(|a| to[a] as usize * s[a]).sum());
+        }
+        match self.edges {
+            Edges::Periodic => {
+                to[axis] = to[axis].rem_euclid(n);
+                let s = self.lattice.strides();
+                Upwind::Cell((0..3).map(|a| to[a] as usize * s[a]).sum())
+            }
+            Edges::Inflow => Upwind::Ghost(self.source_value(self.lattice.centre(to))),
+        }
+    }
+
+    /// One update of cell c from `rho`.
+    fn update(&self, c: usize, rho: &[f64]) -> f64 {
+        if let Some(v) = self.fixed[c] {
+            return v;
+        }
+        let at = self.lattice.coords(c);
+        let x = self.lattice.centre(at.map(|v| v as isize));
+        let value = |u: Upwind| match u {
+            Upwind::Cell(i) => rho[i],
+            Upwind::Ghost(v) => v,
+        };
+        let h = self.lattice.spacing;
+        match self.model {
+            Model::Paper => {
+                let u = self.direction(x);
+                let mut change = 0.0;
+                for axis in 0..3 {
+                    let ua = u[axis];
+                    if ua != 0.0 {
+                        let up = self.neighbour(at, axis, if ua > 0.0 { -1 } else { 1 });
+                        change += ua.abs() * (rho[c] - value(up));
+                    }
+                }
+                (1.0 - self.absorption[c]) * (rho[c] - self.courant * change)
+            }
+            Model::Conservative => {
+                // Net outflow Σ_faces (u_f·n) ρ_upwind, u at each face centre.
+                let mut outflow = 0.0;
+                for axis in 0..3 {
+                    for side in [-1isize, 1] {
+                        let mut face = x;
+                        face[axis] += 0.5 * side as f64 * h;
+                        let un = self.direction(face)[axis] * side as f64;
+                        let other = self.neighbour(at, axis, side);
+                        outflow += if un > 0.0 {
+                            un * rho[c]
+                        } else {
+                            un * value(other)
+                        };
+                    }
+                }
+                rho[c] - self.courant * outflow - self.courant * h * self.absorption[c] * rho[c]
+            }
+        }
+    }
+}
+
+/// Marches one light to steady state over `absorption` (per step in [0, 1] for
+/// [`Model::Paper`], a rate in 1/length for [`Model::Conservative`]).
+pub fn propagate(
+    lattice: &Lattice,
+    absorption: &[f64],
+    light: &Light,
+    settings: &UpwindSettings,
+) -> Result<Propagation, ExplicitError> {
+    lattice.check_field("absorption", absorption)?;
+    let bad_absorption = match settings.model {
+        Model::Paper => absorption.iter().any(|&a| !(0.0..=1.0).contains(&a)),
+        Model::Conservative => absorption.iter().any(|&a| a < 0.0),
+    };
+    if bad_absorption {
+        return Err(ExplicitError::Invalid(
+            "absorption: per-step values in [0, 1] (paper) or rates ≥ 0 (conservative)".into(),
+        ));
+    }
+    let light = match *light {
+        Light::Distant { direction, density } => {
+            let d = direction.normalize_or_zero();
+            if d == DVec3::ZERO || !d.is_finite() || !density.is_finite() {
+                return Err(ExplicitError::Invalid(format!(
+                    "distant light {direction:?}, density {density}"
+                )));
+            }
+            Light::Distant {
+                direction: d,
+                density,
+            }
+        }
+        Light::Point {
+            position,
+            density,
+            falloff,
+        } => {
+            if !position.is_finite()
+                || !density.is_finite()
+                || falloff.is_some_and(|w| !(w > 0.0 && w.is_finite()))
+            {
+                return Err(ExplicitError::Invalid(format!(
+                    "point light at {position:?}, density {density}, fall-off {falloff:?}"
+                )));
+            }
+            if settings.edges == Edges::Periodic {
+                return Err(ExplicitError::Invalid(
+                    "periodic edges are for distant lights".into(),
+                ));
+            }
+            *light
+        }
+    };
+    if !(settings.courant > 0.0 && settings.courant.is_finite()) {
+        return Err(ExplicitError::Invalid(format!(
+            "Courant number {}",
+            settings.courant
+        )));
+    }
+    let n = lattice.len();
+    let h = lattice.spacing;
+    // The stability bound over every cell's direction.
+    let s_max = match light {
+        Light::Distant { direction, .. } => direction.abs().element_sum(),
+        Light::Point { position, .. } => (0..n)
+            .map(|c| {
+                let x = lattice.centre(lattice.coords(c).map(|v| v as isize));
+                (x - position).normalize_or_zero().abs().element_sum()
+            })
+            .fold(0.0, f64::max),
+    };
+    let extra = match settings.model {
+        Model::Paper => 0.0,
+        Model::Conservative => h * absorption.iter().fold(0.0f64, |a, &b| a.max(b)),
+    };
+    let limit = 1.0 / (s_max + extra);
+    if settings.courant > limit * (1.0 + 1e-12) && !settings.allow_unstable {
+        return Err(ExplicitError::Unstable {
+            scheme: "upwind convection",
+            parameter: "Courant number",
+            limit,
+            requested: settings.courant,
+        });
+    }
+    let mut setup = Setup {
+        lattice,
+        light,
+        model: settings.model,
+        edges: settings.edges,
+        courant: settings.courant,
+        absorption,
+        fixed: vec![None; n],
+    };
+    let mut reference = match light {
+        Light::Distant { density, .. } => density.abs(),
+        Light::Point { .. } => 0.0,
+    };
+    if let Light::Point { position, .. } = light {
+        for c in 0..n {
+            let x = lattice.centre(lattice.coords(c).map(|v| v as isize));
+            if (x - position).length() < 2.0 * h {
+                let v = setup.source_value(x);
+                setup.fixed[c] = Some(v);
+                reference = reference.max(v.abs());
+            }
+        }
+        // The largest ghost value bounds the field too.
+        for c in 0..n {
+            let at = lattice.coords(c);
+            for axis in 0..3 {
+                for side in [-1isize, 1] {
+                    if let Upwind::Ghost(v) = setup.neighbour(at, axis, side) {
+                        reference = reference.max(v.abs());
+                    }
+                }
+            }
+        }
+    }
+    let mut rho = match &settings.initial {
+        Some(v) => {
+            lattice.check_field("initial", v)?;
+            reference = reference.max(v.iter().fold(0.0f64, |a, b| a.max(b.abs())));
+            v.clone()
+        }
+        None => vec![0.0; n],
+    };
+    for (c, f) in setup.fixed.iter().enumerate() {
+        if let Some(v) = f {
+            rho[c] = *v;
+        }
+    }
+    let monitor = GrowthMonitor {
+        reference,
+        factor: 1e6,
+    };
+    let layers = match settings.sweep {
+        Sweep::Layers { .. } => Some(layers(&setup)),
+        Sweep::Jacobi => None,
+    };
+    let mut next = rho.clone();
+    let mut residuals = Vec::new();
+    let mut iteration = 0;
+    loop {
+        let stop = |reason: StopReason, rho: Vec<f64>, residuals: Vec<f64>, iterations| {
+            Ok(Propagation {
+                density: rho,
+                iterations,
+                residuals,
+                stop_reason: reason,
+            })
+        };
+        if iteration >= settings.max_iterations {
+            let residual = residuals.last().copied().unwrap_or(f64::INFINITY);
+            return stop(
+                StopReason::IterationLimit { residual },
+                rho,
+                residuals,
+                iteration,
+            );
+        }
+        match (&layers, settings.sweep) {
+            (
+                Some(layers),
+                Sweep::Layers {
+                    iterations,
+                    warm_start,
+                },
+            ) => {
+                next.copy_from_slice(&rho);
+                for layer in layers {
+                    // The first pass starts each layer from upstream (or zero); later
+                    // passes continue from where the last one left it.
+                    let start = iteration == 0 && settings.initial.is_none();
+                    for &(c, up) in layer.iter().filter(|_| start) {
+                        if setup.fixed[c].is_none() {
+                            next[c] = if warm_start {
+                                up.map_or(next[c], |u| match u {
+                                    Upwind::Cell(i) => next[i],
+                                    Upwind::Ghost(v) => v,
+                                })
+                            } else {
+                                0.0
+                            };
+                        }
+                    }
+                    let mut values = vec![0.0; layer.len()];
+                    for _ in 0..iterations {
+                        for (v, &(c, _)) in values.iter_mut().zip(layer) {
+                            *v = setup.update(c, &next);
+                        }
+                        for (v, &(c, _)) in values.iter().zip(layer) {
+                            next[c] = *v;
+                        }
+                    }
+                }
+            }
+            _ => {
+                let setup = &setup;
+                let rho = &rho;
+                next.par_iter_mut()
+                    .enumerate()
+                    .for_each(|(c, v)| *v = setup.update(c, rho));
+            }
+        }
+        iteration += 1;
+        if let Some(reason) = monitor.check(&next, iteration) {
+            // Return the last field that passed the monitor: always finite.
+            return stop(reason, rho, residuals, iteration);
+        }
+        let (mut change, mut largest) = (0.0f64, 0.0f64);
+        for (a, b) in next.iter().zip(&rho) {
+            change = change.max((a - b).abs());
+            largest = largest.max(a.abs());
+        }
+        let residual = if largest > 0.0 {
+            change / largest
+        } else {
+            change
+        };
+        residuals.push(residual);
+        std::mem::swap(&mut rho, &mut next);
+        if residual <= settings.tolerance {
+            return stop(
+                StopReason::ConvergedRelative { residual },
+                rho,
+                residuals,
+                iteration,
+            );
+        }
+    }
+}
+
+/// The layers of a layer sweep, upstream first, each cell with the neighbour a warm
+/// start copies (its upwind neighbour along the dominant axis).
+fn layers(setup: &Setup<'_>) -> Vec<Vec<(usize, Option<Upwind>)>> {
+    let lattice = setup.lattice;
+    let h = lattice.spacing;
+    let n = lattice.len();
+    let key = |c: usize| -> usize {
+        let at = lattice.coords(c);
+        match setup.light {
+            Light::Distant { direction, .. } => {
+                let axis = direction.abs().max_position();
+                if direction[axis] > 0.0 {
+                    at[axis]
+                } else {
+                    lattice.dims[axis] - 1 - at[axis]
+                }
+            }
+            Light::Point { position, .. } => {
+                let x = lattice.centre(at.map(|v| v as isize));
+                ((x - position).abs().max_element() / h).floor() as usize
+            }
+        }
+    };
+    let count = (0..n).map(key).max().unwrap_or(0) + 1;
+    let mut out: Vec<Vec<(usize, Option<Upwind>)>> = vec![Vec::new(); count];
+    for c in 0..n {
+        let at = lattice.coords(c);
+        let x = lattice.centre(at.map(|v| v as isize));
+        let u = setup.direction(x);
+        let axis = u.abs().max_position();
+        let up =
+            (u[axis] != 0.0).then(|| setup.neighbour(at, axis, if u[axis] > 0.0 { -1 } else { 1 }));
+        out[key(c)].push((c, up));
+    }
+    out
+}
+
+/// The field of several coloured lights, Eq. 22: L = Σ_k ρ_k L_k, per channel.
+pub fn compose(fields: &[(Vec<f64>, Vec<f64>)]) -> Vec<Vec<f64>> {
+    let channels = fields.iter().map(|(_, c)| c.len()).max().unwrap_or(0);
+    let n = fields.first().map_or(0, |(rho, _)| rho.len());
+    (0..channels)
+        .map(|ch| {
+            let mut out = vec![0.0; n];
+            for (rho, colour) in fields {
+                let k = colour[ch.min(colour.len() - 1)];
+                for (o, r) in out.iter_mut().zip(rho) {
+                    *o += k * r;
+                }
+            }
+            out
+        })
+        .collect()
+}

@@ -1,0 +1,202 @@
+//! Murray's P1 moment system with FTCS (thesis §3.4.2, Eqs. 3.23–3.26; note 000 §2.8):
+//!
+//! (1/c) ∂φ/∂t = −∇·E − σ_a φ + q,    (1/c) ∂E/∂t = −∇φ/3 − σ_t′ E,
+//!
+//! marched with forward Euler, r = cΔt/h, damping per step K_φ = cΔt σ_a, K_E = cΔt σ_t′
+//! ([`Damping::Consistent`]; the thesis's update uses cΔt σ_t on both, [`Damping::Murray`]).
+//!
+//! - [`Layout::Collocated`]: φ and E at cell centres, central differences
+//!   δf = f_{i+1} − f_{i−1}. A site couples only to sites two cells away, so the odd and
+//!   even sub-lattices decouple: from a point source φ stays exactly zero on the sites of
+//!   the other parity (the checkerboard of the thesis's Fig. 3.6).
+//! - [`Layout::Staggered`]: φ at centres, each E component on the faces normal to it
+//!   (MAC/Yee), one-cell differences: the sub-lattices are coupled and the checkerboard is
+//!   gone.
+//!
+//! Stability ([`crate::stability::p1`]): collocated (1 − K_φ)(1 − K_E) + r² ≤ 1, staggered
+//! (1 − K_φ)(1 − K_E) + 4r² ≤ 1; the thesis's "K < 1 and r/2 < 1" is not sufficient.
+//! Periodic edges.
+
+use lucent_core::StopReason;
+
+use crate::error::ExplicitError;
+use crate::lattice::{GrowthMonitor, Lattice};
+
+/// Where the flux lives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Layout {
+    /// φ and E at cell centres.
+    Collocated,
+    /// E_a on the faces normal to axis a (index i: the face between i and i + 1).
+    Staggered,
+}
+
+/// The damping rates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Damping {
+    /// σ_a on φ, σ_t′ on E (Eqs. 3.23–3.24).
+    Consistent {
+        /// σ_a (1/length).
+        sigma_a: f64,
+        /// σ_t′ = σ_a + (1 − g)σ_s (1/length).
+        sigma_t_reduced: f64,
+    },
+    /// σ_t on both, as the thesis's update (Eqs. 3.25–3.26) has it.
+    Murray {
+        /// σ_t (1/length).
+        sigma_t: f64,
+    },
+}
+
+/// The P1 state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct P1State {
+    /// φ per cell.
+    pub fluence: Vec<f64>,
+    /// E_x, E_y, E_z per cell (collocated) or per face (staggered).
+    pub flux: [Vec<f64>; 3],
+    /// Steps run.
+    pub steps: usize,
+    /// Why it stopped.
+    pub stop_reason: StopReason,
+}
+
+/// Settings of [`march`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct P1Settings {
+    /// Grid layout.
+    pub layout: Layout,
+    /// Damping.
+    pub damping: Damping,
+    /// cΔt (length).
+    pub time_step: f64,
+    /// Steps to run.
+    pub steps: usize,
+    /// Run beyond the von Neumann bound (studies).
+    pub allow_unstable: bool,
+}
+
+impl P1Settings {
+    /// (K_φ, K_E) per step.
+    pub fn damping_per_step(&self) -> (f64, f64) {
+        match self.damping {
+            Damping::Consistent {
+                sigma_a,
+                sigma_t_reduced,
+            } => (self.time_step * sigma_a, self.time_step * sigma_t_reduced),
+            Damping::Murray { sigma_t } => (self.time_step * sigma_t, self.time_step * sigma_t),
+        }
+    }
+}
+
+/// Runs `settings.steps` FTCS steps from zero with source `q` (fluence per length per
+/// step unit) on a periodic grid, or from `initial` (φ, E) when given.
+pub fn march(
+    lattice: &Lattice,
+    source: &[f64],
+    settings: &P1Settings,
+    initial: Option<(Vec<f64>, [Vec<f64>; 3])>,
+) -> Result<P1State, ExplicitError> {
+    lattice.check_field("source", source)?;
+    let dt = settings.time_step;
+    if !(dt > 0.0 && dt.is_finite()) {
+        return Err(ExplicitError::Invalid(format!("time step {dt}")));
+    }
+    let (k_phi, k_flux) = settings.damping_per_step();
+    if !(k_phi >= 0.0 && k_flux >= 0.0) {
+        return Err(ExplicitError::Invalid("damping rates must be ≥ 0".into()));
+    }
+    let r = dt / lattice.spacing;
+    let limit = match settings.layout {
+        Layout::Collocated => crate::stability::p1::collocated_limit(k_phi, k_flux),
+        Layout::Staggered => crate::stability::p1::staggered_limit(k_phi, k_flux),
+    };
+    let unstable = r > limit * (1.0 + 1e-12) || k_phi > 2.0 || k_flux > 2.0;
+    if unstable && !settings.allow_unstable {
+        return Err(ExplicitError::Unstable {
+            scheme: "P1 FTCS",
+            parameter: "r = cΔt/h",
+            limit: limit * lattice.spacing,
+            requested: dt,
+        });
+    }
+    let n = lattice.len();
+    let (mut phi, mut flux) = match initial {
+        Some((p, f)) => {
+            lattice.check_field("initial fluence", &p)?;
+            for e in &f {
+                lattice.check_field("initial flux", e)?;
+            }
+            (p, f)
+        }
+        None => (vec![0.0; n], [vec![0.0; n], vec![0.0; n], vec![0.0; n]]),
+    };
+    let largest = |v: &[f64]| v.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+    let monitor = GrowthMonitor {
+        reference: largest(&phi)
+            + flux.iter().map(|f| largest(f)).fold(0.0, f64::max)
+            + largest(source) * dt * settings.steps as f64
+            + f64::MIN_POSITIVE,
+        factor: 1e6,
+    };
+    let s = lattice.strides();
+    let wrap = |g: usize, axis: usize, step: isize| -> usize {
+        let at = lattice.coords(g);
+        let n = lattice.dims[axis] as isize;
+        let moved = (at[axis] as isize + step).rem_euclid(n) as usize;
+        g - at[axis] * s[axis] + moved * s[axis]
+    };
+    let mut last_change = 0.0;
+    for step in 1..=settings.steps {
+        let mut next_phi = vec![0.0; n];
+        let mut next_flux = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+        for g in 0..n {
+            let divergence: f64 = (0..3)
+                .map(|a| match settings.layout {
+                    Layout::Collocated => 0.5 * (flux[a][wrap(g, a, 1)] - flux[a][wrap(g, a, -1)]),
+                    Layout::Staggered => flux[a][g] - flux[a][wrap(g, a, -1)],
+                })
+                .sum();
+            next_phi[g] = (1.0 - k_phi) * phi[g] - r * divergence + dt * source[g];
+            for a in 0..3 {
+                let gradient = match settings.layout {
+                    Layout::Collocated => 0.5 * (phi[wrap(g, a, 1)] - phi[wrap(g, a, -1)]),
+                    Layout::Staggered => phi[wrap(g, a, 1)] - phi[g],
+                };
+                next_flux[a][g] = (1.0 - k_flux) * flux[a][g] - r * gradient / 3.0;
+            }
+        }
+        let stop = monitor
+            .check(&next_phi, step)
+            .or_else(|| next_flux.iter().find_map(|f| monitor.check(f, step)));
+        if let Some(stop_reason) = stop {
+            return Ok(P1State {
+                fluence: phi,
+                flux,
+                steps: step,
+                stop_reason,
+            });
+        }
+        let change: f64 = next_phi
+            .iter()
+            .zip(&phi)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum();
+        let size: f64 = next_phi.iter().map(|a| a * a).sum();
+        last_change = if size > 0.0 {
+            (change / size).sqrt()
+        } else {
+            change.sqrt()
+        };
+        phi = next_phi;
+        flux = next_flux;
+    }
+    Ok(P1State {
+        fluence: phi,
+        flux,
+        steps: settings.steps,
+        stop_reason: StopReason::IterationLimit {
+            residual: last_change,
+        },
+    })
+}

@@ -1,0 +1,172 @@
+//! Explicit iterations on lucent-diffusion's discrete problem: FTCS in time and Jacobi
+//! relaxation, marched to the steady state, which is then the multigrid's solution of the
+//! same system A φ = b ([`lucent_diffusion::DiffusionProblem::assemble`]).
+//!
+//! - FTCS: V dφ/dτ = b − Aφ (A in integrated form, V the cell volume), φ′ = φ +
+//!   (cΔt/V)(b − Aφ); stable for cΔt ≤ 2V/λ_max(A), bounded here by Gershgorin
+//!   (λ_max ≤ max_i a_ii + Σ_j |a_ij|), which is exact for the homogeneous box's
+//!   checkerboard mode.
+//! - Jacobi: φ′ = φ + ω D⁻¹(b − Aφ), ω ∈ (0, 1]: FTCS at the positivity limit
+//!   cΔt = V/a_ii, cell by cell (note 000 §3.3: "FTCS at the positivity bound is Jacobi").
+//!
+//! Both converge at rate 1 − O(h²): explicit schemes pay for steady states with
+//! thousands of sweeps, which is what the pareto charts show against multigrid.
+
+use lucent_core::StopReason;
+use lucent_diffusion::AssembledSystem;
+use rayon::prelude::*;
+
+use crate::error::ExplicitError;
+
+/// Which explicit iteration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Iteration {
+    /// FTCS with step cΔt (length) and cell volume V (length³).
+    Ftcs {
+        /// cΔt.
+        time_step: f64,
+        /// Cell volume.
+        cell_volume: f64,
+    },
+    /// Weighted Jacobi.
+    Jacobi {
+        /// Damping in (0, 1].
+        omega: f64,
+    },
+}
+
+/// When to stop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SteadySettings {
+    /// Relative residual ‖b − Aφ‖/‖b‖.
+    pub tolerance: f64,
+    /// Most sweeps.
+    pub max_iterations: usize,
+    /// Wall-time budget.
+    pub time_budget: Option<std::time::Duration>,
+    /// Run FTCS beyond its bound (studies).
+    pub allow_unstable: bool,
+}
+
+/// The result of [`iterate`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Steady {
+    /// φ per unknown of the system.
+    pub fluence: Vec<f64>,
+    /// Relative residual before each sweep and after the last.
+    pub residuals: Vec<f64>,
+    /// Why it stopped.
+    pub stop_reason: StopReason,
+}
+
+/// The FTCS step limit 2V / (max_i a_ii + Σ|a_ij|).
+pub fn ftcs_limit(system: &AssembledSystem, cell_volume: f64) -> f64 {
+    let gershgorin = system
+        .matrix
+        .outer_iterator()
+        .map(|row| row.iter().map(|(_, v)| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    2.0 * cell_volume / gershgorin
+}
+
+/// Iterates from zero to the stopping rule.
+pub fn iterate(
+    system: &AssembledSystem,
+    iteration: Iteration,
+    settings: &SteadySettings,
+) -> Result<Steady, ExplicitError> {
+    let started = std::time::Instant::now();
+    let a = &system.matrix;
+    let b = &system.rhs;
+    let n = b.len();
+    let diagonal: Vec<f64> = (0..n)
+        .map(|i| a.get(i, i).copied().unwrap_or(0.0))
+        .collect();
+    if diagonal.iter().any(|&d| d <= 0.0) {
+        return Err(ExplicitError::Invalid(
+            "the system has a non-positive diagonal".into(),
+        ));
+    }
+    // Per-row scale of the residual added to φ.
+    let scale: Vec<f64> = match iteration {
+        Iteration::Ftcs {
+            time_step,
+            cell_volume,
+        } => {
+            let limit = ftcs_limit(system, cell_volume);
+            if !(time_step > 0.0 && time_step.is_finite()) {
+                return Err(ExplicitError::Invalid(format!("time step {time_step}")));
+            }
+            if time_step > limit * (1.0 + 1e-12) && !settings.allow_unstable {
+                return Err(ExplicitError::Unstable {
+                    scheme: "FTCS diffusion",
+                    parameter: "cΔt",
+                    limit,
+                    requested: time_step,
+                });
+            }
+            vec![time_step / cell_volume; n]
+        }
+        Iteration::Jacobi { omega } => {
+            if !(omega > 0.0 && omega <= 1.0) {
+                return Err(ExplicitError::Invalid(format!(
+                    "Jacobi damping {omega} outside (0, 1]"
+                )));
+            }
+            diagonal.iter().map(|d| omega / d).collect()
+        }
+    };
+    let b_norm = b
+        .iter()
+        .map(|v| v * v)
+        .sum::<f64>()
+        .sqrt()
+        .max(f64::MIN_POSITIVE);
+    let mut phi = vec![0.0f64; n];
+    let mut r = b.clone();
+    let mut residuals: Vec<f64> = vec![1.0];
+    let mut iterations = 0;
+    loop {
+        let relative: f64 = residuals.last().copied().unwrap_or(1.0);
+        let stop = if !relative.is_finite() {
+            Some(StopReason::DivergedNonFinite {
+                iteration: iterations,
+            })
+        } else if relative <= settings.tolerance {
+            Some(StopReason::ConvergedRelative { residual: relative })
+        } else if relative > 1e6 {
+            Some(StopReason::DivergedGrowth {
+                growth: relative,
+                iteration: iterations,
+            })
+        } else if iterations >= settings.max_iterations {
+            Some(StopReason::IterationLimit { residual: relative })
+        } else if settings.time_budget.is_some_and(|t| started.elapsed() >= t) {
+            Some(StopReason::TimeLimit { residual: relative })
+        } else {
+            None
+        };
+        if let Some(stop_reason) = stop {
+            if phi.iter().any(|v| !v.is_finite()) {
+                phi.fill(0.0);
+            }
+            return Ok(Steady {
+                fluence: phi,
+                residuals,
+                stop_reason,
+            });
+        }
+        phi.par_iter_mut()
+            .zip(r.par_iter())
+            .zip(scale.par_iter())
+            .for_each(|((p, r), s)| *p += s * r);
+        // r = b − Aφ by rows (CSR).
+        r.par_iter_mut().enumerate().for_each(|(i, ri)| {
+            let row = a.outer_view(i);
+            let ax: f64 = row.map_or(0.0, |row| row.iter().map(|(j, v)| v * phi[j]).sum());
+            *ri = b[i] - ax;
+        });
+        iterations += 1;
+        residuals.push(r.iter().map(|v| v * v).sum::<f64>().sqrt() / b_norm);
+    }
+}
