@@ -11,6 +11,8 @@
 //! | [`core`] | `lucent-core` | the `Problem`, the `Solver` trait, solutions and stop reasons, the `direct` solver |
 //! | [`render`] | `lucent-render` | cameras, ray marching, tone mapping, PNG and EXR |
 //! | [`mc`] | `lucent-mc` | Monte Carlo ground truth: delta tracking, track-length fluence with standard errors |
+//! | [`diffusion`] | `lucent-diffusion` | steady diffusion, embedded boundary, matrix-free multigrid |
+//! | [`explicit`] | `lucent-explicit` | FTCS, P1, ordinates, Zhang & Ma convection–diffusion, Jacobi, with their stability bounds |
 //! | [`scene`] | (here) | TOML scene files and the built-in default scene |
 //!
 //! See `ARCHITECTURE.md` at the repository root for the crate map and the data flow
@@ -32,6 +34,7 @@ use std::path::PathBuf;
 
 pub use lucent_core as core;
 pub use lucent_diffusion as diffusion;
+pub use lucent_explicit as explicit;
 pub use lucent_grid as grid;
 pub use lucent_mc as mc;
 pub use lucent_optics as optics;
@@ -42,6 +45,9 @@ pub fn registry() -> lucent_core::Registry {
     let mut registry = lucent_core::Registry::with_core_solvers();
     registry.register(lucent_mc::McSolver::ENTRY);
     for entry in lucent_diffusion::DiffusionSolver::ENTRIES {
+        registry.register(entry);
+    }
+    for entry in lucent_explicit::ExplicitSolver::ENTRIES {
         registry.register(entry);
     }
     registry

@@ -76,4 +76,4 @@ pub use multigrid::{
 };
 pub use problem::{AssembledSystem, Balance, Boundaries, Condition, DiffusionProblem, Sources};
 pub use solve::{DiffusionSolution, Method, solve};
-pub use solver::DiffusionSolver;
+pub use solver::{DiffusionSolver, LinearSolve};

@@ -264,6 +264,49 @@ impl Solver for DiffusionSolver {
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
+        let method = self.method;
+        self.solve_with(problem, options, &|diffusion, sources, stopping| {
+            solve(diffusion, sources, method, stopping)
+        })
+    }
+}
+
+/// A linear solve of one channel's discrete problem: what [`DiffusionSolver::solve_with`]
+/// plugs in.
+pub type LinearSolve<'a> = dyn Fn(
+        &DiffusionProblem,
+        &Sources,
+        &Stopping,
+    ) -> Result<crate::DiffusionSolution, crate::DiffusionError>
+    + 'a;
+
+impl DiffusionSolver {
+    /// A solver named `name` that maps problems as the diffusion solvers do (embedded
+    /// boundary) and leaves the linear solve to [`DiffusionSolver::solve_with`]: for other
+    /// crates' iterations on the same discrete problem (`lucent-explicit`'s FTCS and Jacobi).
+    pub const fn custom(name: &'static str) -> Self {
+        Self {
+            name,
+            method: Method::Multigrid(MultigridSettings {
+                cycle: Cycle::V,
+                smoother: Smoother::RedBlackGaussSeidel,
+                pre_sweeps: 2,
+                post_sweeps: 2,
+                full_multigrid: true,
+                prolongation: crate::multigrid::Prolongation::Constant,
+            }),
+            discretisation: Discretisation::EmbeddedBoundary,
+        }
+    }
+
+    /// Solves `problem` as [`Solver::solve`] does, with `linear` solving each channel's
+    /// discrete problem A φ = b (sources mapped, reduced-intensity source included).
+    pub fn solve_with(
+        &self,
+        problem: &Problem,
+        options: &SolveOptions,
+        linear: &LinearSolve<'_>,
+    ) -> Result<Solution, SolveError> {
         self.capabilities().check(self.name, problem)?;
         options.validate()?;
         let started = Instant::now();
@@ -395,7 +438,7 @@ impl Solver for DiffusionSolver {
                 }
             }
             sources.volumetric = q0;
-            let solution = solve(&diffusion, &sources, self.method, &stopping)
+            let solution = linear(&diffusion, &sources, &stopping)
                 .map_err(|e| invalid("problem", e.to_string()))?;
             memory = memory.max(solution.memory_bytes);
             let scattered_grid = Grid::from_vec(

@@ -73,6 +73,11 @@ pub enum Sweep {
     },
     /// Global Jacobi: every cell from the previous step (parallel over slabs).
     Jacobi,
+    /// Gauss–Seidel in the light's order: each cell set to the fixed point of Eq. 16 from
+    /// its upwind neighbours, visited after them (octant loop order for a distant light,
+    /// increasing distance for a point light). For a distant light one pass is the exact
+    /// steady state; a point light's cells in its own slabs need a second pass or two.
+    Ordered,
 }
 
 /// What is outside the grid.
@@ -92,7 +97,7 @@ pub struct UpwindSettings {
     pub courant: f64,
     /// Paper or conservative form.
     pub model: Model,
-    /// Layers or global Jacobi.
+    /// Ordered (default: exact and fast), the paper's layers, or global Jacobi.
     pub sweep: Sweep,
     /// Boundary treatment.
     pub edges: Edges,
@@ -112,10 +117,7 @@ impl Default for UpwindSettings {
         Self {
             courant: 0.5,
             model: Model::Paper,
-            sweep: Sweep::Layers {
-                iterations: 5,
-                warm_start: true,
-            },
+            sweep: Sweep::Ordered,
             edges: Edges::Inflow,
             tolerance: 1e-10,
             max_iterations: 10_000,
@@ -201,6 +203,103 @@ impl Setup<'_> {
                 Upwind::Cell((0..3).map(|a| to[a] as usize * s[a]).sum())
             }
             Edges::Inflow => Upwind::Ghost(self.source_value(self.lattice.centre(to))),
+        }
+    }
+
+    /// The steady value of cell c given its upwind neighbours in `rho`: the fixed point of
+    /// [`Setup::update`].
+    fn fixed_point(&self, c: usize, rho: &[f64]) -> f64 {
+        if let Some(v) = self.fixed[c] {
+            return v;
+        }
+        let at = self.lattice.coords(c);
+        let x = self.lattice.centre(at.map(|v| v as isize));
+        let value = |u: Upwind| match u {
+            Upwind::Cell(i) => rho[i],
+            Upwind::Ghost(v) => v,
+        };
+        match self.model {
+            Model::Paper => {
+                // ρ = (1 − σ)C Σ|u_a| ρ_up / (σ + (1 − σ)C S), S = Σ|u_a|.
+                let u = self.direction(x);
+                let (mut inflow, mut s) = (0.0, 0.0);
+                for axis in 0..3 {
+                    let ua = u[axis];
+                    if ua != 0.0 {
+                        let up = self.neighbour(at, axis, if ua > 0.0 { -1 } else { 1 });
+                        inflow += ua.abs() * value(up);
+                        s += ua.abs();
+                    }
+                }
+                let sigma = self.absorption[c];
+                let keep = (1.0 - sigma) * self.courant;
+                let denominator = sigma + keep * s;
+                if denominator > 0.0 {
+                    keep * inflow / denominator
+                } else {
+                    rho[c]
+                }
+            }
+            Model::Conservative => {
+                // ρ (Σ_out u·n + σh) = Σ_in |u·n| ρ_nb.
+                let h = self.lattice.spacing;
+                let (mut inflow, mut outflow) = (0.0, self.absorption[c] * h);
+                for axis in 0..3 {
+                    for side in [-1isize, 1] {
+                        let mut face = x;
+                        face[axis] += 0.5 * side as f64 * h;
+                        let un = self.direction(face)[axis] * side as f64;
+                        if un > 0.0 {
+                            outflow += un;
+                        } else if un < 0.0 {
+                            inflow += -un * value(self.neighbour(at, axis, side));
+                        }
+                    }
+                }
+                if outflow > 0.0 {
+                    inflow / outflow
+                } else {
+                    rho[c]
+                }
+            }
+        }
+    }
+
+    /// The order of an ordered sweep: every cell after its upwind neighbours.
+    fn order(&self) -> Vec<usize> {
+        let l = self.lattice;
+        let n = l.len();
+        match self.light {
+            Light::Distant { direction, .. } => {
+                let range = |axis: usize| -> Vec<usize> {
+                    let r: Vec<usize> = (0..l.dims[axis]).collect();
+                    if direction[axis] < 0.0 {
+                        r.into_iter().rev().collect()
+                    } else {
+                        r
+                    }
+                };
+                let s = l.strides();
+                let mut out = Vec::with_capacity(n);
+                for k in range(2) {
+                    for j in range(1) {
+                        for i in range(0) {
+                            out.push(i + j * s[1] + k * s[2]);
+                        }
+                    }
+                }
+                out
+            }
+            Light::Point { position, .. } => {
+                let mut keyed: Vec<(f64, usize)> = (0..n)
+                    .map(|c| {
+                        let x = l.centre(l.coords(c).map(|v| v as isize));
+                        ((x - position).length_squared(), c)
+                    })
+                    .collect();
+                keyed.sort_by(|a, b| a.0.total_cmp(&b.0));
+                keyed.into_iter().map(|(_, c)| c).collect()
+            }
         }
     }
 
@@ -387,7 +486,12 @@ pub fn propagate(
     };
     let layers = match settings.sweep {
         Sweep::Layers { .. } => Some(layers(&setup)),
-        Sweep::Jacobi => None,
+        Sweep::Jacobi | Sweep::Ordered => None,
+    };
+    let order = match (settings.sweep, light) {
+        (Sweep::Ordered, Light::Point { .. }) => setup.order(),
+        (Sweep::Ordered, Light::Distant { .. }) if settings.model != Model::Paper => setup.order(),
+        _ => Vec::new(),
     };
     let mut next = rho.clone();
     let mut residuals = Vec::new();
@@ -446,6 +550,20 @@ pub fn propagate(
                     }
                 }
             }
+            (_, Sweep::Ordered) => {
+                next.copy_from_slice(&rho);
+                if let (Light::Distant { direction, density }, Model::Paper, Edges::Inflow) =
+                    (light, settings.model, settings.edges)
+                {
+                    // One pass in octant order is the exact steady state.
+                    ordered_distant(&setup, direction, density, &mut next);
+                    iteration += 1;
+                    return stop(StopReason::Exact, next, vec![0.0], iteration);
+                }
+                for &c in &order {
+                    next[c] = setup.fixed_point(c, &next);
+                }
+            }
             _ => {
                 let setup = &setup;
                 let rho = &rho;
@@ -478,6 +596,46 @@ pub fn propagate(
                 residuals,
                 iteration,
             );
+        }
+    }
+}
+
+/// The exact steady state of Eq. 16 for a distant light in one pass: rows in the octant
+/// order of the light, each cell the fixed point ρ = (1 − σ)C Σ|u_a|ρ_up / (σ + (1 − σ)CS)
+/// of its three upwind neighbours (the light's density beyond inflow faces).
+fn ordered_distant(setup: &Setup<'_>, u: DVec3, density: f64, rho: &mut [f64]) {
+    let l = setup.lattice;
+    let [nx, ny, nz] = l.dims;
+    let s = l.strides();
+    let w = u.abs();
+    let total = w.element_sum();
+    let (px, py, pz) = (u.x >= 0.0, u.y >= 0.0, u.z >= 0.0);
+    let flip = |v: usize, n: usize, positive: bool| if positive { v } else { n - 1 - v };
+    for kk in 0..nz {
+        let k = flip(kk, nz, pz);
+        for jj in 0..ny {
+            let j = flip(jj, ny, py);
+            let row = j * s[1] + k * s[2];
+            let y_up = (jj > 0).then(|| if py { row - s[1] } else { row + s[1] });
+            let z_up = (kk > 0).then(|| if pz { row - s[2] } else { row + s[2] });
+            let mut x_up = density;
+            for ii in 0..nx {
+                let i = flip(ii, nx, px);
+                let c = row + i;
+                let from_y = y_up.map_or(density, |r| rho[r + i]);
+                let from_z = z_up.map_or(density, |r| rho[r + i]);
+                let inflow = w.x * x_up + w.y * from_y + w.z * from_z;
+                let sigma = setup.absorption[c];
+                let keep = (1.0 - sigma) * setup.courant;
+                let denominator = sigma + keep * total;
+                let value = if denominator > 0.0 {
+                    keep * inflow / denominator
+                } else {
+                    rho[c]
+                };
+                rho[c] = value;
+                x_up = value;
+            }
         }
     }
 }

@@ -45,8 +45,10 @@ mod lattice;
 pub mod ordinates;
 pub mod p1;
 pub mod scatter;
+mod solver;
 pub mod stability;
 pub mod steady;
 
 pub use error::ExplicitError;
 pub use lattice::Lattice;
+pub use solver::ExplicitSolver;

@@ -15,7 +15,7 @@
 //!
 //! Stability ([`crate::stability::p1`]): collocated (1 − K_φ)(1 − K_E) + r² ≤ 1, staggered
 //! (1 − K_φ)(1 − K_E) + 4r² ≤ 1; the thesis's "K < 1 and r/2 < 1" is not sufficient.
-//! Periodic edges.
+//! Periodic edges (studies) or zero beyond the grid.
 
 use lucent_core::StopReason;
 
@@ -61,6 +61,16 @@ pub struct P1State {
     pub stop_reason: StopReason,
 }
 
+/// What lies beyond the grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum P1Edges {
+    /// Periodic (stability studies).
+    #[default]
+    Periodic,
+    /// φ = 0 and E = 0 beyond the grid (a crude vacuum).
+    Zero,
+}
+
 /// Settings of [`march`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct P1Settings {
@@ -70,8 +80,12 @@ pub struct P1Settings {
     pub damping: Damping,
     /// cΔt (length).
     pub time_step: f64,
-    /// Steps to run.
+    /// Most steps to run.
     pub steps: usize,
+    /// Stop early when ‖φ′ − φ‖/‖φ′‖ falls below this (0: run every step).
+    pub tolerance: f64,
+    /// Beyond the grid.
+    pub edges: P1Edges,
     /// Run beyond the von Neumann bound (studies).
     pub allow_unstable: bool,
 }
@@ -140,12 +154,18 @@ pub fn march(
         factor: 1e6,
     };
     let s = lattice.strides();
-    let wrap = |g: usize, axis: usize, step: isize| -> usize {
+    let neighbour = |g: usize, axis: usize, step: isize| -> Option<usize> {
         let at = lattice.coords(g);
         let n = lattice.dims[axis] as isize;
-        let moved = (at[axis] as isize + step).rem_euclid(n) as usize;
-        g - at[axis] * s[axis] + moved * s[axis]
+        let to = at[axis] as isize + step;
+        let moved = match settings.edges {
+            P1Edges::Periodic => to.rem_euclid(n),
+            P1Edges::Zero if (0..n).contains(&to) => to,
+            P1Edges::Zero => return None,
+        } as usize;
+        Some(g - at[axis] * s[axis] + moved * s[axis])
     };
+    let at = |f: &[f64], g: Option<usize>| g.map_or(0.0, |g| f[g]);
     let mut last_change = 0.0;
     for step in 1..=settings.steps {
         let mut next_phi = vec![0.0; n];
@@ -153,15 +173,19 @@ pub fn march(
         for g in 0..n {
             let divergence: f64 = (0..3)
                 .map(|a| match settings.layout {
-                    Layout::Collocated => 0.5 * (flux[a][wrap(g, a, 1)] - flux[a][wrap(g, a, -1)]),
-                    Layout::Staggered => flux[a][g] - flux[a][wrap(g, a, -1)],
+                    Layout::Collocated => {
+                        0.5 * (at(&flux[a], neighbour(g, a, 1)) - at(&flux[a], neighbour(g, a, -1)))
+                    }
+                    Layout::Staggered => flux[a][g] - at(&flux[a], neighbour(g, a, -1)),
                 })
                 .sum();
             next_phi[g] = (1.0 - k_phi) * phi[g] - r * divergence + dt * source[g];
             for a in 0..3 {
                 let gradient = match settings.layout {
-                    Layout::Collocated => 0.5 * (phi[wrap(g, a, 1)] - phi[wrap(g, a, -1)]),
-                    Layout::Staggered => phi[wrap(g, a, 1)] - phi[g],
+                    Layout::Collocated => {
+                        0.5 * (at(&phi, neighbour(g, a, 1)) - at(&phi, neighbour(g, a, -1)))
+                    }
+                    Layout::Staggered => at(&phi, neighbour(g, a, 1)) - phi[g],
                 };
                 next_flux[a][g] = (1.0 - k_flux) * flux[a][g] - r * gradient / 3.0;
             }
@@ -190,6 +214,16 @@ pub fn march(
         };
         phi = next_phi;
         flux = next_flux;
+        if last_change <= settings.tolerance {
+            return Ok(P1State {
+                fluence: phi,
+                flux,
+                steps: step,
+                stop_reason: StopReason::ConvergedRelative {
+                    residual: last_change,
+                },
+            });
+        }
     }
     Ok(P1State {
         fluence: phi,

@@ -83,13 +83,23 @@ pub fn diffuse(
             stop_reason,
         });
     }
+    let scatterer = match solver {
+        StepSolver::Multigrid { .. } => Some(Scatterer::new(lattice, a)?),
+        StepSolver::GaussSeidel { .. } => None,
+    };
     for _ in 0..steps {
-        let (next, its, reason) = match solver {
-            StepSolver::GaussSeidel {
-                tolerance,
-                max_sweeps,
-            } => gauss_seidel_step(lattice, &current, a, tolerance, max_sweeps),
-            StepSolver::Multigrid { tolerance } => multigrid_step(lattice, &current, a, tolerance)?,
+        let (next, its, reason) = match (&scatterer, solver) {
+            (Some(s), StepSolver::Multigrid { tolerance }) => s.step(&current, tolerance)?,
+            (
+                _,
+                StepSolver::GaussSeidel {
+                    tolerance,
+                    max_sweeps,
+                },
+            ) => gauss_seidel_step(lattice, &current, a, tolerance, max_sweeps),
+            (None, StepSolver::Multigrid { tolerance }) => {
+                Scatterer::new(lattice, a)?.step(&current, tolerance)?
+            }
         };
         iterations += its;
         stop_reason = reason;
@@ -179,43 +189,71 @@ fn gauss_seidel_step(
     (x, 0, StopReason::Exact)
 }
 
-fn multigrid_step(
-    lattice: &Lattice,
-    rhs: &[f64],
-    a: f64,
-    tolerance: f64,
-) -> Result<(Vec<f64>, usize, StopReason), ExplicitError> {
-    use lucent_diffusion::{
-        Boundaries, CellGeometry, Condition, DiffusionProblem, Method, Sources, Stopping, solve,
-    };
-    let invalid = |e: &dyn std::fmt::Display| ExplicitError::Invalid(e.to_string());
-    let h = lattice.spacing;
-    let dims = lattice.dims;
-    let grid = lucent_grid::GridGeometry::from_bounds(
-        dims,
-        lattice.origin,
-        lattice.origin + glam::DVec3::from_array(dims.map(|n| n as f64)) * h,
-    )
-    .map_err(|e| invalid(&e))?;
-    let n = lattice.len();
-    // −∇·(D∇x) + x = rhs with D = a h²: the integrated rows are h³ times the step's.
-    let problem = DiffusionProblem::new(
-        CellGeometry::full_box(grid),
-        vec![(a * h * h) as f32; n],
-        vec![1.0; n],
-        Boundaries::uniform(Condition::Neumann { flux: 0.0 }),
-    )
-    .map_err(|e| invalid(&e))?;
-    let sources = Sources {
-        volumetric: rhs.iter().map(|&v| v as f32).collect(),
-        ..Sources::default()
-    };
-    let stopping = Stopping {
-        relative_tolerance: tolerance,
-        ..Stopping::default()
-    };
-    let solution =
-        solve(&problem, &sources, Method::default(), &stopping).map_err(|e| invalid(&e))?;
-    let c = solution.convergence;
-    Ok((solution.fluence, c.iterations(), c.stop_reason))
+/// The multigrid hierarchy of one backward-Euler step, built once and reused for every
+/// step and every frame with the same grid and a = σ_s Δt/Δx² (what an interactive
+/// renderer keeps between transfer-function edits).
+#[derive(Debug, Clone)]
+pub struct Scatterer {
+    multigrid: lucent_diffusion::Multigrid,
+    volume: f64,
+    cells: usize,
+}
+
+impl Scatterer {
+    /// The hierarchy for (I − aΔ_h) on `lattice` with reflecting walls.
+    pub fn new(lattice: &Lattice, a: f64) -> Result<Self, ExplicitError> {
+        use lucent_diffusion::{
+            Boundaries, CellGeometry, Condition, DiffusionProblem, Multigrid, MultigridSettings,
+        };
+        let invalid = |e: &dyn std::fmt::Display| ExplicitError::Invalid(e.to_string());
+        if !(a > 0.0 && a.is_finite()) {
+            return Err(ExplicitError::Invalid(format!("a = {a}: must be positive")));
+        }
+        let h = lattice.spacing;
+        let dims = lattice.dims;
+        let grid = lucent_grid::GridGeometry::from_bounds(
+            dims,
+            lattice.origin,
+            lattice.origin + glam::DVec3::from_array(dims.map(|n| n as f64)) * h,
+        )
+        .map_err(|e| invalid(&e))?;
+        let n = lattice.len();
+        // −∇·(D∇x) + x = L with D = a h², integrated over cells of volume h³.
+        let problem = DiffusionProblem::new(
+            CellGeometry::full_box(grid),
+            vec![(a * h * h) as f32; n],
+            vec![1.0; n],
+            Boundaries::uniform(Condition::Neumann { flux: 0.0 }),
+        )
+        .map_err(|e| invalid(&e))?;
+        Ok(Self {
+            multigrid: Multigrid::build(&problem, MultigridSettings::default())
+                .map_err(|e| invalid(&e))?,
+            volume: h * h * h,
+            cells: n,
+        })
+    }
+
+    /// One step from `field` to a relative residual `tolerance`.
+    pub fn step(
+        &self,
+        field: &[f64],
+        tolerance: f64,
+    ) -> Result<(Vec<f64>, usize, StopReason), ExplicitError> {
+        if field.len() != self.cells {
+            return Err(ExplicitError::Invalid(format!(
+                "{} values for {} cells",
+                field.len(),
+                self.cells
+            )));
+        }
+        let rhs: Vec<f64> = field.iter().map(|v| v * self.volume).collect();
+        let mut out = field.to_vec();
+        let stopping = lucent_diffusion::Stopping {
+            relative_tolerance: tolerance,
+            ..lucent_diffusion::Stopping::default()
+        };
+        let c = self.multigrid.solve(&rhs, &mut out, &stopping);
+        Ok((out, c.iterations(), c.stop_reason))
+    }
 }

@@ -6,7 +6,7 @@ use glam::DVec3;
 use lucent_core::StopReason;
 use lucent_explicit::ftcs::{Edges, FtcsDiffusion, GradientSign, March, murray_coefficients};
 use lucent_explicit::ordinates::{OrdinatesSettings, angular_error, march as ordinates};
-use lucent_explicit::p1::{Damping, Layout, P1Settings, march as p1};
+use lucent_explicit::p1::{Damping, Layout, P1Edges, P1Settings, march as p1};
 use lucent_explicit::{ExplicitError, Lattice, stability};
 use lucent_optics::SphericalQuadrature;
 use proptest::prelude::*;
@@ -282,6 +282,8 @@ fn collocated_p1_leaves_a_checkerboard_and_staggered_does_not() {
             damping: Damping::Murray { sigma_t: 0.02 / r },
             time_step: r,
             steps: 60,
+            tolerance: 0.0,
+            edges: P1Edges::Periodic,
             allow_unstable: false,
         };
         p1(&lattice, &q, &settings, None).unwrap().fluence
@@ -323,6 +325,8 @@ fn p1_bound_is_not_murrays_condition() {
         damping: Damping::Murray { sigma_t: 0.5 / r },
         time_step: r,
         steps: 40,
+        tolerance: 0.0,
+        edges: P1Edges::Periodic,
         allow_unstable,
     };
     let q = vec![0.0; n];

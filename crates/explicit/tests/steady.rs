@@ -16,12 +16,9 @@ fn ftcs_and_jacobi_reach_the_multigrid_solution() {
     // multigrid (1e-11) to 1e-5 relative in L2: the residual bound times the condition
     // number (~1e3 here) leaves a margin of 100.
     let grid = GridGeometry::from_bounds([12; 3], DVec3::splat(-3.0), DVec3::splat(3.0)).unwrap();
-    let cells = CellGeometry::from_sdf(
-        grid,
-        |p| p.length() - 2.7,
-        Discretisation::EmbeddedBoundary,
-    )
-    .unwrap();
+    let cells =
+        CellGeometry::from_sdf(grid, |p| p.length() - 2.7, Discretisation::EmbeddedBoundary)
+            .unwrap();
     let n = grid.voxel_count();
     let d: Vec<f32> = (0..n).map(|c| 0.1 + 0.1 * ((c * 7) % 5) as f32).collect();
     let problem = DiffusionProblem::new(
@@ -63,7 +60,11 @@ fn ftcs_and_jacobi_reach_the_multigrid_solution() {
         Iteration::Jacobi { omega: 1.0 },
     ] {
         let out = iterate(&system, iteration, &settings).unwrap();
-        assert!(out.stop_reason.is_converged(), "{iteration:?}: {:?}", out.stop_reason);
+        assert!(
+            out.stop_reason.is_converged(),
+            "{iteration:?}: {:?}",
+            out.stop_reason
+        );
         let error = out
             .fluence
             .iter()
@@ -72,7 +73,11 @@ fn ftcs_and_jacobi_reach_the_multigrid_solution() {
             .sum::<f64>()
             .sqrt()
             / norm;
-        assert!(error < 1e-5, "{iteration:?}: {error} after {} sweeps", out.residuals.len());
+        assert!(
+            error < 1e-5,
+            "{iteration:?}: {error} after {} sweeps",
+            out.residuals.len()
+        );
     }
     // Beyond the step bound: refused.
     let too_big = Iteration::Ftcs {
