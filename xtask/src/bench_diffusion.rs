@@ -45,7 +45,7 @@ fn sphere(n: usize) -> Result<(DiffusionProblem, Sources), String> {
 }
 
 /// Best of `runs` wall times of `f`, seconds.
-fn best_of(runs: usize, mut f: impl FnMut()) -> f64 {
+pub(crate) fn best_of(runs: usize, mut f: impl FnMut()) -> f64 {
     (0..runs)
         .map(|_| {
             let t = Instant::now();
@@ -57,7 +57,7 @@ fn best_of(runs: usize, mut f: impl FnMut()) -> f64 {
 
 /// Copy bandwidth (bytes read + written per second) of a 256 MiB f32 buffer: single
 /// thread and over rayon's pool.
-fn copy_bandwidth() -> (f64, f64) {
+pub(crate) fn copy_bandwidth() -> (f64, f64) {
     let n = 64 << 20;
     let src: Vec<f32> = (0..n).map(|i| i as f32).collect();
     let mut dst = vec![0.0f32; n];

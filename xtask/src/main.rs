@@ -21,15 +21,21 @@
 //! - `bench-diffusion [N...]`: lucent-diffusion's multigrid on the marble sphere at N³
 //!   (64, 128, 256): time to 1e-8, one smoothing sweep's GB/s beside the copy bandwidth
 //!   measured in the same run, and pyamg and scipy CG on the same exported matrix.
+//! - `bench-explicit [N]`: one step of each explicit scheme at N³ with updates/s and GB/s
+//!   beside the copy bandwidth, and Zhang & Ma's full update for one light.
+//! - `stability`: each explicit scheme's measured blow-up boundary against its theoretical
+//!   curves, as `docs/stability/*.svg` and `.csv` (see `docs/stability.md`).
 
 // This binary reports to the terminal.
 #![allow(clippy::print_stdout)]
 
 mod bench_diffusion;
+mod bench_explicit;
+mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...]>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | stability>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -45,6 +51,29 @@ fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("xtask: mitsuba: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
+    if command.as_deref() == Some("bench-explicit") {
+        let n = std::env::args()
+            .nth(2)
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(128);
+        return match bench_explicit::run(n) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("xtask: bench-explicit: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
+    if command.as_deref() == Some("stability") {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        return match stability::run(&root) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("xtask: stability: {e}");
                 ExitCode::FAILURE
             }
         };

@@ -10,7 +10,7 @@
 //! thesis prints s = −1 (Eq. 4.3), kept as [`GradientSign::Printed`] for the study: it
 //! converges to a different equation wherever D varies.
 //!
-//! Murray's parameters ([`FtcsDiffusion::murray`]): β = D/Δ ∈ (0, 1], albedo α, g = 0, so
+//! Murray's parameters ([`murray_coefficients`]): β = D/Δ ∈ (0, 1], albedo α, g = 0, so
 //! σ_a = (1 − α)/(3βΔ), and r = cΔt/Δ.
 //!
 //! Stability ([`crate::stability::ftcs_diffusion`]): von Neumann r ≤ 6β/(36β² + (1 − α))
@@ -139,8 +139,45 @@ impl FtcsDiffusion<'_> {
             GradientSign::Conservative => 1.0,
             GradientSign::Printed => -1.0,
         };
+        let [_, _, nz] = l.dims;
+        let (phi_d, d, sa, q) = (phi, self.diffusion, self.absorption, self.source);
         out.par_chunks_mut(slab).enumerate().for_each(|(k, out)| {
+            // Interior rows: every neighbour in the grid, straight index arithmetic.
+            if k > 0 && k + 1 < nz && ny > 2 && nx > 2 {
+                for j in 1..ny - 1 {
+                    let row = k * slab + j * nx;
+                    for i in 1..nx - 1 {
+                        let g = row + i;
+                        let (pi, di) = (phi_d[g], d[g]);
+                        let mut laplacian = -6.0 * pi;
+                        let mut gradient = 0.0;
+                        for s in [1, nx, slab] {
+                            let (pm, pp) = (phi_d[g - s], phi_d[g + s]);
+                            laplacian += pm + pp;
+                            gradient += (d[g + s] - d[g - s]) * (pp - pm);
+                        }
+                        out[j * nx + i] = pi
+                            + dt * (di * laplacian / h2 + sign * gradient / (4.0 * h2)
+                                - sa[g] * pi
+                                + q[g]);
+                    }
+                }
+            }
+            let interior = |local: usize| {
+                let (i, j) = (local % nx, local / nx);
+                k > 0
+                    && k + 1 < nz
+                    && ny > 2
+                    && nx > 2
+                    && i > 0
+                    && i + 1 < nx
+                    && j > 0
+                    && j + 1 < ny
+            };
             for (local, o) in out.iter_mut().enumerate() {
+                if interior(local) {
+                    continue;
+                }
                 let g = k * slab + local;
                 let at = l.coords(g).map(|v| v as isize);
                 let (pi, di) = (phi[g], self.diffusion[g]);

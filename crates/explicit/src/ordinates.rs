@@ -91,16 +91,6 @@ pub fn march(
     let n = lattice.len();
     let m = dirs.len();
     let s = lattice.strides();
-    // Upwind neighbours per direction and axis: index or none (vacuum).
-    let upwind = |g: usize, d: usize, axis: usize| -> Option<usize> {
-        let at = lattice.coords(g);
-        let w = dirs[d][axis];
-        if w > 0.0 {
-            (at[axis] > 0).then(|| g - s[axis])
-        } else {
-            (at[axis] + 1 < lattice.dims[axis]).then(|| g + s[axis])
-        }
-    };
     let mut radiance = vec![0.0f64; n * m];
     let mut next = vec![0.0f64; n * m];
     let mut phi = vec![0.0f64; n];
@@ -125,17 +115,27 @@ pub fn march(
             let (radiance, phi) = (&radiance, &phi);
             next.par_chunks_mut(m).enumerate().for_each(|(g, out)| {
                 let emission = dt * (sigma_s[g] * phi[g] + source[g]) / four_pi;
+                let at = lattice.coords(g);
+                // The neighbours' blocks of m radiances, low and high, per axis.
+                let blocks: [[Option<usize>; 2]; 3] = std::array::from_fn(|axis| {
+                    [
+                        (at[axis] > 0).then(|| (g - s[axis]) * m),
+                        (at[axis] + 1 < lattice.dims[axis]).then(|| (g + s[axis]) * m),
+                    ]
+                });
+                let damping = 1.0 - dt * sigma_t[g];
                 for (d, o) in out.iter_mut().enumerate() {
                     let l = radiance[g * m + d];
                     let mut change = 0.0;
                     for axis in 0..3 {
-                        let w = dirs[d][axis].abs();
-                        if w > 0.0 {
-                            let up = upwind(g, d, axis).map_or(0.0, |u| radiance[u * m + d]);
-                            change += w * (l - up);
+                        let w = dirs[d][axis];
+                        if w != 0.0 {
+                            let side = usize::from(w < 0.0);
+                            let up = blocks[axis][side].map_or(0.0, |b| radiance[b + d]);
+                            change += w.abs() * (l - up);
                         }
                     }
-                    *o = l - r * change - dt * sigma_t[g] * l + emission;
+                    *o = damping * l - r * change + emission;
                 }
             });
         }
