@@ -408,3 +408,64 @@ fn ordinates_ray_effects_shrink_with_more_directions() {
     assert!(errors.windows(2).all(|w| w[1] < 0.7 * w[0]), "{errors:?}");
     assert!(errors[0] > 0.3, "S2 must show its rays: {errors:?}");
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+
+    #[test]
+    fn p1_and_ordinates_below_the_bound_stay_bounded_and_beyond_it_are_refused(
+        k in 0.05f64..1.0, fraction in 0.2f64..0.95, factor in 1.1f64..3.0,
+    ) {
+        // P1 (collocated): random data decays in the energy norm below 0.95 × the bound;
+        // beyond 1.1 × it is refused, and a forced run stops with DivergedGrowth.
+        let lattice = Lattice::new([8; 3], 1.0).unwrap();
+        let n = lattice.len();
+        let q = vec![0.0; n];
+        let initial = || (random(n, 1), [random(n, 2), random(n, 3), random(n, 4)]);
+        let energy = |s: &lucent_explicit::p1::P1State| {
+            s.fluence.iter().map(|v| v * v).sum::<f64>()
+                + 3.0 * s.flux.iter().flatten().map(|v| v * v).sum::<f64>()
+        };
+        let settings = |r: f64, steps, allow_unstable| P1Settings {
+            layout: Layout::Collocated,
+            damping: Damping::Murray { sigma_t: k / r },
+            time_step: r,
+            steps,
+            tolerance: 0.0,
+            edges: P1Edges::Periodic,
+            allow_unstable,
+        };
+        let limit = stability::p1::collocated_limit(k, k);
+        let e0 = energy(&p1(&lattice, &q, &settings(fraction * limit, 0, false), Some(initial())).unwrap());
+        let below = p1(&lattice, &q, &settings(fraction * limit, 200, false), Some(initial())).unwrap();
+        prop_assert!(energy(&below) <= e0 * (1.0 + 1e-9));
+        let refused = matches!(
+            p1(&lattice, &q, &settings(factor * limit, 200, false), Some(initial())),
+            Err(ExplicitError::Unstable { .. })
+        );
+        prop_assert!(refused);
+        let forced = p1(&lattice, &q, &settings(factor * limit, 1_000_000, true), Some(initial())).unwrap();
+        let stopped = matches!(forced.stop_reason, StopReason::DivergedGrowth { .. });
+        prop_assert!(stopped, "{:?}", forced.stop_reason);
+        prop_assert!(forced.fluence.iter().all(|v| v.is_finite()));
+
+        // Ordinates (S2, vacuum edges, absorbing): non-negative and bounded below the
+        // bound from a non-negative source; refused beyond it.
+        let quadrature = SphericalQuadrature::level_symmetric(2).unwrap();
+        let s_max = 3f64.sqrt();
+        let sigma_t = 0.5;
+        let mut source = vec![0.0; n];
+        source[n / 2] = 1.0;
+        // The bounds at K = cΔt σ_t for cΔt near 0.2 (the march checks its own K).
+        let step = |f: f64| f * stability::ordinates::von_neumann_limit(s_max, sigma_t * 0.2);
+        let run = |time_step: f64, allow_unstable| ordinates(
+            &lattice, &quadrature, &vec![sigma_t; n], &vec![0.2; n], &source,
+            &OrdinatesSettings { time_step, tolerance: 0.0, max_steps: 300, allow_unstable },
+        );
+        let positivity = stability::ordinates::positivity_limit(s_max, sigma_t * 0.2);
+        let ok = run(fraction * positivity.min(step(1.0)), false).unwrap();
+        prop_assert!(ok.fluence.iter().all(|&v| v >= 0.0 && v.is_finite()));
+        let refused = matches!(run(step(factor), false), Err(ExplicitError::Unstable { .. }));
+        prop_assert!(refused);
+    }
+}
