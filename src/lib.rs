@@ -12,6 +12,7 @@
 //! | [`render`] | `lucent-render` | cameras, ray marching, tone mapping, PNG and EXR |
 //! | [`mc`] | `lucent-mc` | Monte Carlo ground truth: delta tracking, track-length fluence with standard errors |
 //! | [`diffusion`] | `lucent-diffusion` | steady diffusion, embedded boundary, matrix-free multigrid |
+//! | [`fem`] | `lucent-fem` | Murray's finite elements for the RTE, Krylov solvers on a linear-operator trait |
 //! | [`explicit`] | `lucent-explicit` | FTCS, P1, ordinates, Zhang & Ma convection–diffusion, Jacobi, with their stability bounds |
 //! | [`scene`] | (here) | TOML scene files and the built-in default scene |
 //!
@@ -35,6 +36,7 @@ use std::path::PathBuf;
 pub use lucent_core as core;
 pub use lucent_diffusion as diffusion;
 pub use lucent_explicit as explicit;
+pub use lucent_fem as fem;
 pub use lucent_grid as grid;
 pub use lucent_mc as mc;
 pub use lucent_optics as optics;
@@ -50,6 +52,7 @@ pub fn registry() -> lucent_core::Registry {
     for entry in lucent_explicit::ExplicitSolver::ENTRIES {
         registry.register(entry);
     }
+    registry.register(lucent_fem::FemP1Solver::ENTRY);
     registry
 }
 

@@ -1,0 +1,40 @@
+//! Finite elements for the RTE and for diffusion (Murray's thesis, chapter 3; issue 8).
+//!
+//! - [`murray`]: Murray's discretisation of the steady RTE without in-scattering,
+//!   ω·∇L = Q_e − K_t L, Galerkin in the angular basis {1, ω_x, ω_y, ω_z} times trilinear
+//!   hat functions: the α, β, γ, δ matrices of `shared/notes/000_murray.md` §2.6, exactly.
+//!   Jacobi on it diverges for every K_t: the iteration matrix's spectral radius is at least
+//!   19/8 (the mass matrix's off-diagonal sum 19/27 exceeds its diagonal 8/27), and grows
+//!   like 1/(K_tΔ) when streaming dominates. It is a non-symmetric system: Krylov methods
+//!   or a direct solve are the sound way to it.
+//! - [`solvers`]: Jacobi and Gauss–Seidel on sparse matrices, BiCGSTAB and restarted GMRES
+//!   on any [`LinearOperator`], dense LU for small systems; residual histories and PETSc-style
+//!   stop reasons.
+//! - `fem-p1-jacobi` in the registry ([`FemP1Solver`]): Murray's system by Jacobi, kept
+//!   for the stability study (it ends with `DivergedGrowth`).
+//!
+//! Not yet here (issue 8 is open): the Q1 Galerkin diffusion solver `fem-diffusion` with
+//! its multigrid-preconditioned CG, and a stabilised P1 system with in-scattering.
+//!
+//! Units: lengths in the mesh's unit, K_t in 1/length; the fluence is φ = 4π L_0 (the
+//! angular basis's constant coefficient).
+//!
+//! ```
+//! use lucent_fem::murray::{Mesh, MurraySystem};
+//! // Mass-dominated (K_t Δ = 10): Jacobi's spectral radius is 19/8.
+//! let mesh = Mesh { nodes: [6; 3], spacing: 1.0, periodic: true };
+//! let system = MurraySystem::assemble(mesh, 10.0)?;
+//! let rho = system.jacobi_spectral_radius(200);
+//! assert!((rho / 2.375 - 1.0).abs() < 0.01);
+//! # Ok::<(), lucent_fem::FemError>(())
+//! ```
+
+mod error;
+pub mod murray;
+mod operator;
+mod solver;
+pub mod solvers;
+
+pub use error::FemError;
+pub use operator::{Dense, LinearOperator};
+pub use solver::FemP1Solver;

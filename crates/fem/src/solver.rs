@@ -1,0 +1,160 @@
+//! The registry entry `fem-p1-jacobi`: Murray's finite-element system on a problem's grid
+//! (vertices at the cell centres, homogeneous K_t = σ_t, natural boundary), solved by
+//! Jacobi as the thesis did. It is kept for the stability study: Jacobi diverges on this
+//! system for every K_t (spectral radius ≥ 19/8), so the solve ends with
+//! `DivergedGrowth` and returns the last finite iterate. Parameter `solver`: `jacobi`
+//! (default), or `gmres` to see what the converged system gives.
+
+use std::time::Instant;
+
+use lucent_core::{
+    BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OutputKind, ParamValue, Params,
+    Problem, Solution, SolveError, SolveOptions, SolveReport, Solver, SolverEntry,
+};
+use lucent_grid::Grid;
+
+use crate::murray::{Mesh, MurraySystem};
+use crate::solvers::{Stopping, gmres, jacobi};
+
+/// `fem-p1-jacobi`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FemP1Solver {
+    krylov: bool,
+}
+
+fn invalid(name: &str, reason: impl Into<String>) -> SolveError {
+    SolveError::InvalidParameter {
+        name: name.into(),
+        reason: reason.into(),
+    }
+}
+
+impl FemP1Solver {
+    /// The registry entry.
+    pub const ENTRY: SolverEntry = SolverEntry {
+        name: "fem-p1-jacobi",
+        summary: "Murray's P1 x trilinear finite elements for the RTE, by Jacobi (diverges: kept for the study)",
+        build: |p: &Params| {
+            p.check_known("fem-p1-jacobi", &["solver"])?;
+            let krylov = match p.0.get("solver") {
+                None => false,
+                Some(ParamValue::Text(t)) if t == "jacobi" => false,
+                Some(ParamValue::Text(t)) if t == "gmres" => true,
+                Some(other) => {
+                    return Err(invalid("solver", format!("{other:?}: jacobi or gmres")));
+                }
+            };
+            Ok(Box::new(FemP1Solver { krylov }))
+        },
+    };
+}
+
+impl Solver for FemP1Solver {
+    fn name(&self) -> &str {
+        "fem-p1-jacobi"
+    }
+
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            anisotropic: true,
+            heterogeneous: false,
+            embedded_geometry: false,
+            boundaries: vec![BoundaryKind::Vacuum],
+            lights: vec![LightKind::Point, LightKind::Emission],
+            output: OutputKind::Fluence,
+            fluence: FluenceKind::Uncollided,
+        }
+    }
+
+    fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
+        self.capabilities().check(self.name(), problem)?;
+        options.validate()?;
+        let started = Instant::now();
+        let g = *problem.geometry();
+        let h = g.spacing();
+        if (h.x - h.y).abs() > 1e-9 * h.x || (h.x - h.z).abs() > 1e-9 * h.x {
+            return Err(invalid("grid", "cubic cells needed"));
+        }
+        let mesh = Mesh {
+            nodes: g.dims(),
+            spacing: h.x,
+            periodic: false,
+        };
+        let n = g.voxel_count();
+        let bytes = (n as u64) * 4 * 27 * 4 * 16;
+        if bytes > options.memory_budget {
+            return Err(SolveError::OverBudget {
+                solver: self.name().into(),
+                needed: bytes,
+                budget: options.memory_budget,
+            });
+        }
+        let mut fluence = Vec::new();
+        let mut last = None;
+        for c in 0..problem.channels() {
+            let kt = f64::from(problem.medium().sigma_t(c).data()[0]);
+            let system =
+                MurraySystem::assemble(mesh, kt).map_err(|e| invalid("problem", e.to_string()))?;
+            // ∫ψ_0 ϕ_k Q_e with a lumped mass: 4π Q_k h³ per vertex.
+            let mut b = vec![0.0; 4 * n];
+            let volume = g.cell_volume();
+            for light in problem.lights() {
+                match light {
+                    Light::Point {
+                        position,
+                        intensity,
+                    } => {
+                        let v = g.world_to_voxel(*position).round();
+                        let inside = (0..3).all(|a| v[a] >= 0.0 && v[a] < g.dims()[a] as f64);
+                        if !inside {
+                            return Err(invalid("lights", "point lights must lie inside the grid"));
+                        }
+                        let k = g.index(v.x as usize, v.y as usize, v.z as usize);
+                        b[4 * k] += 4.0 * std::f64::consts::PI * intensity.channel(c);
+                    }
+                    Light::Emission { grid, scale } => {
+                        for (k, e) in grid.data().iter().enumerate() {
+                            b[4 * k] += 4.0
+                                * std::f64::consts::PI
+                                * scale.channel(c)
+                                * f64::from(*e)
+                                * volume;
+                        }
+                    }
+                    other => return Err(invalid("lights", format!("{:?}", other.kind()))),
+                }
+            }
+            let stopping = Stopping {
+                relative_tolerance: options.relative_tolerance,
+                max_iterations: options.max_iterations,
+                ..Stopping::default()
+            };
+            let mut x = vec![0.0; 4 * n];
+            let convergence = if self.krylov {
+                gmres(&system.matrix, &b, &mut x, 60, &stopping)
+            } else {
+                jacobi(&system.matrix, &b, &mut x, &stopping)
+                    .map_err(|e| invalid("problem", e.to_string()))?
+            };
+            fluence.push(Grid::from_vec(
+                g,
+                system.fluence(&x).iter().map(|&v| v as f32).collect(),
+            )?);
+            last = Some(convergence);
+        }
+        let convergence = last.ok_or_else(|| invalid("problem", "no channel"))?;
+        Ok(Solution {
+            fluence,
+            angular: None,
+            standard_error: None,
+            report: SolveReport {
+                solver: self.name().into(),
+                iterations: convergence.residuals.len().saturating_sub(1),
+                residual_history: convergence.residuals,
+                wall_time_s: started.elapsed().as_secs_f64(),
+                peak_memory_bytes: bytes,
+                stop_reason: convergence.stop_reason,
+            },
+        })
+    }
+}
