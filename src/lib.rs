@@ -53,6 +53,7 @@ pub fn registry() -> lucent_core::Registry {
         registry.register(entry);
     }
     registry.register(lucent_fem::FemP1Solver::ENTRY);
+    registry.register(lucent_fem::FemDiffusionSolver::ENTRY);
     registry
 }
 

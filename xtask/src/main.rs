@@ -23,6 +23,8 @@
 //!   measured in the same run, and pyamg and scipy CG on the same exported matrix.
 //! - `bench-explicit [N]`: one step of each explicit scheme at N³ with updates/s and GB/s
 //!   beside the copy bandwidth, and Zhang & Ma's full update for one light.
+//! - `bench-fem [N...]`: Q1 finite elements (matrix-based) against the matrix-free finite
+//!   volumes on the same box: assembly, bytes per unknown, solve time.
 //! - `stability`: each explicit scheme's measured blow-up boundary against its theoretical
 //!   curves, as `docs/stability/*.svg` and `.csv` (see `docs/stability.md`).
 
@@ -31,11 +33,12 @@
 
 mod bench_diffusion;
 mod bench_explicit;
+mod bench_fem;
 mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | stability>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-fem [N...] | stability>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -64,6 +67,22 @@ fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("xtask: bench-explicit: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
+    if command.as_deref() == Some("bench-fem") {
+        let mut sizes: Vec<usize> = std::env::args()
+            .skip(2)
+            .filter_map(|s| s.parse().ok())
+            .collect();
+        if sizes.is_empty() {
+            sizes = vec![64, 128];
+        }
+        return match bench_fem::run(&sizes) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("xtask: bench-fem: {e}");
                 ExitCode::FAILURE
             }
         };

@@ -13,8 +13,12 @@
 //! - `fem-p1-jacobi` in the registry ([`FemP1Solver`]): Murray's system by Jacobi, kept
 //!   for the stability study (it ends with `DivergedGrowth`).
 //!
-//! Not yet here (issue 8 is open): the Q1 Galerkin diffusion solver `fem-diffusion` with
-//! its multigrid-preconditioned CG, and a stabilised P1 system with in-scattering.
+//! - [`q1`]: Q1 (trilinear) Galerkin diffusion with heterogeneous D and σ_a and a Robin
+//!   box, CG preconditioned by geometric multigrid on the element hierarchy (Galerkin
+//!   coarse operators): `fem-diffusion` ([`FemDiffusionSolver`]). Second order.
+//!
+//! Not yet here (issue 8 is open): embedded (curved) boundaries for `fem-diffusion`, and a
+//! stabilised P1 system with in-scattering.
 //!
 //! Units: lengths in the mesh's unit, K_t in 1/length; the fluence is φ = 4π L_0 (the
 //! angular basis's constant coefficient).
@@ -32,9 +36,10 @@
 mod error;
 pub mod murray;
 mod operator;
+pub mod q1;
 mod solver;
 pub mod solvers;
 
 pub use error::FemError;
 pub use operator::{Dense, LinearOperator};
-pub use solver::FemP1Solver;
+pub use solver::{FemDiffusionSolver, FemP1Solver};

@@ -63,3 +63,70 @@ fn jacobi_is_stopped_by_growth_and_gmres_converges() {
         assert!(gmres.report.residual_history.len() > 2);
     }
 }
+
+/// Relative L2 difference between fem-diffusion and diffusion-mg on an n³ marble-like box
+/// (12 mm, σ_t = 2.2/mm, albedo 0.999, Robin η = 1.3), beyond 1.5 mm from the light.
+fn fem_against_multigrid(n: usize) -> f64 {
+    use lucent_diffusion::DiffusionSolver;
+    let geometry = GridGeometry::from_bounds([n; 3], Default::default(), [12.0; 3].into()).unwrap();
+    let medium = Medium {
+        sigma_t: vec![Grid::filled(geometry, 2.2)],
+        albedo: vec![Field::Constant(0.999)],
+        phase: lucent_optics::Phase::Isotropic,
+        eta: 1.3,
+    };
+    let source: glam::DVec3 = [6.1, 5.8, 6.3].into();
+    let light = Light::Point {
+        position: source,
+        intensity: Spectrum::Grey(1.0),
+    };
+    let p = Problem::new(
+        geometry,
+        medium,
+        vec![light],
+        Boundary::Robin { eta: 1.3 },
+        None,
+    )
+    .unwrap();
+    let options = SolveOptions {
+        relative_tolerance: 1e-10,
+        ..SolveOptions::default()
+    };
+    let fem = (lucent_fem::FemDiffusionSolver::ENTRY.build)(&Params::default())
+        .unwrap()
+        .solve(&p, &options)
+        .unwrap();
+    assert!(
+        fem.report.stop_reason.is_converged(),
+        "{:?}",
+        fem.report.stop_reason
+    );
+    let mg = (DiffusionSolver::MULTIGRID.build)(&Params::default())
+        .unwrap()
+        .solve(&p, &options)
+        .unwrap();
+    let (mut d, mut s) = (0.0, 0.0);
+    for c in 0..geometry.voxel_count() {
+        let [i, j, k] = geometry.coords(c);
+        if (geometry.cell_centre(i, j, k) - source).length() < 1.5 {
+            continue;
+        }
+        let (a, b) = (
+            f64::from(fem.fluence(0).data()[c]),
+            f64::from(mg.fluence(0).data()[c]),
+        );
+        d += (a - b).powi(2);
+        s += b * b;
+    }
+    (d / s).sqrt()
+}
+
+#[test]
+fn fem_diffusion_agrees_with_diffusion_mg() {
+    // Vertex-centred Q1 elements and cell-centred finite volumes, both second order, on
+    // the same problem: their difference is discretisation error and shrinks as h²
+    // (measured 1.65% at 24³, 0.43% at 48³: a factor 3.9).
+    let (coarse, fine) = (fem_against_multigrid(24), fem_against_multigrid(48));
+    assert!(coarse < 0.03, "{coarse}");
+    assert!(fine < 0.35 * coarse, "{coarse} → {fine}");
+}
