@@ -17,8 +17,12 @@
 //!   box, CG preconditioned by geometric multigrid on the element hierarchy (Galerkin
 //!   coarse operators): `fem-diffusion` ([`FemDiffusionSolver`]). Second order.
 //!
-//! Not yet here (issue 8 is open): embedded (curved) boundaries for `fem-diffusion`, and a
-//! stabilised P1 system with in-scattering.
+//! - [`sphere`]: the same elements on a boundary-fitted ball (the cube lattice mapped
+//!   radially), isoparametric, for curved Robin boundaries (note 002 T7).
+//!
+//! Not yet here (issue 8 is open): curved boundaries through the registry entry (it meshes
+//! the problem's box), the tilted half-space T9, and a stabilised P1 system with
+//! in-scattering.
 //!
 //! Units: lengths in the mesh's unit, K_t in 1/length; the fluence is φ = 4π L_0 (the
 //! angular basis's constant coefficient).
@@ -39,6 +43,7 @@ mod operator;
 pub mod q1;
 mod solver;
 pub mod solvers;
+pub mod sphere;
 
 pub use error::FemError;
 pub use operator::{Dense, LinearOperator};

@@ -212,15 +212,6 @@ impl Q1Problem {
         }
         Ok(b)
     }
-
-    /// The element counts of the next coarser mesh, if every axis has an even number of
-    /// cells ≥ 2 (coarse operators are Galerkin products, so no coefficients are averaged).
-    fn coarsened_cells(&self) -> Option<[usize; 3]> {
-        self.cells
-            .iter()
-            .all(|&c| c >= 2 && c % 2 == 0)
-            .then(|| self.cells.map(|c| c / 2))
-    }
 }
 
 /// Trilinear prolongation from the coarse vertices (`coarse` cells per axis) to the fine
@@ -270,17 +261,23 @@ impl Q1Multigrid {
     /// Builds the hierarchy of `problem`'s matrix `a` (Galerkin coarse operators) down to a
     /// level of at most 1000 vertices or one that cannot halve.
     pub fn new(problem: &Q1Problem, a: sprs::CsMat<f64>, sweeps: usize) -> Self {
+        Self::for_lattice(problem.cells, a, sweeps)
+    }
+
+    /// The hierarchy of a matrix on the vertices of a lattice of `cells` elements per axis
+    /// (vertex (i, j, k) at index i + (n_x + 1)(j + (n_y + 1) k)), whatever the elements'
+    /// shapes: prolongation is trilinear in the lattice's coordinates (exact for nested
+    /// meshes, a good preconditioner for mapped ones).
+    pub fn for_lattice(cells: [usize; 3], a: sprs::CsMat<f64>, sweeps: usize) -> Self {
         let mut operators = vec![a];
         let mut prolongations = Vec::new();
-        let mut cells = problem.cells;
+        let mut cells = cells;
         while operators[operators.len() - 1].rows() > 1000 {
-            let probe = Q1Problem {
-                cells,
-                ..problem.clone()
-            };
-            let Some(coarse) = probe.coarsened_cells() else {
+            // Halve while every axis has an even number of cells ≥ 2.
+            if !cells.iter().all(|&c| c >= 2 && c % 2 == 0) {
                 break;
-            };
+            }
+            let coarse = cells.map(|c| c / 2);
             let p = prolongation(coarse);
             let pt = p.transpose_view().to_csr();
             let fine = &operators[operators.len() - 1];
