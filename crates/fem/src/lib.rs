@@ -20,9 +20,13 @@
 //! - [`sphere`]: the same elements on a boundary-fitted ball (the cube lattice mapped
 //!   radially), isoparametric, for curved Robin boundaries (note 002 T7).
 //!
-//! Not yet here (issue 8 is open): curved boundaries through the registry entry (it meshes
-//! the problem's box), the tilted half-space T9, and a stabilised P1 system with
-//! in-scattering.
+//! - [`p1ls`]: the steady P1 system with in-scattering and anisotropy (σ_t′), stabilised
+//!   by least squares: SPD, no checkerboard, second order in φ; 4 unknowns per vertex and
+//!   CG iterations growing like 1/h are its cost.
+//!
+//! Not yet here (issue 8 is open): curved boundaries and external lights through the
+//! registry entry (it meshes the problem's box and takes point lights and emission), the
+//! tilted half-space T9, the harness and pareto entries.
 //!
 //! Units: lengths in the mesh's unit, K_t in 1/length; the fluence is φ = 4π L_0 (the
 //! angular basis's constant coefficient).
@@ -40,6 +44,7 @@
 mod error;
 pub mod murray;
 mod operator;
+pub mod p1ls;
 pub mod q1;
 mod solver;
 pub mod solvers;
