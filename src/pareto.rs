@@ -5,7 +5,8 @@
 //!   that it is the same medium, and the fine solution averaged back onto the scene's cells,
 //!   so that cell averages are compared with cell averages) and the sky quadrature (8 and
 //!   32 directions);
-//! - `diffusion-*`: the stopping tolerance, and 1× and 2× cells for the multigrid methods
+//! - `diffusion-*` and `fem-diffusion`: the stopping tolerance, and 1× and 2× cells for the
+//!   multigrid methods
 //!   (against the total fluence: the curves flatten at the diffusion model's error);
 //! - `mc`: particles per batch (8 batches).
 //!
@@ -117,12 +118,13 @@ pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Vec<Point>, Err
     // Diffusion: every iterative method on the same operator, over the stopping tolerance
     // and (for the multigrid ones) the grid resolution. Its error against the total
     // fluence levels off at the diffusion model's own error.
-    let diffusion_runs: [(&str, &[usize], &[f64]); 5] = [
+    let diffusion_runs: [(&str, &[usize], &[f64]); 6] = [
         ("diffusion-mg", &[1, 2], &[1e-2, 1e-4, 1e-8]),
         ("diffusion-mgcg", &[1, 2], &[1e-4, 1e-8]),
         ("diffusion-cg", &[1], &[1e-2, 1e-4, 1e-8]),
         ("diffusion-sor", &[1], &[1e-2, 1e-4]),
         ("diffusion-jacobi", &[1], &[1e-2]),
+        ("fem-diffusion", &[1, 2], &[1e-4, 1e-8]),
     ];
     for (name, factors, tolerances) in diffusion_runs {
         let solver = registry.build(name, &Params::default())?;
@@ -134,6 +136,13 @@ pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Vec<Point>, Err
             continue;
         }
         for &factor in factors {
+            // Q1 elements need cubic cells; skip scenes without them.
+            let h = scene.built.problem.geometry().spacing();
+            if name == "fem-diffusion"
+                && ((h.x - h.y).abs() > 1e-9 * h.x || (h.x - h.z).abs() > 1e-9 * h.x)
+            {
+                continue;
+            }
             let problem = refined(scene, factor)?;
             for &relative_tolerance in tolerances {
                 let options = SolveOptions {

@@ -92,3 +92,41 @@ impl Solution {
         }
     }
 }
+
+/// The first-collision sources a diffusion-type solver takes for external lights, from a
+/// `direct` solution with its per-light transmittance: per cell, Q₀ = σ_s φ_u (isotropic,
+/// power/length³) and Q₁ = g σ_s Σ_l ω_l E_l T_l (the first moment of once-scattered
+/// light, for a phase function of mean cosine g). `sigma_s` holds σ_s per cell for
+/// `channel`. Q₁ is empty when g = 0 or the solution has no per-light part.
+pub fn first_collision_sources(
+    direct: &Solution,
+    geometry: &lucent_grid::GridGeometry,
+    channel: usize,
+    sigma_s: &[f32],
+    g: f64,
+) -> (Vec<f32>, Vec<[f32; 3]>) {
+    let n = geometry.voxel_count();
+    let phi_u = direct.fluence(channel).data();
+    let q0: Vec<f32> = (0..n).map(|cell| sigma_s[cell] * phi_u[cell]).collect();
+    let Some(Angular::Lights(lights)) = &direct.angular else {
+        return (q0, Vec::new());
+    };
+    if g == 0.0 {
+        return (q0, Vec::new());
+    }
+    let q1 = (0..n)
+        .map(|cell| {
+            let [i, j, k] = geometry.coords(cell);
+            let x = geometry.cell_centre(i, j, k);
+            let mut v = DVec3::ZERO;
+            for (light, grids) in lights.lights.iter().zip(&lights.transmittance) {
+                if let Some((w, e, _)) = light.arrival(x, lights.far, lights.min_distance) {
+                    let t = grids[channel.min(grids.len() - 1)].data()[cell];
+                    v += w * light.spectrum().channel(channel) * e * f64::from(t);
+                }
+            }
+            (v * g * f64::from(sigma_s[cell])).as_vec3().to_array()
+        })
+        .collect();
+    (q0, q1)
+}

@@ -399,7 +399,6 @@ impl DiffusionSolver {
                 }
             }
             let mut q0 = vec![0.0f32; n];
-            let mut q1 = vec![[0.0f32; 3]; n];
             for light in &emission {
                 if let Light::Emission { grid, scale } = light {
                     let s = 4.0 * std::f64::consts::PI * scale.channel(c);
@@ -408,34 +407,13 @@ impl DiffusionSolver {
                     }
                 }
             }
-            if let Some(Solution {
-                fluence: uncollided,
-                angular: Some(Angular::Lights(lights)),
-                ..
-            }) = &direct
-            {
-                let phi_u = &uncollided[c.min(uncollided.len() - 1)];
-                for (cell, q) in q0.iter_mut().enumerate() {
-                    *q += ss[cell] * phi_u.data()[cell];
+            if let Some(direct) = &direct {
+                let (scattered, first) =
+                    lucent_core::first_collision_sources(direct, &geometry, c, &ss, g);
+                for (q, s) in q0.iter_mut().zip(scattered) {
+                    *q += s;
                 }
-                if g != 0.0 {
-                    for cell in 0..n {
-                        let [i, j, k] = geometry.coords(cell);
-                        let x = geometry.cell_centre(i, j, k);
-                        let mut v = DVec3::ZERO;
-                        for (light, grids) in lights.lights.iter().zip(&lights.transmittance) {
-                            if let Some((w, e, _)) =
-                                light.arrival(x, lights.far, lights.min_distance)
-                            {
-                                let t = grids[c.min(grids.len() - 1)].data()[cell];
-                                v += w * light.spectrum().channel(c) * e * f64::from(t);
-                            }
-                        }
-                        let v = v * g * f64::from(ss[cell]);
-                        q1[cell] = v.as_vec3().to_array();
-                    }
-                    sources.first_moment = q1;
-                }
+                sources.first_moment = first;
             }
             sources.volumetric = q0;
             let solution = linear(&diffusion, &sources, &stopping)

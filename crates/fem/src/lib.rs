@@ -24,9 +24,12 @@
 //!   by least squares: SPD, no checkerboard, second order in φ; 4 unknowns per vertex and
 //!   CG iterations growing like 1/h are its cost.
 //!
-//! Not yet here (issue 8 is open): curved boundaries and external lights through the
-//! registry entry (it meshes the problem's box and takes point lights and emission), the
-//! tilted half-space T9, the harness and pareto entries.
+//! `fem-diffusion` takes every light (external ones through `direct`'s first-collision
+//! sources, like `diffusion-mg`) and is in the cross-check harness and the pareto charts.
+//!
+//! Not yet here (issue 8 is open): curved (embedded) boundaries through the registry
+//! entry (it meshes the problem's box; the ball is reached through [`sphere`] directly),
+//! and the tilted half-space T9.
 //!
 //! Units: lengths in the mesh's unit, K_t in 1/length; the fluence is φ = 4π L_0 (the
 //! angular basis's constant coefficient).

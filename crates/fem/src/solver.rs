@@ -161,8 +161,11 @@ impl Solver for FemP1Solver {
 
 /// `fem-diffusion`: Q1 Galerkin diffusion on the problem's grid (unknowns at the cell
 /// corners, D = 1/(3σ_t′) and σ_a per cell), Robin (A from η), vacuum (A = 1) or reflecting
-/// boxes, solved by multigrid-preconditioned CG. Lights: point lights inside (power 4πI)
-/// and emission (4π L_e). The fluence per cell is the mean of its 8 corners. Parameter
+/// boxes, solved by multigrid-preconditioned CG. Lights: point lights inside (power 4πI),
+/// emission (4π L_e), and every other light through `direct`'s first-collision sources
+/// (`lucent_core::first_collision_sources`: Q₀ = σ_s φ_u, Q₁ = g σ_s Σ ω E T, the latter
+/// entering the weak form as ∫ 3D Q₁·∇v, whose boundary terms cancel against the Robin
+/// condition's). The fluence per cell is the mean of its 8 corners plus φ_u. Parameter
 /// `sweeps` (smoothing sweeps per level, 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FemDiffusionSolver {
@@ -200,7 +203,13 @@ impl Solver for FemDiffusionSolver {
                 BoundaryKind::Robin,
                 BoundaryKind::Neumann,
             ],
-            lights: vec![LightKind::Point, LightKind::Emission],
+            lights: vec![
+                LightKind::Directional,
+                LightKind::Point,
+                LightKind::Spot,
+                LightKind::Sky,
+                LightKind::Emission,
+            ],
             output: OutputKind::Fluence,
             fluence: FluenceKind::Total,
         }
@@ -228,6 +237,33 @@ impl Solver for FemDiffusionSolver {
         };
         let n = g.voxel_count();
         let gbar = problem.medium().phase.mean_cosine();
+        // Lights the elements take directly, and the rest through `direct`.
+        let inside = |p: glam::DVec3| {
+            let v = g.world_to_voxel(p) + 0.5;
+            (0..3).all(|a| v[a] >= 0.0 && v[a] <= g.dims()[a] as f64)
+        };
+        let external: Vec<Light> = problem
+            .lights()
+            .iter()
+            .filter(|l| match l {
+                Light::Point { position, .. } => !inside(*position),
+                Light::Emission { .. } => false,
+                _ => true,
+            })
+            .cloned()
+            .collect();
+        let direct = if external.is_empty() {
+            None
+        } else {
+            let p = Problem::new(
+                g,
+                problem.medium().clone(),
+                external,
+                lucent_core::Boundary::Vacuum,
+                None,
+            )?;
+            Some(lucent_core::DirectSolver::default().solve(&p, options)?)
+        };
         let floor = 1e-3 / h.x;
         let mut fluence = Vec::new();
         let mut last = None;
@@ -255,12 +291,42 @@ impl Solver for FemDiffusionSolver {
             let mut b = vec![0.0; matrix.rows()];
             let origin = g.origin();
             let volume = g.cell_volume();
+            if let Some(direct) = &direct {
+                let ss: Vec<f32> = (0..n)
+                    .map(|cell| {
+                        let [i, j, k] = g.coords(cell);
+                        problem.medium().sigma_s_at(c, g.cell_centre(i, j, k))
+                    })
+                    .collect();
+                let (scattered, moment) =
+                    lucent_core::first_collision_sources(direct, &g, c, &ss, gbar);
+                let hh = h.x * h.x / 4.0;
+                for cell in 0..n {
+                    let [i, j, k] = g.coords(cell);
+                    for corner in 0..8 {
+                        let p = [corner & 1, (corner >> 1) & 1, corner >> 2];
+                        let node = q1.node([i + p[0], j + p[1], k + p[2]]);
+                        b[node] += f64::from(scattered[cell]) * volume / 8.0;
+                        if let Some(first) = moment.get(cell) {
+                            // ∫ 3D Q₁·∇ϕ over the cube: ±h²/4 per axis.
+                            let dq = 3.0 * q1.diffusion[cell];
+                            let grad: f64 = (0..3)
+                                .map(|a| {
+                                    let v = f64::from(first[a]);
+                                    if p[a] == 1 { v } else { -v }
+                                })
+                                .sum();
+                            b[node] += dq * grad * hh;
+                        }
+                    }
+                }
+            }
             for light in problem.lights() {
                 match light {
                     Light::Point {
                         position,
                         intensity,
-                    } => {
+                    } if inside(*position) => {
                         let x = *position - origin;
                         let s = q1
                             .point_source(
@@ -283,7 +349,7 @@ impl Solver for FemDiffusionSolver {
                             }
                         }
                     }
-                    other => return Err(invalid("lights", format!("{:?}", other.kind()))),
+                    _ => {}
                 }
             }
             bytes = bytes.max((matrix.nnz() * 12 + matrix.rows() * 40) as u64);
@@ -313,7 +379,13 @@ impl Solver for FemDiffusionSolver {
                     (sum / 8.0) as f32
                 })
                 .collect();
-            fluence.push(Grid::from_vec(g, cells)?);
+            let mut total = Grid::from_vec(g, cells)?;
+            if let Some(direct) = &direct {
+                for (t, u) in total.data_mut().iter_mut().zip(direct.fluence(c).data()) {
+                    *t += u;
+                }
+            }
+            fluence.push(total);
             last = Some(convergence);
         }
         let convergence = last.ok_or_else(|| invalid("problem", "no channel"))?;
