@@ -32,7 +32,7 @@ pub(crate) fn run(sizes: &[usize]) -> Result<(), String> {
             spacing: h,
             diffusion: vec![d; count],
             absorption: vec![sigma_a; count],
-            robin: Some(a),
+            robin: [Some(a); 6],
         };
         let t = Instant::now();
         let matrix = problem.assemble().map_err(|e| err(&e))?;

@@ -34,8 +34,9 @@ pub struct Q1Problem {
     pub diffusion: Vec<f64>,
     /// σ_a per element (1/length).
     pub absorption: Vec<f64>,
-    /// Robin factor A ≥ 1 on every face of the box, or `None` for reflecting faces.
-    pub robin: Option<f64>,
+    /// Robin factor A ≥ 1 on each face of the box (low x, high x, low y, high y, low z,
+    /// high z), or `None` for a reflecting face.
+    pub robin: [Option<f64>; 6],
 }
 
 impl Q1Problem {
@@ -59,7 +60,10 @@ impl Q1Problem {
             && self.absorption.len() == count
             && self.diffusion.iter().all(|d| *d > 0.0 && d.is_finite())
             && self.absorption.iter().all(|s| *s >= 0.0 && s.is_finite())
-            && self.robin.is_none_or(|a| a >= 1.0 && a.is_finite());
+            && self
+                .robin
+                .iter()
+                .all(|r| r.is_none_or(|a| a >= 1.0 && a.is_finite()));
         if ok {
             Ok(())
         } else {
@@ -122,12 +126,15 @@ impl Q1Problem {
                 }
             }
         }
-        if let Some(a_factor) = self.robin {
-            // ∮ φ v /(2A) on each of the six faces: the 2-D mass of every boundary quad.
-            let w = 1.0 / (2.0 * a_factor);
-            for axis in 0..3 {
-                let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-                for side in [0, self.cells[axis]] {
+        // ∮ φ v /(2A) on each Robin face: the 2-D mass of every boundary quad.
+        for axis in 0..3 {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            for (high, side) in [0, self.cells[axis]].into_iter().enumerate() {
+                let Some(a_factor) = self.robin[2 * axis + high] else {
+                    continue;
+                };
+                let w = 1.0 / (2.0 * a_factor);
+                {
                     for fu in 0..self.cells[u] {
                         for fv in 0..self.cells[v] {
                             for a in 0..4 {

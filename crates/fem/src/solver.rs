@@ -283,7 +283,7 @@ impl Solver for FemDiffusionSolver {
                 spacing: h.x,
                 diffusion: d,
                 absorption: sa,
-                robin,
+                robin: [robin; 6],
             };
             let matrix = q1
                 .assemble()

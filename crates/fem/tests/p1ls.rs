@@ -99,7 +99,7 @@ fn least_squares_p1_matches_primal_diffusion_and_stays_positive() {
         spacing: 1.0 / n as f64,
         diffusion: vec![1.0 / (3.0 * st); count],
         absorption: vec![sa; count],
-        robin: Some(a),
+        robin: [Some(a); 6],
     };
     let matrix = primal.assemble().unwrap();
     let load = primal.load(q);
