@@ -15,9 +15,7 @@
 //! per vertex instead of 1, 16× the matrix entries, and CG iterations growing like 1/h.
 
 use crate::error::FemError;
-use crate::operator::{LinearOperator, dot, norm};
 use crate::solvers::{Convergence, Stopping};
-use lucent_core::StopReason;
 
 /// A P1 problem on a box of `cells` elements of side `spacing`, constant coefficients.
 #[derive(Debug, Clone, PartialEq)]
@@ -180,8 +178,7 @@ impl P1LeastSquares {
         rhs: &[f64],
         stopping: &Stopping,
     ) -> (Vec<f64>, Convergence) {
-        let n = rhs.len();
-        let diagonal: Vec<f64> = (0..n)
+        let diagonal: Vec<f64> = (0..rhs.len())
             .map(|i| {
                 matrix
                     .get(i, i)
@@ -190,51 +187,13 @@ impl P1LeastSquares {
                     .unwrap_or(1.0)
             })
             .collect();
-        let b_norm = norm(rhs).max(f64::MIN_POSITIVE);
-        let mut x = vec![0.0; n];
-        let mut r = rhs.to_vec();
-        let mut z: Vec<f64> = r.iter().zip(&diagonal).map(|(r, d)| r / d).collect();
-        let mut p = z.clone();
-        let mut rz = dot(&r, &z);
-        let mut ap = vec![0.0; n];
-        let mut residuals = vec![norm(&r) / b_norm];
-        loop {
-            let iteration = residuals.len() - 1;
-            let rel = residuals[iteration];
-            let stop = if !rel.is_finite() {
-                Some(StopReason::DivergedNonFinite { iteration })
-            } else if rel <= stopping.relative_tolerance {
-                Some(StopReason::ConvergedRelative { residual: rel })
-            } else if iteration >= stopping.max_iterations {
-                Some(StopReason::IterationLimit { residual: rel })
-            } else {
-                None
-            };
-            if let Some(stop_reason) = stop {
-                return (
-                    x,
-                    Convergence {
-                        residuals,
-                        stop_reason,
-                    },
-                );
-            }
-            matrix.apply(&p, &mut ap);
-            let alpha = rz / dot(&p, &ap);
-            for i in 0..n {
-                x[i] += alpha * p[i];
-                r[i] -= alpha * ap[i];
-            }
-            residuals.push(norm(&r) / b_norm);
-            for i in 0..n {
-                z[i] = r[i] / diagonal[i];
-            }
-            let rz_new = dot(&r, &z);
-            let beta = rz_new / rz;
-            rz = rz_new;
-            for i in 0..n {
-                p[i] = z[i] + beta * p[i];
-            }
-        }
+        let mut x = vec![0.0; rhs.len()];
+        let convergence =
+            crate::solvers::conjugate_gradient(matrix, rhs, &mut x, stopping, |r, z| {
+                for ((z, r), d) in z.iter_mut().zip(r).zip(&diagonal) {
+                    *z = r / d;
+                }
+            });
+        (x, convergence)
     }
 }

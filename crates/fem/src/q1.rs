@@ -16,10 +16,8 @@
 //! Gauss–Seidel V(ν, ν) cycles, the coarsest level by dense LU: a symmetric positive
 //! definite preconditioner, as CG needs.
 
-use lucent_core::StopReason;
-
 use crate::error::FemError;
-use crate::operator::{LinearOperator, dot, norm};
+use crate::operator::LinearOperator;
 use crate::solvers::{Convergence, Stopping, lu_solve};
 
 /// A box of `cells` elements of side `spacing`, low corner `origin`, with D and σ_a per
@@ -374,53 +372,8 @@ impl Q1Multigrid {
 
     /// CG on level 0 preconditioned by one V-cycle per iteration, from `x`.
     pub fn solve(&self, b: &[f64], x: &mut [f64], stopping: &Stopping) -> Convergence {
-        let a = &self.operators[0];
-        let n = b.len();
-        let b_norm = norm(b).max(f64::MIN_POSITIVE);
-        let mut r = vec![0.0; n];
-        a.apply(x, &mut r);
-        for (r, b) in r.iter_mut().zip(b) {
-            *r = b - *r;
-        }
-        let mut z = vec![0.0; n];
-        self.cycle(0, &r, &mut z);
-        let mut p = z.clone();
-        let mut rz = dot(&r, &z);
-        let mut ap = vec![0.0; n];
-        let mut residuals = vec![norm(&r) / b_norm];
-        loop {
-            let iteration = residuals.len() - 1;
-            let rel = residuals[iteration];
-            let stop = if !rel.is_finite() {
-                Some(StopReason::DivergedNonFinite { iteration })
-            } else if rel <= stopping.relative_tolerance {
-                Some(StopReason::ConvergedRelative { residual: rel })
-            } else if iteration >= stopping.max_iterations {
-                Some(StopReason::IterationLimit { residual: rel })
-            } else {
-                None
-            };
-            if let Some(stop_reason) = stop {
-                return Convergence {
-                    residuals,
-                    stop_reason,
-                };
-            }
-            a.apply(&p, &mut ap);
-            let alpha = rz / dot(&p, &ap);
-            for i in 0..n {
-                x[i] += alpha * p[i];
-                r[i] -= alpha * ap[i];
-            }
-            residuals.push(norm(&r) / b_norm);
-            z.fill(0.0);
-            self.cycle(0, &r, &mut z);
-            let rz_new = dot(&r, &z);
-            let beta = rz_new / rz;
-            rz = rz_new;
-            for i in 0..n {
-                p[i] = z[i] + beta * p[i];
-            }
-        }
+        crate::solvers::conjugate_gradient(&self.operators[0], b, x, stopping, |r, z| {
+            self.cycle(0, r, z)
+        })
     }
 }

@@ -288,6 +288,52 @@ pub fn gmres(
     }
 }
 
+/// Preconditioned conjugate gradients from `x` for a symmetric positive-definite `op`;
+/// `precondition(r, z)` sets z ≈ A⁻¹ r with a symmetric positive-definite approximation
+/// (the identity, Jacobi, a symmetric multigrid cycle).
+pub fn conjugate_gradient(
+    op: &dyn LinearOperator,
+    b: &[f64],
+    x: &mut [f64],
+    stopping: &Stopping,
+    mut precondition: impl FnMut(&[f64], &mut [f64]),
+) -> Convergence {
+    let n = b.len();
+    let b_norm = norm(b).max(f64::MIN_POSITIVE);
+    let mut r = vec![0.0; n];
+    residual(op, b, x, &mut r);
+    let mut z = vec![0.0; n];
+    precondition(&r, &mut z);
+    let mut p = z.clone();
+    let mut rz = dot(&r, &z);
+    let mut ap = vec![0.0; n];
+    let mut residuals = vec![norm(&r) / b_norm];
+    loop {
+        let iteration = residuals.len() - 1;
+        if let Some(stop_reason) = verdict(stopping, residuals[iteration], iteration) {
+            return Convergence {
+                residuals,
+                stop_reason,
+            };
+        }
+        op.apply(&p, &mut ap);
+        let alpha = rz / dot(&p, &ap);
+        for i in 0..n {
+            x[i] += alpha * p[i];
+            r[i] -= alpha * ap[i];
+        }
+        residuals.push(norm(&r) / b_norm);
+        z.fill(0.0);
+        precondition(&r, &mut z);
+        let rz_new = dot(&r, &z);
+        let beta = rz_new / rz;
+        rz = rz_new;
+        for i in 0..n {
+            p[i] = z[i] + beta * p[i];
+        }
+    }
+}
+
 /// The largest system [`lu_solve`] accepts.
 pub const DENSE_LIMIT: usize = 6000;
 
