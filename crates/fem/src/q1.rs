@@ -71,8 +71,137 @@ impl Q1Problem {
         }
     }
 
-    /// The stiffness + mass + Robin matrix (CSR, symmetric positive definite).
+    /// The stiffness + mass + Robin matrix (CSR, symmetric positive definite), built row by
+    /// row in parallel: a vertex's row holds its ≤ 27 neighbours (in index order), each
+    /// entry summed over the ≤ 8 elements (and ≤ 3 Robin faces) the two vertices share.
+    /// Equal to [`Q1Problem::assemble_by_triplets`] (tested) and far faster.
     pub fn assemble(&self) -> Result<sprs::CsMat<f64>, FemError> {
+        use rayon::prelude::*;
+        self.check()?;
+        let h = self.spacing;
+        let m1 = |a: usize, b: usize| if a == b { h / 3.0 } else { h / 6.0 };
+        let s1 = |a: usize, b: usize| if a == b { 1.0 / h } else { -1.0 / h };
+        // Element matrices indexed by the local corner bits of the two vertices.
+        let mut mass = [[0.0; 8]; 8];
+        let mut stiffness = [[0.0; 8]; 8];
+        let bits = |a: usize| [a & 1, (a >> 1) & 1, (a >> 2) & 1];
+        for a in 0..8 {
+            for b in 0..8 {
+                let (pa, pb) = (bits(a), bits(b));
+                mass[a][b] = (0..3).map(|i| m1(pa[i], pb[i])).product();
+                stiffness[a][b] = (0..3)
+                    .map(|axis| {
+                        (0..3)
+                            .map(|i| {
+                                if i == axis {
+                                    s1(pa[i], pb[i])
+                                } else {
+                                    m1(pa[i], pb[i])
+                                }
+                            })
+                            .product::<f64>()
+                    })
+                    .sum();
+            }
+        }
+        let nodes = self.nodes();
+        let cells = self.cells;
+        let n: usize = nodes.iter().product();
+        let rows: Vec<Vec<(usize, f64)>> = (0..n)
+            .into_par_iter()
+            .map(|v| {
+                let at = [
+                    v % nodes[0],
+                    (v / nodes[0]) % nodes[1],
+                    v / (nodes[0] * nodes[1]),
+                ];
+                let mut row = Vec::with_capacity(27);
+                for dk in -1i64..=1 {
+                    for dj in -1i64..=1 {
+                        for di in -1i64..=1 {
+                            let d = [di, dj, dk];
+                            let w: [i64; 3] = std::array::from_fn(|a| at[a] as i64 + d[a]);
+                            if (0..3).any(|a| w[a] < 0 || w[a] >= nodes[a] as i64) {
+                                continue;
+                            }
+                            let mut value = 0.0;
+                            // Elements with low corner e containing both: e_a ∈ {at_a − 1, at_a}
+                            // ∩ {w_a − 1, w_a}, inside the box.
+                            for ek in at[2].saturating_sub(1)..=at[2] {
+                                for ej in at[1].saturating_sub(1)..=at[1] {
+                                    for ei in at[0].saturating_sub(1)..=at[0] {
+                                        let e = [ei, ej, ek];
+                                        let inside = (0..3).all(|a| {
+                                            e[a] < cells[a]
+                                                && (w[a] - e[a] as i64) >= 0
+                                                && (w[a] - e[a] as i64) <= 1
+                                        });
+                                        if !inside {
+                                            continue;
+                                        }
+                                        let la = (at[0] - e[0])
+                                            | ((at[1] - e[1]) << 1)
+                                            | ((at[2] - e[2]) << 2);
+                                        let lb = (w[0] as usize - e[0])
+                                            | ((w[1] as usize - e[1]) << 1)
+                                            | ((w[2] as usize - e[2]) << 2);
+                                        let id = e[0] + cells[0] * (e[1] + cells[1] * e[2]);
+                                        value += self.diffusion[id] * stiffness[la][lb]
+                                            + self.absorption[id] * mass[la][lb];
+                                    }
+                                }
+                            }
+                            // Robin faces both lie on: ∮ over the shared boundary quads.
+                            for axis in 0..3 {
+                                for (high, side) in [0, cells[axis]].into_iter().enumerate() {
+                                    let Some(a_factor) = self.robin[2 * axis + high] else {
+                                        continue;
+                                    };
+                                    if at[axis] != side || w[axis] as usize != side {
+                                        continue;
+                                    }
+                                    let (u, t) = ((axis + 1) % 3, (axis + 2) % 3);
+                                    let mut face = 0.0;
+                                    for fu in at[u].saturating_sub(1)..=at[u] {
+                                        for ft in at[t].saturating_sub(1)..=at[t] {
+                                            let ok = fu < cells[u]
+                                                && ft < cells[t]
+                                                && (0..=1).contains(&(w[u] - fu as i64))
+                                                && (0..=1).contains(&(w[t] - ft as i64));
+                                            if ok {
+                                                face += m1(at[u] - fu, w[u] as usize - fu)
+                                                    * m1(at[t] - ft, w[t] as usize - ft);
+                                            }
+                                        }
+                                    }
+                                    value += face / (2.0 * a_factor);
+                                }
+                            }
+                            let col = w[0] as usize
+                                + nodes[0] * (w[1] as usize + nodes[1] * w[2] as usize);
+                            row.push((col, value));
+                        }
+                    }
+                }
+                row
+            })
+            .collect();
+        let mut indptr = Vec::with_capacity(n + 1);
+        indptr.push(0);
+        let (mut indices, mut data) = (Vec::new(), Vec::new());
+        for row in rows {
+            for (c, v) in row {
+                indices.push(c);
+                data.push(v);
+            }
+            indptr.push(indices.len());
+        }
+        Ok(sprs::CsMat::new((n, n), indptr, indices, data))
+    }
+
+    /// The same matrix through element-by-element triplets (the reference the fast
+    /// assembly is tested against).
+    pub fn assemble_by_triplets(&self) -> Result<sprs::CsMat<f64>, FemError> {
         self.check()?;
         let h = self.spacing;
         let m1 = |a: usize, b: usize| if a == b { h / 3.0 } else { h / 6.0 };
