@@ -47,15 +47,17 @@ pub(crate) fn run(sizes: &[usize]) -> Result<(), String> {
         let hierarchy = t.elapsed().as_secs_f64();
         let mut x = vec![0.0; b.len()];
         let t = Instant::now();
-        let c = mg.solve(
-            &b,
-            &mut x,
-            &lucent::fem::solvers::Stopping {
-                relative_tolerance: 1e-8,
-                max_iterations: 200,
-                ..Default::default()
-            },
-        );
+        let c = mg
+            .solve(
+                &b,
+                &mut x,
+                &lucent::fem::solvers::Stopping {
+                    relative_tolerance: 1e-8,
+                    max_iterations: 200,
+                    ..Default::default()
+                },
+            )
+            .map_err(|e| err(&e))?;
         let fem_solve = t.elapsed().as_secs_f64();
         // The finite-volume multigrid on the same box.
         let grid = GridGeometry::from_bounds([n; 3], DVec3::ZERO, DVec3::splat(12.0))

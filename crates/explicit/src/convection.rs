@@ -677,11 +677,21 @@ fn layers(setup: &Setup<'_>) -> Vec<Vec<(usize, Option<Upwind>)>> {
     out
 }
 
-/// The field of several coloured lights, Eq. 22: L = Σ_k ρ_k L_k, per channel.
-pub fn compose(fields: &[(Vec<f64>, Vec<f64>)]) -> Vec<Vec<f64>> {
+/// The field of several coloured lights, Eq. 22: L = Σ_k ρ_k L_k, per channel. Each
+/// light is (ρ_k, its colour per channel; a single value is grey). Fields of different
+/// sizes or empty colours are an error.
+pub fn compose(fields: &[(Vec<f64>, Vec<f64>)]) -> Result<Vec<Vec<f64>>, ExplicitError> {
     let channels = fields.iter().map(|(_, c)| c.len()).max().unwrap_or(0);
     let n = fields.first().map_or(0, |(rho, _)| rho.len());
-    (0..channels)
+    if fields
+        .iter()
+        .any(|(rho, colour)| rho.len() != n || colour.is_empty())
+    {
+        return Err(ExplicitError::Invalid(
+            "compose: every light needs a field of one size and a colour".into(),
+        ));
+    }
+    Ok((0..channels)
         .map(|ch| {
             let mut out = vec![0.0; n];
             for (rho, colour) in fields {
@@ -692,5 +702,5 @@ pub fn compose(fields: &[(Vec<f64>, Vec<f64>)]) -> Vec<Vec<f64>> {
             }
             out
         })
-        .collect()
+        .collect())
 }

@@ -509,7 +509,10 @@ impl ExplicitSolver {
                 }
                 fields.push((out.density, vec![colour]));
             }
-            let mut total = compose(&fields).pop().unwrap_or_else(|| vec![0.0; l.len()]);
+            let mut total = compose(&fields)
+                .map_err(explicit_error)?
+                .pop()
+                .unwrap_or_else(|| vec![0.0; l.len()]);
             if scattering > 0.0 {
                 let out = crate::scatter::diffuse(
                     &l,

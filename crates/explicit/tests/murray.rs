@@ -267,9 +267,9 @@ proptest! {
 
 #[test]
 fn collocated_p1_leaves_a_checkerboard_and_staggered_does_not() {
-    // A point source on a periodic 17³... grid of even size (so parities wrap
-    // consistently): collocated φ stays exactly 0 on the sites of the other parity at
-    // every step; staggered fills them.
+    // A point source on a periodic 16³ grid (an even size, so parities wrap consistently):
+    // collocated φ stays exactly 0 on the sites of the other parity at every step;
+    // staggered fills them.
     let lattice = Lattice::new([16; 3], 1.0).unwrap();
     let n = lattice.len();
     let mut q = vec![0.0; n];

@@ -32,7 +32,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         j.residuals.len() - 1
     );
     let mut x = vec![0.0; b.len()];
-    let g = gmres(&system.matrix, &b, &mut x, 60, &Stopping::default());
+    let g = gmres(&system.matrix, &b, &mut x, 60, &Stopping::default())?;
     println!(
         "GMRES(60): {:?} after {} products",
         g.stop_reason,

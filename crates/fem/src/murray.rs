@@ -192,9 +192,10 @@ impl MurraySystem {
     }
 
     /// The spectral radius of the Jacobi iteration matrix I − D⁻¹A, by power iteration
-    /// (`iterations` steps from a fixed pseudo-random start; the geometric mean growth of
-    /// the last half).
+    /// (`iterations` steps, at least 2, from a fixed pseudo-random start; the geometric
+    /// mean growth of the last half).
     pub fn jacobi_spectral_radius(&self, iterations: usize) -> f64 {
+        let iterations = iterations.max(2);
         let a = &self.matrix;
         let n = a.rows();
         let diagonal: Vec<f64> = (0..n)

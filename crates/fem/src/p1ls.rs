@@ -172,12 +172,13 @@ impl P1LeastSquares {
         Ok((t.to_csr(), rhs))
     }
 
-    /// Jacobi-preconditioned CG on the normal system, from zero.
+    /// Jacobi-preconditioned CG on the normal system, from zero (an error if the sizes of
+    /// `matrix` and `rhs` differ).
     pub fn solve(
         matrix: &sprs::CsMat<f64>,
         rhs: &[f64],
         stopping: &Stopping,
-    ) -> (Vec<f64>, Convergence) {
+    ) -> Result<(Vec<f64>, Convergence), FemError> {
         let diagonal: Vec<f64> = (0..rhs.len())
             .map(|i| {
                 matrix
@@ -194,6 +195,6 @@ impl P1LeastSquares {
                     *z = r / d;
                 }
             });
-        (x, convergence)
+        Ok((x, convergence?))
     }
 }

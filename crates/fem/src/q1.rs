@@ -80,30 +80,7 @@ impl Q1Problem {
         self.check()?;
         let h = self.spacing;
         let m1 = |a: usize, b: usize| if a == b { h / 3.0 } else { h / 6.0 };
-        let s1 = |a: usize, b: usize| if a == b { 1.0 / h } else { -1.0 / h };
-        // Element matrices indexed by the local corner bits of the two vertices.
-        let mut mass = [[0.0; 8]; 8];
-        let mut stiffness = [[0.0; 8]; 8];
-        let bits = |a: usize| [a & 1, (a >> 1) & 1, (a >> 2) & 1];
-        for a in 0..8 {
-            for b in 0..8 {
-                let (pa, pb) = (bits(a), bits(b));
-                mass[a][b] = (0..3).map(|i| m1(pa[i], pb[i])).product();
-                stiffness[a][b] = (0..3)
-                    .map(|axis| {
-                        (0..3)
-                            .map(|i| {
-                                if i == axis {
-                                    s1(pa[i], pb[i])
-                                } else {
-                                    m1(pa[i], pb[i])
-                                }
-                            })
-                            .product::<f64>()
-                    })
-                    .sum();
-            }
-        }
+        let (mass, stiffness) = element_matrices(h);
         let nodes = self.nodes();
         let cells = self.cells;
         let n: usize = nodes.iter().product();
@@ -205,29 +182,8 @@ impl Q1Problem {
         self.check()?;
         let h = self.spacing;
         let m1 = |a: usize, b: usize| if a == b { h / 3.0 } else { h / 6.0 };
-        let s1 = |a: usize, b: usize| if a == b { 1.0 / h } else { -1.0 / h };
         let bits = |a: usize| [a & 1, (a >> 1) & 1, (a >> 2) & 1];
-        let mut mass = [[0.0; 8]; 8];
-        let mut stiffness = [[0.0; 8]; 8];
-        for a in 0..8 {
-            for b in 0..8 {
-                let (pa, pb) = (bits(a), bits(b));
-                mass[a][b] = (0..3).map(|i| m1(pa[i], pb[i])).product();
-                stiffness[a][b] = (0..3)
-                    .map(|axis| {
-                        (0..3)
-                            .map(|i| {
-                                if i == axis {
-                                    s1(pa[i], pb[i])
-                                } else {
-                                    m1(pa[i], pb[i])
-                                }
-                            })
-                            .product::<f64>()
-                    })
-                    .sum();
-            }
-        }
+        let (mass, stiffness) = element_matrices(h);
         let nodes = self.nodes();
         let n: usize = nodes.iter().product();
         let [cx, cy, cz] = self.cells;
@@ -346,6 +302,37 @@ impl Q1Problem {
         }
         Ok(b)
     }
+}
+
+/// The trilinear element's mass ∫ϕ_aϕ_b and stiffness ∫∇ϕ_a·∇ϕ_b on a cube of side h,
+/// local vertex a = a₀ + 2a₁ + 4a₂: tensor products of the 1-D (h/6)[[2, 1], [1, 2]] and
+/// (1/h)[[1, −1], [−1, 1]].
+fn element_matrices(h: f64) -> ([[f64; 8]; 8], [[f64; 8]; 8]) {
+    let m1 = |a: usize, b: usize| if a == b { h / 3.0 } else { h / 6.0 };
+    let s1 = |a: usize, b: usize| if a == b { 1.0 / h } else { -1.0 / h };
+    let bits = |a: usize| [a & 1, (a >> 1) & 1, (a >> 2) & 1];
+    let mut mass = [[0.0; 8]; 8];
+    let mut stiffness = [[0.0; 8]; 8];
+    for a in 0..8 {
+        for b in 0..8 {
+            let (pa, pb) = (bits(a), bits(b));
+            mass[a][b] = (0..3).map(|i| m1(pa[i], pb[i])).product();
+            stiffness[a][b] = (0..3)
+                .map(|axis| {
+                    (0..3)
+                        .map(|i| {
+                            if i == axis {
+                                s1(pa[i], pb[i])
+                            } else {
+                                m1(pa[i], pb[i])
+                            }
+                        })
+                        .product::<f64>()
+                })
+                .sum();
+        }
+    }
+    (mass, stiffness)
 }
 
 /// Trilinear prolongation from the coarse vertices (`coarse` cells per axis) to the fine
@@ -499,8 +486,14 @@ impl Q1Multigrid {
         }
     }
 
-    /// CG on level 0 preconditioned by one V-cycle per iteration, from `x`.
-    pub fn solve(&self, b: &[f64], x: &mut [f64], stopping: &Stopping) -> Convergence {
+    /// CG on level 0 preconditioned by one V-cycle per iteration, from `x` (an error if
+    /// the sizes of `b` and `x` are not the finest level's).
+    pub fn solve(
+        &self,
+        b: &[f64],
+        x: &mut [f64],
+        stopping: &Stopping,
+    ) -> Result<Convergence, FemError> {
         crate::solvers::conjugate_gradient(&self.operators[0], b, x, stopping, |r, z| {
             self.cycle(0, r, z)
         })

@@ -134,8 +134,8 @@ impl Solver for FemP1Solver {
                 gmres(&system.matrix, &b, &mut x, 60, &stopping)
             } else {
                 jacobi(&system.matrix, &b, &mut x, &stopping)
-                    .map_err(|e| invalid("problem", e.to_string()))?
-            };
+            }
+            .map_err(|e| invalid("problem", e.to_string()))?;
             fluence.push(Grid::from_vec(
                 g,
                 system.fluence(&x).iter().map(|&v| v as f32).collect(),
@@ -355,15 +355,17 @@ impl Solver for FemDiffusionSolver {
             bytes = bytes.max((matrix.nnz() * 12 + matrix.rows() * 40) as u64);
             let mg = crate::q1::Q1Multigrid::new(&q1, matrix, self.sweeps);
             let mut x = vec![0.0; b.len()];
-            let convergence = mg.solve(
-                &b,
-                &mut x,
-                &Stopping {
-                    relative_tolerance: options.relative_tolerance,
-                    max_iterations: options.max_iterations,
-                    ..Stopping::default()
-                },
-            );
+            let convergence = mg
+                .solve(
+                    &b,
+                    &mut x,
+                    &Stopping {
+                        relative_tolerance: options.relative_tolerance,
+                        max_iterations: options.max_iterations,
+                        ..Stopping::default()
+                    },
+                )
+                .map_err(|e| invalid("problem", e.to_string()))?;
             let cells: Vec<f32> = (0..n)
                 .map(|cell| {
                     let [i, j, k] = g.coords(cell);

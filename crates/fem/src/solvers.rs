@@ -63,6 +63,19 @@ fn verdict(stopping: &Stopping, rel: f64, iteration: usize) -> Option<StopReason
     }
 }
 
+/// The operator, right-hand side and iterate must have one size.
+fn check_sizes(op: &dyn LinearOperator, b: &[f64], x: &[f64]) -> Result<(), FemError> {
+    if b.len() != op.dim() || x.len() != op.dim() {
+        return Err(FemError::Invalid(format!(
+            "an operator of dimension {} with a right-hand side of {} and an iterate of {}",
+            op.dim(),
+            b.len(),
+            x.len()
+        )));
+    }
+    Ok(())
+}
+
 fn diagonal(a: &sprs::CsMat<f64>) -> Result<Vec<f64>, FemError> {
     (0..a.rows())
         .map(|i| match a.get(i, i) {
@@ -81,6 +94,7 @@ pub fn jacobi(
     x: &mut [f64],
     stopping: &Stopping,
 ) -> Result<Convergence, FemError> {
+    check_sizes(a, b, x)?;
     let d = diagonal(a)?;
     let b_norm = norm(b).max(f64::MIN_POSITIVE);
     let mut r = vec![0.0; b.len()];
@@ -115,6 +129,7 @@ pub fn gauss_seidel(
     x: &mut [f64],
     stopping: &Stopping,
 ) -> Result<Convergence, FemError> {
+    check_sizes(a, b, x)?;
     let d = diagonal(a)?;
     let csr = a.to_csr();
     let b_norm = norm(b).max(f64::MIN_POSITIVE);
@@ -149,7 +164,8 @@ pub fn bicgstab(
     b: &[f64],
     x: &mut [f64],
     stopping: &Stopping,
-) -> Convergence {
+) -> Result<Convergence, FemError> {
+    check_sizes(op, b, x)?;
     let n = b.len();
     let b_norm = norm(b).max(f64::MIN_POSITIVE);
     let mut r = vec![0.0; n];
@@ -161,21 +177,21 @@ pub fn bicgstab(
     loop {
         let iteration = residuals.len() - 1;
         if let Some(stop_reason) = verdict(stopping, residuals[iteration], iteration) {
-            return Convergence {
+            return Ok(Convergence {
                 residuals,
                 stop_reason,
-            };
+            });
         }
         let rho_new = dot(&r0, &r);
         if rho_new == 0.0 || omega == 0.0 {
-            // Breakdown: restart from the current iterate.
+            // Breakdown (ρ or ω vanished): stop with the current iterate and its residual.
             residual(op, b, x, &mut r);
-            return Convergence {
+            return Ok(Convergence {
                 stop_reason: StopReason::IterationLimit {
                     residual: norm(&r) / b_norm,
                 },
                 residuals,
-            };
+            });
         }
         let beta = (rho_new / rho) * (alpha / omega);
         rho = rho_new;
@@ -206,7 +222,8 @@ pub fn gmres(
     x: &mut [f64],
     restart: usize,
     stopping: &Stopping,
-) -> Convergence {
+) -> Result<Convergence, FemError> {
+    check_sizes(op, b, x)?;
     let n = b.len();
     let m = restart.max(1);
     let b_norm = norm(b).max(f64::MIN_POSITIVE);
@@ -217,10 +234,10 @@ pub fn gmres(
     loop {
         let beta = norm(&r);
         if let Some(stop_reason) = verdict(stopping, beta / b_norm, iteration) {
-            return Convergence {
+            return Ok(Convergence {
                 residuals,
                 stop_reason,
-            };
+            });
         }
         let mut basis: Vec<Vec<f64>> = vec![r.iter().map(|v| v / beta).collect()];
         let mut h = vec![vec![0.0; m]; m + 1];
@@ -297,7 +314,8 @@ pub fn conjugate_gradient(
     x: &mut [f64],
     stopping: &Stopping,
     mut precondition: impl FnMut(&[f64], &mut [f64]),
-) -> Convergence {
+) -> Result<Convergence, FemError> {
+    check_sizes(op, b, x)?;
     let n = b.len();
     let b_norm = norm(b).max(f64::MIN_POSITIVE);
     let mut r = vec![0.0; n];
@@ -311,10 +329,10 @@ pub fn conjugate_gradient(
     loop {
         let iteration = residuals.len() - 1;
         if let Some(stop_reason) = verdict(stopping, residuals[iteration], iteration) {
-            return Convergence {
+            return Ok(Convergence {
                 residuals,
                 stop_reason,
-            };
+            });
         }
         op.apply(&p, &mut ap);
         let alpha = rz / dot(&p, &ap);

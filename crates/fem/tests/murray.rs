@@ -117,7 +117,7 @@ fn jacobi_diverges_and_is_stopped_while_krylov_and_lu_solve_it() {
         ..Stopping::default()
     };
     let mut xg = vec![0.0; n];
-    let g = gmres(&s.matrix, &b, &mut xg, 60, &stopping);
+    let g = gmres(&s.matrix, &b, &mut xg, 60, &stopping).unwrap();
     assert!(g.stop_reason.is_converged(), "GMRES: {:?}", g.stop_reason);
     assert!(
         g.residuals.len() > 2
@@ -126,7 +126,7 @@ fn jacobi_diverges_and_is_stopped_while_krylov_and_lu_solve_it() {
                 .all(|w| w[1] <= w[0] * (1.0 + 1e-9) || w[1] < 1e-9)
     );
     let mut xb = vec![0.0; n];
-    let c = bicgstab(&s.matrix, &b, &mut xb, &stopping);
+    let c = bicgstab(&s.matrix, &b, &mut xb, &stopping).unwrap();
     assert!(
         c.stop_reason.is_converged(),
         "BiCGSTAB: {:?}",
@@ -203,12 +203,12 @@ proptest! {
         let scale = exact.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
         let stopping = Stopping { relative_tolerance: 1e-12, max_iterations: 2000, ..Stopping::default() };
         let mut x = vec![0.0; n];
-        let g = gmres(&a, &b, &mut x, 20, &stopping);
+        let g = gmres(&a, &b, &mut x, 20, &stopping).unwrap();
         prop_assert!(g.stop_reason.is_converged(), "{:?}", g.stop_reason);
         let e = x.iter().zip(&exact).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt() / scale;
         prop_assert!(e < 1e-8, "gmres {e}");
         let mut x = vec![0.0; n];
-        let c = bicgstab(&a, &b, &mut x, &stopping);
+        let c = bicgstab(&a, &b, &mut x, &stopping).unwrap();
         prop_assert!(c.stop_reason.is_converged(), "{:?}", c.stop_reason);
         let e = x.iter().zip(&exact).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt() / scale;
         prop_assert!(e < 1e-8, "bicgstab {e}");

@@ -30,7 +30,8 @@ fn manufactured(n: usize) -> (f64, usize) {
             max_iterations: 20_000,
             ..Stopping::default()
         },
-    );
+    )
+    .unwrap();
     assert!(c.stop_reason.is_converged(), "{n}: {:?}", c.stop_reason);
     let h = 1.0 / n as f64;
     let mut worst = 0.0f64;
@@ -85,7 +86,8 @@ fn least_squares_p1_matches_primal_diffusion_and_stays_positive() {
             max_iterations: 20_000,
             ..Stopping::default()
         },
-    );
+    )
+    .unwrap();
     assert!(c.stop_reason.is_converged());
     let phi: Vec<f64> = x.chunks(4).map(|u| u[0]).collect();
     assert!(
@@ -105,7 +107,7 @@ fn least_squares_p1_matches_primal_diffusion_and_stays_positive() {
     let load = primal.load(q);
     let mg = Q1Multigrid::new(&primal, matrix, 2);
     let mut y = vec![0.0; load.len()];
-    let c = mg.solve(&load, &mut y, &Stopping::default());
+    let c = mg.solve(&load, &mut y, &Stopping::default()).unwrap();
     assert!(c.stop_reason.is_converged());
     let d = phi
         .iter()

@@ -32,15 +32,17 @@ fn manufactured(n: usize) -> (f64, usize) {
     let b = problem.load(q);
     let mg = Q1Multigrid::new(&problem, a, 2);
     let mut x = vec![0.0; b.len()];
-    let c = mg.solve(
-        &b,
-        &mut x,
-        &Stopping {
-            relative_tolerance: 1e-10,
-            max_iterations: 200,
-            ..Stopping::default()
-        },
-    );
+    let c = mg
+        .solve(
+            &b,
+            &mut x,
+            &Stopping {
+                relative_tolerance: 1e-10,
+                max_iterations: 200,
+                ..Stopping::default()
+            },
+        )
+        .unwrap();
     assert!(c.stop_reason.is_converged(), "{n}: {:?}", c.stop_reason);
     let nodes = n + 1;
     let mut worst = 0.0f64;
@@ -113,15 +115,17 @@ fn half_space(layers_per_mm: usize) -> f64 {
     }
     let mg = Q1Multigrid::new(&problem, a, 2);
     let mut x = vec![0.0; b.len()];
-    let c = mg.solve(
-        &b,
-        &mut x,
-        &Stopping {
-            relative_tolerance: 1e-12,
-            max_iterations: 500,
-            ..Stopping::default()
-        },
-    );
+    let c = mg
+        .solve(
+            &b,
+            &mut x,
+            &Stopping {
+                relative_tolerance: 1e-12,
+                max_iterations: 500,
+                ..Stopping::default()
+            },
+        )
+        .unwrap();
     assert!(c.stop_reason.is_converged(), "{:?}", c.stop_reason);
     let mut worst = 0.0f64;
     for k in 0..=nz {

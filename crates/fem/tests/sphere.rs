@@ -27,15 +27,17 @@ fn ball(cells: usize) -> ([f64; 3], f64) {
     b[mesh.centre()] = 1.0;
     let mg = Q1Multigrid::for_lattice([cells; 3], a, 2);
     let mut x = vec![0.0; b.len()];
-    let conv = mg.solve(
-        &b,
-        &mut x,
-        &Stopping {
-            relative_tolerance: 1e-10,
-            max_iterations: 200,
-            ..Stopping::default()
-        },
-    );
+    let conv = mg
+        .solve(
+            &b,
+            &mut x,
+            &Stopping {
+                relative_tolerance: 1e-10,
+                max_iterations: 200,
+                ..Stopping::default()
+            },
+        )
+        .unwrap();
     assert!(conv.stop_reason.is_converged(), "{:?}", conv.stop_reason);
     let h = 2.0 * radius / cells as f64;
     let shell = |r: f64| {
