@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::DVec3;
-use lucent_core::{FluenceKind, Params, SolveOptions};
+use lucent_core::{FluenceKind, Params, SolveOptions, StopReason};
 use lucent_grid::Grid;
 use lucent_grid::io::{LoadOptions, ScalarType, npy};
 use lucent_mc::{McConfig, estimate};
@@ -44,6 +44,22 @@ pub struct Tolerance {
     pub params: Params,
     /// Why this tolerance.
     pub why: String,
+    /// What the run must do: meet the tolerance (the default), or stop with
+    /// `DivergedGrowth` (a solver kept to show a method's failure).
+    #[serde(default)]
+    pub expect: Expect,
+}
+
+/// What a harness entry requires of its run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Expect {
+    /// The fluence's relative L2 error is within the tolerance.
+    #[default]
+    Tolerance,
+    /// The solver stops with `StopReason::DivergedGrowth`; the error of its last finite
+    /// iterate is reported, not bounded.
+    Diverged,
 }
 
 #[derive(Deserialize)]
@@ -322,6 +338,8 @@ pub enum CheckResult {
         reference_error: f64,
         /// For stochastic solvers, the run's own expected relative L2 error.
         solution_error: Option<f64>,
+        /// Why the solver stopped.
+        stop_reason: StopReason,
     },
     /// The solver cannot handle the scene (its capabilities say why).
     Skipped(String),
@@ -331,9 +349,14 @@ impl Outcome {
     /// Whether the check passed (skips pass: capabilities decide what is checked).
     pub fn passed(&self) -> bool {
         match &self.result {
-            CheckResult::Compared { comparison, .. } => {
-                comparison.relative_l2 <= self.tolerance.tolerance
-            }
+            CheckResult::Compared {
+                comparison,
+                stop_reason,
+                ..
+            } => match self.tolerance.expect {
+                Expect::Tolerance => comparison.relative_l2 <= self.tolerance.tolerance,
+                Expect::Diverged => matches!(stop_reason, StopReason::DivergedGrowth { .. }),
+            },
             CheckResult::Skipped(_) => true,
         }
     }
@@ -378,6 +401,7 @@ pub fn run(suite: &Path, cache: Option<&Path>) -> Result<Vec<Outcome>, Error> {
                     reference: reference.kind,
                     reference_error: reference.relative_std_error,
                     solution_error,
+                    stop_reason: solution.report.stop_reason,
                 }
             }
         };
@@ -410,6 +434,7 @@ pub fn validation_markdown(outcomes: &[Outcome], command: &str) -> String {
                 reference,
                 reference_error,
                 solution_error,
+                stop_reason,
             } => out.push_str(&format!(
                 "| {} | {} | {} (±{:.2}%) | {:.1}% | {:.2}% | {:.1}% | {} | {:.2} s | {} | {} |\n",
                 o.solver,
@@ -421,7 +446,12 @@ pub fn validation_markdown(outcomes: &[Outcome], command: &str) -> String {
                 100.0 * comparison.max_relative,
                 solution_error.map_or("–".to_owned(), |e| format!("±{:.2}%", 100.0 * e)),
                 seconds,
-                if o.passed() { "pass" } else { "FAIL" },
+                match (o.tolerance.expect, o.passed()) {
+                    (Expect::Tolerance, true) => "pass".to_owned(),
+                    (Expect::Diverged, true) =>
+                        format!("pass (diverged as required: {stop_reason:?})"),
+                    (_, false) => format!("FAIL ({stop_reason:?})"),
+                },
                 why
             )),
             CheckResult::Skipped(reason) => out.push_str(&format!(

@@ -8,6 +8,9 @@
 //! - `diffusion-*` and `fem-diffusion`: the stopping tolerance, and 1× and 2× cells for the
 //!   multigrid methods
 //!   (against the total fluence: the curves flatten at the diffusion model's error);
+//! - `fem-p1-jacobi`: the Jacobi iteration count (its error grows: the method diverges),
+//!   and the same system by GMRES (`fem-p1-gmres`) over the stopping tolerance, against
+//!   the uncollided fluence;
 //! - `mc`: particles per batch (8 batches).
 //!
 //! `cargo xtask pareto` writes `docs/pareto/<scene>.svg` and `.csv`.
@@ -40,6 +43,15 @@ fn params(pairs: &[(&str, i64)]) -> Params {
         pairs
             .iter()
             .map(|(k, v)| ((*k).to_owned(), ParamValue::Int(*v)))
+            .collect(),
+    )
+}
+
+fn params_text(pairs: &[(&str, &str)]) -> Params {
+    Params(
+        pairs
+            .iter()
+            .map(|(k, v)| ((*k).to_owned(), ParamValue::Text((*v).to_owned())))
             .collect(),
     )
 }
@@ -82,8 +94,16 @@ fn refined(scene: &SuiteScene, factor: usize) -> Result<Problem, Error> {
             other => Ok(other.clone()),
         })
         .collect::<Result<_, _>>()?;
+    // The embedded body's SDF too: without it the medium would fill the box.
+    let embedded = p.embedded().map(up).transpose()?;
     let geometry = *medium.sigma_t[0].geometry();
-    Ok(Problem::new(geometry, medium, lights, p.boundary(), None)?)
+    Ok(Problem::new(
+        geometry,
+        medium,
+        lights,
+        p.boundary(),
+        embedded,
+    )?)
 }
 
 /// Sweeps `direct` and `mc` on `scene`.
@@ -165,6 +185,47 @@ pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Vec<Point>, Err
                     error: compare(&averaged, &total).relative_l2,
                 });
             }
+        }
+    }
+    // Murray's finite elements by Jacobi: the error grows with every iteration (the
+    // iteration matrix's spectral radius is ≥ 19/8); GMRES on the same system shows what
+    // the Galerkin solution itself is worth.
+    let murray = registry.build("fem-p1-jacobi", &Params::default())?;
+    if murray
+        .capabilities()
+        .check("fem-p1-jacobi", &scene.built.problem)
+        .is_ok()
+    {
+        for iterations in [1usize, 2, 4, 8] {
+            let options = SolveOptions {
+                max_iterations: iterations,
+                ..SolveOptions::default()
+            };
+            let start = Instant::now();
+            let solution = murray.solve(&scene.built.problem, &options)?;
+            points.push(Point {
+                solver: "fem-p1-jacobi".into(),
+                setting: format!("{iterations} Jacobi iterations"),
+                seconds: start.elapsed().as_secs_f64(),
+                error: compare(&solution.fluence, &uncollided).relative_l2,
+            });
+        }
+        let gmres = registry.build("fem-p1-jacobi", &params_text(&[("solver", "gmres")]))?;
+        // One tolerance: restarted GMRES stagnates on this indefinite system at
+        // K_tΔ < 1, so tighter tolerances only cost time (14 s each at 16³).
+        for relative_tolerance in [1e-4] {
+            let options = SolveOptions {
+                relative_tolerance,
+                ..SolveOptions::default()
+            };
+            let start = Instant::now();
+            let solution = gmres.solve(&scene.built.problem, &options)?;
+            points.push(Point {
+                solver: "fem-p1-gmres".into(),
+                setting: format!("GMRES to {relative_tolerance:.0e}"),
+                seconds: start.elapsed().as_secs_f64(),
+                error: compare(&solution.fluence, &uncollided).relative_l2,
+            });
         }
     }
     for particles in [1000i64, 4000, 16000, 64000] {

@@ -26,7 +26,8 @@ fn every_solver_meets_its_tolerance_on_the_suite() {
                 compared += 1;
                 assert!(
                     o.passed(),
-                    "{} on {}: relative L2 {:.4} over the tolerance {} ({})",
+                    "{} on {}: relative L2 {:.4} over the tolerance {}, or not the expected \
+                     stop ({})",
                     o.solver,
                     o.scene,
                     comparison.relative_l2,

@@ -17,8 +17,9 @@
 //!   box, CG preconditioned by geometric multigrid on the element hierarchy (Galerkin
 //!   coarse operators): `fem-diffusion` ([`FemDiffusionSolver`]). Second order.
 //!
-//! - [`sphere`]: the same elements on a boundary-fitted ball (the cube lattice mapped
-//!   radially), isoparametric, for curved Robin boundaries (note 002 T7).
+//! - [`sphere`]: the same elements on boundary-fitted meshes of star-shaped bodies (the
+//!   cube lattice mapped radially onto the surface), isoparametric, for curved Robin
+//!   boundaries (note 002 T7): the ball, and any embedded SDF body through the registry.
 //!
 //! - [`p1ls`]: the steady P1 system with in-scattering and anisotropy (σ_t′), stabilised
 //!   by least squares: SPD, no checkerboard, second order in φ; 4 unknowns per vertex and
@@ -30,8 +31,9 @@
 //! Tested against note 002's T7 (the ball) and T9 (the Robin half-space, per-face Robin
 //! conditions on a column): second order, 0.03% and 0.017% at the finest meshes.
 //!
-//! Not yet here (issue 8 is open): curved (embedded) boundaries through the registry entry
-//! (it meshes the problem's box; the ball is reached through [`sphere`] directly).
+//! With an embedded body, `fem-diffusion` meshes the body alone (it must be star-shaped
+//! from the centroid of its inside cells; other shapes are refused with a typed error):
+//! 0.55% from T7 at 32³ away from the source, second order, as `diffusion-mg`'s cut cells.
 //!
 //! Units: lengths in the mesh's unit, K_t in 1/length; the fluence is φ = 4π L_0 (the
 //! angular basis's constant coefficient).

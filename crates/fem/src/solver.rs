@@ -15,6 +15,7 @@ use lucent_grid::Grid;
 
 use crate::murray::{Mesh, MurraySystem};
 use crate::solvers::{Stopping, gmres, jacobi};
+use crate::sphere::StarMesh;
 
 /// `fem-p1-jacobi`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -165,8 +166,10 @@ impl Solver for FemP1Solver {
 /// emission (4π L_e), and every other light through `direct`'s first-collision sources
 /// (`lucent_core::first_collision_sources`: Q₀ = σ_s φ_u, Q₁ = g σ_s Σ ω E T, the latter
 /// entering the weak form as ∫ 3D Q₁·∇v, whose boundary terms cancel against the Robin
-/// condition's). The fluence per cell is the mean of its 8 corners plus φ_u. Parameter
-/// `sweeps` (smoothing sweeps per level, 2).
+/// condition's). The fluence per cell is the mean of its 8 corners plus φ_u. With an
+/// embedded body the elements are fitted to it instead ([`StarMesh::from_sdf`]; Robin or
+/// vacuum on its surface) and cell values interpolate the nodal solution at cell centres.
+/// Parameter `sweeps` (smoothing sweeps per level, 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FemDiffusionSolver {
     sweeps: usize,
@@ -197,7 +200,7 @@ impl Solver for FemDiffusionSolver {
         Capabilities {
             anisotropic: true,
             heterogeneous: true,
-            embedded_geometry: false,
+            embedded_geometry: true,
             boundaries: vec![
                 BoundaryKind::Vacuum,
                 BoundaryKind::Robin,
@@ -219,6 +222,9 @@ impl Solver for FemDiffusionSolver {
         use lucent_optics::PhaseFunction;
         self.capabilities().check(self.name(), problem)?;
         options.validate()?;
+        if let Some(sdf) = problem.embedded() {
+            return self.solve_embedded(problem, sdf, options);
+        }
         let started = Instant::now();
         let g = *problem.geometry();
         let h = g.spacing();
@@ -382,6 +388,229 @@ impl Solver for FemDiffusionSolver {
                 })
                 .collect();
             let mut total = Grid::from_vec(g, cells)?;
+            if let Some(direct) = &direct {
+                for (t, u) in total.data_mut().iter_mut().zip(direct.fluence(c).data()) {
+                    *t += u;
+                }
+            }
+            fluence.push(total);
+            last = Some(convergence);
+        }
+        let convergence = last.ok_or_else(|| invalid("problem", "no channel"))?;
+        Ok(Solution {
+            fluence,
+            angular: None,
+            standard_error: None,
+            report: SolveReport {
+                solver: self.name().into(),
+                iterations: convergence.residuals.len().saturating_sub(1),
+                residual_history: convergence.residuals,
+                wall_time_s: started.elapsed().as_secs_f64(),
+                peak_memory_bytes: bytes,
+                stop_reason: convergence.stop_reason,
+            },
+        })
+    }
+}
+
+impl FemDiffusionSolver {
+    /// The embedded body {sdf < 0} on a boundary-fitted mesh ([`StarMesh::from_sdf`] from
+    /// the centroid of its inside cells; the body must be star-shaped from there), D and σ_a
+    /// sampled trilinearly at every Gauss point, Robin (A from η) or vacuum (A = 1) on its
+    /// surface. External lights are attenuated through the body only (σ_t set to zero
+    /// outside), as `diffusion-mg` does; cells outside the body get φ_u alone.
+    fn solve_embedded(
+        &self,
+        problem: &Problem,
+        sdf: &Grid,
+        options: &SolveOptions,
+    ) -> Result<Solution, SolveError> {
+        use glam::DVec3;
+        use lucent_optics::PhaseFunction;
+        let started = Instant::now();
+        let g = *problem.geometry();
+        let n = g.voxel_count();
+        let robin = match problem.boundary() {
+            lucent_core::Boundary::Neumann { .. } => {
+                return Err(invalid(
+                    "boundary",
+                    "an embedded body takes Robin or vacuum conditions on its surface",
+                ));
+            }
+            b => b.robin_factor().unwrap_or(1.0),
+        };
+        // The body's centroid and extent from its inside cells.
+        let (mut sum, mut count) = (DVec3::ZERO, 0usize);
+        let (mut lo, mut hi) = (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN));
+        for (cell, d) in sdf.data().iter().enumerate() {
+            if *d < 0.0 {
+                let [i, j, k] = g.coords(cell);
+                let p = g.cell_centre(i, j, k);
+                sum += p;
+                count += 1;
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+        if count == 0 {
+            return Err(invalid("embedded", "the body covers no cell centre"));
+        }
+        let h = g.spacing().max_element();
+        let extent = (hi - lo).max_element() + 2.0 * h;
+        // Lattice cells: the grid's spacing across the body, a multiple of 8 (three
+        // multigrid levels at least).
+        let cells = ((extent / h / 8.0).ceil() as usize).max(1) * 8;
+        let sample = |p: DVec3| f64::from(sdf.sample_trilinear(p));
+        let reach = (g.extent()).length();
+        let mesh = StarMesh::from_sdf(cells, sum / count as f64, sample, reach, 0.25 * h)
+            .map_err(|e| invalid("embedded", e.to_string()))?;
+
+        let inside = |p: DVec3| sample(p) < 0.0 && mesh.locate(p).is_some();
+        let (mut points, mut emission, mut external) = (Vec::new(), Vec::new(), Vec::new());
+        for light in problem.lights() {
+            match light {
+                Light::Point { position, .. } if inside(*position) => points.push(light),
+                Light::Emission { .. } => emission.push(light),
+                _ => external.push(light.clone()),
+            }
+        }
+        let direct = if external.is_empty() {
+            None
+        } else {
+            let medium = problem.medium();
+            let masked = lucent_core::Medium {
+                sigma_t: medium
+                    .sigma_t
+                    .iter()
+                    .map(|s| {
+                        let mut s = s.clone();
+                        for (v, d) in s.data_mut().iter_mut().zip(sdf.data()) {
+                            if *d >= 0.0 {
+                                *v = 0.0;
+                            }
+                        }
+                        s
+                    })
+                    .collect(),
+                ..medium.clone()
+            };
+            let p = Problem::new(g, masked, external, lucent_core::Boundary::Vacuum, None)?;
+            Some(lucent_core::DirectSolver::default().solve(&p, options)?)
+        };
+
+        let gbar = problem.medium().phase.mean_cosine();
+        let floor = 1e-3 / h;
+        let medium = problem.medium();
+        let coefficients = |c: usize, p: DVec3| {
+            let st = f64::from(medium.sigma_t(c).sample_trilinear(p));
+            let ss = f64::from(medium.sigma_s_at(c, p));
+            let a = (st - ss).max(0.0);
+            (1.0 / (3.0 * (a + (1.0 - gbar) * ss).max(floor)), a)
+        };
+        let mut fluence = Vec::new();
+        let mut last = None;
+        let mut bytes = 0u64;
+        for c in 0..problem.channels() {
+            let matrix = mesh
+                .assemble_with(|p| coefficients(c, p), robin)
+                .map_err(|e| invalid("embedded", e.to_string()))?;
+            // Volumetric sources: emission and first-collision sources, sampled
+            // trilinearly from the grid at every Gauss point.
+            let mut q0 = vec![0.0f32; n];
+            for light in &emission {
+                if let Light::Emission { grid, scale } = light {
+                    let s = 4.0 * std::f64::consts::PI * scale.channel(c);
+                    for (q, e) in q0.iter_mut().zip(grid.data()) {
+                        *q += (s * f64::from(*e)) as f32;
+                    }
+                }
+            }
+            let mut moment = [vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]];
+            if let Some(direct) = &direct {
+                let ss: Vec<f32> = (0..n)
+                    .map(|cell| {
+                        let [i, j, k] = g.coords(cell);
+                        medium.sigma_s_at(c, g.cell_centre(i, j, k))
+                    })
+                    .collect();
+                let (scattered, first) =
+                    lucent_core::first_collision_sources(direct, &g, c, &ss, gbar);
+                for (q, s) in q0.iter_mut().zip(scattered) {
+                    *q += s;
+                }
+                for (cell, f) in first.iter().enumerate() {
+                    for a in 0..3 {
+                        moment[a][cell] = f[a];
+                    }
+                }
+            }
+            let q0 = Grid::from_vec(g, q0)?;
+            let moment = moment.map(|m| Grid::from_vec(g, m));
+            let [mx, my, mz] = moment;
+            let (mx, my, mz) = (mx?, my?, mz?);
+            let with_moment = direct.is_some();
+            let mut b = mesh
+                .load(|p| {
+                    let q = f64::from(q0.sample_trilinear(p));
+                    if !with_moment {
+                        return (q, DVec3::ZERO);
+                    }
+                    let first = DVec3::new(
+                        f64::from(mx.sample_trilinear(p)),
+                        f64::from(my.sample_trilinear(p)),
+                        f64::from(mz.sample_trilinear(p)),
+                    );
+                    (q, 3.0 * coefficients(c, p).0 * first)
+                })
+                .map_err(|e| invalid("embedded", e.to_string()))?;
+            for light in &points {
+                if let Light::Point {
+                    position,
+                    intensity,
+                } = light
+                {
+                    let (cell, xi) = mesh
+                        .locate(*position)
+                        .ok_or_else(|| invalid("lights", "a point light outside the mesh"))?;
+                    let power = 4.0 * std::f64::consts::PI * intensity.channel(c);
+                    let ids = mesh.element(cell);
+                    for (a, id) in ids.iter().enumerate() {
+                        let w = [a & 1, (a >> 1) & 1, a >> 2]
+                            .iter()
+                            .zip(xi)
+                            .map(|(&o, t)| if o == 1 { t } else { 1.0 - t })
+                            .product::<f64>();
+                        b[*id] += power * w;
+                    }
+                }
+            }
+            bytes = bytes.max((matrix.nnz() * 12 + matrix.rows() * 40) as u64);
+            let mg = crate::q1::Q1Multigrid::for_lattice([cells; 3], matrix, self.sweeps);
+            let mut x = vec![0.0; b.len()];
+            let convergence = mg
+                .solve(
+                    &b,
+                    &mut x,
+                    &Stopping {
+                        relative_tolerance: options.relative_tolerance,
+                        max_iterations: options.max_iterations,
+                        ..Stopping::default()
+                    },
+                )
+                .map_err(|e| invalid("problem", e.to_string()))?;
+            let mut total = Grid::from_vec(
+                g,
+                (0..n)
+                    .map(|cell| {
+                        let [i, j, k] = g.coords(cell);
+                        let p = g.cell_centre(i, j, k);
+                        match sdf.data()[cell] < 0.0 {
+                            true => mesh.interpolate(&x, p).unwrap_or(0.0) as f32,
+                            false => 0.0,
+                        }
+                    })
+                    .collect(),
+            )?;
             if let Some(direct) = &direct {
                 for (t, u) in total.data_mut().iter_mut().zip(direct.fluence(c).data()) {
                     *t += u;
