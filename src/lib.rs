@@ -13,6 +13,7 @@
 //! | [`mc`] | `lucent-mc` | Monte Carlo ground truth: delta tracking, track-length fluence with standard errors |
 //! | [`diffusion`] | `lucent-diffusion` | steady diffusion, embedded boundary, matrix-free multigrid |
 //! | [`fem`] | `lucent-fem` | Murray's finite elements for the RTE, Krylov solvers on a linear-operator trait |
+//! | [`dom`] | `lucent-dom` | discrete ordinates: octant wavefront sweeps, first-collision sources, DSA |
 //! | [`explicit`] | `lucent-explicit` | FTCS, P1, ordinates, Zhang & Ma convection–diffusion, Jacobi, with their stability bounds |
 //! | [`scene`] | (here) | TOML scene files and the built-in default scene |
 //!
@@ -35,6 +36,7 @@ use std::path::PathBuf;
 
 pub use lucent_core as core;
 pub use lucent_diffusion as diffusion;
+pub use lucent_dom as dom;
 pub use lucent_explicit as explicit;
 pub use lucent_fem as fem;
 pub use lucent_grid as grid;
@@ -54,6 +56,7 @@ pub fn registry() -> lucent_core::Registry {
     }
     registry.register(lucent_fem::FemP1Solver::ENTRY);
     registry.register(lucent_fem::FemDiffusionSolver::ENTRY);
+    registry.register(lucent_dom::DomSolver::ENTRY);
     registry
 }
 

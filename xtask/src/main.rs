@@ -25,6 +25,8 @@
 //!   beside the copy bandwidth, and Zhang & Ma's full update for one light.
 //! - `bench-fem [N...]`: Q1 finite elements (matrix-based) against the matrix-free finite
 //!   volumes on the same box: assembly, bytes per unknown, solve time.
+//! - `bench-dom [N] [ORDER]`: a converged discrete-ordinates solve at N³ (128) with S_ORDER
+//!   (6: 48 directions), g = 0.6: wall time, sweeps, time per cell-direction and GB/s.
 //! - `stability`: each explicit scheme's measured blow-up boundary against its theoretical
 //!   curves, as `docs/stability/*.svg` and `.csv` (see `docs/stability.md`).
 
@@ -32,13 +34,14 @@
 #![allow(clippy::print_stdout)]
 
 mod bench_diffusion;
+mod bench_dom;
 mod bench_explicit;
 mod bench_fem;
 mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-fem [N...] | stability>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-fem [N...] | bench-dom [N] [ORDER] | stability>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -83,6 +86,18 @@ fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("xtask: bench-fem: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
+    if command.as_deref() == Some("bench-dom") {
+        let mut args = std::env::args().skip(2).filter_map(|s| s.parse().ok());
+        let n = args.next().unwrap_or(128);
+        let order = args.next().unwrap_or(6);
+        return match bench_dom::run(n, order) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("xtask: bench-dom: {e}");
                 ExitCode::FAILURE
             }
         };

@@ -59,7 +59,9 @@ pub use direct::DirectSolver;
 pub use error::{ProblemError, SolveError};
 pub use problem::{Boundary, BoundaryKind, Field, Light, LightKind, Medium, Problem};
 pub use registry::{ParamValue, Params, Registry, SolverEntry};
-pub use solution::{Angular, LightTransmittance, Solution, first_collision_sources};
+pub use solution::{
+    Angular, LightTransmittance, OrdinateRadiance, Solution, first_collision_sources,
+};
 pub use solver::{
     Capabilities, FluenceKind, OutputKind, Progress, ProgressFn, SolveOptions, SolveReport, Solver,
     StopReason,

@@ -67,6 +67,26 @@ impl Medium {
     pub fn sigma_s_at(&self, channel: usize, p: DVec3) -> f32 {
         self.albedo(channel).sample(p) * self.sigma_t(channel).sample_trilinear(p)
     }
+
+    /// The same medium on `dims` cells over the same box: every grid resampled
+    /// (`lucent_grid::resample::resample`: trilinear to finer grids, box-averaged to
+    /// coarser ones), constants kept.
+    pub fn resampled(&self, dims: [usize; 3]) -> Result<Self, lucent_grid::GridError> {
+        let up = |g: &Grid| lucent_grid::resample::resample(g, dims);
+        Ok(Self {
+            sigma_t: self.sigma_t.iter().map(up).collect::<Result<_, _>>()?,
+            albedo: self
+                .albedo
+                .iter()
+                .map(|a| match a {
+                    Field::Constant(v) => Ok(Field::Constant(*v)),
+                    Field::Grid(g) => up(g).map(Field::Grid),
+                })
+                .collect::<Result<_, _>>()?,
+            phase: self.phase,
+            eta: self.eta,
+        })
+    }
 }
 
 /// A light source. Directions are directions of propagation; all radiometric values are

@@ -55,11 +55,79 @@ impl LightTransmittance {
     }
 }
 
+/// In-scattered radiance stored at a set of directions per cell (discrete ordinates), plus
+/// the exact single scattering of point-like lights.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrdinateRadiance {
+    /// The storage directions ω_m (unit).
+    pub directions: Vec<glam::DVec3>,
+    /// Concentration κ of the interpolation kernel e^{κ(ω·ω_m − 1)} between them.
+    pub kernel: f64,
+    /// Per channel: Σ_n w_n p̄(ω_n → ω_m) L_n per cell and storage direction (cell-major,
+    /// direction fastest), the in-scattered radiance per unit σ_s of the light the
+    /// ordinates carry (W/length²/sr).
+    pub inscattered: Vec<Vec<f32>>,
+    /// The grid the cells belong to.
+    pub geometry: lucent_grid::GridGeometry,
+    /// The uncollided light of point-like lights, in-scattered with the exact phase function.
+    pub lights: Option<LightTransmittance>,
+}
+
+impl OrdinateRadiance {
+    /// In-scattered radiance toward `omega` per unit σ_s: the lights' exact part plus the
+    /// stored directions, interpolated trilinearly in space and with the normalised kernel
+    /// in angle.
+    pub fn inscattered(&self, channel: usize, x: DVec3, omega: DVec3) -> f64 {
+        let lights = self
+            .lights
+            .as_ref()
+            .map_or(0.0, |l| l.sum(channel, x, |w| l.phase.eval(w, omega)));
+        let m = self.directions.len();
+        let data = &self.inscattered[channel.min(self.inscattered.len() - 1)];
+        let weights: Vec<f64> = self
+            .directions
+            .iter()
+            .map(|d| (self.kernel * (d.dot(omega) - 1.0)).exp())
+            .collect();
+        let norm: f64 = weights.iter().sum();
+        let dims = self.geometry.dims();
+        let v = self.geometry.world_to_voxel(x);
+        let mut total = 0.0;
+        for corner in 0..8 {
+            let mut weight = 1.0;
+            let mut at = [0usize; 3];
+            for a in 0..3 {
+                let max = dims[a] as f64 - 1.0;
+                let p = v[a].clamp(0.0, max);
+                let lo = p.floor().min((max - 1.0).max(0.0));
+                let t = p - lo;
+                let bit = corner >> a & 1;
+                weight *= if bit == 1 { t } else { 1.0 - t };
+                at[a] = (lo as usize + bit).min(dims[a] - 1);
+            }
+            if weight == 0.0 {
+                continue;
+            }
+            let cell = at[0] + dims[0] * (at[1] + dims[1] * at[2]);
+            let row = &data[cell * m..(cell + 1) * m];
+            let value: f64 = row
+                .iter()
+                .zip(&weights)
+                .map(|(j, w)| f64::from(*j) * w)
+                .sum();
+            total += weight * value / norm;
+        }
+        lights + total
+    }
+}
+
 /// An angular representation of the radiance field.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Angular {
     /// Per-light transmittance of point-like lights.
     Lights(LightTransmittance),
+    /// Discrete-ordinate in-scattered radiance (and the lights' exact part).
+    Ordinates(OrdinateRadiance),
 }
 
 /// A solver's result.
@@ -86,6 +154,7 @@ impl Solution {
     pub fn inscattered(&self, channel: usize, x: DVec3, omega: DVec3) -> f64 {
         match &self.angular {
             Some(Angular::Lights(lights)) => lights.inscattered(channel, x, omega),
+            Some(Angular::Ordinates(ordinates)) => ordinates.inscattered(channel, x, omega),
             None => {
                 f64::from(self.fluence(channel).sample_trilinear(x)) / (4.0 * std::f64::consts::PI)
             }

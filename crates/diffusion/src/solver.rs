@@ -458,7 +458,8 @@ impl DiffusionSolver {
                     .collect();
                 Some(Angular::Lights(lights))
             }
-            None => None,
+            // `direct` keeps per-light transmittance only.
+            Some(Angular::Ordinates(_)) | None => None,
         });
         let (iterations, residual_history, stop_reason) =
             report.unwrap_or((0, Vec::new(), StopReason::Exact));

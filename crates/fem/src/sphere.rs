@@ -86,7 +86,7 @@ impl StarMesh {
             )));
         }
         let at_centre = sdf(centre);
-        if !(at_centre < 0.0) {
+        if at_centre.is_nan() || at_centre >= 0.0 {
             return Err(FemError::Invalid(format!(
                 "the centre {centre} is not inside the body (sdf {at_centre})"
             )));
@@ -209,7 +209,7 @@ impl StarMesh {
             position += x * shape[a];
         }
         let det = jac.determinant();
-        if !(det > 0.0) {
+        if det.is_nan() || det <= 0.0 {
             return None;
         }
         let inv_t = jac.inverse().transpose();

@@ -39,6 +39,8 @@ pub enum QuadratureFamily {
     Octahedral(usize),
     /// Fibonacci spiral with this many directions.
     Fibonacci(usize),
+    /// Directions and weights given by the caller, with this many directions.
+    Custom(usize),
 }
 
 /// A set of directions and weights on the unit sphere.
@@ -218,6 +220,49 @@ impl SphericalQuadrature {
         })
     }
 
+    /// A set given by the caller (for tests along chosen directions, or sets from other
+    /// codes): unit directions and positive weights summing to 4π (to 10⁻¹²), at least two
+    /// directions. The design degree is taken as 0 (nothing is assumed).
+    ///
+    /// ```
+    /// use glam::DVec3;
+    /// use lucent_optics::SphericalQuadrature;
+    /// // The six axis directions.
+    /// let axes = [DVec3::X, -DVec3::X, DVec3::Y, -DVec3::Y, DVec3::Z, -DVec3::Z];
+    /// let q = SphericalQuadrature::custom(axes.to_vec(), vec![4.0 * std::f64::consts::PI / 6.0; 6])?;
+    /// assert_eq!(q.len(), 6);
+    /// # Ok::<(), lucent_optics::OpticsError>(())
+    /// ```
+    pub fn custom(directions: Vec<DVec3>, weights: Vec<f64>) -> Result<Self, OpticsError> {
+        let unsupported = |reason| OpticsError::UnsupportedQuadrature {
+            family: "custom",
+            order: directions.len(),
+            reason,
+        };
+        if directions.len() < 2 || directions.len() != weights.len() {
+            return Err(unsupported("at least two directions, one weight each"));
+        }
+        if directions
+            .iter()
+            .any(|d| !d.is_finite() || (d.length() - 1.0).abs() > 1e-12)
+        {
+            return Err(unsupported("directions must be unit vectors"));
+        }
+        if weights.iter().any(|w| !(w.is_finite() && *w > 0.0)) {
+            return Err(unsupported("weights must be positive and finite"));
+        }
+        let total: f64 = weights.iter().sum();
+        if (total / (4.0 * PI) - 1.0).abs() > 1e-12 {
+            return Err(unsupported("weights must sum to 4π"));
+        }
+        Ok(Self {
+            family: QuadratureFamily::Custom(directions.len()),
+            directions,
+            weights,
+            design_degree: 0,
+        })
+    }
+
     /// The family and its parameter.
     pub fn family(&self) -> QuadratureFamily {
         self.family
@@ -260,7 +305,8 @@ impl SphericalQuadrature {
 
     /// The octant of direction `m` as a bit mask: bit 0 set when ω_x < 0, bit 1 when
     /// ω_y < 0, bit 2 when ω_z < 0. Sweeps group directions by octant. No direction of
-    /// these sets lies on a coordinate plane, so the octant is never ambiguous.
+    /// the built-in sets lies on a coordinate plane; a custom one that does counts a zero
+    /// component as positive.
     pub fn octant(&self, m: usize) -> usize {
         let d = self.directions[m];
         usize::from(d.x < 0.0) | usize::from(d.y < 0.0) << 1 | usize::from(d.z < 0.0) << 2

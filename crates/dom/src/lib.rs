@@ -1,0 +1,85 @@
+//! Discrete ordinates with transport sweeps (Bernabei's thesis, chapter 5; issue 9): the
+//! accurate deterministic solver for media where diffusion fails (strongly anisotropic
+//! scattering, low albedo, optically thin regions).
+//!
+//! # What it solves
+//!
+//! The steady radiative transfer equation for the radiance L(x, ω) (W/length²/sr),
+//!
+//! ω·∇L + σ_t L = σ_s ∫ p(ω′ → ω) L(x, ω′) dω′ + Q(x, ω),
+//!
+//! with σ_t, σ_s in 1/length and Q the fixed source per steradian. As in Bernabei's MDOM,
+//! the light of point-like lights is not swept: its uncollided part is ray-marched exactly
+//! (`lucent_core::DirectSolver`) and enters as the first-collision source
+//! Q = σ_s Σ_l p(ω_l → ω) E_l T_l, so the sweeps carry only scattered light (and sky light
+//! and emission, which are smooth in angle) and ray effects stay small.
+//!
+//! # How
+//!
+//! - [`angular`]: N propagation directions (level-symmetric S_N or the nested octahedral
+//!   family of `lucent-optics`), M ≤ N storage directions with a Sinkhorn-normalised
+//!   interpolation (Bernabei's is off by ±15%, note 004 §2.8.1), and a discrete phase
+//!   matrix normalised to conserve energy exactly and corrected to the phase function's g.
+//! - [`sweep`]: the eight octant sweeps, wavefronts of blocks (I + J + K = const), in
+//!   parallel over the blocks of a hyperplane and cell by cell inside each block.
+//! - [`closure`]: step, diamond difference with the set-to-zero fix-up, and Bernabei's
+//!   exponential face-to-face short characteristic (exact as σ_t → 0 and along axes; its
+//!   error at σ_t h ≥ 1 is measured in the tests).
+//! - [`solve`]: source iteration, stopped on the scattering source's change scaled by the
+//!   measured contraction 1/(1 − ρ) (a plain change test stops far too early when
+//!   ρ → 1), with diffusion synthetic acceleration on `lucent-diffusion`'s multigrid.
+//! - Boundaries: vacuum, a uniform incoming radiance (sky), and diffuse reflection of a
+//!   fraction R of the outgoing partial current (Robin-like; R = F_dr for a mismatched
+//!   index, 1 for a reflecting box).
+//! - `dom` in the registry ([`DomSolver`]): fluence plus the in-scattered radiance at the
+//!   storage directions, which the renderer evaluates phase-weighted.
+//!
+//! # Stability and accuracy
+//!
+//! The sweeps are implicit in space: no step limit. Source iteration contracts like the
+//! scattering ratio ω per sweep (ρ → 1 as ω → 1 in thick media); DSA brings it to a few
+//! per cent while cells stay within a few mean free paths. Diamond difference is second
+//! order in thin cells and needs its fix-up (first order, positive) in thick ones; step is
+//! first order and positive; the exponential closure is exact along the axes and for
+//! σ_t → 0, and its mean-chord attenuation errs by up to 50% at σ_t h = 5.
+//!
+//! ```
+//! use lucent_dom::{DomBoundary, DomProblem, DomSettings, angular::Ordinates, solve};
+//! use lucent_grid::GridGeometry;
+//! use lucent_optics::{Phase, SphericalQuadrature};
+//!
+//! // A 12³ cube of albedo 0.9 glowing uniformly, vacuum outside.
+//! let geometry = GridGeometry::from_bounds([12; 3], Default::default(), [1.0; 3].into())?;
+//! let ordinates = Ordinates::new(SphericalQuadrature::level_symmetric(4)?, None, Phase::Isotropic)?;
+//! let n = geometry.voxel_count();
+//! let m = ordinates.storage().len();
+//! let problem = DomProblem {
+//!     geometry,
+//!     sigma_t: vec![10.0; n],
+//!     sigma_s: vec![9.0; n],
+//!     fixed: vec![1.0; n * m],
+//!     boundary: DomBoundary::default(),
+//! };
+//! let stopping = lucent_diffusion::Stopping { relative_tolerance: 1e-7, ..Default::default() };
+//! let solution = solve(&problem, &ordinates, &DomSettings::default(), &stopping)?;
+//! assert!(solution.convergence.stop_reason.is_converged(), "{:?}", solution.convergence);
+//! assert!(solution.balance.relative_imbalance() < 1e-6, "{:?}", solution.balance);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+mod anderson;
+pub mod angular;
+pub mod closure;
+mod dsa;
+mod error;
+mod solve;
+mod solver;
+pub mod sweep;
+
+pub use closure::Closure;
+pub use error::DomError;
+pub use solve::{
+    Acceleration, DomBalance, DomBoundary, DomConvergence, DomProblem, DomSettings, DomSolution,
+    solve,
+};
+pub use solver::DomSolver;

@@ -1,0 +1,344 @@
+//! Whole solves against exact answers: the pure absorber, energy balance, the infinite
+//! medium, the spectral radius of source iteration and the effect of DSA.
+
+use glam::DVec3;
+use lucent_diffusion::Stopping;
+use lucent_dom::angular::Ordinates;
+use lucent_dom::{Acceleration, Closure, DomBoundary, DomProblem, DomSettings, solve};
+use lucent_grid::GridGeometry;
+use lucent_optics::{Phase, SphericalQuadrature};
+
+fn stopping(tolerance: f64, max: usize) -> Stopping {
+    Stopping {
+        relative_tolerance: tolerance,
+        max_iterations: max,
+        ..Stopping::default()
+    }
+}
+
+/// A smooth heterogeneous extinction on `dims` cells of a unit cube.
+fn extinction(geometry: &GridGeometry, base: f64, swing: f64) -> Vec<f32> {
+    (0..geometry.voxel_count())
+        .map(|c| {
+            let [i, j, k] = geometry.coords(c);
+            let p = geometry.cell_centre(i, j, k);
+            (base * (1.0 + swing * (3.0 * p.x).sin() * (2.0 * p.y + 1.0).cos() * (1.0 + p.z)))
+                as f32
+        })
+        .collect()
+}
+
+#[test]
+fn a_pure_absorber_is_exact_along_the_axes() {
+    // Six axis directions, a uniform sky of radiance 1 on every face, heterogeneous σ_t
+    // (0.4 to 3.6 per cell width): the exponential closure's cell average along an axis is
+    // the exact ∫ e^{−τ} over the cell, L e^{−τ_upwind} (1 − e^{−σh})/(σh).
+    let geometry =
+        GridGeometry::from_bounds([7, 5, 6], DVec3::ZERO, DVec3::new(1.4, 1.0, 1.2)).unwrap();
+    let h = geometry.spacing();
+    let n = geometry.voxel_count();
+    let sigma_t = extinction(&geometry, 10.0, 0.4);
+    let axes = vec![
+        DVec3::X,
+        -DVec3::X,
+        DVec3::Y,
+        -DVec3::Y,
+        DVec3::Z,
+        -DVec3::Z,
+    ];
+    let weight = 4.0 * std::f64::consts::PI / 6.0;
+    let set = SphericalQuadrature::custom(axes.clone(), vec![weight; 6]).unwrap();
+    let ordinates = Ordinates::new(set, None, Phase::Isotropic).unwrap();
+    let problem = DomProblem {
+        geometry,
+        sigma_t: sigma_t.clone(),
+        sigma_s: vec![0.0; n],
+        fixed: vec![0.0; n * 6],
+        boundary: DomBoundary {
+            radiance: 1.0,
+            reflectance: 0.0,
+        },
+    };
+    let settings = DomSettings {
+        closure: Closure::Exponential,
+        ..DomSettings::default()
+    };
+    let solution = solve(&problem, &ordinates, &settings, &stopping(1e-10, 10)).unwrap();
+    assert_eq!(
+        solution.convergence.sweeps, 1,
+        "no scattering: one sweep is the answer"
+    );
+    let dims = geometry.dims();
+    let sigma = |i: usize, j: usize, k: usize| f64::from(sigma_t[i + dims[0] * (j + dims[1] * k)]);
+    let mut worst = 0.0f64;
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let mut exact = 0.0;
+                for axis in &axes {
+                    let a = if axis.x != 0.0 {
+                        0
+                    } else if axis.y != 0.0 {
+                        1
+                    } else {
+                        2
+                    };
+                    let forward = axis[a] > 0.0;
+                    let at = [i, j, k];
+                    let mut tau = 0.0;
+                    let range: Vec<usize> = if forward {
+                        (0..at[a]).collect()
+                    } else {
+                        (at[a] + 1..dims[a]).collect()
+                    };
+                    for s in range {
+                        let mut c = at;
+                        c[a] = s;
+                        tau += sigma(c[0], c[1], c[2]) * h[a];
+                    }
+                    let x = sigma(i, j, k) * h[a];
+                    exact += weight * (-tau).exp() * (1.0 - (-x).exp()) / x;
+                }
+                let got = solution.fluence[i + dims[0] * (j + dims[1] * k)];
+                worst = worst.max((got / exact - 1.0).abs());
+            }
+        }
+    }
+    assert!(worst < 1e-12, "worst relative error {worst}");
+    // Nothing scatters: absorbed + leaked = what the sky sent in.
+    assert!(
+        solution.balance.relative_imbalance() < 1e-12,
+        "{:?}",
+        solution.balance
+    );
+}
+
+fn glowing_cube(albedo: f64, cells: usize, sigma: f64) -> (DomProblem, Ordinates) {
+    let geometry = GridGeometry::from_bounds([cells; 3], DVec3::ZERO, DVec3::ONE).unwrap();
+    let n = geometry.voxel_count();
+    let sigma_t = extinction(&geometry, sigma, 0.4);
+    let sigma_s: Vec<f32> = sigma_t
+        .iter()
+        .map(|t| (f64::from(*t) * albedo) as f32)
+        .collect();
+    let ordinates = Ordinates::new(
+        SphericalQuadrature::level_symmetric(4).unwrap(),
+        None,
+        Phase::henyey_greenstein(0.5).unwrap(),
+    )
+    .unwrap();
+    let m = ordinates.storage().len();
+    // Emission in a ball in the middle.
+    let mut fixed = vec![0.0f32; n * m];
+    for c in 0..n {
+        let [i, j, k] = geometry.coords(c);
+        if (geometry.cell_centre(i, j, k) - DVec3::splat(0.5)).length() < 0.25 {
+            fixed[c * m..(c + 1) * m].fill(1.0);
+        }
+    }
+    let problem = DomProblem {
+        geometry,
+        sigma_t,
+        sigma_s,
+        fixed,
+        boundary: DomBoundary::default(),
+    };
+    (problem, ordinates)
+}
+
+#[test]
+fn energy_balances_to_1e8_at_albedo_half_and_099() {
+    // Absorbed + leaked = emitted once the source iteration has converged: each closure
+    // keeps every cell's balance, and the phase matrix conserves scattered energy exactly.
+    for albedo in [0.5, 0.99] {
+        for closure in [Closure::Step, Closure::Diamond, Closure::Exponential] {
+            let (problem, ordinates) = glowing_cube(albedo, 16, 30.0);
+            let settings = DomSettings {
+                closure,
+                ..DomSettings::default()
+            };
+            // Tolerance 1e-9 is at the resolution of the f32 in-scattered radiance (the
+            // change stalls near 2e-9 for some closures): what is asserted is that the
+            // source stopped moving below 1e-8, and the balance.
+            let solution = solve(&problem, &ordinates, &settings, &stopping(1e-9, 120)).unwrap();
+            let last = *solution.convergence.residuals.last().unwrap();
+            assert!(last < 1e-8, "{:?}", solution.convergence);
+            let b = solution.balance;
+            assert!(
+                b.relative_imbalance() < 1e-8,
+                "albedo {albedo}, {closure:?}: {b:?} ({:e})",
+                b.relative_imbalance()
+            );
+            eprintln!(
+                "albedo {albedo} {closure:?}: {} sweeps, imbalance {:e}",
+                solution.convergence.sweeps,
+                b.relative_imbalance()
+            );
+        }
+    }
+}
+
+#[test]
+fn an_infinite_medium_gives_q_over_sigma_a_with_coarse_storage() {
+    // Note 004 §6 test 10: a uniform isotropic source q in an infinite medium (a box
+    // whose walls reflect everything diffusely) must give L = q/σ_a in every direction,
+    // whatever the phase function, also when sources are stored on 8 directions and swept
+    // on 80: the interpolation keeps an isotropic source isotropic and the phase matrix
+    // conserves energy. (Bernabei's unnormalised interpolation would give 1.63–2.31 q/σ_a.)
+    let geometry = GridGeometry::from_bounds([6; 3], DVec3::ZERO, DVec3::ONE).unwrap();
+    let n = geometry.voxel_count();
+    let (sigma_t, albedo) = (4.0f32, 0.8f32);
+    let ordinates = Ordinates::new(
+        SphericalQuadrature::level_symmetric(8).unwrap(),
+        Some(SphericalQuadrature::octahedral(0).unwrap()),
+        Phase::henyey_greenstein(0.7).unwrap(),
+    )
+    .unwrap();
+    let m = ordinates.storage().len();
+    assert_eq!(m, 8);
+    let q = 0.3f32;
+    let problem = DomProblem {
+        geometry,
+        sigma_t: vec![sigma_t; n],
+        sigma_s: vec![sigma_t * albedo; n],
+        fixed: vec![q; n * m],
+        boundary: DomBoundary {
+            radiance: 0.0,
+            reflectance: 1.0,
+        },
+    };
+    let solution = solve(
+        &problem,
+        &ordinates,
+        &DomSettings::default(),
+        &stopping(1e-11, 500),
+    )
+    .unwrap();
+    assert!(
+        solution.convergence.stop_reason.is_converged(),
+        "{:?}",
+        solution.convergence
+    );
+    let expected = 4.0 * std::f64::consts::PI * f64::from(q) / f64::from(sigma_t * (1.0 - albedo));
+    for phi in &solution.fluence {
+        assert!(
+            (phi / expected - 1.0).abs() < 1e-5,
+            "{phi} against {expected}"
+        );
+    }
+}
+
+#[test]
+fn source_iteration_contracts_like_the_albedo() {
+    // In a medium many mean free paths thick, the slowest error mode of source iteration
+    // is smooth and rarely leaks: each sweep multiplies it by the albedo times its small
+    // non-escape loss. A 32³ cube 96 mean free paths wide (σ_t h = 3): the fundamental
+    // mode's escape per collision is ≈ 3π²/(3·96²)... under 0.2%, so ρ ≈ ω within 1%.
+    // (A reflecting box would not do: its diffuse reflection is lagged one sweep, which
+    // adds a slow mode of its own.)
+    for albedo in [0.5, 0.9] {
+        let geometry = GridGeometry::from_bounds([32; 3], DVec3::ZERO, DVec3::ONE).unwrap();
+        let n = geometry.voxel_count();
+        let ordinates = Ordinates::new(
+            SphericalQuadrature::level_symmetric(2).unwrap(),
+            None,
+            Phase::Isotropic,
+        )
+        .unwrap();
+        let m = ordinates.storage().len();
+        let problem = DomProblem {
+            geometry,
+            sigma_t: vec![96.0; n],
+            sigma_s: vec![(96.0 * albedo) as f32; n],
+            fixed: vec![1.0; n * m],
+            boundary: DomBoundary::default(),
+        };
+        let settings = DomSettings {
+            acceleration: Acceleration::None,
+            anderson: 0,
+            ..DomSettings::default()
+        };
+        let solution = solve(&problem, &ordinates, &settings, &stopping(1e-7, 400)).unwrap();
+        assert!(
+            solution.convergence.stop_reason.is_converged(),
+            "{:?}",
+            solution.convergence.stop_reason
+        );
+        let rho = solution.convergence.spectral_radius;
+        eprintln!(
+            "albedo {albedo}: ρ = {rho}, {} sweeps",
+            solution.convergence.sweeps
+        );
+        assert!(
+            (rho / albedo - 1.0).abs() < 0.01,
+            "albedo {albedo}: ρ = {rho}"
+        );
+    }
+}
+
+#[test]
+fn dsa_converges_at_albedo_0999_in_tens_of_sweeps() {
+    // A 24³ cube 16 mean free paths wide (σ_t h = 0.67), albedo 0.999, HG g = 0.3,
+    // emission in a central ball. With DSA the source converges to 1e-6 in under 30
+    // sweeps (measured 21; 12 with Anderson mixing on top); plain source iteration
+    // contracts by ρ = 0.958 per sweep here (the fundamental mode's leakage,
+    // ω/(1 + B²/(3σ_t²(1 − ωg))) with B² = 3π², predicts 0.947) and needs about 390
+    // (counted from its measured ρ: ln(10⁻⁶(1 − ρ))/ln ρ).
+    let geometry = GridGeometry::from_bounds([24; 3], DVec3::ZERO, DVec3::ONE).unwrap();
+    let n = geometry.voxel_count();
+    let ordinates = Ordinates::new(
+        SphericalQuadrature::level_symmetric(4).unwrap(),
+        None,
+        Phase::henyey_greenstein(0.3).unwrap(),
+    )
+    .unwrap();
+    let m = ordinates.storage().len();
+    let mut fixed = vec![0.0f32; n * m];
+    for c in 0..n {
+        let [i, j, k] = geometry.coords(c);
+        if (geometry.cell_centre(i, j, k) - DVec3::splat(0.5)).length() < 0.2 {
+            fixed[c * m..(c + 1) * m].fill(1.0);
+        }
+    }
+    let problem = DomProblem {
+        geometry,
+        sigma_t: vec![16.0; n],
+        sigma_s: vec![16.0 * 0.999; n],
+        fixed,
+        boundary: DomBoundary::default(),
+    };
+    let mut counts = Vec::new();
+    for (acceleration, anderson) in [(Acceleration::Dsa, 4), (Acceleration::Dsa, 0)] {
+        let settings = DomSettings {
+            acceleration,
+            anderson,
+            ..DomSettings::default()
+        };
+        let s = solve(&problem, &ordinates, &settings, &stopping(1e-6, 100)).unwrap();
+        assert!(
+            s.convergence.stop_reason.is_converged(),
+            "{:?}",
+            s.convergence
+        );
+        assert!(s.convergence.dsa_abandoned.is_none());
+        assert!(s.balance.relative_imbalance() < 1e-5, "{:?}", s.balance);
+        counts.push(s.convergence.sweeps);
+    }
+    let settings = DomSettings {
+        acceleration: Acceleration::None,
+        anderson: 0,
+        ..DomSettings::default()
+    };
+    let plain = solve(&problem, &ordinates, &settings, &stopping(1e-6, 150)).unwrap();
+    let rho = plain.convergence.spectral_radius;
+    let predicted = ((1e-6 * (1.0 - rho)).ln() / rho.ln()).ceil();
+    eprintln!(
+        "DSA + Anderson {} sweeps, DSA {} sweeps; plain ρ = {rho:.5}, predicted {predicted} sweeps",
+        counts[0], counts[1]
+    );
+    assert!(counts[0] <= 30 && counts[1] <= 30, "{counts:?}");
+    assert!(
+        rho > 0.94 && predicted > 10.0 * counts[1] as f64,
+        "ρ = {rho}, {predicted}"
+    );
+}
