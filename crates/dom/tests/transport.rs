@@ -342,3 +342,56 @@ fn dsa_converges_at_albedo_0999_in_tens_of_sweeps() {
         "ρ = {rho}, {predicted}"
     );
 }
+
+#[test]
+fn the_registry_solution_in_scatters_what_it_carries() {
+    // Through the registry with a sun and a sky on a small cloud: the renderer's
+    // in-scattered radiance per unit σ_s, integrated over directions, is the fluence
+    // (exactly for an isotropic phase function, where it is φ/(4π) in every direction;
+    // within the angular interpolation's smoothing for HG g = 0.5).
+    use lucent_core::{
+        Boundary, Field, Light, Medium, Params, Problem, SolveOptions, Solver, Spectrum,
+    };
+    let geometry =
+        GridGeometry::from_bounds([12; 3], DVec3::splat(-1.0), DVec3::splat(1.0)).unwrap();
+    let density =
+        lucent_grid::Grid::from_fn(geometry, |p| (6.0 * (1.0 - p.length()).max(0.0)) as f32);
+    for (phase, tolerance) in [
+        (Phase::Isotropic, 1e-5),
+        (Phase::henyey_greenstein(0.5).unwrap(), 0.05),
+    ] {
+        let medium = Medium {
+            sigma_t: vec![density.clone()],
+            albedo: vec![Field::Constant(0.9)],
+            phase,
+            eta: 1.0,
+        };
+        let lights = vec![
+            Light::Directional {
+                direction: DVec3::new(0.2, 0.3, -0.9).normalize(),
+                irradiance: Spectrum::Grey(1.0),
+            },
+            Light::Sky {
+                radiance: Spectrum::Grey(0.1),
+            },
+        ];
+        let problem = Problem::new(geometry, medium, lights, Boundary::Vacuum, None).unwrap();
+        let solver = lucent_dom::DomSolver::from_params(&Params::default()).unwrap();
+        let solution = solver.solve(&problem, &SolveOptions::default()).unwrap();
+        assert!(
+            solution.report.stop_reason.is_converged(),
+            "{:?}",
+            solution.report
+        );
+        let sphere = SphericalQuadrature::level_symmetric(16).unwrap();
+        let mut worst = 0.0f64;
+        for cell in [0, 500, 777, 900, 1500] {
+            let [i, j, k] = geometry.coords(cell);
+            let x = geometry.cell_centre(i, j, k);
+            let integral = sphere.integrate(|w| solution.inscattered(0, x, w));
+            let phi = f64::from(solution.fluence(0).data()[cell]);
+            worst = worst.max((integral / phi - 1.0).abs());
+        }
+        assert!(worst < tolerance, "{phase:?}: {worst}");
+    }
+}
