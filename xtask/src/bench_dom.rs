@@ -81,9 +81,9 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
     }
     println!();
     println!(
-        "| refine_uncollided | run | wall | sweeps | wall per sweep | ns per cell-direction | GB/s (minimal traffic) | stop |"
+        "| refine_uncollided | run | wall | sweeps | sweeps alone | ns per cell-direction (sweeps) | sweep GB/s (work read + written, σ_t) | sources + scattering products | DSA | Anderson | rest (direct, first-collision, set-up) | stop |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (refine, run) in [(1i64, 0), (1, 1), (1, 2), (2, 0)] {
         let mut params = Params::default();
         params
@@ -92,27 +92,29 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
         params
             .0
             .insert("refine_uncollided".into(), ParamValue::Int(refine));
-        let solver = lucent::registry()
-            .build("dom", &params)
-            .map_err(|e| err(&e))?;
+        let solver = lucent::dom::DomSolver::from_params(&params).map_err(|e| err(&e))?;
         let t = std::time::Instant::now();
-        let solution = solver.solve(&problem, &options).map_err(|e| err(&e))?;
+        let (solution, records) = solver
+            .solve_with_details(&problem, &options)
+            .map_err(|e| err(&e))?;
         let wall = t.elapsed().as_secs_f64();
-        let sweeps = solution.report.iterations;
+        let r = &records[0];
+        let sweeps = r.sweeps as f64;
         let cells = (n * n * n) as f64;
-        // The report does not carry the sweep time: the DOM solve proper is re-run through
-        // the crate's own API below for it; here the wall time includes direct and set-up.
-        let per_sweep = wall / sweeps.max(1) as f64;
-        // Minimal traffic per cell and sweep: σ_t, σ_s (8 B); fixed and previous source at
-        // each direction (8 B × N); the in-scattered radiance read and written once per
-        // octant (8 × 8 B × M, M = N); the scalar flux likewise (8 × 16 B).
-        let bytes = 8.0 + 8.0 * directions as f64 + 64.0 * directions as f64 + 128.0;
-        let gbs = bytes * cells / per_sweep / 1e9;
+        let updates = cells * directions as f64 * sweeps;
+        // Per cell and sweep the wavefronts read and write the f64 radiance of every
+        // direction once (16 B each) and read σ_t (4 B).
+        let gbs = cells * (16.0 * directions as f64 + 4.0) * sweeps / r.sweep_seconds / 1e9;
+        let rest = wall - r.sweep_seconds - r.scatter_seconds - r.dsa_seconds - r.anderson_seconds;
         println!(
-            "| {refine} | {run} | {wall:.2} s | {sweeps} | {:.3} s | {:.2} | {gbs:.1} ({:.0}% of copy) | {:?} |",
-            per_sweep,
-            per_sweep / (cells * directions as f64) * 1e9,
+            "| {refine} | {run} | {wall:.2} s | {} | {:.2} s | {:.2} | {gbs:.1} ({:.0}% of copy) | {:.2} s | {:.2} s | {:.2} s | {rest:.2} s | {:?} |",
+            r.sweeps,
+            r.sweep_seconds,
+            r.sweep_seconds / updates * 1e9,
             100.0 * gbs * 1e9 / copy,
+            r.scatter_seconds,
+            r.dsa_seconds,
+            r.anderson_seconds,
             solution.report.stop_reason
         );
     }

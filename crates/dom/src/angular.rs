@@ -114,7 +114,7 @@ impl Ordinates {
     }
 
     /// w_n p̄(ω_n → ω_m), row n (N × M): radiance ψ_n along ω_n contributes
-    /// Σ_n row_n[m] ψ_n to the in-scattered radiance toward ω_m (per unit σ_s).
+    /// Σ_n row_n(m) ψ_n to the in-scattered radiance toward ω_m (per unit σ_s).
     pub fn scattering(&self) -> &[f64] {
         &self.scattering
     }

@@ -80,7 +80,7 @@ impl Default for DomSettings {
         Self {
             closure: Closure::default(),
             acceleration: Acceleration::default(),
-            anderson: 4,
+            anderson: 2,
             block: 16,
         }
     }
@@ -127,6 +127,12 @@ pub struct DomConvergence {
     pub sweeps: usize,
     /// Wall time of the sweeps alone (s).
     pub sweep_seconds: f64,
+    /// Wall time of the source interpolation and scattering products (s).
+    pub scatter_seconds: f64,
+    /// Wall time of the DSA solves (s).
+    pub dsa_seconds: f64,
+    /// Wall time of the Anderson mixing (s).
+    pub anderson_seconds: f64,
     /// The sweep after which DSA was dropped because it amplified the error (thick
     /// cells), if it was.
     pub dsa_abandoned: Option<usize>,
@@ -277,6 +283,7 @@ pub fn solve(
     });
     let mut residuals: Vec<f64> = Vec::new();
     let mut sweep_seconds = 0.0;
+    let (mut scatter_seconds, mut dsa_seconds, mut anderson_seconds) = (0.0, 0.0, 0.0);
     let mut spectral_radius = 0.0;
     let mut first_change = None;
     let mut best_change = f64::INFINITY;
@@ -287,12 +294,14 @@ pub fn solve(
     let (stop_reason, last): (StopReason, SweepOutput) = loop {
         // The source at the propagation directions, S_n = W (Q + σ_s J) (W = 1 when
         // storage is propagation).
+        let t = Instant::now();
         match &interpolation {
             None => fill(&fixed, &previous, &sigma_s, &octants, &mut work),
             Some(transposed) => {
                 interpolate(&fixed, &previous, &sigma_s, &octants, transposed, &mut work);
             }
         }
+        scatter_seconds += t.elapsed().as_secs_f64();
         let input = SweepInput {
             layout: &layout,
             ordinates,
@@ -309,12 +318,15 @@ pub fn solve(
         };
         // In-scattered radiance toward each storage direction: J = Ψ̄ (w p̄), one product
         // of the (cells × N) radiance with the (N × M) scattering matrix.
-        scatter(&work, &octants, &scattering, &mut inscattered);
         sweep_seconds += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        scatter(&work, &octants, &scattering, &mut inscattered);
+        scatter_seconds += t.elapsed().as_secs_f64();
         let iteration = residuals.len() + 1;
         if out.fluence.iter().any(|v| !v.is_finite()) {
             break (StopReason::DivergedNonFinite { iteration }, out);
         }
+        let t = Instant::now();
         let mut dsa_failed = false;
         if let Some(solver) = &dsa {
             // σ_s(φ^{k+½} − φ^k), with φ^k = Σ_m w_m J_m of the source just swept.
@@ -350,6 +362,7 @@ pub fn solve(
                 dsa_failed = true;
             }
         }
+        dsa_seconds += t.elapsed().as_secs_f64();
         if dsa_failed {
             abandon(
                 &mut dsa,
@@ -481,6 +494,7 @@ pub fn solve(
             let ratio = change / residuals[residuals.len() - 2];
             mixing = anderson.is_some() && (dsa.is_none() || ratio > 0.3);
         }
+        let t = Instant::now();
         if let Some(a) = anderson.as_mut().filter(|_| mixing) {
             // With mixing, the contraction of the underlying map is measured directly;
             // the largest of the last three (above the storage floor) bounds the error.
@@ -493,6 +507,7 @@ pub fn solve(
                 spectral_radius = recent.iter().copied().fold(0.0, f64::max);
             }
         }
+        anderson_seconds += t.elapsed().as_secs_f64();
         std::mem::swap(&mut previous, &mut inscattered);
     };
     let emitted: f64 = fixed
@@ -521,6 +536,9 @@ pub fn solve(
             stop_reason,
             spectral_radius,
             sweep_seconds,
+            scatter_seconds,
+            dsa_seconds,
+            anderson_seconds,
             dsa_abandoned,
         },
         balance: DomBalance {
@@ -579,28 +597,29 @@ fn fill(
     }
 }
 
-/// J = Σ_o Ψ̄_o B_o, B_o the octant's rows of the (N × M) scattering matrix, in parallel
-/// over blocks of cells (ndarray's matrix product: matrixmultiply's SIMD kernels), in f64
-/// and stored in f32.
+/// J = Ψ̄ B, B the (N × M) scattering matrix: per block of cells the octant-major radiance
+/// is gathered into one (rows × N) matrix (in cache) and multiplied once (ndarray's matrix
+/// product: matrixmultiply's SIMD kernels), in f64, stored in f32.
 fn scatter(psi: &[f64], octants: &[(usize, usize)], b: &ndarray::Array2<f64>, out: &mut [f32]) {
-    let m = b.ncols();
+    let (n, m) = (b.nrows(), b.ncols());
     let cells = out.len() / m.max(1);
     out.par_chunks_mut(ROWS * m)
         .enumerate()
         .for_each(|(chunk, out)| {
             let rows = out.len() / m;
             let start = chunk * ROWS;
-            let mut c = ndarray::Array2::<f64>::zeros((rows, m));
-            for (k, &(first, count)) in octants.iter().enumerate() {
+            let mut a = ndarray::Array2::<f64>::zeros((rows, n));
+            for &(first, count) in octants {
                 let block =
                     &psi[octant_rows(cells, (first, count))][start * count..(start + rows) * count];
-                let a =
-                    ndarray::ArrayView2::from_shape((rows, count), block).expect("rows × count");
-                let rows_b =
-                    b.slice_axis(ndarray::Axis(0), ndarray::Slice::from(first..first + count));
-                let beta = if k == 0 { 0.0 } else { 1.0 };
-                ndarray::linalg::general_mat_mul(1.0, &a, &rows_b, beta, &mut c);
+                for (r, mut row) in a.rows_mut().into_iter().enumerate() {
+                    for d in 0..count {
+                        row[first + d] = block[r * count + d];
+                    }
+                }
             }
+            let mut c = ndarray::Array2::<f64>::zeros((rows, m));
+            ndarray::linalg::general_mat_mul(1.0, &a, b, 0.0, &mut c);
             for (o, v) in out.iter_mut().zip(c.iter()) {
                 *o = *v as f32;
             }

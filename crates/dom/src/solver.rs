@@ -14,7 +14,7 @@
 //! refinement level, default 2), `family` (`level-symmetric` or `octahedral`),
 //! `storage_level` (store sources on the octahedral set of this level instead of on the
 //! propagation set), `closure` (`diamond`, `step`, `exponential`), `acceleration` (`dsa`
-//! or `none`), `anderson` (mixing depth, 4; 0 off), `block` (wavefront block edge, 16),
+//! or `none`), `anderson` (mixing depth, 2; 0 off), `block` (wavefront block edge, 16),
 //! `refine_uncollided` (2: the uncollided light and its first-collision source are
 //! averaged over 2³ sub-cells, as the sweeps' cell averages are; 1: cell centres).
 
@@ -111,7 +111,7 @@ impl DomSolver {
             "none" => Acceleration::None,
             other => return Err(invalid("acceleration", format!("{other}: dsa or none"))),
         };
-        let anderson = p.usize_or("anderson", 4)?;
+        let anderson = p.usize_or("anderson", 2)?;
         let block = p.usize_or("block", 16)?;
         let refine = p.usize_or("refine_uncollided", 2)?;
         if !(1..=2).contains(&refine) {
@@ -186,6 +186,18 @@ impl Solver for DomSolver {
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
+        self.solve_with_details(problem, options).map(|(s, _)| s)
+    }
+}
+
+impl DomSolver {
+    /// [`Solver::solve`], also returning each channel's iteration record (sweeps, timings,
+    /// contraction, whether DSA was dropped).
+    pub fn solve_with_details(
+        &self,
+        problem: &Problem,
+        options: &SolveOptions,
+    ) -> Result<(Solution, Vec<crate::DomConvergence>), SolveError> {
         self.capabilities().check(self.name(), problem)?;
         options.validate()?;
         let started = Instant::now();
@@ -259,6 +271,7 @@ impl Solver for DomSolver {
         let mut fluence = Vec::with_capacity(channels);
         let mut inscattered = Vec::with_capacity(channels);
         let mut report: Option<(Vec<f64>, StopReason)> = None;
+        let mut records = Vec::with_capacity(channels);
         for c in 0..channels {
             let sigma_t: Vec<f32> = medium.sigma_t(c).data().to_vec();
             let sigma_s: Vec<f32> = (0..n)
@@ -313,6 +326,7 @@ impl Solver for DomSolver {
             fluence.push(Grid::from_vec(g, total)?);
             inscattered.push(solution.inscattered);
             let conv = solution.convergence;
+            records.push(conv.clone());
             let replace = match &report {
                 None => true,
                 Some((_, reason)) => reason.is_converged() && !conv.stop_reason.is_converged(),
@@ -322,7 +336,7 @@ impl Solver for DomSolver {
             }
         }
         let (residuals, stop_reason) = report.ok_or_else(|| invalid("problem", "no channel"))?;
-        Ok(Solution {
+        let solution = Solution {
             fluence,
             angular: Some(Angular::Ordinates(OrdinateRadiance {
                 directions: ordinates.storage().directions().to_vec(),
@@ -340,7 +354,8 @@ impl Solver for DomSolver {
                 peak_memory_bytes: bytes,
                 stop_reason,
             },
-        })
+        };
+        Ok((solution, records))
     }
 }
 
