@@ -395,3 +395,48 @@ fn the_registry_solution_in_scatters_what_it_carries() {
         assert!(worst < tolerance, "{phase:?}: {worst}");
     }
 }
+
+#[test]
+fn a_diffusely_reflecting_boundary_keeps_the_balance_and_returns_light() {
+    // A Robin-like wall returning R = 0.4 of the outgoing partial current diffusely (the
+    // partial-current reflectance of η = 1.3): the balance holds with the reflected light
+    // counted as inflow, exactly R of what reaches the wall comes back, and more is
+    // absorbed than with vacuum walls.
+    let mut results = Vec::new();
+    for reflectance in [0.0, 0.4] {
+        let (mut problem, ordinates) = glowing_cube(0.9, 12, 20.0);
+        problem.boundary = DomBoundary {
+            radiance: 0.0,
+            reflectance,
+        };
+        let s = solve(
+            &problem,
+            &ordinates,
+            &DomSettings::default(),
+            &stopping(1e-9, 200),
+        )
+        .unwrap();
+        assert!(
+            *s.convergence.residuals.last().unwrap() < 1e-8,
+            "{:?}",
+            s.convergence
+        );
+        assert!(
+            s.balance.relative_imbalance() < 1e-7,
+            "R = {reflectance}: {:?}",
+            s.balance
+        );
+        results.push(s.balance);
+    }
+    let (vacuum, robin) = (results[0], results[1]);
+    assert_eq!(vacuum.inflow, 0.0);
+    // What comes back in is R times what reaches the wall.
+    assert!(
+        (robin.inflow / robin.outflow - 0.4).abs() < 1e-6,
+        "{robin:?}"
+    );
+    assert!(
+        robin.absorbed > 1.05 * vacuum.absorbed,
+        "{vacuum:?} {robin:?}"
+    );
+}
