@@ -68,6 +68,27 @@ impl Medium {
         self.albedo(channel).sample(p) * self.sigma_t(channel).sample_trilinear(p)
     }
 
+    /// The medium with σ_t set to zero in the cells where `sdf` ≥ 0 (outside an embedded
+    /// body): what light crosses on its way to the body without interacting.
+    pub fn masked(&self, sdf: &Grid) -> Self {
+        Self {
+            sigma_t: self
+                .sigma_t
+                .iter()
+                .map(|g| {
+                    let mut g = g.clone();
+                    for (v, d) in g.data_mut().iter_mut().zip(sdf.data()) {
+                        if *d >= 0.0 {
+                            *v = 0.0;
+                        }
+                    }
+                    g
+                })
+                .collect(),
+            ..self.clone()
+        }
+    }
+
     /// The same medium on `dims` cells over the same box: every grid resampled
     /// (`lucent_grid::resample::resample`: trilinear to finer grids, box-averaged to
     /// coarser ones), constants kept.

@@ -347,23 +347,9 @@ impl DiffusionSolver {
         } else {
             // Straight-line attenuation through the medium only.
             let medium = problem.medium();
-            let masked = Medium {
-                sigma_t: medium
-                    .sigma_t
-                    .iter()
-                    .map(|g| {
-                        let mut g = g.clone();
-                        if let Some(s) = sdf {
-                            for (v, d) in g.data_mut().iter_mut().zip(s.data()) {
-                                if *d >= 0.0 {
-                                    *v = 0.0;
-                                }
-                            }
-                        }
-                        g
-                    })
-                    .collect(),
-                ..medium.clone()
+            let masked = match sdf {
+                Some(s) => medium.masked(s),
+                None => medium.clone(),
             };
             let p = Problem::new(geometry, masked, external, Boundary::Vacuum, None)?;
             Some(DirectSolver::default().solve(&p, options)?)

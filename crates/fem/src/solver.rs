@@ -396,20 +396,7 @@ impl Solver for FemDiffusionSolver {
             fluence.push(total);
             last = Some(convergence);
         }
-        let convergence = last.ok_or_else(|| invalid("problem", "no channel"))?;
-        Ok(Solution {
-            fluence,
-            angular: None,
-            standard_error: None,
-            report: SolveReport {
-                solver: self.name().into(),
-                iterations: convergence.residuals.len().saturating_sub(1),
-                residual_history: convergence.residuals,
-                wall_time_s: started.elapsed().as_secs_f64(),
-                peak_memory_bytes: bytes,
-                stop_reason: convergence.stop_reason,
-            },
-        })
+        finish(self.name(), fluence, last, started, bytes)
     }
 }
 
@@ -478,22 +465,7 @@ impl FemDiffusionSolver {
             None
         } else {
             let medium = problem.medium();
-            let masked = lucent_core::Medium {
-                sigma_t: medium
-                    .sigma_t
-                    .iter()
-                    .map(|s| {
-                        let mut s = s.clone();
-                        for (v, d) in s.data_mut().iter_mut().zip(sdf.data()) {
-                            if *d >= 0.0 {
-                                *v = 0.0;
-                            }
-                        }
-                        s
-                    })
-                    .collect(),
-                ..medium.clone()
-            };
+            let masked = medium.masked(sdf);
             let p = Problem::new(g, masked, external, lucent_core::Boundary::Vacuum, None)?;
             Some(lucent_core::DirectSolver::default().solve(&p, options)?)
         };
@@ -619,19 +591,31 @@ impl FemDiffusionSolver {
             fluence.push(total);
             last = Some(convergence);
         }
-        let convergence = last.ok_or_else(|| invalid("problem", "no channel"))?;
-        Ok(Solution {
-            fluence,
-            angular: None,
-            standard_error: None,
-            report: SolveReport {
-                solver: self.name().into(),
-                iterations: convergence.residuals.len().saturating_sub(1),
-                residual_history: convergence.residuals,
-                wall_time_s: started.elapsed().as_secs_f64(),
-                peak_memory_bytes: bytes,
-                stop_reason: convergence.stop_reason,
-            },
-        })
+        finish(self.name(), fluence, last, started, bytes)
     }
+}
+
+/// The solution of `fem-diffusion` from the channels' fluence and the last channel's
+/// convergence.
+fn finish(
+    name: &str,
+    fluence: Vec<Grid>,
+    last: Option<crate::solvers::Convergence>,
+    started: Instant,
+    bytes: u64,
+) -> Result<Solution, SolveError> {
+    let convergence = last.ok_or_else(|| invalid("problem", "no channel"))?;
+    Ok(Solution {
+        fluence,
+        angular: None,
+        standard_error: None,
+        report: SolveReport {
+            solver: name.into(),
+            iterations: convergence.residuals.len().saturating_sub(1),
+            residual_history: convergence.residuals,
+            wall_time_s: started.elapsed().as_secs_f64(),
+            peak_memory_bytes: bytes,
+            stop_reason: convergence.stop_reason,
+        },
+    })
 }

@@ -197,7 +197,9 @@ impl StarMesh {
         })
     }
 
-    fn point(&self, ids: &[usize; 8], xi: [f64; 3]) -> Option<Point> {
+    /// The element's trilinear map at ξ: shape values, reference gradients, the Jacobian
+    /// (columns ∂X/∂ξ_d) and the mapped point.
+    fn map(&self, ids: &[usize; 8], xi: [f64; 3]) -> ([f64; 8], [DVec3; 8], DMat3, DVec3) {
         let (shape, dshape) = shape_at(xi);
         let mut jac = DMat3::ZERO;
         let mut position = DVec3::ZERO;
@@ -208,6 +210,11 @@ impl StarMesh {
             jac.z_axis += x * dshape[a].z;
             position += x * shape[a];
         }
+        (shape, dshape, jac, position)
+    }
+
+    fn point(&self, ids: &[usize; 8], xi: [f64; 3]) -> Option<Point> {
+        let (shape, dshape, jac, position) = self.map(ids, xi);
         let det = jac.determinant();
         if det.is_nan() || det <= 0.0 {
             return None;
@@ -404,16 +411,7 @@ impl StarMesh {
         for _move in 0..8 {
             let ids = self.element(cell);
             for _newton in 0..20 {
-                let (shape, dshape) = shape_at(xi);
-                let mut jac = DMat3::ZERO;
-                let mut position = DVec3::ZERO;
-                for a in 0..8 {
-                    let v = self.vertices[ids[a]];
-                    jac.x_axis += v * dshape[a].x;
-                    jac.y_axis += v * dshape[a].y;
-                    jac.z_axis += v * dshape[a].z;
-                    position += v * shape[a];
-                }
+                let (_, _, jac, position) = self.map(&ids, xi);
                 let step = jac.inverse() * (x - position);
                 if !step.is_finite() {
                     return None;
