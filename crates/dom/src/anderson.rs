@@ -13,18 +13,22 @@
 //! (inner product weighted by σ_s² w_m, the scattering source's norm) and sets
 //! x_{k+1} = G(x_k) − ΔG γ.
 //!
-//! Memory: 2·depth + 2 vectors of the stored radiance (f32). Each step makes three passes
+//! Memory: 2·depth + 2 vectors of the stored radiance (f32); the weights are formed from
+//! σ_s per cell and w_m per direction. Each step makes three passes
 //! over them (differences and norms; the new inner products; the update).
 
 use rayon::prelude::*;
 
-const CHUNK: usize = 1 << 14;
+/// Cells per parallel chunk.
+const ROWS: usize = 256;
 
 /// The mixing state.
 pub(crate) struct Anderson {
     depth: usize,
-    /// Per-entry weight of the inner product.
-    weights: Vec<f32>,
+    /// The inner product's weight of entry (cell, m) is `cell_weight[cell]` ×
+    /// `direction_weight[m]` (σ_s² and w_m), formed on the fly.
+    cell_weight: Vec<f32>,
+    direction_weight: Vec<f32>,
     /// Ring buffers of ΔF and ΔG; `order[i]` is the slot of the i-th oldest difference.
     delta_f: Vec<Vec<f32>>,
     delta_g: Vec<Vec<f32>>,
@@ -37,10 +41,11 @@ pub(crate) struct Anderson {
 }
 
 impl Anderson {
-    pub(crate) fn new(depth: usize, weights: Vec<f32>) -> Self {
+    pub(crate) fn new(depth: usize, cell_weight: Vec<f32>, direction_weight: Vec<f32>) -> Self {
         Self {
             depth,
-            weights,
+            cell_weight,
+            direction_weight,
             delta_f: Vec::new(),
             delta_g: Vec::new(),
             order: Vec::new(),
@@ -65,10 +70,11 @@ impl Anderson {
         if !self.started {
             self.last_f.resize(len, 0.0);
             self.last_g.resize(len, 0.0);
+            let chunk = ROWS * self.direction_weight.len();
             self.last_f
-                .par_chunks_mut(CHUNK)
-                .zip(self.last_g.par_chunks_mut(CHUNK))
-                .zip(g.par_chunks(CHUNK).zip(x.par_chunks(CHUNK)))
+                .par_chunks_mut(chunk)
+                .zip(self.last_g.par_chunks_mut(chunk))
+                .zip(g.par_chunks(chunk).zip(x.par_chunks(chunk)))
                 .for_each(|((lf, lg), (g, x))| {
                     for i in 0..g.len() {
                         lf[i] = g[i] - x[i];
@@ -90,18 +96,21 @@ impl Anderson {
         };
         self.order.push(slot);
         // Pass 1: ΔF = f − f_last, ΔG = g − g_last, last ← current; ‖ΔG‖² and ‖ΔX‖².
+        let dirs = self.direction_weight.len();
+        let chunk = ROWS * dirs;
+        let (cw, dw) = (&self.cell_weight, &self.direction_weight);
         let (norm_g, norm_x) = {
             let (df, dg) = (&mut self.delta_f[slot], &mut self.delta_g[slot]);
-            df.par_chunks_mut(CHUNK)
-                .zip(dg.par_chunks_mut(CHUNK))
+            df.par_chunks_mut(chunk)
+                .zip(dg.par_chunks_mut(chunk))
                 .zip(
                     self.last_f
-                        .par_chunks_mut(CHUNK)
-                        .zip(self.last_g.par_chunks_mut(CHUNK)),
+                        .par_chunks_mut(chunk)
+                        .zip(self.last_g.par_chunks_mut(chunk)),
                 )
-                .zip(g.par_chunks(CHUNK).zip(x.par_chunks(CHUNK)))
-                .zip(self.weights.par_chunks(CHUNK))
-                .map(|((((df, dg), (lf, lg)), (g, x)), w)| {
+                .zip(g.par_chunks(chunk).zip(x.par_chunks(chunk)))
+                .enumerate()
+                .map(|(c, (((df, dg), (lf, lg)), (g, x)))| {
                     let (mut ng, mut nx) = (0.0f64, 0.0f64);
                     for i in 0..g.len() {
                         let f = g[i] - x[i];
@@ -109,10 +118,19 @@ impl Anderson {
                         dg[i] = g[i] - lg[i];
                         lf[i] = f;
                         lg[i] = g[i];
-                        let dx = f64::from(dg[i] - df[i]);
-                        let w = f64::from(w[i]);
-                        ng += w * f64::from(dg[i]).powi(2);
-                        nx += w * dx * dx;
+                    }
+                    for (r, row) in (c * ROWS..).zip(0..g.len() / dirs) {
+                        let s = f64::from(cw[r]);
+                        if s == 0.0 {
+                            continue;
+                        }
+                        for q in 0..dirs {
+                            let i = row * dirs + q;
+                            let w = s * f64::from(dw[q]);
+                            let dx = f64::from(dg[i] - df[i]);
+                            ng += w * f64::from(dg[i]).powi(2);
+                            nx += w * dx * dx;
+                        }
                     }
                     (ng, nx)
                 })
@@ -124,20 +142,26 @@ impl Anderson {
         let slots = self.order.clone();
         let dots: Vec<f64> = {
             let df = &self.delta_f;
-            let (lf, w) = (&self.last_f, &self.weights);
-            (0..len.div_ceil(CHUNK))
+            let lf = &self.last_f;
+            (0..len.div_ceil(chunk))
                 .into_par_iter()
                 .map(|c| {
-                    let range = c * CHUNK..((c + 1) * CHUNK).min(len);
                     let mut out = vec![0.0f64; 2 * m];
-                    let new = &df[slot][range.clone()];
+                    let cells = c * ROWS..((c + 1) * ROWS).min(len / dirs);
                     for (k, &s) in slots.iter().enumerate() {
-                        let v = &df[s][range.clone()];
+                        let (v, new) = (&df[s], &df[slot]);
                         let (mut a, mut b) = (0.0f64, 0.0f64);
-                        for (i, idx) in range.clone().enumerate() {
-                            let wv = f64::from(w[idx]) * f64::from(v[i]);
-                            a += wv * f64::from(new[i]);
-                            b += wv * f64::from(lf[idx]);
+                        for cell in cells.clone() {
+                            let weight = f64::from(cw[cell]);
+                            if weight == 0.0 {
+                                continue;
+                            }
+                            for q in 0..dirs {
+                                let i = cell * dirs + q;
+                                let wv = weight * f64::from(dw[q]) * f64::from(v[i]);
+                                a += wv * f64::from(new[i]);
+                                b += wv * f64::from(lf[i]);
+                            }
                         }
                         out[k] = a;
                         out[m + k] = b;
@@ -181,8 +205,8 @@ impl Anderson {
         // where it is near zero).
         let dg: Vec<&Vec<f32>> = slots.iter().map(|&s| &self.delta_g[s]).collect();
         let gamma: Vec<f32> = gamma.iter().map(|v| *v as f32).collect();
-        g.par_chunks_mut(CHUNK).enumerate().for_each(|(c, g)| {
-            let start = c * CHUNK;
+        g.par_chunks_mut(chunk).enumerate().for_each(|(c, g)| {
+            let start = c * chunk;
             for (k, v) in dg.iter().enumerate() {
                 let v = &v[start..start + g.len()];
                 let c = gamma[k];

@@ -271,15 +271,11 @@ pub fn solve(
     });
 
     let mut anderson = (settings.anderson > 0 && scatters).then(|| {
-        let weights = sigma_s
-            .iter()
-            .flat_map(|s| {
-                storage_weights
-                    .iter()
-                    .map(move |w| (f64::from(*s).powi(2) * w) as f32)
-            })
-            .collect();
-        Anderson::new(settings.anderson, weights)
+        Anderson::new(
+            settings.anderson,
+            sigma_s.iter().map(|s| s * s).collect(),
+            storage_weights.iter().map(|w| *w as f32).collect(),
+        )
     });
     let mut residuals: Vec<f64> = Vec::new();
     let mut sweep_seconds = 0.0;

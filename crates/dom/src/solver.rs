@@ -207,7 +207,7 @@ impl DomSolver {
         let ordinates = self.ordinates(medium.phase)?;
         let m = ordinates.storage().len();
         let channels = problem.channels();
-        let anderson_vectors = 2 * self.settings.anderson + 3;
+        let anderson_vectors = 2 * self.settings.anderson + 2;
         let bytes = (n * m * 4 * (3 + anderson_vectors) + n * 40) as u64 * channels as u64;
         if bytes > options.memory_budget {
             return Err(SolveError::OverBudget {
