@@ -494,9 +494,11 @@ until the spatial error and the reference's own noise (0.6%) remain.
   error at S8. Bernabei's exponential face-to-face scheme attenuates with the mean chord, which
   errs by several per cent per cell at σ_t h ≈ 1 (crates/dom/tests/closure.rs), so at these
   resolutions it sits between the two.
-- **Iterations.** DSA with `lucent-diffusion`'s cell-centred operator converges in 7–15 sweeps
-  for σ_t h ≤ 2 (tests/transport.rs); beyond, inconsistent DSA amplifies errors in thick cells and
-  is dropped for Anderson-mixed source iteration, which the solver reports (`dsa_abandoned`).
+- **Iterations** (crates/dom/tests/transport.rs). DSA with `lucent-diffusion`'s cell-centred
+  operator takes albedo 0.999 at σ_t h = 0.67 to 10⁻⁶ in 21 sweeps (12 with Anderson mixing);
+  plain source iteration would need about 390. At σ_t h = 2 with diamond difference this
+  inconsistent DSA amplifies errors and is dropped (the solver reports `dsa_abandoned`), while
+  with Anderson mixing on top it converges in 14 sweeps.
 ";
 
 /// What the marble sphere shows about diffusion, with the measurements behind it.

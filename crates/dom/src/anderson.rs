@@ -3,8 +3,8 @@
 //!
 //! Why: diffusion synthetic acceleration with a diffusion operator that is not derived
 //! from the transport closure ("inconsistent" DSA) contracts to a few per cent per sweep
-//! in cells up to about one mean free path wide, but its spectral radius passes 1 for
-//! diamond difference near σ_t h ≈ 1.5 (measured in this crate's tests, as Fourier
+//! in cells up to about one mean free path wide, but for diamond difference its spectral
+//! radius passes 1 in thicker cells (at σ_t h = 2 in this crate's tests, as Fourier
 //! analysis predicts; Larsen 1982, Azmy). Krylov methods preconditioned by that same DSA
 //! stay effective there (Warsa, Wareing & Morel 2004); Anderson mixing is the Krylov method
 //! (GMRES, for a linear map) that needs only evaluations of the iteration itself, so it

@@ -37,15 +37,15 @@
 //! # Stability and accuracy
 //!
 //! The sweeps are implicit in space: no step limit. Source iteration contracts like the
-//! scattering ratio ω per sweep (ρ → 1 as ω → 1 in thick media); DSA brings it to 0.1–0.5
-//! while cells are at most about one mean free path wide. DSA with lucent-diffusion's
-//! cell-centred operator is not consistent with the transport closures: for diamond
-//! difference it diverges from σ_t h ≈ 1.5 (measured at 2, 8 and 32). Anderson mixing on top
-//! restores convergence up to σ_t h ≈ 2 (diamond) and 8 (exponential); beyond, the solver
-//! drops DSA when it amplifies or stalls the error and says so (`dsa_abandoned`). DSA
-//! accelerates the isotropic error only: with strongly forward scattering the first-moment
-//! error still contracts by about ωg per sweep. Diamond difference is second
-//! order in thin cells and needs its fix-up (first order, positive) in thick ones; step is
+//! scattering ratio ω per sweep (ρ → 1 as ω → 1 in thick media). DSA removes that: at
+//! albedo 0.999 and σ_t h = 0.67 it reaches 10⁻⁶ in 21 sweeps (12 with Anderson mixing),
+//! where plain iteration would need about 390. DSA with lucent-diffusion's cell-centred
+//! operator is not consistent with the transport closures: with diamond difference at
+//! σ_t h = 2 it amplifies the error and the solver drops it (`dsa_abandoned`); Anderson
+//! mixing on top converges there in 14 sweeps, and with the exponential closure at
+//! σ_t h = 8 in 52 (all in tests/transport.rs). DSA accelerates the isotropic error only:
+//! with strongly forward scattering the first-moment error still contracts by about ωg per
+//! sweep. Diamond difference is second order in thin cells and needs its fix-up (first order, positive) in thick ones; step is
 //! first order and positive; the exponential closure is exact along the axes and for
 //! σ_t → 0, and its mean-chord attenuation errs by up to 50% at σ_t h = 5.
 //!

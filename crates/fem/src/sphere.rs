@@ -28,6 +28,9 @@ pub struct StarMesh {
     pub vertices: Vec<DVec3>,
 }
 
+/// The two-point Gauss–Legendre nodes on [0, 1], ½ ∓ ½/√3.
+const GAUSS: [f64; 2] = [0.211_324_865_405_187_1, 0.788_675_134_594_812_9];
+
 /// Trilinear shape functions and their reference gradients at ξ ∈ [0, 1]³ (corner a has
 /// offsets (a & 1, a >> 1 & 1, a >> 2)).
 fn shape_at(xi: [f64; 3]) -> ([f64; 8], [DVec3; 8]) {
@@ -213,6 +216,28 @@ impl StarMesh {
         (shape, dshape, jac, position)
     }
 
+    /// Element (i, j, k)'s vertices and its 2×2×2 Gauss points (weight det J/8 each);
+    /// an inverted element is an error.
+    fn gauss_points(&self, at: [usize; 3]) -> Result<([usize; 8], [Point; 8]), FemError> {
+        let ids = self.element(at);
+        let mut out = Vec::with_capacity(8);
+        for &pz in &GAUSS {
+            for &py in &GAUSS {
+                for &px in &GAUSS {
+                    out.push(
+                        self.point(&ids, [px, py, pz]).ok_or_else(|| {
+                            FemError::Invalid(format!("inverted element at {at:?}"))
+                        })?,
+                    );
+                }
+            }
+        }
+        let points: [Point; 8] = out
+            .try_into()
+            .map_err(|_| FemError::Invalid("eight Gauss points".into()))?;
+        Ok((ids, points))
+    }
+
     fn point(&self, ids: &[usize; 8], xi: [f64; 3]) -> Option<Point> {
         let (shape, dshape, jac, position) = self.map(ids, xi);
         let det = jac.determinant();
@@ -240,37 +265,26 @@ impl StarMesh {
         }
         let c = self.cells;
         let n = (c + 1).pow(3);
-        let g = 0.5 / 3f64.sqrt();
-        let points = [0.5 - g, 0.5 + g];
         let mut t = sprs::TriMat::with_capacity((n, n), 64 * c * c * c);
         for k in 0..c {
             for j in 0..c {
                 for i in 0..c {
-                    let ids = self.element([i, j, k]);
+                    let (ids, points) = self.gauss_points([i, j, k])?;
                     let mut local = [[0.0; 8]; 8];
-                    for &pz in &points {
-                        for &py in &points {
-                            for &px in &points {
-                                let p = self.point(&ids, [px, py, pz]).ok_or_else(|| {
-                                    FemError::Invalid(format!(
-                                        "inverted element at ({i}, {j}, {k})"
-                                    ))
-                                })?;
-                                let (d, sa) = coefficients(p.position);
-                                if !(d > 0.0 && sa >= 0.0 && d.is_finite() && sa.is_finite()) {
-                                    return Err(FemError::Invalid(format!(
-                                        "D = {d}, σ_a = {sa} at {}: D > 0, σ_a ≥ 0",
-                                        p.position
-                                    )));
-                                }
-                                let w = p.det / 8.0;
-                                for a in 0..8 {
-                                    for b in 0..8 {
-                                        local[a][b] += w
-                                            * (d * p.grads[a].dot(p.grads[b])
-                                                + sa * p.shape[a] * p.shape[b]);
-                                    }
-                                }
+                    for p in &points {
+                        let (d, sa) = coefficients(p.position);
+                        if !(d > 0.0 && sa >= 0.0 && d.is_finite() && sa.is_finite()) {
+                            return Err(FemError::Invalid(format!(
+                                "D = {d}, σ_a = {sa} at {}: D > 0, σ_a ≥ 0",
+                                p.position
+                            )));
+                        }
+                        let w = p.det / 8.0;
+                        for a in 0..8 {
+                            for b in 0..8 {
+                                local[a][b] += w
+                                    * (d * p.grads[a].dot(p.grads[b])
+                                        + sa * p.shape[a] * p.shape[b]);
                             }
                         }
                     }
@@ -298,8 +312,8 @@ impl StarMesh {
                         });
                         let x: [DVec3; 4] = std::array::from_fn(|q| self.vertices[ids[q]]);
                         let mut local = [[0.0; 4]; 4];
-                        for &s in &points {
-                            for &r in &points {
+                        for &s in &GAUSS {
+                            for &r in &GAUSS {
                                 let shape =
                                     [(1.0 - s) * (1.0 - r), s * (1.0 - r), (1.0 - s) * r, s * r];
                                 let ds = (x[1] - x[0]) * (1.0 - r) + (x[3] - x[2]) * r;
@@ -338,27 +352,16 @@ impl StarMesh {
     /// moment Q₁, both from `source(x)` = (q, 3D Q₁) at each Gauss point.
     pub fn load(&self, source: impl Fn(DVec3) -> (f64, DVec3)) -> Result<Vec<f64>, FemError> {
         let c = self.cells;
-        let g = 0.5 / 3f64.sqrt();
-        let points = [0.5 - g, 0.5 + g];
         let mut b = vec![0.0; (c + 1).pow(3)];
         for k in 0..c {
             for j in 0..c {
                 for i in 0..c {
-                    let ids = self.element([i, j, k]);
-                    for &pz in &points {
-                        for &py in &points {
-                            for &px in &points {
-                                let p = self.point(&ids, [px, py, pz]).ok_or_else(|| {
-                                    FemError::Invalid(format!(
-                                        "inverted element at ({i}, {j}, {k})"
-                                    ))
-                                })?;
-                                let (q, moment) = source(p.position);
-                                let w = p.det / 8.0;
-                                for a in 0..8 {
-                                    b[ids[a]] += w * (q * p.shape[a] + moment.dot(p.grads[a]));
-                                }
-                            }
+                    let (ids, points) = self.gauss_points([i, j, k])?;
+                    for p in &points {
+                        let (q, moment) = source(p.position);
+                        let w = p.det / 8.0;
+                        for a in 0..8 {
+                            b[ids[a]] += w * (q * p.shape[a] + moment.dot(p.grads[a]));
                         }
                     }
                 }
