@@ -107,7 +107,7 @@ pub fn camera_image_with_progress(
     let majorants: Vec<MajorantGrid> = medium
         .sigma_t
         .iter()
-        .map(|s| MajorantGrid::new(&floored(s), config.majorant_cells))
+        .map(|s| MajorantGrid::for_config(&floored(s), config))
         .collect();
     let groups: Vec<(usize, Vec<usize>)> = if medium.sigma_t.len() == 1 {
         vec![(0, (0..channels).collect())]
@@ -123,7 +123,7 @@ pub fn camera_image_with_progress(
                 *m = m.max(*v);
             }
         }
-        MajorantGrid::new(&floored(&max), config.majorant_cells)
+        MajorantGrid::for_config(&floored(&max), config)
     });
     let mut radiance = vec![[0f32; 3]; width * height];
     let mut std_error = vec![[0f32; 3]; width * height];

@@ -10,7 +10,10 @@
 //! faces, cosine-weighted; emission: cells proposed by the largest neighbouring value, a
 //! uniform point, power weighted by the trilinear Q(x) over the proposal). A particle flies by **delta tracking** against a coarse
 //! **majorant grid** walked by a 3D DDA (the majorant of a coarse cell bounds the trilinear
-//! extinction inside it, so tracking is exact, and thin regions are crossed in long steps):
+//! extinction inside it, so tracking is exact, and thin regions are crossed in long steps;
+//! every walk — particle flights, camera paths, shadow rays — is clipped to the grid's box
+//! in that one place, since the coarse grid sticks out of it when a dimension is not a
+//! multiple of the block size):
 //! tentative collisions at rate σ̄, accepted with probability σ_t(x)/σ̄. At a real collision
 //! the absorbed share w(1 − α) is tallied and the particle continues with weight wα
 //! (implicit capture), scatters by sampling the phase function exactly, and plays Russian

@@ -1,9 +1,17 @@
 //! The coarse majorant grid: an upper bound of the extinction per coarse cell, walked by a
-//! DDA so that delta tracking takes long steps through thin regions (pbrt-v4's approach,
-//! `shared/notes/anchors.md` §1.1–1.3).
+//! DDA so that delta tracking takes long steps through thin regions (pbrt-v4's approach:
+//! Pharr, Jakob and Humphreys, *Physically Based Rendering*, 4th ed., §11.4 and §14.1).
+//!
+//! **The medium ends at the box.** A coarse grid of ⌈n/f⌉ cells per axis sticks out of the
+//! fine grid's box when n is not a multiple of f, and the trilinear σ_t sampled there is the
+//! edge-clamped value of the boundary cells: a phantom layer of up to f − 1 cells. Every walk
+//! is therefore clipped to the fine grid's box here, once, so that no caller — the fluence
+//! tracer, camera paths, shadow rays — can see medium outside it.
 
 use glam::DVec3;
-use lucent_grid::{Grid, GridGeometry};
+use lucent_grid::{Grid, GridGeometry, ray_box};
+
+use crate::transport::McConfig;
 
 /// Per coarse cell, the largest extinction the trilinear medium takes inside it.
 ///
@@ -14,6 +22,8 @@ use lucent_grid::{Grid, GridGeometry};
 pub struct MajorantGrid {
     geometry: GridGeometry,
     values: Vec<f64>,
+    /// The fine grid's box: the medium's extent, to which every walk is clipped.
+    domain: (DVec3, DVec3),
 }
 
 impl MajorantGrid {
@@ -44,7 +54,22 @@ impl MajorantGrid {
                 }
             }
         }
-        Self { geometry, values }
+        Self {
+            geometry,
+            values,
+            domain: fine.bounds(),
+        }
+    }
+
+    /// The majorant `config` asks for: one global bound with `global_majorant`, otherwise
+    /// blocks of `majorant_cells`³ fine cells. The fluence tracer and camera paths both
+    /// build theirs here.
+    pub fn for_config(sigma_t: &Grid, config: &McConfig) -> Self {
+        if config.global_majorant {
+            Self::global(sigma_t)
+        } else {
+            Self::new(sigma_t, config.majorant_cells)
+        }
     }
 
     /// One majorant for the whole domain (the largest extinction): the global-majorant
@@ -57,6 +82,7 @@ impl MajorantGrid {
         Self {
             geometry,
             values: vec![f64::from(max.max(0.0))],
+            domain: (lo, hi),
         }
     }
 
@@ -83,8 +109,9 @@ impl MajorantGrid {
             .index(c.x as usize, c.y as usize, c.z as usize)]
     }
 
-    /// Walks the ray `origin + t·dir` (unit `dir`) for t ∈ [0, t_max] through the coarse
-    /// cells, calling `visit(t_enter, t_exit, majorant)` in order until it returns `false`.
+    /// Walks the ray `origin + t·dir` (unit `dir`) for t ∈ [0, t_max] ∩ the fine grid's box
+    /// through the coarse cells, calling `visit(t_enter, t_exit, majorant)` in order until it
+    /// returns `false`. Nothing outside the box is visited.
     pub fn walk(
         &self,
         origin: DVec3,
@@ -92,11 +119,20 @@ impl MajorantGrid {
         t_max: f64,
         mut visit: impl FnMut(f64, f64, f64) -> bool,
     ) {
+        let Some((t_in, t_out)) = ray_box(origin, dir, self.domain.0, self.domain.1) else {
+            return;
+        };
+        let (t_in, t_out) = (t_in.max(0.0), t_out.min(t_max));
+        if t_in >= t_out {
+            return;
+        }
         let values = &self.values;
-        self.geometry
-            .traverse(origin, origin + dir * t_max, |index, enter, exit| {
-                visit(enter, exit, values[index])
-            });
+        // `traverse` measures distances from the start of the segment it is given.
+        self.geometry.traverse(
+            origin + dir * t_in,
+            origin + dir * t_out,
+            |index, enter, exit| visit(t_in + enter, t_in + exit, values[index]),
+        );
     }
 
     /// Tentative collisions along `origin + t·dir` for t ∈ [`t_start`, `t_end`]: points of a

@@ -358,11 +358,7 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
         } else {
             medium.sigma_t(*extinction)
         };
-        let majorant = if config.global_majorant {
-            MajorantGrid::global(sigma_t)
-        } else {
-            MajorantGrid::new(sigma_t, config.majorant_cells)
-        };
+        let majorant = MajorantGrid::for_config(sigma_t, config);
         for chunk in batch_ids.chunks(group_size) {
             let tallies: Vec<Tally> = chunk
                 .par_iter()
