@@ -54,8 +54,9 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
     println!();
     println!("copy bandwidth: {:.1} GB/s", copy / 1e9);
     println!();
-    // `direct` alone, at the grid and at 2× (what `refine_uncollided` 1 and 2 cost).
-    for factor in [1usize, 2] {
+    // `direct` alone (the renderer's transmittance), and the uncollided cell integrals that
+    // make the first-collision source.
+    for factor in [1usize] {
         let medium = problem
             .medium()
             .resampled([n * factor; 3])
@@ -79,26 +80,31 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
             t.elapsed().as_secs_f64()
         );
     }
+    let t = std::time::Instant::now();
+    for light in problem.lights() {
+        lucent::core::uncollided_cells(problem.medium().sigma_t(0), light, 50.0);
+    }
+    println!(
+        "uncollided cell integrals on {n}³: {:.2} s",
+        t.elapsed().as_secs_f64()
+    );
     println!();
     println!(
-        "| refine_uncollided | run | wall | sweeps | sweeps alone | ns per cell-direction (sweeps) | sweep GB/s (work read + written, σ_t) | sources + scattering products | DSA | Anderson | rest (direct, first-collision, set-up) | stop |"
+        "| run | wall | sweeps | sweeps alone | ns per cell-direction (sweeps) | sweep GB/s (work read + written, σ_t) | sources + scattering products | DSA | Anderson | rest (direct, first-collision, set-up) | stop |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
-    for (refine, run) in [(1i64, 0), (1, 1), (1, 2), (2, 0)] {
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    for run in 0..3 {
         let mut params = Params::default();
         params
             .0
             .insert("order".into(), ParamValue::Int(order as i64));
-        params
-            .0
-            .insert("refine_uncollided".into(), ParamValue::Int(refine));
         let solver = lucent::dom::DomSolver::from_params(&params).map_err(|e| err(&e))?;
         let t = std::time::Instant::now();
         let (solution, records) = solver
             .solve_with_details(&problem, &options)
             .map_err(|e| err(&e))?;
         let wall = t.elapsed().as_secs_f64();
-        let r = &records[0];
+        let r = &records[0].convergence;
         let sweeps = r.sweeps as f64;
         let cells = (n * n * n) as f64;
         let updates = cells * directions as f64 * sweeps;
@@ -107,7 +113,7 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
         let gbs = cells * (16.0 * directions as f64 + 4.0) * sweeps / r.sweep_seconds / 1e9;
         let rest = wall - r.sweep_seconds - r.scatter_seconds - r.dsa_seconds - r.anderson_seconds;
         println!(
-            "| {refine} | {run} | {wall:.2} s | {} | {:.2} s | {:.2} | {gbs:.1} ({:.0}% of copy) | {:.2} s | {:.2} s | {:.2} s | {rest:.2} s | {:?} |",
+            "| {run} | {wall:.2} s | {} | {:.2} s | {:.2} | {gbs:.1} ({:.0}% of copy) | {:.2} s | {:.2} s | {:.2} s | {rest:.2} s | {:?} |",
             r.sweeps,
             r.sweep_seconds,
             r.sweep_seconds / updates * 1e9,

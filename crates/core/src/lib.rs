@@ -54,16 +54,16 @@ mod registry;
 mod solution;
 mod solver;
 mod spectrum;
+mod uncollided;
 
 pub use direct::DirectSolver;
 pub use error::{ProblemError, SolveError};
 pub use problem::{Boundary, BoundaryKind, Field, Light, LightKind, Medium, Problem};
 pub use registry::{ParamValue, Params, Registry, SolverEntry};
-pub use solution::{
-    Angular, LightTransmittance, OrdinateRadiance, Solution, first_collision_sources,
-};
+pub use solution::{Angular, LightTransmittance, OrdinateRadiance, Solution};
 pub use solver::{
     Capabilities, FluenceKind, OutputKind, Progress, ProgressFn, SolveOptions, SolveReport, Solver,
     StopReason,
 };
 pub use spectrum::Spectrum;
+pub use uncollided::{Uncollided, UncollidedCells, uncollided_cells};

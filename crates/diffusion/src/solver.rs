@@ -24,8 +24,8 @@ use std::time::Instant;
 
 use glam::DVec3;
 use lucent_core::{
-    Angular, Boundary, BoundaryKind, Capabilities, DirectSolver, FluenceKind, Light, LightKind,
-    Medium, OutputKind, Params, Problem, Solution, SolveError, SolveOptions, SolveReport, Solver,
+    Angular, Boundary, BoundaryKind, Capabilities, FluenceKind, Light, LightKind, Medium,
+    OutputKind, Params, Problem, Solution, SolveError, SolveOptions, SolveReport, Solver,
     SolverEntry, StopReason,
 };
 use lucent_grid::Grid;
@@ -352,7 +352,7 @@ impl DiffusionSolver {
                 None => medium.clone(),
             };
             let p = Problem::new(geometry, masked, external, Boundary::Vacuum, None)?;
-            Some(DirectSolver::default().solve(&p, options)?)
+            Some(lucent_core::Uncollided::new(&p, options)?)
         };
 
         let floor = 1e-3 / geometry.spacing().max_element();
@@ -394,8 +394,7 @@ impl DiffusionSolver {
                 }
             }
             if let Some(direct) = &direct {
-                let (scattered, first) =
-                    lucent_core::first_collision_sources(direct, &geometry, c, &ss, g);
+                let (scattered, first) = direct.first_collision_sources(c, &ss, g);
                 for (q, s) in q0.iter_mut().zip(scattered) {
                     *q += s;
                 }
@@ -411,9 +410,8 @@ impl DiffusionSolver {
             )?;
             let mut total = scattered_grid.clone();
             if let Some(direct) = &direct {
-                let u = direct.fluence(c);
-                for (t, v) in total.data_mut().iter_mut().zip(u.data()) {
-                    *t += v;
+                for (t, v) in total.data_mut().iter_mut().zip(direct.fluence(c)) {
+                    *t += v as f32;
                 }
             }
             fluence.push(total);
@@ -427,7 +425,7 @@ impl DiffusionSolver {
                 report = Some((conv.iterations(), conv.residuals, conv.stop_reason));
             }
         }
-        let angular = direct.and_then(|d| match d.angular {
+        let angular = direct.and_then(|d| match d.direct.angular {
             Some(Angular::Lights(mut lights)) => {
                 lights.isotropic_fluence = scattered
                     .iter()

@@ -88,4 +88,4 @@ pub use solve::{
     Acceleration, DomBalance, DomBoundary, DomConvergence, DomProblem, DomSettings, DomSolution,
     solve,
 };
-pub use solver::DomSolver;
+pub use solver::{DomChannel, DomSolver};

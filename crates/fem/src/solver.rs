@@ -164,7 +164,7 @@ impl Solver for FemP1Solver {
 /// corners, D = 1/(3σ_t′) and σ_a per cell), Robin (A from η), vacuum (A = 1) or reflecting
 /// boxes, solved by multigrid-preconditioned CG. Lights: point lights inside (power 4πI),
 /// emission (4π L_e), and every other light through `direct`'s first-collision sources
-/// (`lucent_core::first_collision_sources`: Q₀ = σ_s φ_u, Q₁ = g σ_s Σ ω E T, the latter
+/// (`lucent_core::Uncollided::first_collision_sources`: Q₀ = σ_s φ_u, Q₁ = g σ_s Σ ω E T, the latter
 /// entering the weak form as ∫ 3D Q₁·∇v, whose boundary terms cancel against the Robin
 /// condition's). The fluence per cell is the mean of its 8 corners plus φ_u. With an
 /// embedded body the elements are fitted to it instead ([`StarMesh::from_sdf`]; Robin or
@@ -268,7 +268,7 @@ impl Solver for FemDiffusionSolver {
                 lucent_core::Boundary::Vacuum,
                 None,
             )?;
-            Some(lucent_core::DirectSolver::default().solve(&p, options)?)
+            Some(lucent_core::Uncollided::new(&p, options)?)
         };
         let floor = 1e-3 / h.x;
         let mut fluence = Vec::new();
@@ -304,8 +304,7 @@ impl Solver for FemDiffusionSolver {
                         problem.medium().sigma_s_at(c, g.cell_centre(i, j, k))
                     })
                     .collect();
-                let (scattered, moment) =
-                    lucent_core::first_collision_sources(direct, &g, c, &ss, gbar);
+                let (scattered, moment) = direct.first_collision_sources(c, &ss, gbar);
                 let hh = h.x * h.x / 4.0;
                 for cell in 0..n {
                     let [i, j, k] = g.coords(cell);
@@ -389,8 +388,8 @@ impl Solver for FemDiffusionSolver {
                 .collect();
             let mut total = Grid::from_vec(g, cells)?;
             if let Some(direct) = &direct {
-                for (t, u) in total.data_mut().iter_mut().zip(direct.fluence(c).data()) {
-                    *t += u;
+                for (t, u) in total.data_mut().iter_mut().zip(direct.fluence(c)) {
+                    *t += u as f32;
                 }
             }
             fluence.push(total);
@@ -467,7 +466,7 @@ impl FemDiffusionSolver {
             let medium = problem.medium();
             let masked = medium.masked(sdf);
             let p = Problem::new(g, masked, external, lucent_core::Boundary::Vacuum, None)?;
-            Some(lucent_core::DirectSolver::default().solve(&p, options)?)
+            Some(lucent_core::Uncollided::new(&p, options)?)
         };
 
         let gbar = problem.medium().phase.mean_cosine();
@@ -505,8 +504,7 @@ impl FemDiffusionSolver {
                         medium.sigma_s_at(c, g.cell_centre(i, j, k))
                     })
                     .collect();
-                let (scattered, first) =
-                    lucent_core::first_collision_sources(direct, &g, c, &ss, gbar);
+                let (scattered, first) = direct.first_collision_sources(c, &ss, gbar);
                 for (q, s) in q0.iter_mut().zip(scattered) {
                     *q += s;
                 }
@@ -584,8 +582,8 @@ impl FemDiffusionSolver {
                     .collect(),
             )?;
             if let Some(direct) = &direct {
-                for (t, u) in total.data_mut().iter_mut().zip(direct.fluence(c).data()) {
-                    *t += u;
+                for (t, u) in total.data_mut().iter_mut().zip(direct.fluence(c)) {
+                    *t += u as f32;
                 }
             }
             fluence.push(total);
