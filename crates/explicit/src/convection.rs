@@ -57,6 +57,18 @@ pub enum Model {
     Paper,
     /// Conservative fluxes, absorption a rate σ_a (1/length) times cΔt.
     Conservative,
+    /// The steady state by short characteristics: each cell's value is the upstream
+    /// value where the ray through its centre crosses the previous plane of cell centres
+    /// (across the light's dominant axis), interpolated bilinearly from the four cells
+    /// there, times the exact attenuation e^{−τ} along that step (τ by the trapezoid rule
+    /// on σ_a, which is exact for σ_a linear along the step). For a point light the
+    /// interpolated quantity is φ r² (the light's I·T, smooth where φ ∝ 1/r² is not).
+    /// Absorption is a rate (1/length). Unconditionally stable and positive (convex
+    /// interpolation weights), no Courant number; second order where the field is smooth,
+    /// where Eq. 16 and the conservative form are first order (and attenuate a cell by
+    /// 1/(1 + σh) instead of e^{−σh}). Marched only by ordered sweeps (one pass for a
+    /// distant light).
+    Characteristic,
 }
 
 /// How the march reaches steady state.
@@ -179,7 +191,7 @@ impl Setup<'_> {
                 let g = falloff.map_or(1.0, |w| (-0.5 * d2 / (w * w)).exp());
                 match self.model {
                     Model::Paper => g * density,
-                    Model::Conservative => {
+                    Model::Conservative | Model::Characteristic => {
                         g * density / d2.max(0.25 * self.lattice.spacing.powi(2))
                     }
                 }
@@ -240,6 +252,7 @@ impl Setup<'_> {
                     rho[c]
                 }
             }
+            Model::Characteristic => self.characteristic(c, rho),
             Model::Conservative => {
                 // ρ (Σ_out u·n + σh) = Σ_in |u·n| ρ_nb.
                 let h = self.lattice.spacing;
@@ -265,6 +278,153 @@ impl Setup<'_> {
         }
     }
 
+    /// The short-characteristic value of cell c from its upstream plane in `rho`
+    /// ([`Model::Characteristic`]). The ray through the cell's centre is traced back to
+    /// the previous plane of cell centres across the light's dominant axis, or to the box
+    /// if it leaves it first; there the upstream value is interpolated bilinearly from the
+    /// nodes around it: cell centres, or points of an inflow face, where the light arrives
+    /// unattenuated (so the interpolation never reaches across the box's surface, where
+    /// the field has a kink).
+    fn characteristic(&self, c: usize, rho: &[f64]) -> f64 {
+        let l = self.lattice;
+        let h = l.spacing;
+        let at = l.coords(c);
+        let x = l.centre(at.map(|v| v as isize));
+        let u = self.direction(x);
+        let axis = u.abs().max_position();
+        if u[axis] == 0.0 {
+            return rho[c];
+        }
+        let lo = l.origin;
+        let hi = l.origin + DVec3::new(l.dims[0] as f64, l.dims[1] as f64, l.dims[2] as f64) * h;
+        let point_light = match self.light {
+            Light::Point { position, .. } => Some(position),
+            Light::Distant { .. } => None,
+        };
+        // φ r² for a point light (its I·T, smooth where φ is not), φ for a distant one.
+        let spread = |y: DVec3| point_light.map_or(1.0, |p| (y - p).length_squared());
+        let light_at = |y: DVec3| self.source_value(y) * spread(y);
+        let finish = |psi: f64, tau: f64| psi * (-tau).exp() / spread(x);
+        // Back along −u: to the box, or to the upstream plane of centres.
+        let to_box = (0..3)
+            .filter(|&a| u[a] != 0.0)
+            .map(|a| {
+                if u[a] > 0.0 {
+                    (x[a] - lo[a]) / u[a]
+                } else {
+                    (x[a] - hi[a]) / u[a]
+                }
+            })
+            .fold(f64::INFINITY, f64::min);
+        let to_plane = h / u[axis].abs();
+        if to_box <= to_plane {
+            let y = x - u * to_box;
+            return finish(light_at(y), self.absorption[c] * to_box);
+        }
+        let y = x - u * to_plane;
+        let plane = at[axis] as isize + if u[axis] > 0.0 { -1 } else { 1 };
+        let (b, d) = ((axis + 1) % 3, (axis + 2) % 3);
+        // The value at a node of the upstream plane: (ψ, σ). A node is a cell index or,
+        // where the index leaves the grid, the point of the (inflow) face beside it.
+        let node_value = |ib: isize, id: isize| -> (f64, f64) {
+            let mut to = [0isize; 3];
+            to[axis] = plane;
+            to[b] = ib;
+            to[d] = id;
+            let inside = [b, d]
+                .iter()
+                .all(|&a| (0..l.dims[a] as isize).contains(&to[a]));
+            let clamped = to.map(|v| v.max(0));
+            let clamped = [0, 1, 2].map(|a| clamped[a].min(l.dims[a] as isize - 1));
+            let i = (0..3)
+                .map(|a| clamped[a] as usize * l.strides()[a])
+                .sum::<usize>();
+            let mut point = l.centre(to);
+            if inside {
+                return (rho[i] * spread(point), self.absorption[i]);
+            }
+            for a in [b, d] {
+                point[a] = point[a].clamp(lo[a], hi[a]);
+            }
+            (light_at(point), self.absorption[i])
+        };
+        // Per lateral axis: the position of y in index coordinates (centres at integers,
+        // faces at −½ and n − ½), and the nodes around it with their positions.
+        let coordinate = |a: usize| (y[a] - lo[a]) / h - 0.5;
+        let position = |a: usize, i: isize| -> f64 {
+            let n = l.dims[a] as isize;
+            if i < 0 {
+                -0.5
+            } else if i >= n {
+                n as f64 - 0.5
+            } else {
+                i as f64
+            }
+        };
+        // Bilinear: the two nodes that bracket y.
+        let linear = |a: usize| -> [(isize, f64); 2] {
+            let q = coordinate(a);
+            let n = l.dims[a] as isize;
+            let i = (q.floor() as isize).clamp(-1, n - 1);
+            let (p0, p1) = (position(a, i), position(a, i + 1));
+            let t = if p1 > p0 {
+                ((q - p0) / (p1 - p0)).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            [(i, 1.0 - t), (i + 1, t)]
+        };
+        // Quadratic: Lagrange weights on the nearest centre and its two neighbours (faces
+        // at their half-cell distance where a neighbour leaves the grid).
+        let quadratic = |a: usize| -> [(isize, f64); 3] {
+            let q = coordinate(a);
+            let n = l.dims[a] as isize;
+            let centre = (q.round() as isize).clamp(0, n - 1);
+            // Faces are nodes only where the light comes in: never reach past an outflow
+            // face (shift the stencil inward there; one-sided is still quadratic).
+            let start = match (u[a] > 0.0, u[a] < 0.0) {
+                (_, true) if centre == 0 && n >= 3 => 0,
+                (true, _) if centre == n - 1 && n >= 3 => n - 3,
+                _ => centre - 1,
+            };
+            let nodes = [start, start + 1, start + 2];
+            let x = nodes.map(|i| position(a, i));
+            let weight = |k: usize| {
+                let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+                (q - x[i]) * (q - x[j]) / ((x[k] - x[i]) * (x[k] - x[j]))
+            };
+            [0, 1, 2].map(|k| (nodes[k], weight(k)))
+        };
+        let (mut lowest, mut highest) = (f64::INFINITY, f64::NEG_INFINITY);
+        let (mut bilinear, mut sigma_up) = (0.0, 0.0);
+        for (ib, wb) in linear(b) {
+            for (id, wd) in linear(d) {
+                let (v, s) = node_value(ib, id);
+                lowest = lowest.min(v);
+                highest = highest.max(v);
+                bilinear += wb * wd * v;
+                sigma_up += wb * wd * s;
+            }
+        }
+        let mut psi = 0.0;
+        for (ib, wb) in quadratic(b) {
+            for (id, wd) in quadratic(d) {
+                if wb * wd != 0.0 {
+                    psi += wb * wd * node_value(ib, id).0;
+                }
+            }
+        }
+        // Monotone: the quadratic value, limited to the range of the bracketing nodes
+        // (where the field has a kink — a shadow edge, the light entering through a box
+        // edge — the quadratic would overshoot).
+        let psi = if psi.is_finite() {
+            psi.clamp(lowest, highest)
+        } else {
+            bilinear
+        };
+        finish(psi, 0.5 * (self.absorption[c] + sigma_up) * to_plane)
+    }
+
     /// The order of an ordered sweep: every cell after its upwind neighbours.
     fn order(&self) -> Vec<usize> {
         let l = self.lattice;
@@ -279,12 +439,16 @@ impl Setup<'_> {
                         r
                     }
                 };
+                // The dominant axis outermost: each plane across it is complete before the
+                // next starts (short characteristics read their whole upstream plane).
                 let s = l.strides();
+                let outer = direction.abs().max_position();
+                let (b, d) = ((outer + 1) % 3, (outer + 2) % 3);
                 let mut out = Vec::with_capacity(n);
-                for k in range(2) {
-                    for j in range(1) {
-                        for i in range(0) {
-                            out.push(i + j * s[1] + k * s[2]);
+                for p in range(outer) {
+                    for q in range(d) {
+                        for r in range(b) {
+                            out.push(p * s[outer] + q * s[d] + r * s[b]);
                         }
                     }
                 }
@@ -328,6 +492,7 @@ impl Setup<'_> {
                 }
                 (1.0 - self.absorption[c]) * (rho[c] - self.courant * change)
             }
+            Model::Characteristic => self.characteristic(c, rho),
             Model::Conservative => {
                 // Net outflow Σ_faces (u_f·n) ρ_upwind, u at each face centre.
                 let mut outflow = 0.0;
@@ -361,7 +526,7 @@ pub fn propagate(
     lattice.check_field("absorption", absorption)?;
     let bad_absorption = match settings.model {
         Model::Paper => absorption.iter().any(|&a| !(0.0..=1.0).contains(&a)),
-        Model::Conservative => absorption.iter().any(|&a| a < 0.0),
+        Model::Conservative | Model::Characteristic => absorption.iter().any(|&a| a < 0.0),
     };
     if bad_absorption {
         return Err(ExplicitError::Invalid(
@@ -421,11 +586,15 @@ pub fn propagate(
             .fold(0.0, f64::max),
     };
     let extra = match settings.model {
-        Model::Paper => 0.0,
+        Model::Paper | Model::Characteristic => 0.0,
         Model::Conservative => h * absorption.iter().fold(0.0f64, |a, &b| a.max(b)),
     };
     let limit = 1.0 / (s_max + extra);
-    if settings.courant > limit * (1.0 + 1e-12) && !settings.allow_unstable {
+    // Short characteristics are not a time march: no Courant number applies.
+    if settings.model != Model::Characteristic
+        && settings.courant > limit * (1.0 + 1e-12)
+        && !settings.allow_unstable
+    {
         return Err(ExplicitError::Unstable {
             scheme: "upwind convection",
             parameter: "Courant number",
@@ -450,7 +619,11 @@ pub fn propagate(
         for c in 0..n {
             let x = lattice.centre(lattice.coords(c).map(|v| v as isize));
             if (x - position).length() < 2.0 * h {
-                let v = setup.source_value(x);
+                let mut v = setup.source_value(x);
+                if settings.model == Model::Characteristic {
+                    // The exact attenuation over the short distance, σ of the cell.
+                    v *= (-absorption[c] * (x - position).length()).exp();
+                }
                 setup.fixed[c] = Some(v);
                 reference = reference.max(v.abs());
             }
@@ -491,6 +664,7 @@ pub fn propagate(
     let order = match (settings.sweep, light) {
         (Sweep::Ordered, Light::Point { .. }) => setup.order(),
         (Sweep::Ordered, Light::Distant { .. }) if settings.model != Model::Paper => setup.order(),
+        (_, _) if settings.model == Model::Characteristic => setup.order(),
         _ => Vec::new(),
     };
     let mut next = rho.clone();
@@ -562,6 +736,13 @@ pub fn propagate(
                 }
                 for &c in &order {
                     next[c] = setup.fixed_point(c, &next);
+                }
+                if let (Light::Distant { .. }, Model::Characteristic, Edges::Inflow) =
+                    (light, settings.model, settings.edges)
+                {
+                    // Every cell comes after its whole upstream stencil: exact in one pass.
+                    iteration += 1;
+                    return stop(StopReason::Exact, next, vec![0.0], iteration);
                 }
             }
             _ => {

@@ -5,11 +5,16 @@
 //!   boundaries, embedded surfaces), marched to the stopping tolerance. Parameters
 //!   `step_fraction` (of the FTCS bound, 0.9), `omega` (Jacobi, 1), `allow_unstable`.
 //! - `convection-diffusion`: Zhang & Ma per channel: every directional and point light
-//!   marched by upwind convection–absorption (σ_t as the absorption; conservative form by
-//!   default, so point lights fall off as 1/r²), composed, then the implicit scattering
-//!   step with `scattering` = σ̂_s t (length², 0 by default: the uncollided light only,
-//!   comparable with `direct`). Parameters `courant` (½), `model` (conservative, paper),
-//!   `sweep` (ordered, layers, jacobi), `scattering`, `allow_unstable`.
+//!   marched by convection–absorption (σ_t as the absorption), composed, then the implicit
+//!   scattering step with `scattering` = σ̂_s t (length², 0 by default: the uncollided
+//!   light only, comparable with `direct`). Parameters `model` (`characteristic`, the
+//!   default: short characteristics with exact per-step attenuation, second order and
+//!   free of a Courant limit; `conservative`: first-order upwind fluxes; `paper`: Eq. 16
+//!   as printed), `courant` (½, for the two upwind models), `sweep` (ordered, layers,
+//!   jacobi), `scattering`, `allow_unstable`. The upwind models are first order and
+//!   attenuate a cell by 1/(1 + σ_t h) instead of e^{−σ_t h}: 5.6% and 3.3% relative L2
+//!   against `direct` at 32×32×48 and 64×64×96 under an oblique sun, where the
+//!   characteristic model is second order (docs/validation.md).
 //! - `ftcs-p1`: Murray's P1 system with FTCS on a homogeneous medium (σ_a, σ_t′ from the
 //!   first cell), zero beyond the box. Parameters `layout` (staggered, collocated),
 //!   `step_fraction` (0.9), `allow_unstable`.
@@ -158,13 +163,14 @@ impl ExplicitSolver {
                 "convection-diffusion",
                 &["courant", "model", "sweep", "scattering", "allow_unstable"],
             )?;
-            let model = match text(p, "model", "conservative")? {
+            let model = match text(p, "model", "characteristic")? {
+                "characteristic" => Model::Characteristic,
                 "conservative" => Model::Conservative,
                 "paper" => Model::Paper,
                 other => {
                     return Err(invalid(
                         "model",
-                        format!("`{other}`: conservative or paper"),
+                        format!("`{other}`: characteristic, conservative or paper"),
                     ));
                 }
             };
@@ -469,7 +475,7 @@ impl ExplicitSolver {
                 .map(|&v| f64::from(v))
                 .collect();
             let absorption: Vec<f64> = match settings.model {
-                Model::Conservative => sigma_t,
+                Model::Conservative | Model::Characteristic => sigma_t,
                 // The paper's per-step absorption: the opacity of one step cΔt = C h.
                 Model::Paper => sigma_t
                     .iter()
