@@ -141,7 +141,7 @@ pub struct Reference {
 }
 
 /// The analytic reference of a scene, if it has one: the marble sphere (T7) with the
-/// scene's boundary index and its partial-current A
+/// scene's boundary index and its Milne A
 /// ([`lucent_core::Boundary::robin_factor`]), valid at least three transport mean free
 /// paths from the source and from the boundary (where diffusion is meant to hold).
 fn analytic(scene: &SuiteScene) -> Option<Reference> {
@@ -505,37 +505,35 @@ until the spatial error and the reference's own noise (0.6%) remain.
 const MARBLE_NOTE: &str = "
 ## Marble sphere: transport against diffusion
 
-Monte Carlo (a Fresnel interface at η = 1.3 on the embedded sphere) against the analytic
-diffusion solution of note 002 T7 (Robin condition), as the ratio of fluences averaged over
-1 mm shells (measured 2026-11-22 on the dev machine with the suite scene and
-`McConfig { particles: 16000, batches: 8 }`, 41 s per run; `cargo test --release --test
-cross_check marble` asserts the compared shells within 3% at 4000 paths per batch):
+Monte Carlo (a Fresnel interface on the embedded sphere: reflection, refraction, total
+internal reflection) against the analytic diffusion solution of note 002 T7 with the Robin
+condition, as the ratio of fluences averaged over 1 mm shells (measured 2026-11-23 on the
+dev machine with the suite scene and `McConfig { particles: 8000, batches: 8 }`; `cargo test
+--release --test cross_check fresnel` asserts the compared shells within 2.5% at 4000 paths
+per batch for η = 1, 1.3, 1.4 and 1.5). The diffusion solvers' A is the transport-exact
+extrapolation length of the Milne problem, A = 3z_b(η)/2 (docs/milne.md); the P1 boundary
+factors (Marshak's 1, Haskell's partial currents, Groenhuis' fit) misplace the extrapolated
+boundary by 5–6%:
 
-| r (mm) | 0–1 | 1–2 | 2–3 | 3–4 | 4–5 | 5–6 | 6–7 | 7–8 | 8–9 | 9–10 |
-|---|---|---|---|---|---|---|---|---|---|---|
-| η = 1.3, partial-current A = 2.341 | 1.187 | 1.001 | 0.997 | 0.996 | 0.994 | 0.988 | 0.986 | 0.980 | 0.969 | 0.933 |
-| η = 1.3, Groenhuis A = 2.600 | 1.187 | 1.000 | 0.995 | 0.993 | 0.989 | 0.981 | 0.975 | 0.964 | 0.942 | 0.879 |
-| η = 1, A = 1 | 1.188 | 1.002 | 0.999 | 0.999 | 0.998 | 0.995 | 0.996 | 0.998 | 1.000 | 0.994 |
+| η, A | 1–2 | 2–3 | 3–4 | 4–5 | 5–6 | 6–7 | 7–8 | 8–9 | 9–10 mm |
+|---|---|---|---|---|---|---|---|---|---|
+| 1.0, Milne 1.0657 | 1.003 | 0.995 | 0.994 | 0.994 | 0.993 | 0.993 | 0.995 | 0.992 | 0.969 |
+| 1.3, Milne 2.2119 | 1.002 | 0.994 | 0.993 | 0.992 | 0.991 | 0.990 | 0.989 | 0.985 | 0.960 |
+| 1.4, Milne 2.7895 | 1.002 | 0.994 | 0.993 | 0.992 | 0.991 | 0.990 | 0.989 | 0.984 | 0.955 |
+| 1.5, Milne 3.4457 | 1.002 | 0.994 | 0.993 | 0.992 | 0.992 | 0.990 | 0.990 | 0.987 | 0.953 |
+| 1.4, partial current 2.9485 | 1.001 | 0.993 | 0.991 | 0.989 | 0.987 | 0.983 | 0.979 | 0.968 | 0.924 |
 
 The compared region is 3 transport mean free paths (1.37 mm) from the source and from the
 surface, r = 1.37–8.63 mm.
 
 - **Near the source** (r < 3 transport mean free paths) diffusion is not meant to hold: the
-  point source's first flights are ballistic, not diffusive, and the innermost cells' Monte
-  Carlo averages of a 1/r singularity are compared with its values at cell centres. The 19%
-  excess in the first shell is both effects; it is outside the compared region.
-- **Which A.** The Robin condition φ + 2AD ∂φ/∂n = 0 needs the boundary factor A of the
-  interface. Note 002 (and Jensen et al. 2001, Mertens) use A = (1 + F_dr)/(1 − F_dr) with
-  Groenhuis' fit of the diffuse Fresnel reflectance F_dr; with it transport falls 5% below
-  diffusion at r = 8–8.6 mm. Haskell et al. 1994's partial-current A, which matches both P1
-  moments of the Fresnel reflection (R_eff = (R_φ + R_j)/(2 − R_φ + R_j)), halves that and
-  keeps every compared shell within 3%, so lucent's diffusion solvers and this reference use
-  it (`Boundary::robin_factor`); the T7 values with the Groenhuis A stay tested in
-  lucent-optics.
-- **Near a mismatched surface** some disagreement remains (3% at 8–8.6 mm, 7% in the last
-  shell, which is outside the compared region), while the index-matched sphere agrees within
-  0.6% everywhere inside: total internal reflection above the critical angle (50° at η = 1.3)
-  makes the radiance near the surface far from the linearly anisotropic one that any P1
-  boundary condition assumes. Transport also leaks a little more: escaped 0.783 ± 0.002
-  against diffusion's 0.779, absorbed 0.217 ± 0.002 against 0.221.
+  point source's first flights are ballistic, and the innermost cells' Monte Carlo averages
+  of a 1/r singularity are compared with its values at cell centres (19% in the first shell).
+- **Which A.** With the Milne A the profile is flat to within 1% of its interior level for
+  every index; with the partial-current A it falls by 2.5% toward the surface for every
+  mismatched index. Monte Carlo was right; the P1 boundary factor was the approximation.
+  The uniform 0.6% below 1 is the transport/diffusion difference at albedo 0.999 plus cell
+  averages against centre values.
+- **Within a transport mean free path of the surface** (the last shell) no Robin condition
+  holds: the radiance there is far from linearly anisotropic.
 ";

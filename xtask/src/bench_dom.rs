@@ -56,30 +56,11 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
     println!();
     // `direct` alone (the renderer's transmittance), and the uncollided cell integrals that
     // make the first-collision source.
-    for factor in [1usize] {
-        let medium = problem
-            .medium()
-            .resampled([n * factor; 3])
-            .map_err(|e| err(&e))?;
-        let fine = *medium.sigma_t(0).geometry();
-        let p = Problem::new(
-            fine,
-            medium,
-            problem.lights().to_vec(),
-            Boundary::Vacuum,
-            None,
-        )
+    let t = std::time::Instant::now();
+    lucent::core::DirectSolver::default()
+        .solve(&problem, &options)
         .map_err(|e| err(&e))?;
-        let t = std::time::Instant::now();
-        lucent::core::DirectSolver::default()
-            .solve(&p, &options)
-            .map_err(|e| err(&e))?;
-        println!(
-            "direct on {}³: {:.2} s",
-            n * factor,
-            t.elapsed().as_secs_f64()
-        );
-    }
+    println!("direct on {n}³: {:.2} s", t.elapsed().as_secs_f64());
     let t = std::time::Instant::now();
     for light in problem.lights() {
         lucent::core::uncollided_cells(problem.medium().sigma_t(0), light, 50.0);

@@ -292,14 +292,36 @@ impl Boundary {
         }
     }
 
-    /// The boundary factor A of a [`Boundary::Robin`] condition: Haskell et al.'s partial-
-    /// current A ([`lucent_optics::DiffuseFresnel::PartialCurrent`]; 1 when η = 1, 2.341
-    /// at η = 1.3), the one Monte Carlo through a Fresnel interface agrees with. `None` for
-    /// the other kinds.
+    /// The boundary factor A of the diffusion solvers' Robin condition φ + 2AD ∂φ/∂n = 0
+    /// for a [`Boundary::Robin`] of index η and for [`Boundary::Vacuum`] (η = 1): the
+    /// transport-exact extrapolation length of the Milne problem, A = 3z_b(η)/2
+    /// ([`lucent_optics::DiffuseFresnel::Milne`]; 1.0657 at η = 1, 2.2119 at 1.3, 2.7895
+    /// at 1.4), which gives diffusion the interior that Monte Carlo through a Fresnel
+    /// interface has (the P1 conditions' A, Marshak's 1 and Haskell's partial-current
+    /// 2.341 at 1.3, misplace the extrapolated boundary by 5–6%). `None` for the other
+    /// kinds.
     pub fn robin_factor(&self) -> Option<f64> {
+        let eta = match *self {
+            Boundary::Robin { eta } => eta,
+            Boundary::Vacuum => 1.0,
+            _ => return None,
+        };
+        lucent_optics::Dielectric::new(eta)
+            .and_then(|d| d.boundary_factor(lucent_optics::DiffuseFresnel::Milne))
+            .ok()
+    }
+
+    /// The fraction of the outgoing partial current that a [`Boundary::Robin`] wall of
+    /// index η returns diffusely into the medium, Haskell et al.'s R_eff
+    /// ([`lucent_optics::DiffuseFresnel::PartialCurrent`]; 0 at η = 1, 0.401 at 1.3), for
+    /// transport solvers that model the interface as a diffuse reflector; 0 for a vacuum,
+    /// 1 for a reflecting (zero-flux Neumann) box. `None` for the other kinds.
+    pub fn diffuse_reflectance(&self) -> Option<f64> {
         match *self {
+            Boundary::Vacuum => Some(0.0),
+            Boundary::Neumann { flux: 0.0 } => Some(1.0),
             Boundary::Robin { eta } => lucent_optics::Dielectric::new(eta)
-                .and_then(|d| d.boundary_factor(lucent_optics::DiffuseFresnel::PartialCurrent))
+                .and_then(|d| d.diffuse_reflectance(lucent_optics::DiffuseFresnel::PartialCurrent))
                 .ok(),
             _ => None,
         }

@@ -17,7 +17,8 @@
 //!   fluence is φ_u + φ_d, and its angular part keeps the per-light transmittance so the
 //!   renderer phase-weights single scattering.
 //!
-//! Boundaries: Robin (A = `Boundary::robin_factor`), Vacuum (Robin with A = 1), Dirichlet,
+//! Boundaries: Robin (A = `Boundary::robin_factor`, the transport-exact extrapolation
+//! length of the Milne problem), Vacuum (Robin at η = 1: A = 1.0657), Dirichlet,
 //! Neumann; the same on the embedded surface and the box.
 
 use std::time::Instant;
@@ -207,8 +208,7 @@ impl DiffusionSolver {
 
 fn conditions(boundary: Boundary) -> Boundaries {
     Boundaries::uniform(match boundary {
-        Boundary::Vacuum => Condition::Robin { a: 1.0 },
-        Boundary::Robin { .. } => Condition::Robin {
+        Boundary::Vacuum | Boundary::Robin { .. } => Condition::Robin {
             a: boundary.robin_factor().unwrap_or(1.0),
         },
         Boundary::Dirichlet { value } => Condition::Dirichlet { value },

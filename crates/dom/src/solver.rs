@@ -13,9 +13,10 @@
 //!   fluence. `direct`'s per-light transmittance at cell centres is kept for the renderer's
 //!   exact single scattering.
 //! - A sky is the sweeps' boundary radiance; emission an isotropic fixed source.
-//! - Boundaries: vacuum; Robin (η) as a diffuse reflector of the same partial-current
-//!   reflectance R = (A − 1)/(A + 1) as the diffusion solvers' A (a Robin-like condition,
-//!   not a Fresnel interface); a reflecting (zero-flux Neumann) box as R = 1.
+//! - Boundaries: vacuum; Robin (η) as a diffuse reflector of Haskell et al.'s partial-current
+//!   reflectance R_eff (0.401 at η = 1.3, 0 when index-matched; a Robin-like condition, not
+//!   a Fresnel interface; `Boundary::diffuse_reflectance`); a reflecting (zero-flux
+//!   Neumann) box as R = 1.
 //! - Output: fluence, and [`lucent_core::OrdinateRadiance`] for the renderer.
 //!
 //! Parameters: `order` (level-symmetric S_N, default 8; with `family = "octahedral"` the
@@ -227,18 +228,13 @@ impl DomSolver {
             });
         }
         let reflectance = match problem.boundary() {
-            Boundary::Vacuum => 0.0,
-            Boundary::Neumann { flux: 0.0 } => 1.0,
-            Boundary::Neumann { .. } => {
+            Boundary::Neumann { flux } if flux != 0.0 => {
                 return Err(invalid(
                     "boundary",
                     "only a reflecting (zero-flux) Neumann box",
                 ));
             }
-            b => {
-                let a = b.robin_factor().unwrap_or(1.0);
-                (a - 1.0) / (a + 1.0)
-            }
+            b => b.diffuse_reflectance().unwrap_or(0.0),
         };
         // Point-like lights through `direct` (uncollided, exact).
         let pointlike: Vec<Light> = problem

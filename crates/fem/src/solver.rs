@@ -161,7 +161,7 @@ impl Solver for FemP1Solver {
 }
 
 /// `fem-diffusion`: Q1 Galerkin diffusion on the problem's grid (unknowns at the cell
-/// corners, D = 1/(3σ_t′) and σ_a per cell), Robin (A from η), vacuum (A = 1) or reflecting
+/// corners, D = 1/(3σ_t′) and σ_a per cell), Robin (A from η), vacuum (A at η = 1) or reflecting
 /// boxes, solved by multigrid-preconditioned CG. Lights: point lights inside (power 4πI),
 /// emission (4π L_e), and every other light through `direct`'s first-collision sources
 /// (`lucent_core::Uncollided::first_collision_sources`: Q₀ = σ_s φ_u, Q₁ = g σ_s Σ ω E T, the latter
@@ -402,7 +402,7 @@ impl Solver for FemDiffusionSolver {
 impl FemDiffusionSolver {
     /// The embedded body {sdf < 0} on a boundary-fitted mesh ([`StarMesh::from_sdf`] from
     /// the centroid of its inside cells; the body must be star-shaped from there), D and σ_a
-    /// sampled trilinearly at every Gauss point, Robin (A from η) or vacuum (A = 1) on its
+    /// sampled trilinearly at every Gauss point, Robin (A from η) or vacuum (A at η = 1) on its
     /// surface. External lights are attenuated through the body only (σ_t set to zero
     /// outside), as `diffusion-mg` does; cells outside the body get φ_u alone.
     fn solve_embedded(

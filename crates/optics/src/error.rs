@@ -44,6 +44,13 @@ pub enum OpticsError {
         /// What would have been accepted.
         reason: &'static str,
     },
+    /// A numerical reference could not be computed (a singular system), which the inputs
+    /// that passed validation should never cause.
+    #[error("could not compute {what}: singular system")]
+    Singular {
+        /// What was being computed.
+        what: &'static str,
+    },
     /// A material name that is not in the measured table.
     #[error("unknown material `{0}`; see `lucent_optics::materials::JENSEN_2001` for the names")]
     UnknownMaterial(String),

@@ -27,11 +27,18 @@ pub enum DiffuseFresnel {
     /// R_eff = (R_φ + R_j)/(2 − R_φ + R_j), with R_φ = 2∫₀¹ F_r μ dμ (= F_dr, exact) and
     /// R_j = 3∫₀¹ F_r μ² dμ, both for light inside: the value that matches *both* P1 partial
     /// currents at the surface instead of the cosine-weighted one alone. A = 2.341 at
-    /// η = 1.3 (Groenhuis: 2.600). lucent uses it for the diffusion solvers' Robin
-    /// condition because it is the one transport agrees with: Monte Carlo through a
-    /// Fresnel interface at η = 1.3 stays within 3% of it 3 mean free paths inside the
-    /// surface, where the Groenhuis A overestimates the fluence by 5% (docs/validation.md).
+    /// η = 1.3 (Groenhuis: 2.600). Still a P1 condition: its extrapolation length 2AD is
+    /// 5–6% longer than transport's at η = 1.3–1.5 and 6% shorter at η = 1 (see
+    /// [`DiffuseFresnel::Milne`]). `dom` uses its R_eff as the reflectance of its diffuse
+    /// Robin wall, which is 0 for an index-matched boundary.
     PartialCurrent,
+    /// The transport-exact extrapolation length of the Milne problem behind the boundary,
+    /// A = 3z_b(η)/2 ([`crate::milne`]): the A whose Robin condition gives diffusion the
+    /// interior of transport (A = 1.0657 at η = 1, 2.2119 at 1.3, 2.7895 at 1.4, 3.4457 at
+    /// 1.5). lucent's diffusion solvers use it: Monte Carlo through a Fresnel interface at
+    /// η = 1.3–1.5 stays within 1.6% of it 3 transport mean free paths inside a marble
+    /// sphere, where the partial-current A is 3.2% off (docs/validation.md).
+    Milne,
 }
 
 /// A smooth boundary with relative refractive index η = n_inside / n_outside.
@@ -89,12 +96,20 @@ impl Dielectric {
                 let r_j = cosine_squared_weighted_reflectance(1.0 / self.eta);
                 Ok((r_phi + r_j) / (2.0 - r_phi + r_j))
             }
+            DiffuseFresnel::Milne => {
+                let a = 1.5 * crate::milne::extrapolation_length(self.eta)?;
+                Ok((a - 1.0) / (a + 1.0))
+            }
         }
     }
 
     /// The boundary factor A = (1 + F_dr)/(1 − F_dr) of the Robin condition
-    /// φ + 2AD ∂φ/∂n = 0 (A = 1 when index-matched; the extrapolation distance is 2AD).
+    /// φ + 2AD ∂φ/∂n = 0 (the extrapolation distance is 2AD; A = 1 when index-matched for
+    /// the P1 models, 1.0657 for [`DiffuseFresnel::Milne`]).
     pub fn boundary_factor(&self, model: DiffuseFresnel) -> Result<f64, OpticsError> {
+        if model == DiffuseFresnel::Milne {
+            return Ok(1.5 * crate::milne::extrapolation_length(self.eta)?);
+        }
         let f_dr = self.diffuse_reflectance(model)?;
         Ok((1.0 + f_dr) / (1.0 - f_dr))
     }

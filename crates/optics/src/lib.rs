@@ -78,6 +78,7 @@ mod error;
 pub mod fresnel;
 pub mod integrate;
 pub mod materials;
+pub mod milne;
 pub mod phase;
 pub mod quadrature;
 
