@@ -51,6 +51,7 @@ mod direct;
 mod error;
 mod problem;
 mod registry;
+mod singular;
 mod solution;
 mod solver;
 mod spectrum;
@@ -60,6 +61,7 @@ pub use direct::DirectSolver;
 pub use error::{ProblemError, SolveError};
 pub use problem::{Boundary, BoundaryKind, Field, Light, LightKind, Medium, Problem};
 pub use registry::{ParamValue, Params, Registry, SolverEntry};
+pub use singular::{SingularPart, point_source_singular_part};
 pub use solution::{Angular, LightTransmittance, OrdinateRadiance, Solution};
 pub use solver::{
     Capabilities, FluenceKind, OutputKind, Progress, ProgressFn, SolveOptions, SolveReport, Solver,

@@ -370,21 +370,36 @@ impl DiffusionSolver {
         let mut memory = 0u64;
         for c in 0..channels {
             let (d, sa, ss) = coefficients(problem.medium(), c, floor);
-            let diffusion = DiffusionProblem::new(cells.clone(), d, sa, boundaries)
+            let diffusion = DiffusionProblem::new(cells.clone(), d.clone(), sa.clone(), boundaries)
                 .map_err(|e| invalid("problem", e.to_string()))?;
             let mut sources = Sources::default();
+            let mut q0 = vec![0.0f32; n];
+            // Point sources: their singular part G̃ analytically where the medium around
+            // them allows (the remainder's smooth source goes into q0), else as points.
+            let mut singular = vec![0.0f32; n];
             for light in &points {
                 if let Light::Point {
                     position,
                     intensity,
                 } = light
                 {
-                    sources
-                        .points
-                        .push((*position, 4.0 * std::f64::consts::PI * intensity.channel(c)));
+                    let power = 4.0 * std::f64::consts::PI * intensity.channel(c);
+                    let whole = |cell: usize| cells.volume_fraction()[cell] >= 1.0;
+                    match lucent_core::point_source_singular_part(
+                        &geometry, &d, &sa, whole, *position, power,
+                    ) {
+                        Some(part) => {
+                            for (q, f) in q0.iter_mut().zip(&part.source) {
+                                *q += f;
+                            }
+                            for (g, p) in singular.iter_mut().zip(&part.fluence) {
+                                *g += p;
+                            }
+                        }
+                        None => sources.points.push((*position, power)),
+                    }
                 }
             }
-            let mut q0 = vec![0.0f32; n];
             for light in &emission {
                 if let Light::Emission { grid, scale } = light {
                     let s = 4.0 * std::f64::consts::PI * scale.channel(c);
@@ -409,6 +424,9 @@ impl DiffusionSolver {
                 solution.fluence.iter().map(|&v| v as f32).collect(),
             )?;
             let mut total = scattered_grid.clone();
+            for (t, g) in total.data_mut().iter_mut().zip(&singular) {
+                *t += g;
+            }
             if let Some(direct) = &direct {
                 for (t, v) in total.data_mut().iter_mut().zip(direct.fluence(c)) {
                     *t += v as f32;

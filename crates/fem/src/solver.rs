@@ -326,18 +326,76 @@ impl Solver for FemDiffusionSolver {
                     }
                 }
             }
+            let mut singular = vec![0.0f32; n];
             for light in problem.lights() {
                 match light {
                     Light::Point {
                         position,
                         intensity,
                     } if inside(*position) => {
+                        let power = 4.0 * std::f64::consts::PI * intensity.channel(c);
+                        // The singular part analytically where the medium allows (its
+                        // smooth remainder's source lumped like emission), else a point.
+                        let (d, sa): (Vec<f32>, Vec<f32>) = q1
+                            .diffusion
+                            .iter()
+                            .zip(&q1.absorption)
+                            .map(|(&d, &a)| (d as f32, a as f32))
+                            .unzip();
+                        if let Some(part) = lucent_core::point_source_singular_part(
+                            &g,
+                            &d,
+                            &sa,
+                            |_| true,
+                            *position,
+                            power,
+                        ) {
+                            // ∫ f ϕ_a over each element by 3×3×3 Gauss points: f varies on
+                            // the scale of the cut-off, which lumping would blur.
+                            let rule = [
+                                (0.5 - 0.5 * 0.6f64.sqrt(), 5.0 / 18.0),
+                                (0.5, 8.0 / 18.0),
+                                (0.5 + 0.5 * 0.6f64.sqrt(), 5.0 / 18.0),
+                            ];
+                            for (cell, f) in part.source.iter().enumerate() {
+                                if *f == 0.0 {
+                                    continue;
+                                }
+                                let [i, j, k] = g.coords(cell);
+                                let corner0 =
+                                    origin + glam::DVec3::new(i as f64, j as f64, k as f64) * h;
+                                for (x, wx) in rule {
+                                    for (y, wy) in rule {
+                                        for (z, wz) in rule {
+                                            let value = part
+                                                .source_at(corner0 + glam::DVec3::new(x, y, z) * h)
+                                                * wx
+                                                * wy
+                                                * wz
+                                                * volume;
+                                            for corner in 0..8usize {
+                                                let o =
+                                                    [corner & 1, (corner >> 1) & 1, corner >> 2];
+                                                let shape = [x, y, z]
+                                                    .iter()
+                                                    .zip(o)
+                                                    .map(|(t, o)| if o == 1 { *t } else { 1.0 - t })
+                                                    .product::<f64>();
+                                                b[q1.node([i + o[0], j + o[1], k + o[2]])] +=
+                                                    value * shape;
+                                            }
+                                        }
+                                    }
+                                }
+                            }
+                            for (s, v) in singular.iter_mut().zip(&part.fluence) {
+                                *s += v;
+                            }
+                            continue;
+                        }
                         let x = *position - origin;
                         let s = q1
-                            .point_source(
-                                x.to_array(),
-                                4.0 * std::f64::consts::PI * intensity.channel(c),
-                            )
+                            .point_source(x.to_array(), power)
                             .map_err(|e| invalid("lights", e.to_string()))?;
                         for (b, s) in b.iter_mut().zip(s) {
                             *b += s;
@@ -387,6 +445,9 @@ impl Solver for FemDiffusionSolver {
                 })
                 .collect();
             let mut total = Grid::from_vec(g, cells)?;
+            for (t, v) in total.data_mut().iter_mut().zip(&singular) {
+                *t += v;
+            }
             if let Some(direct) = &direct {
                 for (t, u) in total.data_mut().iter_mut().zip(direct.fluence(c)) {
                     *t += u as f32;
@@ -514,6 +575,40 @@ impl FemDiffusionSolver {
                     }
                 }
             }
+            // Point sources: the singular part analytically where the medium around them is
+            // homogeneous and whole (the remainder's smooth source joins q0), else points.
+            let mut singular = vec![0.0f32; n];
+            let mut regularised = vec![false; points.len()];
+            let mut parts: Vec<lucent_core::SingularPart> = Vec::new();
+            {
+                let (d, sa): (Vec<f32>, Vec<f32>) = (0..n)
+                    .map(|cell| {
+                        let [i, j, k] = g.coords(cell);
+                        let (d, a) = coefficients(c, g.cell_centre(i, j, k));
+                        (d as f32, a as f32)
+                    })
+                    .unzip();
+                let half_diagonal = 0.5 * 3f64.sqrt() * h;
+                let whole = |cell: usize| f64::from(sdf.data()[cell]) < -half_diagonal;
+                for (l, light) in points.iter().enumerate() {
+                    if let Light::Point {
+                        position,
+                        intensity,
+                    } = light
+                    {
+                        let power = 4.0 * std::f64::consts::PI * intensity.channel(c);
+                        if let Some(part) = lucent_core::point_source_singular_part(
+                            &g, &d, &sa, whole, *position, power,
+                        ) {
+                            for (s, v) in singular.iter_mut().zip(&part.fluence) {
+                                *s += v;
+                            }
+                            regularised[l] = true;
+                            parts.push(part);
+                        }
+                    }
+                }
+            }
             let q0 = Grid::from_vec(g, q0)?;
             let moment = moment.map(|m| Grid::from_vec(g, m));
             let [mx, my, mz] = moment;
@@ -521,7 +616,10 @@ impl FemDiffusionSolver {
             let with_moment = direct.is_some();
             let mut b = mesh
                 .load(|p| {
-                    let q = f64::from(q0.sample_trilinear(p));
+                    // The remainders' sources exactly at the Gauss points: they vary on the
+                    // scale of the cut-off, which trilinear cell values would blur.
+                    let q = f64::from(q0.sample_trilinear(p))
+                        + parts.iter().map(|part| part.source_at(p)).sum::<f64>();
                     if !with_moment {
                         return (q, DVec3::ZERO);
                     }
@@ -533,7 +631,7 @@ impl FemDiffusionSolver {
                     (q, 3.0 * coefficients(c, p).0 * first)
                 })
                 .map_err(|e| invalid("embedded", e.to_string()))?;
-            for light in &points {
+            for (light, _) in points.iter().zip(&regularised).filter(|(_, r)| !**r) {
                 if let Light::Point {
                     position,
                     intensity,
@@ -575,7 +673,7 @@ impl FemDiffusionSolver {
                         let [i, j, k] = g.coords(cell);
                         let p = g.cell_centre(i, j, k);
                         match sdf.data()[cell] < 0.0 {
-                            true => mesh.interpolate(&x, p).unwrap_or(0.0) as f32,
+                            true => mesh.interpolate(&x, p).unwrap_or(0.0) as f32 + singular[cell],
                             false => 0.0,
                         }
                     })

@@ -107,6 +107,16 @@ impl DiffusionMedium {
         RobinSphere::new(*self, radius)
     }
 
+    /// A sphere of radius R > 0 with a unit point source at distance `r0` < R from its
+    /// centre: the exact Legendre series (Robin condition). Needs σ_a > 0.
+    pub fn sphere_off_centre(
+        &self,
+        radius: f64,
+        r0: f64,
+    ) -> Result<RobinSphereOffCentre, OpticsError> {
+        RobinSphereOffCentre::new(*self, radius, r0)
+    }
+
     /// A half-space z ≥ 0 with a unit plane source at depth z′ ≥ 0. Needs σ_a > 0.
     pub fn half_space(&self, source_depth: f64) -> Result<RobinHalfSpace, OpticsError> {
         RobinHalfSpace::new(*self, source_depth)
@@ -232,6 +242,164 @@ impl RobinSphere {
         let s = self.medium.sigma_tr() * self.radius;
         let e2 = (-2.0 * s).exp();
         1.0 - (-s).exp() * (1.0 + s) + self.b * (s * (1.0 + e2) - (1.0 - e2))
+    }
+}
+
+/// A sphere of radius R with a unit point source at distance r₀ from its centre and the
+/// Robin condition on its surface:
+///
+/// φ(x) = [e^{−σ|x − x₀|}/|x − x₀| + Σ_l c_l i_l(σr) P_l(cos γ)]/(4πD),
+///
+/// γ the angle between x and x₀, i_l, k_l the modified spherical Bessel functions
+/// (Abramowitz and Stegun 10.2, k_0(z) = π e^{−z}/(2z)). The free-space part expands as
+/// e^{−σ|x − x₀|}/|x − x₀| = (2σ/π) Σ (2l + 1) i_l(σr_<) k_l(σr_>) P_l(cos γ), and each
+/// c_l = −(2σ/π)(2l + 1) i_l(σr₀) [k_l + bσk_l′]/[i_l + bσi_l′] at σR (b = 2AD) makes the
+/// sum satisfy φ + 2AD ∂φ/∂r = 0 at r = R. The Bessel functions are carried as logarithms
+/// (ratios i_l/i_{l−1} by their continued fraction, k_{l+1}/k_l by the upward recurrence),
+/// so neither (2l − 1)!! nor e^{σR} overflows; terms are summed until they fall below 10⁻¹⁷
+/// of the sum (successive terms shrink by about r r₀/R²). At r₀ = 0 it is [`RobinSphere`].
+/// The derivation is in `docs/point-sources.md`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobinSphereOffCentre {
+    medium: DiffusionMedium,
+    radius: f64,
+    r0: f64,
+    /// Per l: ln î_l(σr₀) + ln k̂_l(σR) − ln î_l(σR) (î_l = i_l e^{−z}, k̂_l = k_l e^{z}).
+    log_weight: Vec<f64>,
+    /// Per l: (1 + bσ k_l′/k_l)/(1 + bσ i_l′/i_l) at σR.
+    robin: Vec<f64>,
+}
+
+/// ln î_l(z) and i_{l+1}/i_l for l = 0..n (continued fraction from far above n).
+fn log_bessel_i(n: usize, z: f64) -> (Vec<f64>, Vec<f64>) {
+    let start = 2 * n + 60 + (2.0 * z).ceil() as usize;
+    // s_l = i_l/i_{l−1} = 1/((2l + 1)/z + s_{l+1}).
+    let mut ratio = vec![0.0; start + 2];
+    for l in (1..=start).rev() {
+        ratio[l] = 1.0 / ((2 * l + 1) as f64 / z + ratio[l + 1]);
+    }
+    let i0 = if z > 1e-8 {
+        (-(-2.0 * z).exp_m1() / (2.0 * z)).ln()
+    } else {
+        -z
+    };
+    let mut log = Vec::with_capacity(n + 1);
+    log.push(i0);
+    for l in 1..=n {
+        log.push(log[l - 1] + ratio[l].ln());
+    }
+    let next = (0..=n).map(|l| ratio[l + 1]).collect();
+    (log, next)
+}
+
+/// ln k̂_l(z) and k_{l+1}/k_l for l = 0..n (upward recurrence of the ratio).
+fn log_bessel_k(n: usize, z: f64) -> (Vec<f64>, Vec<f64>) {
+    let mut log = Vec::with_capacity(n + 1);
+    let mut next = Vec::with_capacity(n + 1);
+    log.push((PI / (2.0 * z)).ln());
+    let mut rho = 1.0 + 1.0 / z;
+    for l in 0..=n {
+        next.push(rho);
+        if l < n {
+            log.push(log[l] + rho.ln());
+        }
+        // ρ_{l+1} = 1/ρ_l + (2l + 3)/z.
+        rho = 1.0 / rho + (2 * l + 3) as f64 / z;
+    }
+    (log, next)
+}
+
+impl RobinSphereOffCentre {
+    /// Most terms kept (a source within 10⁻⁴ R of the surface would need more).
+    const MAX_TERMS: usize = 4000;
+
+    fn new(medium: DiffusionMedium, radius: f64, r0: f64) -> Result<Self, OpticsError> {
+        let radius = in_range("radius", radius, "(0, inf)", |r| r > 0.0)?;
+        let r0 = in_range("r0", r0, "[0, R)", |r| r >= 0.0 && r < radius)?;
+        let sigma = medium.require_absorption()?;
+        let b = medium.extrapolation_distance();
+        let z = sigma * radius;
+        // Enough terms that (r₀/R)^l is below 10⁻¹⁸.
+        let terms = if r0 > 0.0 {
+            ((-41.5 / (r0 / radius).ln()).ceil() as usize + 8).min(Self::MAX_TERMS)
+        } else {
+            1
+        };
+        let (log_i_r, i_next) = log_bessel_i(terms, z);
+        let (log_k_r, k_next) = log_bessel_k(terms, z);
+        let (log_i_0, _) = log_bessel_i(terms, (sigma * r0).max(1e-300));
+        let mut log_weight = Vec::with_capacity(terms);
+        let mut robin = Vec::with_capacity(terms);
+        for l in 0..terms {
+            // i_l′/i_l = i_{l+1}/i_l + l/z, k_l′/k_l = −k_{l+1}/k_l + l/z.
+            let li = l as f64;
+            let di = i_next[l] + li / z;
+            let dk = -k_next[l] + li / z;
+            robin.push((1.0 + b * sigma * dk) / (1.0 + b * sigma * di));
+            log_weight.push(log_i_0[l] + log_k_r[l] - log_i_r[l]);
+        }
+        Ok(Self {
+            medium,
+            radius,
+            r0,
+            log_weight,
+            robin,
+        })
+    }
+
+    /// Fluence at distance `r` ≤ R from the centre and angle γ from the source's direction
+    /// (`cos_gamma` = cos γ); the point must not be the source itself.
+    pub fn fluence(&self, r: f64, cos_gamma: f64) -> Result<f64, OpticsError> {
+        let r = in_range("r", r, "[0, R]", |r| (0.0..=self.radius).contains(&r))?;
+        let cos_gamma = in_range("cos_gamma", cos_gamma, "[-1, 1]", |c| c.abs() <= 1.0)?;
+        let sigma = self.medium.sigma_tr();
+        let distance = (r * r + self.r0 * self.r0 - 2.0 * r * self.r0 * cos_gamma)
+            .max(0.0)
+            .sqrt();
+        if distance == 0.0 {
+            return Err(OpticsError::OutOfRange {
+                name: "r",
+                range: "away from the source",
+                value: r,
+            });
+        }
+        let free = (-sigma * distance).exp() / distance;
+        let n = self.log_weight.len();
+        let (log_i, _) = log_bessel_i(n, (sigma * r).max(1e-300));
+        let decay = sigma * (r + self.r0 - 2.0 * self.radius);
+        // Σ c_l i_l(σr) P_l(cos γ), Legendre by recurrence.
+        let (mut p_prev, mut p) = (1.0, 1.0);
+        let mut sum = 0.0;
+        for l in 0..n {
+            if l == 1 {
+                p = cos_gamma;
+            } else if l > 1 {
+                let next =
+                    ((2 * l - 1) as f64 * cos_gamma * p - (l - 1) as f64 * p_prev) / l as f64;
+                p_prev = p;
+                p = next;
+            }
+            let magnitude = (self.log_weight[l] + log_i[l] + decay).exp();
+            sum -= (2.0 * sigma / PI) * (2 * l + 1) as f64 * magnitude * self.robin[l] * p;
+        }
+        Ok((free + sum) / (4.0 * PI * self.medium.d()))
+    }
+
+    /// Fraction of the source's power that leaves through the surface, ∮ φ(R)/(2A) dA:
+    /// only the l = 0 terms survive the surface integral.
+    pub fn escaped_fraction(&self) -> f64 {
+        let sigma = self.medium.sigma_tr();
+        let z = sigma * self.radius;
+        let (log_i_r, _) = log_bessel_i(0, z);
+        let (log_k_r, _) = log_bessel_k(0, z);
+        let (log_i_0, _) = log_bessel_i(0, (sigma * self.r0).max(1e-300));
+        let shift = sigma * (self.r0 - self.radius);
+        // l = 0 of the free field at r = R > r₀: (2σ/π) i_0(σr₀) k_0(σR).
+        let free = (2.0 * sigma / PI) * (log_i_0[0] + log_k_r[0] + shift).exp();
+        let regular =
+            -(2.0 * sigma / PI) * (self.log_weight[0] + log_i_r[0] + shift).exp() * self.robin[0];
+        let phi0 = (free + regular) / (4.0 * PI * self.medium.d());
+        4.0 * PI * self.radius * self.radius * phi0 / (2.0 * self.medium.boundary_factor())
     }
 }
 

@@ -404,3 +404,61 @@ fn t8_robin_disc() {
     }
     assert!((other.escaped_fraction() - 0.192115).abs() < 1e-6);
 }
+
+mod off_centre_sphere {
+    use lucent_optics::{DiffusionMedium, OpticalCoefficients};
+
+    fn medium(sigma_a: f64, sigma_s: f64, a: f64) -> DiffusionMedium {
+        DiffusionMedium::new(OpticalCoefficients::new(sigma_a, sigma_s, 0.0).unwrap(), a).unwrap()
+    }
+
+    #[test]
+    fn at_the_centre_it_is_the_closed_form() {
+        // r₀ = 0: only l = 0 survives, and it must be T7's closed form.
+        for (sa, ss, a, radius) in [
+            (0.0021, 2.19, 2.21, 10.0),
+            (0.05, 1.0, 1.07, 4.0),
+            (0.5, 3.0, 3.4, 30.0),
+        ] {
+            let m = medium(sa, ss, a);
+            let centred = m.sphere(radius).unwrap();
+            let series = m.sphere_off_centre(radius, 0.0).unwrap();
+            for r in [0.1, 0.3 * radius, 0.77 * radius, radius] {
+                for cos in [-1.0, 0.2, 1.0] {
+                    let (x, y) = (series.fluence(r, cos).unwrap(), centred.fluence(r).unwrap());
+                    assert!((x - y).abs() < 1e-9 * y, "{r} {cos}: {x} against {y}");
+                }
+            }
+            assert!((series.escaped_fraction() - centred.escaped_fraction()).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn the_series_is_reciprocal_and_meets_the_robin_condition() {
+        let m = medium(0.03, 1.5, 2.79);
+        let radius = 8.0;
+        let b = m.extrapolation_distance();
+        for r0 in [2.0, 5.5, 7.0] {
+            let s = m.sphere_off_centre(radius, r0).unwrap();
+            // Green's reciprocity: the fluence at (r, γ) from a source at r₀ equals the
+            // fluence at r₀ from a source at r (same angle).
+            for (r, cos) in [(1.0, 0.3), (6.5, -0.8), (7.9, 0.95)] {
+                let other = m.sphere_off_centre(radius, r).unwrap();
+                let (x, y) = (s.fluence(r, cos).unwrap(), other.fluence(r0, cos).unwrap());
+                assert!((x - y).abs() < 1e-9 * x, "r₀ {r0}, r {r}: {x} against {y}");
+            }
+            // φ + 2AD ∂φ/∂r = 0 on the surface (one-sided finite difference, O(δ²)).
+            for cos in [1.0, 0.5, -0.3, -1.0] {
+                let d = 1e-4;
+                let phi = s.fluence(radius, cos).unwrap();
+                let slope = (3.0 * phi - 4.0 * s.fluence(radius - d, cos).unwrap()
+                    + s.fluence(radius - 2.0 * d, cos).unwrap())
+                    / (2.0 * d);
+                assert!(
+                    (phi + b * slope).abs() < 1e-6 * phi,
+                    "r₀ {r0}, cos {cos}: {phi} + {b}·{slope}"
+                );
+            }
+        }
+    }
+}
