@@ -13,7 +13,8 @@
 //! - `pareto [SCENE...]`: error against wall time for every solver on the suite scenes
 //!   (all of them by default), as `docs/pareto/<scene>.svg` and `.csv`.
 //!
-//! - `mitsuba [SPP]`: the default cloud at 256×256 rendered by lucent's Monte Carlo and by
+//! - `mitsuba [SPP]`: the default cloud and `examples/scenes/box_filling.toml` (a medium
+//!   filling a box of odd dimensions) at 256×256 rendered by lucent's Monte Carlo and by
 //!   Mitsuba 3 (`pip install mitsuba`; `scalar_rgb` and `llvm_ad_rgb`) with the same camera,
 //!   lights, medium, spp and depth; prints the mean difference, per-pixel z-scores and both
 //!   renderers' paths per second. Not part of the default test run.
@@ -264,15 +265,35 @@ fn pareto(only: Vec<String>) -> ExitCode {
     ExitCode::SUCCESS
 }
 
-/// Renders the default cloud with lucent's Monte Carlo and with Mitsuba 3 and compares them.
+/// Renders the default cloud and a medium that fills its box (`examples/scenes/
+/// box_filling.toml`, odd dimensions) with lucent's Monte Carlo and with Mitsuba 3, and
+/// compares them.
 fn mitsuba(spp: usize) -> Result<(), String> {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let cloud = lucent::scene::Scene::default_scene().map_err(|e| e.to_string())?;
+    let box_filling = root.join("examples/scenes/box_filling.toml");
+    let filling = lucent::scene::Scene::load(&box_filling).map_err(|e| e.to_string())?;
+    let mut results = Vec::new();
+    for (name, scene) in [("cloud", cloud), ("box_filling", filling)] {
+        let json = mitsuba_scene(&root, name, &scene, spp)?;
+        results.push(format!("\"{name}\": {json}"));
+    }
+    println!("{{{}}}", results.join(", "));
+    Ok(())
+}
+
+/// One scene of [`mitsuba`]: returns its JSON comparison.
+fn mitsuba_scene(
+    root: &std::path::Path,
+    name: &str,
+    scene: &lucent::scene::Scene,
+    spp: usize,
+) -> Result<String, String> {
     use lucent::core::{Field, Light};
     use lucent::optics::Phase;
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let dir = root.join("target/mitsuba");
+    let dir = root.join("target/mitsuba").join(name);
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
-    let scene = lucent::scene::Scene::default_scene().map_err(|e| e.to_string())?;
-    let built = scene.build(&root).map_err(|e| e.to_string())?;
+    let built = scene.build(root).map_err(|e| e.to_string())?;
     let problem = &built.problem;
     let medium = problem.medium();
     if medium.sigma_t.len() != 1 {
@@ -400,15 +421,14 @@ fn mitsuba(spp: usize) -> Result<(), String> {
     }
     let paths = (width * height * spp) as f64;
     eprintln!(
-        "lucent mc: {lucent_seconds:.2} s, {:.0} paths/s",
+        "{name}: lucent mc: {lucent_seconds:.2} s, {:.0} paths/s",
         paths / lucent_seconds
     );
-    println!(
+    Ok(format!(
         "{{\"lucent\": {{\"seconds\": {lucent_seconds}, \"paths_per_second\": {}}}, \"mitsuba\": {}}}",
         paths / lucent_seconds,
         String::from_utf8_lossy(&output.stdout).trim()
-    );
-    Ok(())
+    ))
 }
 
 /// A tiny JSON object from pre-formatted values.

@@ -9,10 +9,11 @@
 //! ω·∇L + σ_t L = σ_s ∫ p(ω′ → ω) L(x, ω′) dω′ + Q(x, ω),
 //!
 //! with σ_t, σ_s in 1/length and Q the fixed source per steradian. As in Bernabei's MDOM,
-//! the light of point-like lights is not swept: its uncollided part is ray-marched exactly
-//! (`lucent_core::DirectSolver`) and enters as the first-collision source
-//! Q = σ_s Σ_l p(ω_l → ω) E_l T_l, so the sweeps carry only scattered light (and sky light
-//! and emission, which are smooth in angle) and ray effects stay small.
+//! the light of point-like lights is not swept: its uncollided part is integrated over each
+//! cell (`lucent_core::uncollided_cells`, which conserves the light's power whatever the
+//! grid) and enters as the first-collision source Q = σ_s Σ_l p(ω_l → ω) E_l T_l averaged
+//! over the cell, so the sweeps carry only scattered light (and sky light and emission,
+//! which are smooth in angle) and ray effects stay small.
 //!
 //! # How
 //!
