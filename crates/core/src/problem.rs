@@ -185,6 +185,15 @@ impl Light {
         }
     }
 
+    /// Lights that arrive at each point from one point or direction (directional, point,
+    /// spot), whose uncollided light `direct` marches; not sky and emission.
+    pub fn is_pointlike(&self) -> bool {
+        matches!(
+            self,
+            Light::Directional { .. } | Light::Point { .. } | Light::Spot { .. }
+        )
+    }
+
     /// The light's spectrum (irradiance, intensity, radiance or emission scale).
     pub fn spectrum(&self) -> Spectrum {
         match self {

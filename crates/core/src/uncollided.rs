@@ -558,12 +558,7 @@ impl Uncollided {
         let lights: Vec<Light> = problem
             .lights()
             .iter()
-            .filter(|l| {
-                matches!(
-                    l,
-                    Light::Directional { .. } | Light::Point { .. } | Light::Spot { .. }
-                )
-            })
+            .filter(|l| l.is_pointlike())
             .cloned()
             .collect();
         let sigma_t = problem.medium().sigma_t.clone();

@@ -240,12 +240,7 @@ impl DomSolver {
         let pointlike: Vec<Light> = problem
             .lights()
             .iter()
-            .filter(|l| {
-                matches!(
-                    l,
-                    Light::Directional { .. } | Light::Point { .. } | Light::Spot { .. }
-                )
-            })
+            .filter(|l| l.is_pointlike())
             .cloned()
             .collect();
         // Their uncollided light: cell integrals (the sweeps' unknowns are cell averages,

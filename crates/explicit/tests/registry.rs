@@ -103,7 +103,12 @@ fn convection_without_scattering_matches_direct() {
 fn staggered_p1_and_ordinates_approach_diffusion_in_a_thick_medium() {
     // A point light in a thick scattering medium (σ_t h = 1, albedo 0.9, 15³): P1's steady
     // state is diffusion, and S4 ordinates are close to it a few mean free paths out.
-    // Compared on the cells 2–4 cells from the light: P1 within 10% (1.2% measured).
+    // Compared on the cells 2–4 cells from the light. diffusion-mg takes the source's
+    // singular part analytically and is the continuum diffusion solution there (within
+    // 0.5% of the infinite-medium Green's function at 1–2 cells); P1 by FTCS puts the power
+    // into the light's cell, whose discretisation error at one mean free path per cell
+    // makes it 17.8% high at 2 cells, 11% at 4 (when diffusion-mg had the same cell source
+    // they agreed to 1.2%): within 20%.
     let p = problem(
         15,
         1.0,
@@ -149,7 +154,7 @@ fn staggered_p1_and_ordinates_approach_diffusion_in_a_thick_medium() {
         "{:?}",
         p1.report.stop_reason
     );
-    assert!(compare(&p1) < 0.10, "P1: {}", compare(&p1));
+    assert!(compare(&p1) < 0.20, "P1: {}", compare(&p1));
     let ord = (ExplicitSolver::FTCS_ORDINATES.build)(&Params::default())
         .unwrap()
         .solve(&p, &options)
