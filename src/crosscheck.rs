@@ -493,18 +493,18 @@ const DOM_NOTE: &str = "
 ## Discrete ordinates: ray effects and closures
 
 `dom` against the Monte Carlo reference (total fluence, relative L2), from the error-against-time
-sweep of `cargo xtask pareto` (docs/pareto/*.csv, measured 2026-11-22 on the dev machine,
+sweep of `cargo xtask pareto` (docs/pareto/*.csv, measured 2026-11-23 on the dev machine,
 tolerance 1e-4, diamond difference unless stated). The lights' uncollided part is exact
-(`direct`, averaged over 2³ sub-cells), so what changes with N is the scattered light's angular
-discretisation: on the g = 0.8 blob, whose forward peak the low orders cannot resolve, the error
-falls by a factor 16 from S2 to S12; on the cloud (g = 0.5, sun and sky) and the slab it falls
+(integrated over each cell, `lucent_core::uncollided_cells`), so what changes with N is the
+scattered light's angular discretisation: on the g = 0.8 blob, whose forward peak the low
+orders cannot resolve, the error falls by a factor 15 from S2 to S12; on the cloud (g = 0.5, sun and sky) and the slab it falls
 until the spatial error and the reference's own noise (0.6%) remain.
 
 | scene | S2 (8) | S4 (24) | S8 (80) | S12 (168) | S8 step | S8 exponential | diffusion-mg |
 |---|---|---|---|---|---|---|---|
-| anisotropic (g = 0.8) | 17.1% | 8.4% | 1.61% | 1.07% | 3.04% | 1.92% | 19.3% |
-| cloud (g = 0.5) | 3.67% | 2.09% | 1.87% | 1.86% | 4.65% | 3.39% | 38.8% |
-| slab (isotropic) | 4.55% | 2.31% | 1.66% | 1.49% | 2.48% | 1.73% | 7.4% |
+| anisotropic (g = 0.8) | 17.2% | 8.4% | 1.69% | 1.15% | 2.92% | 1.89% | 18.9% |
+| cloud (g = 0.5) | 4.10% | 2.45% | 2.23% | 2.21% | 3.96% | 2.82% | 36.8% |
+| slab (isotropic) | 4.53% | 2.29% | 1.65% | 1.48% | 2.48% | 1.70% | 6.0% |
 
 - **Ray effects.** With the first-collision source computed exactly for each light (MDOM), the
   swept light is already once scattered and smooth in angle; what remains of the ray effect is
