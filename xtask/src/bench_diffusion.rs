@@ -8,9 +8,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::DVec3;
+use lucent::core::Stopping;
 use lucent::diffusion::{
     Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Method, Multigrid,
-    MultigridSettings, Sources, Stopping, solve,
+    MultigridSettings, Sources, solve,
 };
 use lucent_grid::GridGeometry;
 use rayon::prelude::*;

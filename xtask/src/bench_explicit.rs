@@ -4,6 +4,7 @@
 //! & Ma's full update for one light (absorption to steady state + one scattering step).
 
 use glam::DVec3;
+use lucent::core::Stopping;
 use lucent::explicit::Lattice;
 use lucent::explicit::convection::{Light, UpwindSettings, propagate};
 use lucent::explicit::ftcs::{Edges, FtcsDiffusion, GradientSign, March};
@@ -57,8 +58,11 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
     let initial: Vec<f64> = (0..cells).map(|i| (i % 13) as f64).collect();
     let march = March {
         time_step: 0.5 * problem.time_step_limit(),
-        tolerance: 0.0,
-        max_steps: 10,
+        stopping: Stopping {
+            relative_tolerance: 0.0,
+            max_iterations: 10,
+            ..Stopping::default()
+        },
         allow_unstable: false,
         initial: Some(initial.clone()),
     };
@@ -77,8 +81,11 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
         layout: Layout::Staggered,
         damping: Damping::Murray { sigma_t: 0.1 },
         time_step: 0.09,
-        steps: 5,
-        tolerance: 0.0,
+        stopping: Stopping {
+            relative_tolerance: 0.0,
+            max_iterations: 5,
+            ..Stopping::default()
+        },
         edges: P1Edges::Periodic,
         allow_unstable: false,
     };
@@ -106,8 +113,11 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
     source[cells / 2] = 1.0;
     let settings = OrdinatesSettings {
         time_step: 0.3,
-        tolerance: 0.0,
-        max_steps: 3,
+        stopping: Stopping {
+            relative_tolerance: 0.0,
+            max_iterations: 3,
+            ..Stopping::default()
+        },
         allow_unstable: false,
     };
     let t = best_of(3, || {

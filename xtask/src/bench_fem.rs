@@ -5,8 +5,9 @@
 use std::time::Instant;
 
 use glam::DVec3;
+use lucent::core::Stopping;
 use lucent::diffusion::{
-    Boundaries, CellGeometry, Condition, DiffusionProblem, Method, Sources, Stopping, solve,
+    Boundaries, CellGeometry, Condition, DiffusionProblem, Method, Sources, solve,
 };
 use lucent::fem::q1::{Q1Multigrid, Q1Problem};
 use lucent_grid::GridGeometry;
@@ -51,10 +52,10 @@ pub(crate) fn run(sizes: &[usize]) -> Result<(), String> {
             .solve(
                 &b,
                 &mut x,
-                &lucent::fem::solvers::Stopping {
+                &Stopping {
                     relative_tolerance: 1e-8,
                     max_iterations: 200,
-                    ..Default::default()
+                    ..lucent::fem::solvers::default_stopping()
                 },
             )
             .map_err(|e| err(&e))?;

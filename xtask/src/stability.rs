@@ -6,6 +6,7 @@
 //! periodic grid grows over a fixed number of steps (a checkerboard for the upwind scheme,
 //! which is the mode that grows first there).
 
+use lucent::core::Stopping;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -77,8 +78,11 @@ fn ftcs_rows(albedo: f64) -> Vec<Row> {
                 let out = problem
                     .march(&March {
                         time_step: r,
-                        tolerance: 0.0,
-                        max_steps: 400,
+                        stopping: Stopping {
+                            relative_tolerance: 0.0,
+                            max_iterations: 400,
+                            ..Stopping::default()
+                        },
                         allow_unstable: true,
                         initial: Some(initial.clone()),
                     })
@@ -129,8 +133,11 @@ fn upwind_rows() -> Vec<Row> {
                         courant: c,
                         sweep: Sweep::Jacobi,
                         edges: Edges::Periodic,
-                        tolerance: 0.0,
-                        max_iterations: steps,
+                        stopping: Stopping {
+                            relative_tolerance: 0.0,
+                            max_iterations: steps,
+                            ..Stopping::default()
+                        },
                         allow_unstable: true,
                         initial: Some(initial.clone()),
                         ..UpwindSettings::default()
@@ -176,8 +183,11 @@ fn p1_rows(layout: Layout) -> Vec<Row> {
                         layout,
                         damping: Damping::Murray { sigma_t: k / r },
                         time_step: r,
-                        steps,
-                        tolerance: 0.0,
+                        stopping: Stopping {
+                            relative_tolerance: 0.0,
+                            max_iterations: steps,
+                            ..Stopping::default()
+                        },
                         edges: P1Edges::Periodic,
                         allow_unstable: true,
                     };
@@ -230,8 +240,11 @@ fn ordinates_rows() -> Vec<Row> {
                     &source,
                     &OrdinatesSettings {
                         time_step: r,
-                        tolerance: 0.0,
-                        max_steps: 400,
+                        stopping: Stopping {
+                            relative_tolerance: 0.0,
+                            max_iterations: 400,
+                            ..Stopping::default()
+                        },
                         allow_unstable: true,
                     },
                 )

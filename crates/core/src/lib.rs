@@ -18,6 +18,12 @@
 //! - Colour: every quantity is grey or RGB ([`Spectrum`]); a problem has one channel when
 //!   everything is grey and costs one solve; otherwise three independent channels.
 //!
+//! ## Iterating
+//! Every iterative method in lucent stops by one rule, [`Stopping`] with its [`History`]:
+//! a non-finite residual (diverged), the relative then the absolute tolerance (converged),
+//! growth past `divergence` × the initial residual (diverged), the iteration limit, the
+//! time budget — in that order, each ending in its [`StopReason`].
+//!
 //! ## Solvers here
 //! - [`DirectSolver`] (`direct`): uncollided light by exact ray marching of the optical
 //!   depth; keeps per-light transmittance for exact single scattering. Later solvers use it
@@ -49,6 +55,7 @@
 
 mod direct;
 mod error;
+mod iteration;
 mod problem;
 mod registry;
 mod singular;
@@ -59,6 +66,7 @@ mod uncollided;
 
 pub use direct::DirectSolver;
 pub use error::{ProblemError, SolveError};
+pub use iteration::{History, Stopping};
 pub use problem::{Boundary, BoundaryKind, Field, Light, LightKind, Medium, Problem};
 pub use registry::{ParamValue, Params, Registry, SolverEntry};
 pub use singular::{SingularPart, point_source_singular_part};

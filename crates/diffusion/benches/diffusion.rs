@@ -5,9 +5,10 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
+use lucent_core::Stopping;
 use lucent_diffusion::{
     Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Method, Multigrid,
-    MultigridSettings, Sources, Stopping, solve,
+    MultigridSettings, Sources, solve,
 };
 use lucent_grid::GridGeometry;
 

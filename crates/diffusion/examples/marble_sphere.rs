@@ -4,9 +4,9 @@
 
 use glam::DVec3;
 use lucent_core::Boundary;
+use lucent_core::Stopping;
 use lucent_diffusion::{
-    Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Method, Sources,
-    Stopping, solve,
+    Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Method, Sources, solve,
 };
 use lucent_grid::GridGeometry;
 use lucent_optics::{DiffusionMedium, OpticalCoefficients};

@@ -6,7 +6,9 @@
 use rayon::prelude::*;
 
 use crate::level::{Level, norm2};
-use crate::multigrid::{Convergence, Stopping, check_stop};
+use lucent_core::Stopping;
+
+use crate::multigrid::Convergence;
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.par_iter().zip(b.par_iter()).map(|(a, b)| a * b).sum()
@@ -36,7 +38,7 @@ pub(crate) fn conjugate_gradient(
     loop {
         let iteration = residuals.len() - 1;
         if let Some(stop_reason) =
-            check_stop(stopping, iteration, norm / b_norm, norm, initial, started)
+            stopping.verdict(iteration, norm / b_norm, norm, initial, started)
         {
             return Convergence {
                 residuals,
@@ -90,7 +92,7 @@ pub(crate) fn residual_iteration(
     loop {
         let iteration = residuals.len() - 1;
         if let Some(stop_reason) =
-            check_stop(stopping, iteration, norm / b_norm, norm, initial, started)
+            stopping.verdict(iteration, norm / b_norm, norm, initial, started)
         {
             return Convergence {
                 residuals,

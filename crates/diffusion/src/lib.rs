@@ -41,7 +41,8 @@
 //! ```
 //! use glam::DVec3;
 //! use lucent_diffusion::{Boundaries, CellGeometry, Condition, Discretisation,
-//!     DiffusionProblem, Method, Sources, Stopping, solve};
+//!     DiffusionProblem, Method, Sources, solve};
+//! use lucent_core::Stopping;
 //! use lucent_grid::GridGeometry;
 //!
 //! // A marble sphere of radius 5 mm with a unit point source at its centre.
@@ -71,9 +72,7 @@ mod solver;
 pub use error::DiffusionError;
 pub use geometry::{CellGeometry, Discretisation, Patch, Side};
 pub use krylov::optimal_sor_factor;
-pub use multigrid::{
-    Convergence, Cycle, Multigrid, MultigridSettings, Prolongation, Smoother, Stopping,
-};
+pub use multigrid::{Convergence, Cycle, Multigrid, MultigridSettings, Prolongation, Smoother};
 pub use problem::{AssembledSystem, Balance, Boundaries, Condition, DiffusionProblem, Sources};
 pub use solve::{DiffusionSolution, Method, solve};
 pub use solver::{DiffusionSolver, LinearSolve};

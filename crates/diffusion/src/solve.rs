@@ -4,7 +4,9 @@ use std::time::Instant;
 
 use crate::error::DiffusionError;
 use crate::krylov;
-use crate::multigrid::{Convergence, Multigrid, MultigridSettings, Stopping};
+use lucent_core::Stopping;
+
+use crate::multigrid::{Convergence, Multigrid, MultigridSettings};
 use crate::problem::{Balance, DiffusionProblem, Sources};
 
 /// The iterative method.

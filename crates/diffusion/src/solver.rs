@@ -33,9 +33,10 @@ use lucent_grid::Grid;
 use lucent_optics::PhaseFunction;
 
 use crate::geometry::{CellGeometry, Discretisation};
-use crate::multigrid::{Cycle, MultigridSettings, Smoother, Stopping};
+use crate::multigrid::{Cycle, MultigridSettings, Smoother};
 use crate::problem::{Boundaries, Condition, DiffusionProblem, Sources};
 use crate::solve::{Method, solve};
+use lucent_core::Stopping;
 
 /// A diffusion solver as the registry builds it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -357,12 +358,7 @@ impl DiffusionSolver {
 
         let floor = 1e-3 / geometry.spacing().max_element();
         let boundaries = conditions(problem.boundary());
-        let stopping = Stopping {
-            relative_tolerance: options.relative_tolerance,
-            absolute_tolerance: options.absolute_tolerance,
-            max_iterations: options.max_iterations,
-            time_budget: options.time_budget,
-        };
+        let stopping = Stopping::from_options(options);
         let g = problem.medium().phase.mean_cosine();
         let mut fluence = Vec::with_capacity(channels);
         let mut scattered = Vec::with_capacity(channels);

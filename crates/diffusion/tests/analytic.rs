@@ -1,9 +1,10 @@
 //! lucent-diffusion against closed-form diffusion solutions (note 002 T7, T8, T9).
 
 use glam::{DVec2, DVec3};
+use lucent_core::Stopping;
 use lucent_diffusion::{
     Boundaries, CellGeometry, Condition, DiffusionProblem, DiffusionSolution, Discretisation,
-    Method, Side, Sources, Stopping, solve,
+    Method, Side, Sources, solve,
 };
 use lucent_grid::GridGeometry;
 use lucent_optics::materials::MeasuredMaterial;

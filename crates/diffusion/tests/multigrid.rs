@@ -1,9 +1,10 @@
 //! Multigrid convergence: the rates the issue asks for, on the embedded-boundary sphere.
 
 use glam::DVec3;
+use lucent_core::Stopping;
 use lucent_diffusion::{
     Boundaries, CellGeometry, Condition, Convergence, Cycle, DiffusionProblem, Discretisation,
-    Method, MultigridSettings, Smoother, Sources, Stopping, solve,
+    Method, MultigridSettings, Smoother, Sources, solve,
 };
 use lucent_grid::GridGeometry;
 use proptest::prelude::*;

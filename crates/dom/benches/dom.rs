@@ -4,7 +4,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
-use lucent_diffusion::Stopping;
+use lucent_core::Stopping;
 use lucent_dom::angular::Ordinates;
 use lucent_dom::{Acceleration, DomBoundary, DomProblem, DomSettings, solve};
 use lucent_grid::GridGeometry;

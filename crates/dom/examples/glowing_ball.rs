@@ -5,7 +5,7 @@
 //! `cargo run --release -p lucent-dom --example glowing_ball`
 
 use glam::DVec3;
-use lucent_diffusion::Stopping;
+use lucent_core::Stopping;
 use lucent_dom::angular::Ordinates;
 use lucent_dom::{DomBoundary, DomProblem, DomSettings, solve};
 use lucent_grid::GridGeometry;

@@ -16,9 +16,9 @@
 //! effectiveness in much thicker cells (Azmy; Warsa, Wareing & Morel 2004), which the
 //! tests measure rather than assume. The hierarchy is built once per solve.
 
+use lucent_core::Stopping;
 use lucent_diffusion::{
     Boundaries, CellGeometry, Condition, DiffusionProblem, Multigrid, MultigridSettings, Sources,
-    Stopping,
 };
 use lucent_grid::GridGeometry;
 

@@ -67,7 +67,7 @@
 //!     fixed: vec![1.0; n * m],
 //!     boundary: DomBoundary::default(),
 //! };
-//! let stopping = lucent_diffusion::Stopping { relative_tolerance: 1e-7, ..Default::default() };
+//! let stopping = lucent_core::Stopping { relative_tolerance: 1e-7, ..Default::default() };
 //! let solution = solve(&problem, &ordinates, &DomSettings::default(), &stopping)?;
 //! assert!(solution.convergence.stop_reason.is_converged(), "{:?}", solution.convergence);
 //! assert!(solution.balance.relative_imbalance() < 1e-6, "{:?}", solution.balance);

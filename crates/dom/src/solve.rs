@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use lucent_core::StopReason;
-use lucent_diffusion::Stopping;
+use lucent_core::Stopping;
 use lucent_grid::GridGeometry;
 
 use rayon::prelude::*;
@@ -461,28 +461,17 @@ pub fn solve(
         } else {
             f64::INFINITY
         };
-        if remaining <= stopping.relative_tolerance {
-            break (
-                StopReason::ConvergedRelative {
-                    residual: remaining,
-                },
-                out,
-            );
-        }
-        if change > 1e6 * first.max(f64::MIN_POSITIVE) {
-            break (
-                StopReason::DivergedGrowth {
-                    growth: change / first,
-                    iteration,
-                },
-                out,
-            );
-        }
-        if iteration >= stopping.max_iterations {
-            break (StopReason::IterationLimit { residual: change }, out);
-        }
-        if stopping.time_budget.is_some_and(|t| started.elapsed() >= t) {
-            break (StopReason::TimeLimit { residual: change }, out);
+        // The one stopping rule, on the estimated error (the change while no contraction is
+        // measured yet, which may then not count as converged).
+        let estimate = if remaining.is_finite() {
+            remaining
+        } else {
+            change
+        };
+        match stopping.verdict(iteration, estimate, change, first, started) {
+            Some(StopReason::ConvergedRelative { .. }) if !remaining.is_finite() => {}
+            Some(reason) => break (reason, out),
+            None => {}
         }
         // Mixing starts once the iteration contracts slowly (by more than 0.3 per sweep):
         // where DSA alone converges fast it would only cost memory traffic.

@@ -256,12 +256,7 @@ impl DomSolver {
             Some(Angular::Lights(l)) => Some(l.clone()),
             _ => None,
         });
-        let stopping = lucent_diffusion::Stopping {
-            relative_tolerance: options.relative_tolerance,
-            absolute_tolerance: options.absolute_tolerance,
-            max_iterations: options.max_iterations,
-            time_budget: options.time_budget,
-        };
+        let stopping = lucent_core::Stopping::from_options(options);
         let mut fluence = Vec::with_capacity(channels);
         let mut inscattered = Vec::with_capacity(channels);
         let mut report: Option<(Vec<f64>, StopReason)> = None;

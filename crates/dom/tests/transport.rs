@@ -2,7 +2,7 @@
 //! medium, the spectral radius of source iteration and the effect of DSA.
 
 use glam::DVec3;
-use lucent_diffusion::Stopping;
+use lucent_core::Stopping;
 use lucent_dom::angular::Ordinates;
 use lucent_dom::{Acceleration, Closure, DomBoundary, DomProblem, DomSettings, solve};
 use lucent_grid::GridGeometry;

@@ -4,6 +4,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
+use lucent_core::Stopping;
 use lucent_explicit::Lattice;
 use lucent_explicit::convection::{Light, UpwindSettings, propagate};
 use lucent_explicit::ftcs::{Edges, FtcsDiffusion, GradientSign, March};
@@ -27,8 +28,11 @@ fn bench(c: &mut Criterion) {
     let initial: Vec<f64> = (0..cells).map(|i| (i % 13) as f64).collect();
     let march = March {
         time_step: 0.5 * problem.time_step_limit(),
-        tolerance: 0.0,
-        max_steps: 1,
+        stopping: Stopping {
+            relative_tolerance: 0.0,
+            max_iterations: 1,
+            ..Stopping::default()
+        },
         allow_unstable: false,
         initial: Some(initial),
     };
@@ -43,7 +47,10 @@ fn bench(c: &mut Criterion) {
         density: 1.0,
     };
     let settings = UpwindSettings {
-        max_iterations: 1,
+        stopping: Stopping {
+            max_iterations: 1,
+            ..UpwindSettings::default().stopping
+        },
         ..UpwindSettings::default()
     };
     c.bench_function(

@@ -4,6 +4,7 @@
 //! multigrid (its hierarchy built once, outside the timing). Prints the time of each part, for comparison with the paper's 34 + 18 ms at
 //! 128³ on a GeForce 460M. `cargo run --release -p lucent-explicit --example zhang_ma -- 128`
 
+use lucent_core::Stopping;
 use std::time::Instant;
 
 use glam::DVec3;
@@ -29,7 +30,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let started = Instant::now();
     let settings = UpwindSettings {
-        tolerance: 1e-6,
+        stopping: Stopping {
+            relative_tolerance: 1e-6,
+            ..UpwindSettings::default().stopping
+        },
         ..UpwindSettings::default()
     };
     let rho = propagate(&lattice, &absorption, &light, &settings)?;

@@ -22,7 +22,7 @@
 //! ([`crate::stability::upwind`]); `propagate` refuses larger C unless `allow_unstable`.
 
 use glam::DVec3;
-use lucent_core::StopReason;
+use lucent_core::{History, StopReason, Stopping};
 use rayon::prelude::*;
 
 use crate::error::ExplicitError;
@@ -113,10 +113,9 @@ pub struct UpwindSettings {
     pub sweep: Sweep,
     /// Boundary treatment.
     pub edges: Edges,
-    /// Stop when the largest change of a pass is below this fraction of the largest value.
-    pub tolerance: f64,
-    /// Most passes (layer sweeps or Jacobi steps).
-    pub max_iterations: usize,
+    /// When to stop: the residual is the largest change of a pass over the largest value,
+    /// `max_iterations` the most passes (layer sweeps or Jacobi steps).
+    pub stopping: Stopping,
     /// Run even beyond the stability bound (for studies); the growth monitor still stops
     /// a diverging run.
     pub allow_unstable: bool,
@@ -131,8 +130,11 @@ impl Default for UpwindSettings {
             model: Model::Paper,
             sweep: Sweep::Ordered,
             edges: Edges::Inflow,
-            tolerance: 1e-10,
-            max_iterations: 10_000,
+            stopping: Stopping {
+                relative_tolerance: 1e-10,
+                max_iterations: 10_000,
+                ..Stopping::default()
+            },
             allow_unstable: false,
             initial: None,
         }
@@ -668,7 +670,7 @@ pub fn propagate(
         _ => Vec::new(),
     };
     let mut next = rho.clone();
-    let mut residuals = Vec::new();
+    let mut history = History::start();
     let mut iteration = 0;
     loop {
         let stop = |reason: StopReason, rho: Vec<f64>, residuals: Vec<f64>, iterations| {
@@ -679,15 +681,6 @@ pub fn propagate(
                 stop_reason: reason,
             })
         };
-        if iteration >= settings.max_iterations {
-            let residual = residuals.last().copied().unwrap_or(f64::INFINITY);
-            return stop(
-                StopReason::IterationLimit { residual },
-                rho,
-                residuals,
-                iteration,
-            );
-        }
         match (&layers, settings.sweep) {
             (
                 Some(layers),
@@ -756,7 +749,7 @@ pub fn propagate(
         iteration += 1;
         if let Some(reason) = monitor.check(&next, iteration) {
             // Return the last field that passed the monitor: always finite.
-            return stop(reason, rho, residuals, iteration);
+            return stop(reason, rho, history.into_residuals(), iteration);
         }
         let (mut change, mut largest) = (0.0f64, 0.0f64);
         for (a, b) in next.iter().zip(&rho) {
@@ -768,15 +761,9 @@ pub fn propagate(
         } else {
             change
         };
-        residuals.push(residual);
         std::mem::swap(&mut rho, &mut next);
-        if residual <= settings.tolerance {
-            return stop(
-                StopReason::ConvergedRelative { residual },
-                rho,
-                residuals,
-                iteration,
-            );
+        if let Some(reason) = history.record_step(&settings.stopping, iteration, residual, change) {
+            return stop(reason, rho, history.into_residuals(), iteration);
         }
     }
 }

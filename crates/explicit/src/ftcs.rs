@@ -19,7 +19,7 @@
 //! refuses a step beyond von Neumann unless `allow_unstable`.
 
 use glam::DVec3;
-use lucent_core::StopReason;
+use lucent_core::{History, StopReason, Stopping};
 use rayon::prelude::*;
 
 use crate::error::ExplicitError;
@@ -75,10 +75,9 @@ pub struct FtcsDiffusion<'a> {
 pub struct March {
     /// cΔt (length).
     pub time_step: f64,
-    /// Stop when ‖φ′ − φ‖/(cΔt) falls below this fraction of ‖q‖ (of ‖φ‖ without source).
-    pub tolerance: f64,
-    /// Most steps.
-    pub max_steps: usize,
+    /// When to stop: the residual is ‖φ′ − φ‖/(cΔt‖q‖) per step (‖φ′ − φ‖/‖φ′‖ without a
+    /// source), `max_iterations` the most steps.
+    pub stopping: Stopping,
     /// Run beyond the von Neumann bound (studies); the growth monitor still stops it.
     pub allow_unstable: bool,
     /// Start (`None`: zero).
@@ -267,14 +266,16 @@ impl FtcsDiffusion<'_> {
             factor: 1e6,
         };
         let mut next = vec![0.0; n];
-        let mut residuals = Vec::new();
-        for steps in 1..=march.max_steps {
+        let mut history = History::start();
+        let mut steps = 0;
+        loop {
+            steps += 1;
             self.step(&phi, &mut next, dt);
             if let Some(stop_reason) = monitor.check(&next, steps) {
                 return Ok(Marched {
                     fluence: phi,
                     steps,
-                    residuals,
+                    residuals: history.into_residuals(),
                     stop_reason,
                 });
             }
@@ -290,23 +291,16 @@ impl FtcsDiffusion<'_> {
                 norm(&next).max(f64::MIN_POSITIVE)
             };
             let residual = change / scale;
-            residuals.push(residual);
             std::mem::swap(&mut phi, &mut next);
-            if residual <= march.tolerance {
+            if let Some(stop_reason) = history.record_step(&march.stopping, steps, residual, change)
+            {
                 return Ok(Marched {
                     fluence: phi,
                     steps,
-                    residuals,
-                    stop_reason: StopReason::ConvergedRelative { residual },
+                    residuals: history.into_residuals(),
+                    stop_reason,
                 });
             }
         }
-        let residual = residuals.last().copied().unwrap_or(f64::INFINITY);
-        Ok(Marched {
-            fluence: phi,
-            steps: march.max_steps,
-            residuals,
-            stop_reason: StopReason::IterationLimit { residual },
-        })
     }
 }

@@ -16,7 +16,7 @@
 //! r·S + K ≤ 1, S = max_d |ω_x| + |ω_y| + |ω_z| (√3 for level-symmetric sets' diagonal
 //! directions). The thesis states none.
 
-use lucent_core::StopReason;
+use lucent_core::{History, StopReason, Stopping};
 use lucent_optics::SphericalQuadrature;
 use rayon::prelude::*;
 
@@ -28,10 +28,9 @@ use crate::lattice::{GrowthMonitor, Lattice};
 pub struct OrdinatesSettings {
     /// cΔt (length).
     pub time_step: f64,
-    /// Stop when ‖φ′ − φ‖/(cΔt‖q‖) falls below this.
-    pub tolerance: f64,
-    /// Most steps.
-    pub max_steps: usize,
+    /// When to stop: the residual is ‖φ′ − φ‖/(cΔt‖q‖) per step, `max_iterations` the most
+    /// steps.
+    pub stopping: Stopping,
     /// Run beyond the von Neumann bound (studies).
     pub allow_unstable: bool,
 }
@@ -103,14 +102,16 @@ pub fn march(
     let monitor = GrowthMonitor {
         reference: source.iter().fold(0.0f64, |a, b| a.max(b.abs()))
             * dt
-            * settings.max_steps as f64
+            * settings.stopping.max_iterations.min(1 << 40) as f64
             / (4.0 * std::f64::consts::PI)
             + f64::MIN_POSITIVE,
         factor: 1e6,
     };
     let four_pi = 4.0 * std::f64::consts::PI;
-    let mut residuals = Vec::new();
-    for step in 1..=settings.max_steps {
+    let mut history = History::start();
+    let mut step = 0;
+    loop {
+        step += 1;
         {
             let (radiance, phi) = (&radiance, &phi);
             next.par_chunks_mut(m).enumerate().for_each(|(g, out)| {
@@ -143,7 +144,7 @@ pub fn march(
             return Ok(OrdinatesSolution {
                 fluence: phi,
                 steps: step,
-                residuals,
+                residuals: history.into_residuals(),
                 stop_reason,
             });
         }
@@ -159,24 +160,16 @@ pub fn march(
             .sum::<f64>()
             .sqrt();
         let residual = change / (dt * q_norm);
-        residuals.push(residual);
         phi = new_phi;
-        if residual <= settings.tolerance {
+        if let Some(stop_reason) = history.record_step(&settings.stopping, step, residual, change) {
             return Ok(OrdinatesSolution {
                 fluence: phi,
                 steps: step,
-                residuals,
-                stop_reason: StopReason::ConvergedRelative { residual },
+                residuals: history.into_residuals(),
+                stop_reason,
             });
         }
     }
-    let residual = residuals.last().copied().unwrap_or(f64::INFINITY);
-    Ok(OrdinatesSolution {
-        fluence: phi,
-        steps: settings.max_steps,
-        residuals,
-        stop_reason: StopReason::IterationLimit { residual },
-    })
 }
 
 /// The angular (ray-effect) error of `fluence`: its relative L2 difference from

@@ -17,7 +17,7 @@
 //! (1 − K_φ)(1 − K_E) + 4r² ≤ 1; the thesis's "K < 1 and r/2 < 1" is not sufficient.
 //! Periodic edges (studies) or zero beyond the grid.
 
-use lucent_core::StopReason;
+use lucent_core::{History, StopReason, Stopping};
 
 use crate::error::ExplicitError;
 use crate::lattice::{GrowthMonitor, Lattice};
@@ -80,10 +80,9 @@ pub struct P1Settings {
     pub damping: Damping,
     /// cΔt (length).
     pub time_step: f64,
-    /// Most steps to run.
-    pub steps: usize,
-    /// Stop early when ‖φ′ − φ‖/‖φ′‖ falls below this (0: run every step).
-    pub tolerance: f64,
+    /// When to stop: the residual is ‖φ′ − φ‖/‖φ′‖ per step (relative tolerance 0: run
+    /// every step), `max_iterations` the most steps.
+    pub stopping: Stopping,
     /// Beyond the grid.
     pub edges: P1Edges,
     /// Run beyond the von Neumann bound (studies).
@@ -103,7 +102,7 @@ impl P1Settings {
     }
 }
 
-/// Runs `settings.steps` FTCS steps from zero with source `q` (fluence per length per
+/// Runs up to `settings.stopping.max_iterations` FTCS steps from zero with source `q` (fluence per length per
 /// step unit) on a periodic grid, or from `initial` (φ, E) when given.
 pub fn march(
     lattice: &Lattice,
@@ -149,7 +148,7 @@ pub fn march(
     let monitor = GrowthMonitor {
         reference: largest(&phi)
             + flux.iter().map(|f| largest(f)).fold(0.0, f64::max)
-            + largest(source) * dt * settings.steps as f64
+            + largest(source) * dt * settings.stopping.max_iterations.min(1 << 40) as f64
             + f64::MIN_POSITIVE,
         factor: 1e6,
     };
@@ -166,8 +165,10 @@ pub fn march(
         Some(g - at[axis] * s[axis] + moved * s[axis])
     };
     let at = |f: &[f64], g: Option<usize>| g.map_or(0.0, |g| f[g]);
-    let mut last_change = 0.0;
-    for step in 1..=settings.steps {
+    let mut history = History::start();
+    let mut step = 0;
+    loop {
+        step += 1;
         let mut next_phi = vec![0.0; n];
         let mut next_flux = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
         for g in 0..n {
@@ -207,30 +208,22 @@ pub fn march(
             .map(|(a, b)| (a - b).powi(2))
             .sum();
         let size: f64 = next_phi.iter().map(|a| a * a).sum();
-        last_change = if size > 0.0 {
+        let last_change = if size > 0.0 {
             (change / size).sqrt()
         } else {
             change.sqrt()
         };
         phi = next_phi;
         flux = next_flux;
-        if last_change <= settings.tolerance {
+        if let Some(stop_reason) =
+            history.record_step(&settings.stopping, step, last_change, change.sqrt())
+        {
             return Ok(P1State {
                 fluence: phi,
                 flux,
                 steps: step,
-                stop_reason: StopReason::ConvergedRelative {
-                    residual: last_change,
-                },
+                stop_reason,
             });
         }
     }
-    Ok(P1State {
-        fluence: phi,
-        flux,
-        steps: settings.steps,
-        stop_reason: StopReason::IterationLimit {
-            residual: last_change,
-        },
-    })
 }

@@ -150,6 +150,7 @@ fn gauss_seidel_step(
         .max(f64::MIN_POSITIVE);
     let mut x = rhs.to_vec();
     let mut next = vec![0.0; n];
+    let started = std::time::Instant::now();
     for sweep in 1..=max_sweeps {
         // Each colour reads only the other, so computing it into `next` from `x` and
         // copying the other colour is exactly Gauss–Seidel.
@@ -179,11 +180,13 @@ fn gauss_seidel_step(
             .sum::<f64>()
             .sqrt()
             / norm;
-        if residual <= tolerance {
-            return (x, sweep, StopReason::ConvergedRelative { residual });
-        }
-        if sweep == max_sweeps {
-            return (x, sweep, StopReason::IterationLimit { residual });
+        let stopping = lucent_core::Stopping {
+            relative_tolerance: tolerance,
+            max_iterations: max_sweeps,
+            ..lucent_core::Stopping::default()
+        };
+        if let Some(reason) = stopping.verdict(sweep, residual, residual * norm, 1.0, started) {
+            return (x, sweep, reason);
         }
     }
     (x, 0, StopReason::Exact)
@@ -249,9 +252,9 @@ impl Scatterer {
         }
         let rhs: Vec<f64> = field.iter().map(|v| v * self.volume).collect();
         let mut out = field.to_vec();
-        let stopping = lucent_diffusion::Stopping {
+        let stopping = lucent_core::Stopping {
             relative_tolerance: tolerance,
-            ..lucent_diffusion::Stopping::default()
+            ..lucent_core::Stopping::default()
         };
         let c = self.multigrid.solve(&rhs, &mut out, &stopping);
         Ok((out, c.iterations(), c.stop_reason))

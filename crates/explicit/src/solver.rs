@@ -378,9 +378,7 @@ impl Solver for ExplicitSolver {
                     };
                     let setup = t0.elapsed().as_secs_f64();
                     let settings = SteadySettings {
-                        tolerance: stop.relative_tolerance,
-                        max_iterations: stop.max_iterations,
-                        time_budget: stop.time_budget,
+                        stopping: *stop,
                         allow_unstable,
                     };
                     let out = iterate(&system, kind, &settings)
@@ -407,7 +405,17 @@ impl Solver for ExplicitSolver {
             Scheme::Convection {
                 settings,
                 scattering,
-            } => self.convection(problem, settings, *scattering, started),
+            } => {
+                // The caller's time budget bounds every light's march.
+                let settings = UpwindSettings {
+                    stopping: lucent_core::Stopping {
+                        time_budget: options.time_budget,
+                        ..settings.stopping
+                    },
+                    ..settings.clone()
+                };
+                self.convection(problem, &settings, *scattering, started)
+            }
             Scheme::P1 {
                 layout,
                 fraction,
@@ -592,8 +600,7 @@ impl ExplicitSolver {
                     sigma_t_reduced: reduced,
                 },
                 time_step: fraction * lo,
-                steps: options.max_iterations,
-                tolerance: options.relative_tolerance,
+                stopping: lucent_core::Stopping::from_options(options),
                 edges: crate::p1::P1Edges::Zero,
                 allow_unstable,
             };
@@ -669,8 +676,7 @@ impl ExplicitSolver {
             let step = l.spacing / (s_max + 0.5 * l.spacing * k_max);
             let settings = crate::ordinates::OrdinatesSettings {
                 time_step: fraction * step,
-                tolerance: options.relative_tolerance,
-                max_steps: options.max_iterations,
+                stopping: lucent_core::Stopping::from_options(options),
                 allow_unstable,
             };
             let out = crate::ordinates::march(&l, &quadrature, &sigma_t, &sigma_s, &q, &settings)

@@ -12,7 +12,7 @@
 //! Both converge at rate 1 − O(h²): explicit schemes pay for steady states with
 //! thousands of sweeps, which is what the pareto charts show against multigrid.
 
-use lucent_core::StopReason;
+use lucent_core::{History, StopReason, Stopping};
 use lucent_diffusion::AssembledSystem;
 use rayon::prelude::*;
 
@@ -38,12 +38,8 @@ pub enum Iteration {
 /// When to stop.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SteadySettings {
-    /// Relative residual ‖b − Aφ‖/‖b‖.
-    pub tolerance: f64,
-    /// Most sweeps.
-    pub max_iterations: usize,
-    /// Wall-time budget.
-    pub time_budget: Option<std::time::Duration>,
+    /// When to stop, on the relative residual ‖b − Aφ‖/‖b‖ (one sweep, one iteration).
+    pub stopping: Stopping,
     /// Run FTCS beyond its bound (studies).
     pub allow_unstable: bool,
 }
@@ -75,7 +71,6 @@ pub fn iterate(
     iteration: Iteration,
     settings: &SteadySettings,
 ) -> Result<Steady, ExplicitError> {
-    let started = std::time::Instant::now();
     let a = &system.matrix;
     let b = &system.rhs;
     let n = b.len();
@@ -124,35 +119,16 @@ pub fn iterate(
         .max(f64::MIN_POSITIVE);
     let mut phi = vec![0.0f64; n];
     let mut r = b.clone();
-    let mut residuals: Vec<f64> = vec![1.0];
-    let mut iterations = 0;
+    let mut history = History::start();
+    let mut relative = 1.0;
     loop {
-        let relative: f64 = residuals.last().copied().unwrap_or(1.0);
-        let stop = if !relative.is_finite() {
-            Some(StopReason::DivergedNonFinite {
-                iteration: iterations,
-            })
-        } else if relative <= settings.tolerance {
-            Some(StopReason::ConvergedRelative { residual: relative })
-        } else if relative > 1e6 {
-            Some(StopReason::DivergedGrowth {
-                growth: relative,
-                iteration: iterations,
-            })
-        } else if iterations >= settings.max_iterations {
-            Some(StopReason::IterationLimit { residual: relative })
-        } else if settings.time_budget.is_some_and(|t| started.elapsed() >= t) {
-            Some(StopReason::TimeLimit { residual: relative })
-        } else {
-            None
-        };
-        if let Some(stop_reason) = stop {
+        if let Some(stop_reason) = history.record(&settings.stopping, relative, relative * b_norm) {
             if phi.iter().any(|v| !v.is_finite()) {
                 phi.fill(0.0);
             }
             return Ok(Steady {
                 fluence: phi,
-                residuals,
+                residuals: history.into_residuals(),
                 stop_reason,
             });
         }
@@ -166,7 +142,6 @@ pub fn iterate(
             let ax: f64 = row.map_or(0.0, |row| row.iter().map(|(j, v)| v * phi[j]).sum());
             *ri = b[i] - ax;
         });
-        iterations += 1;
-        residuals.push(r.iter().map(|v| v * v).sum::<f64>().sqrt() / b_norm);
+        relative = r.iter().map(|v| v * v).sum::<f64>().sqrt() / b_norm;
     }
 }

@@ -4,6 +4,7 @@
 
 use glam::DVec3;
 use lucent_core::StopReason;
+use lucent_core::Stopping;
 use lucent_explicit::ftcs::{Edges, FtcsDiffusion, GradientSign, March, murray_coefficients};
 use lucent_explicit::ordinates::{OrdinatesSettings, angular_error, march as ordinates};
 use lucent_explicit::p1::{Damping, Layout, P1Edges, P1Settings, march as p1};
@@ -43,8 +44,11 @@ fn ftcs_growth(beta: f64, albedo: f64, r: f64, steps: usize) -> f64 {
     let out = problem
         .march(&March {
             time_step: r,
-            tolerance: 0.0,
-            max_steps: steps,
+            stopping: Stopping {
+                relative_tolerance: 0.0,
+                max_iterations: steps,
+                ..Stopping::default()
+            },
             allow_unstable: true,
             initial: Some(initial),
         })
@@ -115,8 +119,11 @@ fn ftcs_refuses_a_step_beyond_von_neumann_and_stops_a_forced_one() {
     };
     let march = |allow_unstable| March {
         time_step: 0.33,
-        tolerance: 0.0,
-        max_steps: 100_000,
+        stopping: Stopping {
+            relative_tolerance: 0.0,
+            max_iterations: 100_000,
+            ..Stopping::default()
+        },
         allow_unstable,
         initial: Some(random(n, 3)),
     };
@@ -171,8 +178,11 @@ fn manufactured_error(n: usize, a: f64, b: f64, sign: GradientSign) -> f64 {
     let out = problem
         .march(&March {
             time_step: 0.95 * problem.time_step_limit(),
-            tolerance: 1e-11,
-            max_steps: 200_000,
+            stopping: Stopping {
+                relative_tolerance: 1e-11,
+                max_iterations: 200_000,
+                ..Stopping::default()
+            },
             allow_unstable: false,
             initial: None,
         })
@@ -230,8 +240,9 @@ proptest! {
             (fraction * stability::ftcs_diffusion::von_neumann(beta, albedo), false),
         ] {
             let out = problem.march(&March {
-                time_step: step, tolerance: 0.0, max_steps: 300, allow_unstable: false,
+                time_step: step,                stopping: Stopping { relative_tolerance: 0.0, max_iterations: 300, ..Stopping::default() }, allow_unstable: false,
                 initial: Some(initial.clone()),
+
             }).unwrap();
             prop_assert!(out.fluence.iter().all(|v| v.abs() <= 1.0 + 1e-12));
             if check_sign {
@@ -254,8 +265,9 @@ proptest! {
             sign: GradientSign::Conservative, edges: Edges::Periodic,
         };
         let march = |allow_unstable| March {
-            time_step: r, tolerance: 0.0, max_steps: 1_000_000, allow_unstable,
+            time_step: r,            stopping: Stopping { relative_tolerance: 0.0, max_iterations: 1_000_000, ..Stopping::default() }, allow_unstable,
             initial: Some(random(n, 5)),
+
         };
         let refused = matches!(problem.march(&march(false)), Err(ExplicitError::Unstable { .. }));
         prop_assert!(refused);
@@ -281,8 +293,11 @@ fn collocated_p1_leaves_a_checkerboard_and_staggered_does_not() {
             layout,
             damping: Damping::Murray { sigma_t: 0.02 / r },
             time_step: r,
-            steps: 60,
-            tolerance: 0.0,
+            stopping: Stopping {
+                relative_tolerance: 0.0,
+                max_iterations: 60,
+                ..Stopping::default()
+            },
             edges: P1Edges::Periodic,
             allow_unstable: false,
         };
@@ -324,8 +339,11 @@ fn p1_bound_is_not_murrays_condition() {
         layout: Layout::Collocated,
         damping: Damping::Murray { sigma_t: 0.5 / r },
         time_step: r,
-        steps: 40,
-        tolerance: 0.0,
+        stopping: Stopping {
+            relative_tolerance: 0.0,
+            max_iterations: 40,
+            ..Stopping::default()
+        },
         edges: P1Edges::Periodic,
         allow_unstable,
     };
@@ -342,7 +360,10 @@ fn p1_bound_is_not_murrays_condition() {
             &lattice,
             &q,
             &P1Settings {
-                steps: 40,
+                stopping: Stopping {
+                    max_iterations: 40,
+                    ..settings(r, true).stopping
+                },
                 ..settings(r, true)
             },
             Some(initial()),
@@ -352,7 +373,10 @@ fn p1_bound_is_not_murrays_condition() {
             &lattice,
             &q,
             &P1Settings {
-                steps: 80,
+                stopping: Stopping {
+                    max_iterations: 80,
+                    ..settings(r, true).stopping
+                },
                 ..settings(r, true)
             },
             Some(initial()),
@@ -389,8 +413,11 @@ fn ordinates_ray_effects_shrink_with_more_directions() {
             .fold(0.0, f64::max);
         let settings = OrdinatesSettings {
             time_step: 0.9 * stability::ordinates::von_neumann_limit(s_max, 0.15),
-            tolerance: 1e-8,
-            max_steps: 5000,
+            stopping: Stopping {
+                relative_tolerance: 1e-8,
+                max_iterations: 5000,
+                ..Stopping::default()
+            },
             allow_unstable: false,
         };
         let out = ordinates(&lattice, &quadrature, &st, &ss, &q, &settings).unwrap();
@@ -430,10 +457,10 @@ proptest! {
             layout: Layout::Collocated,
             damping: Damping::Murray { sigma_t: k / r },
             time_step: r,
-            steps,
-            tolerance: 0.0,
+            stopping: Stopping { relative_tolerance: 0.0, max_iterations: steps, ..Stopping::default() },
             edges: P1Edges::Periodic,
             allow_unstable,
+
         };
         let limit = stability::p1::collocated_limit(k, k);
         let e0 = energy(&p1(&lattice, &q, &settings(fraction * limit, 0, false), Some(initial())).unwrap());
@@ -460,7 +487,7 @@ proptest! {
         let step = |f: f64| f * stability::ordinates::von_neumann_limit(s_max, sigma_t * 0.2);
         let run = |time_step: f64, allow_unstable| ordinates(
             &lattice, &quadrature, &vec![sigma_t; n], &vec![0.2; n], &source,
-            &OrdinatesSettings { time_step, tolerance: 0.0, max_steps: 300, allow_unstable },
+            &OrdinatesSettings { time_step, stopping: Stopping { relative_tolerance: 0.0, max_iterations: 300, ..Stopping::default() }, allow_unstable },
         );
         let positivity = stability::ordinates::positivity_limit(s_max, sigma_t * 0.2);
         let ok = run(fraction * positivity.min(step(1.0)), false).unwrap();

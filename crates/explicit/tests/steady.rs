@@ -1,9 +1,9 @@
 //! The steady states of FTCS and Jacobi equal diffusion-mg's on the same discrete problem.
 
 use glam::DVec3;
+use lucent_core::Stopping;
 use lucent_diffusion::{
-    Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Method, Sources,
-    Stopping, solve,
+    Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Method, Sources, solve,
 };
 use lucent_explicit::ExplicitError;
 use lucent_explicit::steady::{Iteration, SteadySettings, ftcs_limit, iterate};
@@ -46,9 +46,11 @@ fn ftcs_and_jacobi_reach_the_multigrid_solution() {
     let exact: Vec<f64> = system.cells.iter().map(|&c| reference.fluence[c]).collect();
     let norm = exact.iter().map(|v| v * v).sum::<f64>().sqrt();
     let settings = SteadySettings {
-        tolerance: 1e-9,
-        max_iterations: 200_000,
-        time_budget: None,
+        stopping: Stopping {
+            relative_tolerance: 1e-9,
+            max_iterations: 200_000,
+            ..Stopping::default()
+        },
         allow_unstable: false,
     };
     let volume = grid.cell_volume();

@@ -3,6 +3,7 @@
 
 use glam::DVec3;
 use lucent_core::StopReason;
+use lucent_core::Stopping;
 use lucent_explicit::convection::{Edges, Light, Model, Sweep, UpwindSettings, propagate};
 use lucent_explicit::scatter::{StepSolver, diffuse};
 use lucent_explicit::{ExplicitError, Lattice, stability};
@@ -65,7 +66,10 @@ fn t2_discrete_beer_lambert() {
         (0.5, 1.6935e-5),
     ] {
         let settings = UpwindSettings {
-            tolerance: 1e-15,
+            stopping: Stopping {
+                relative_tolerance: 1e-15,
+                ..UpwindSettings::default().stopping
+            },
             ..UpwindSettings::default()
         };
         let out = propagate(&lattice, &[sa; 32], &distant(DVec3::X), &settings).unwrap();
@@ -87,7 +91,10 @@ fn t2_discrete_beer_lambert() {
     for (c, ratio) in [(0.25, 0.5), (0.5, 2.0 / 3.0), (1.0, 0.8)] {
         let settings = UpwindSettings {
             courant: c,
-            tolerance: 1e-15,
+            stopping: Stopping {
+                relative_tolerance: 1e-15,
+                ..UpwindSettings::default().stopping
+            },
             ..UpwindSettings::default()
         };
         let out = propagate(&lattice, &[0.2; 32], &distant(DVec3::X), &settings).unwrap();
@@ -140,8 +147,11 @@ fn checkerboard_growth(courant: f64, direction: DVec3, sigma_a: f64) -> f64 {
             courant,
             sweep: Sweep::Jacobi,
             edges: Edges::Periodic,
-            max_iterations: steps,
-            tolerance: 0.0,
+            stopping: Stopping {
+                relative_tolerance: 0.0,
+                max_iterations: steps,
+                ..Stopping::default()
+            },
             allow_unstable: true,
             initial: Some(initial.clone()),
             ..UpwindSettings::default()
@@ -207,7 +217,10 @@ fn t6_warm_and_cold_starts_per_layer() {
                 iterations,
                 warm_start,
             },
-            max_iterations: 1,
+            stopping: Stopping {
+                max_iterations: 1,
+                ..UpwindSettings::default().stopping
+            },
             ..UpwindSettings::default()
         };
         propagate(&lattice, &[sa; 128], &distant(DVec3::X), &settings)
@@ -366,9 +379,7 @@ proptest! {
         for steps in [1, 7, 40] {
             let settings = UpwindSettings {
                 courant,
-                sweep: Sweep::Jacobi,
-                max_iterations: steps,
-                tolerance: 0.0,
+                sweep: Sweep::Jacobi,                stopping: Stopping { relative_tolerance: 0.0, max_iterations: steps, ..Stopping::default() },
                 ..UpwindSettings::default()
             };
             let out = propagate(&lattice, &sa, &distant(direction), &settings).unwrap();
@@ -397,9 +408,7 @@ proptest! {
         let out = propagate(&lattice, &[0.0; 512], &distant(direction), &UpwindSettings {
             courant,
             sweep: Sweep::Jacobi,
-            edges: Edges::Periodic,
-            tolerance: 0.0,
-            max_iterations: 100_000,
+            edges: Edges::Periodic,            stopping: Stopping { relative_tolerance: 0.0, max_iterations: 100_000, ..Stopping::default() },
             allow_unstable: true,
             initial: Some(initial),
             ..UpwindSettings::default()

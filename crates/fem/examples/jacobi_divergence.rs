@@ -3,7 +3,7 @@
 //! do with it on a small grid. `cargo run --release -p lucent-fem --example jacobi_divergence`
 
 use lucent_fem::murray::{Mesh, MurraySystem};
-use lucent_fem::solvers::{Stopping, gmres, jacobi, lu_solve};
+use lucent_fem::solvers::{default_stopping, gmres, jacobi, lu_solve};
 
 #[allow(clippy::print_stdout)]
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -25,14 +25,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let system = MurraySystem::assemble(mesh, 1.0)?;
     let b = system.point_source([3, 3, 3], 1.0);
     let mut x = vec![0.0; b.len()];
-    let j = jacobi(&system.matrix, &b, &mut x, &Stopping::default())?;
+    let j = jacobi(&system.matrix, &b, &mut x, &default_stopping())?;
     println!(
         "Jacobi on a 7³ mesh, K_tΔ = 1: {:?} after {} sweeps",
         j.stop_reason,
         j.residuals.len() - 1
     );
     let mut x = vec![0.0; b.len()];
-    let g = gmres(&system.matrix, &b, &mut x, 60, &Stopping::default())?;
+    let g = gmres(&system.matrix, &b, &mut x, 60, &default_stopping())?;
     println!(
         "GMRES(60): {:?} after {} products",
         g.stop_reason,

@@ -15,7 +15,8 @@
 //! per vertex instead of 1, 16× the matrix entries, and CG iterations growing like 1/h.
 
 use crate::error::FemError;
-use crate::solvers::{Convergence, Stopping};
+use crate::solvers::Convergence;
+use lucent_core::Stopping;
 
 /// A P1 problem on a box of `cells` elements of side `spacing`, constant coefficients.
 #[derive(Debug, Clone, PartialEq)]

@@ -18,7 +18,8 @@
 
 use crate::error::FemError;
 use crate::operator::LinearOperator;
-use crate::solvers::{Convergence, Stopping, lu_solve};
+use crate::solvers::{Convergence, lu_solve};
+use lucent_core::Stopping;
 
 /// A box of `cells` elements of side `spacing`, low corner `origin`, with D and σ_a per
 /// element.

@@ -14,8 +14,9 @@ use lucent_core::{
 use lucent_grid::Grid;
 
 use crate::murray::{Mesh, MurraySystem};
-use crate::solvers::{Stopping, gmres, jacobi};
+use crate::solvers::{default_stopping, gmres, jacobi};
 use crate::sphere::StarMesh;
+use lucent_core::Stopping;
 
 /// `fem-p1-jacobi`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -128,7 +129,8 @@ impl Solver for FemP1Solver {
             let stopping = Stopping {
                 relative_tolerance: options.relative_tolerance,
                 max_iterations: options.max_iterations,
-                ..Stopping::default()
+                time_budget: options.time_budget,
+                ..default_stopping()
             };
             let mut x = vec![0.0; 4 * n];
             let convergence = if self.krylov {
@@ -425,7 +427,8 @@ impl Solver for FemDiffusionSolver {
                     &Stopping {
                         relative_tolerance: options.relative_tolerance,
                         max_iterations: options.max_iterations,
-                        ..Stopping::default()
+                        time_budget: options.time_budget,
+                        ..default_stopping()
                     },
                 )
                 .map_err(|e| invalid("problem", e.to_string()))?;
@@ -662,7 +665,8 @@ impl FemDiffusionSolver {
                     &Stopping {
                         relative_tolerance: options.relative_tolerance,
                         max_iterations: options.max_iterations,
-                        ..Stopping::default()
+                        time_budget: options.time_budget,
+                        ..default_stopping()
                     },
                 )
                 .map_err(|e| invalid("problem", e.to_string()))?;

@@ -3,29 +3,20 @@
 //! partial pivoting for small systems. Each iterative solver reports its residual history
 //! and why it stopped, PETSc-style.
 
-use lucent_core::StopReason;
+use lucent_core::{StopReason, Stopping};
 
 use crate::error::FemError;
 use crate::operator::{LinearOperator, dot, norm};
 
-/// When an iterative solve stops.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Stopping {
-    /// Relative residual ‖b − Ax‖/‖b‖ to reach.
-    pub relative_tolerance: f64,
-    /// Most iterations (matrix–vector products for the Krylov methods' outer count).
-    pub max_iterations: usize,
-    /// Residual growth over the initial one that counts as divergence.
-    pub divergence: f64,
-}
-
-impl Default for Stopping {
-    fn default() -> Self {
-        Self {
-            relative_tolerance: 1e-10,
-            max_iterations: 10_000,
-            divergence: 1e8,
-        }
+/// The finite-element solvers' stopping rule when a caller asks for nothing else: a
+/// relative residual of 10⁻¹⁰, 10 000 iterations, divergence at 10⁸ times the initial
+/// residual (Jacobi on Murray's system must be seen to blow up, not merely stall).
+pub fn default_stopping() -> Stopping {
+    Stopping {
+        relative_tolerance: 1e-10,
+        max_iterations: 10_000,
+        divergence: 1e8,
+        ..Stopping::default()
     }
 }
 
@@ -45,22 +36,16 @@ fn residual(op: &dyn LinearOperator, b: &[f64], x: &[f64], r: &mut [f64]) {
     }
 }
 
-/// `Some` if the iteration must stop at relative residual `rel`.
-fn verdict(stopping: &Stopping, rel: f64, iteration: usize) -> Option<StopReason> {
-    if !rel.is_finite() {
-        Some(StopReason::DivergedNonFinite { iteration })
-    } else if rel <= stopping.relative_tolerance {
-        Some(StopReason::ConvergedRelative { residual: rel })
-    } else if rel > stopping.divergence {
-        Some(StopReason::DivergedGrowth {
-            growth: rel,
-            iteration,
-        })
-    } else if iteration >= stopping.max_iterations {
-        Some(StopReason::IterationLimit { residual: rel })
-    } else {
-        None
-    }
+/// `Some` if the iteration must stop at relative residual `rel` (of ‖b‖ = `b_norm`), by
+/// the one rule of [`Stopping::verdict`].
+fn verdict(
+    stopping: &Stopping,
+    rel: f64,
+    b_norm: f64,
+    iteration: usize,
+    started: std::time::Instant,
+) -> Option<StopReason> {
+    stopping.verdict(iteration, rel, rel * b_norm, 1.0, started)
 }
 
 /// The operator, right-hand side and iterate must have one size.
@@ -97,6 +82,7 @@ pub fn jacobi(
     check_sizes(a, b, x)?;
     let d = diagonal(a)?;
     let b_norm = norm(b).max(f64::MIN_POSITIVE);
+    let started = std::time::Instant::now();
     let mut r = vec![0.0; b.len()];
     let mut residuals = Vec::new();
     let mut last = x.to_vec();
@@ -105,7 +91,7 @@ pub fn jacobi(
         residual(a, b, x, &mut r);
         let rel = norm(&r) / b_norm;
         residuals.push(rel);
-        if let Some(stop_reason) = verdict(stopping, rel, iteration) {
+        if let Some(stop_reason) = verdict(stopping, rel, b_norm, iteration, started) {
             if !rel.is_finite() {
                 x.copy_from_slice(&last);
             }
@@ -133,6 +119,7 @@ pub fn gauss_seidel(
     let d = diagonal(a)?;
     let csr = a.to_csr();
     let b_norm = norm(b).max(f64::MIN_POSITIVE);
+    let started = std::time::Instant::now();
     let mut r = vec![0.0; b.len()];
     let mut residuals = Vec::new();
     let mut iteration = 0;
@@ -140,7 +127,7 @@ pub fn gauss_seidel(
         residual(&csr, b, x, &mut r);
         let rel = norm(&r) / b_norm;
         residuals.push(rel);
-        if let Some(stop_reason) = verdict(stopping, rel, iteration) {
+        if let Some(stop_reason) = verdict(stopping, rel, b_norm, iteration, started) {
             return Ok(Convergence {
                 residuals,
                 stop_reason,
@@ -168,6 +155,7 @@ pub fn bicgstab(
     check_sizes(op, b, x)?;
     let n = b.len();
     let b_norm = norm(b).max(f64::MIN_POSITIVE);
+    let started = std::time::Instant::now();
     let mut r = vec![0.0; n];
     residual(op, b, x, &mut r);
     let r0 = r.clone();
@@ -176,7 +164,9 @@ pub fn bicgstab(
     let mut residuals = vec![norm(&r) / b_norm];
     loop {
         let iteration = residuals.len() - 1;
-        if let Some(stop_reason) = verdict(stopping, residuals[iteration], iteration) {
+        if let Some(stop_reason) =
+            verdict(stopping, residuals[iteration], b_norm, iteration, started)
+        {
             return Ok(Convergence {
                 residuals,
                 stop_reason,
@@ -227,13 +217,14 @@ pub fn gmres(
     let n = b.len();
     let m = restart.max(1);
     let b_norm = norm(b).max(f64::MIN_POSITIVE);
+    let started = std::time::Instant::now();
     let mut r = vec![0.0; n];
     residual(op, b, x, &mut r);
     let mut residuals = vec![norm(&r) / b_norm];
     let mut iteration = 0;
     loop {
         let beta = norm(&r);
-        if let Some(stop_reason) = verdict(stopping, beta / b_norm, iteration) {
+        if let Some(stop_reason) = verdict(stopping, beta / b_norm, b_norm, iteration, started) {
             return Ok(Convergence {
                 residuals,
                 stop_reason,
@@ -318,6 +309,7 @@ pub fn conjugate_gradient(
     check_sizes(op, b, x)?;
     let n = b.len();
     let b_norm = norm(b).max(f64::MIN_POSITIVE);
+    let started = std::time::Instant::now();
     let mut r = vec![0.0; n];
     residual(op, b, x, &mut r);
     let mut z = vec![0.0; n];
@@ -328,7 +320,9 @@ pub fn conjugate_gradient(
     let mut residuals = vec![norm(&r) / b_norm];
     loop {
         let iteration = residuals.len() - 1;
-        if let Some(stop_reason) = verdict(stopping, residuals[iteration], iteration) {
+        if let Some(stop_reason) =
+            verdict(stopping, residuals[iteration], b_norm, iteration, started)
+        {
             return Ok(Convergence {
                 residuals,
                 stop_reason,

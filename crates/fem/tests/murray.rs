@@ -4,8 +4,9 @@
 use std::f64::consts::PI;
 
 use lucent_core::StopReason;
+use lucent_core::Stopping;
 use lucent_fem::murray::{Mesh, MurraySystem};
-use lucent_fem::solvers::{Stopping, bicgstab, gauss_seidel, gmres, jacobi, lu_solve};
+use lucent_fem::solvers::{bicgstab, default_stopping, gauss_seidel, gmres, jacobi, lu_solve};
 use lucent_fem::{Dense, LinearOperator};
 use proptest::prelude::*;
 
@@ -102,7 +103,7 @@ fn jacobi_diverges_and_is_stopped_while_krylov_and_lu_solve_it() {
     let b = s.point_source([3, 3, 3], 1.0);
     let n = b.len();
     let mut x = vec![0.0; n];
-    let j = jacobi(&s.matrix, &b, &mut x, &Stopping::default()).unwrap();
+    let j = jacobi(&s.matrix, &b, &mut x, &default_stopping()).unwrap();
     assert!(
         matches!(j.stop_reason, StopReason::DivergedGrowth { .. }),
         "{:?}",
@@ -114,7 +115,7 @@ fn jacobi_diverges_and_is_stopped_while_krylov_and_lu_solve_it() {
     let stopping = Stopping {
         relative_tolerance: 1e-10,
         max_iterations: 20_000,
-        ..Stopping::default()
+        ..default_stopping()
     };
     let mut xg = vec![0.0; n];
     let g = gmres(&s.matrix, &b, &mut xg, 60, &stopping).unwrap();
@@ -201,7 +202,7 @@ proptest! {
         let b: Vec<f64> = (0..n).map(|i| ((i * 7 + 3) % 11) as f64 - 5.0).collect();
         let exact = lu_solve(&a, &b).unwrap();
         let scale = exact.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
-        let stopping = Stopping { relative_tolerance: 1e-12, max_iterations: 2000, ..Stopping::default() };
+        let stopping = Stopping { relative_tolerance: 1e-12, max_iterations: 2000, ..default_stopping() };
         let mut x = vec![0.0; n];
         let g = gmres(&a, &b, &mut x, 20, &stopping).unwrap();
         prop_assert!(g.stop_reason.is_converged(), "{:?}", g.stop_reason);
@@ -240,7 +241,7 @@ fn gauss_seidel_converges_on_a_diagonally_dominant_fe_mass_system() {
     let stopping = Stopping {
         relative_tolerance: 1e-10,
         max_iterations: 5000,
-        ..Stopping::default()
+        ..default_stopping()
     };
     let mut x = vec![0.0; n];
     let gs = gauss_seidel(&mass, &b, &mut x, &stopping).unwrap();

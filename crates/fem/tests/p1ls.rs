@@ -3,8 +3,9 @@
 
 use std::f64::consts::PI;
 
+use lucent_core::Stopping;
 use lucent_fem::p1ls::P1LeastSquares;
-use lucent_fem::solvers::Stopping;
+use lucent_fem::solvers::default_stopping;
 
 /// φ = cos πx cos πy cos πz on [0, 1]³ with σ_a = 0.5, σ_s = 4, g = 0.6 (σ_t′ = 2.1):
 /// E = −∇φ/(3σ_t′) has E·n = 0 on the faces (reflecting box), q = ∇·E + σ_a φ. Max nodal
@@ -28,7 +29,7 @@ fn manufactured(n: usize) -> (f64, usize) {
         &Stopping {
             relative_tolerance: 1e-10,
             max_iterations: 20_000,
-            ..Stopping::default()
+            ..default_stopping()
         },
     )
     .unwrap();
@@ -84,7 +85,7 @@ fn least_squares_p1_matches_primal_diffusion_and_stays_positive() {
         &Stopping {
             relative_tolerance: 1e-10,
             max_iterations: 20_000,
-            ..Stopping::default()
+            ..default_stopping()
         },
     )
     .unwrap();
@@ -107,7 +108,7 @@ fn least_squares_p1_matches_primal_diffusion_and_stays_positive() {
     let load = primal.load(q);
     let mg = Q1Multigrid::new(&primal, matrix, 2);
     let mut y = vec![0.0; load.len()];
-    let c = mg.solve(&load, &mut y, &Stopping::default()).unwrap();
+    let c = mg.solve(&load, &mut y, &default_stopping()).unwrap();
     assert!(c.stop_reason.is_converged());
     let d = phi
         .iter()

@@ -3,8 +3,9 @@
 
 use std::f64::consts::PI;
 
+use lucent_core::Stopping;
 use lucent_fem::q1::{Q1Multigrid, Q1Problem};
-use lucent_fem::solvers::Stopping;
+use lucent_fem::solvers::default_stopping;
 
 /// Max nodal error for φ = cos πx cos πy cos πz on [0, 1]³ (reflecting faces), D = 1 + x/2
 /// per element (at its centre), σ_a = 1; and the MG-CG iteration count.
@@ -39,7 +40,7 @@ fn manufactured(n: usize) -> (f64, usize) {
             &Stopping {
                 relative_tolerance: 1e-10,
                 max_iterations: 200,
-                ..Stopping::default()
+                ..default_stopping()
             },
         )
         .unwrap();
@@ -122,7 +123,7 @@ fn half_space(layers_per_mm: usize) -> f64 {
             &Stopping {
                 relative_tolerance: 1e-12,
                 max_iterations: 500,
-                ..Stopping::default()
+                ..default_stopping()
             },
         )
         .unwrap();

@@ -1,7 +1,8 @@
 //! Q1 on the boundary-fitted ball against the closed-form Robin sphere (note 002 T7).
 
+use lucent_core::Stopping;
 use lucent_fem::q1::Q1Multigrid;
-use lucent_fem::solvers::Stopping;
+use lucent_fem::solvers::default_stopping;
 use lucent_fem::sphere::StarMesh;
 use lucent_optics::{Dielectric, DiffuseFresnel, DiffusionMedium, OpticalCoefficients};
 
@@ -34,7 +35,7 @@ fn ball(cells: usize) -> ([f64; 3], f64) {
             &Stopping {
                 relative_tolerance: 1e-10,
                 max_iterations: 200,
-                ..Stopping::default()
+                ..default_stopping()
             },
         )
         .unwrap();

@@ -1,0 +1,225 @@
+//! One vocabulary for iterative methods: when to stop ([`Stopping`]) and what happened
+//! ([`History`]), used by every iterative solver in every crate, so that a tolerance, an
+//! iteration limit, a time budget and a divergence test mean the same everywhere and end in
+//! the same [`StopReason`] (PETSc's KSP converged and diverged reasons).
+//!
+//! The order of the tests is fixed: a non-finite residual first (diverged), then the
+//! relative and the absolute tolerance (converged), then growth beyond `divergence` times
+//! the initial residual (diverged), then the iteration limit, then the time budget.
+
+use std::time::{Duration, Instant};
+
+use crate::solver::{SolveOptions, StopReason};
+
+/// When an iterative method stops.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stopping {
+    /// Stop when the residual, relative to the method's reference (usually ‖b‖ or the first
+    /// residual), falls to this.
+    pub relative_tolerance: f64,
+    /// Stop when the absolute residual falls to this.
+    pub absolute_tolerance: f64,
+    /// Stop after this many iterations.
+    pub max_iterations: usize,
+    /// Stop after this much wall time since the history started.
+    pub time_budget: Option<Duration>,
+    /// Stop as diverged when the relative residual grows beyond this many times
+    /// max(initial relative residual, 1).
+    pub divergence: f64,
+}
+
+impl Default for Stopping {
+    fn default() -> Self {
+        Self {
+            relative_tolerance: 1e-8,
+            absolute_tolerance: 0.0,
+            max_iterations: 200,
+            time_budget: None,
+            divergence: 1e6,
+        }
+    }
+}
+
+impl Stopping {
+    /// The stopping rule a caller's [`SolveOptions`] ask for (divergence at 10⁶).
+    pub fn from_options(options: &SolveOptions) -> Self {
+        Self {
+            relative_tolerance: options.relative_tolerance,
+            absolute_tolerance: options.absolute_tolerance,
+            max_iterations: options.max_iterations,
+            time_budget: options.time_budget,
+            ..Self::default()
+        }
+    }
+
+    /// The verdict after `iteration` iterations at `relative` and `absolute` residual,
+    /// `initial` being the relative residual the iteration started from; `None`: go on.
+    pub fn verdict(
+        &self,
+        iteration: usize,
+        relative: f64,
+        absolute: f64,
+        initial: f64,
+        started: Instant,
+    ) -> Option<StopReason> {
+        if !(relative.is_finite() && absolute.is_finite()) {
+            return Some(StopReason::DivergedNonFinite { iteration });
+        }
+        if relative <= self.relative_tolerance {
+            return Some(StopReason::ConvergedRelative { residual: relative });
+        }
+        if absolute <= self.absolute_tolerance {
+            return Some(StopReason::ConvergedAbsolute { residual: absolute });
+        }
+        if relative > self.divergence * initial.max(1.0) {
+            return Some(StopReason::DivergedGrowth {
+                growth: relative / initial.max(f64::MIN_POSITIVE),
+                iteration,
+            });
+        }
+        if iteration >= self.max_iterations {
+            return Some(StopReason::IterationLimit { residual: relative });
+        }
+        if self.time_budget.is_some_and(|t| started.elapsed() >= t) {
+            return Some(StopReason::TimeLimit { residual: relative });
+        }
+        None
+    }
+}
+
+/// The residual record of an iterative solve: the relative residual before the first
+/// iteration and after each, and when it started.
+#[derive(Debug, Clone, PartialEq)]
+pub struct History {
+    residuals: Vec<f64>,
+    started: Instant,
+}
+
+impl Default for History {
+    fn default() -> Self {
+        Self::start()
+    }
+}
+
+impl History {
+    /// An empty history; the time budget counts from now.
+    pub fn start() -> Self {
+        Self {
+            residuals: Vec::new(),
+            started: Instant::now(),
+        }
+    }
+
+    /// Records the residual after the next iteration (the first record is the initial
+    /// residual, iteration 0) and says whether `stopping` stops here.
+    pub fn record(
+        &mut self,
+        stopping: &Stopping,
+        relative: f64,
+        absolute: f64,
+    ) -> Option<StopReason> {
+        let iteration = self.residuals.len();
+        self.residuals.push(relative);
+        let initial = self.residuals[0];
+        stopping.verdict(iteration, relative, absolute, initial, self.started)
+    }
+
+    /// Records the residual after `iteration` steps of a march that has no initial residual
+    /// (the first record is after step 1) and says whether `stopping` stops here.
+    pub fn record_step(
+        &mut self,
+        stopping: &Stopping,
+        iteration: usize,
+        relative: f64,
+        absolute: f64,
+    ) -> Option<StopReason> {
+        self.residuals.push(relative);
+        let initial = self.residuals[0];
+        stopping.verdict(iteration, relative, absolute, initial, self.started)
+    }
+
+    /// Iterations recorded after the initial residual.
+    pub fn iterations(&self) -> usize {
+        self.residuals.len().saturating_sub(1)
+    }
+
+    /// The relative residuals recorded.
+    pub fn residuals(&self) -> &[f64] {
+        &self.residuals
+    }
+
+    /// The last relative residual (infinity before any).
+    pub fn last(&self) -> f64 {
+        self.residuals.last().copied().unwrap_or(f64::INFINITY)
+    }
+
+    /// When the history started.
+    pub fn started(&self) -> Instant {
+        self.started
+    }
+
+    /// The residuals, consumed.
+    pub fn into_residuals(self) -> Vec<f64> {
+        self.residuals
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_tests_come_in_their_fixed_order() {
+        let s = Stopping {
+            relative_tolerance: 1e-3,
+            absolute_tolerance: 1e-9,
+            max_iterations: 3,
+            time_budget: None,
+            divergence: 100.0,
+        };
+        let mut h = History::start();
+        assert_eq!(h.record(&s, 1.0, 1.0), None);
+        assert_eq!(h.record(&s, 0.5, 0.5), None);
+        assert!(matches!(
+            h.record(&s, f64::NAN, 1.0),
+            Some(StopReason::DivergedNonFinite { iteration: 2 })
+        ));
+        let mut h = History::start();
+        h.record(&s, 1.0, 1.0);
+        assert!(matches!(
+            h.record(&s, 1e-3, 1.0),
+            Some(StopReason::ConvergedRelative { .. })
+        ));
+        let mut h = History::start();
+        h.record(&s, 1.0, 1.0);
+        assert!(matches!(
+            h.record(&s, 0.9, 1e-10),
+            Some(StopReason::ConvergedAbsolute { .. })
+        ));
+        let mut h = History::start();
+        h.record(&s, 2.0, 1.0);
+        assert!(matches!(
+            h.record(&s, 201.0, 1.0),
+            Some(StopReason::DivergedGrowth { .. })
+        ));
+        let mut h = History::start();
+        for r in [1.0, 0.9, 0.8] {
+            assert_eq!(h.record(&s, r, r), None);
+        }
+        assert!(matches!(
+            h.record(&s, 0.7, 0.7),
+            Some(StopReason::IterationLimit { .. })
+        ));
+        assert_eq!(h.iterations(), 3);
+        let budget = Stopping {
+            time_budget: Some(Duration::ZERO),
+            max_iterations: 100,
+            ..s
+        };
+        let mut h = History::start();
+        assert!(matches!(
+            h.record(&budget, 1.0, 1.0),
+            Some(StopReason::TimeLimit { .. })
+        ));
+    }
+}
