@@ -2,7 +2,7 @@
 //! allow, its fluence compared with a reference under a stated tolerance.
 //!
 //! The suite lives in `examples/scenes/suite/` with `tolerances.toml` beside it. The
-//! reference is the analytic solution where one exists (the marble sphere of note 002, T7),
+//! reference is the analytic solution where one exists (the marble sphere, Mertens T7),
 //! otherwise Monte Carlo (`lucent-mc`) run until its mean relative standard error is below
 //! a fifth of the tolerance — counting only uncollided light for solvers whose fluence is
 //! uncollided. Monte Carlo references are cached under the given folder (`target/`), keyed
@@ -575,7 +575,7 @@ const MARBLE_NOTE: &str = "
 ## Marble sphere: transport against diffusion
 
 Monte Carlo (a Fresnel interface on the embedded sphere: reflection, refraction, total
-internal reflection) against the analytic diffusion solution of note 002 T7 with the Robin
+internal reflection) against the analytic diffusion solution (Mertens T7) with the Robin
 condition, as the ratio of fluences averaged over 1 mm shells (measured 2026-11-23 on the
 dev machine with the suite scene and `McConfig { particles: 8000, batches: 8 }`; `cargo test
 --release --test cross_check fresnel` asserts the compared shells within 2.5% at 4000 paths

@@ -484,7 +484,7 @@ mod tests {
         let text = String::from_utf8(out).expect("utf-8");
         // Header, column names, and 12 materials × 3 channels.
         assert_eq!(text.lines().count(), 2 + 36);
-        // Marble red: R dipole 0.86654 and the exact Robin half-space 0.86633 (note 002, T4/T5).
+        // Marble red: R dipole 0.86654 and the exact Robin half-space 0.86633 (Mertens T4/T5).
         let marble_red = text
             .lines()
             .find(|l| l.starts_with("Marble") && l.contains(" R "))

@@ -138,3 +138,61 @@ fn benchmarks_md_has_its_table() {
         "BENCHMARKS.md must keep the what/command/machine/result/date table"
     );
 }
+
+/// Files a user of the repository reads: every `.rs`, `.md` and `.toml` below the root, but
+/// not build output.
+fn user_facing_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        if path.is_dir() {
+            if name != "target" && !name.starts_with('.') {
+                user_facing_files(&path, out);
+            }
+        } else if path
+            .extension()
+            .is_some_and(|e| e == "rs" || e == "md" || e == "toml")
+        {
+            out.push(path);
+        }
+    }
+}
+
+#[test]
+fn citations_point_at_what_a_user_has() {
+    // The analyses the project was built from, and its issue tracker, are not part of the
+    // repository: code and docs cite the paper or thesis (author, chapter, equation) and
+    // docs/reference-cases.md, which holds the checked cases and corrections they rely on.
+    let forbidden = [
+        "shared/notes",
+        "anchors.md",
+        "note 000",
+        "note 001",
+        "note 002",
+        "note 004",
+        "_murray.md",
+        "_zhangma.md",
+        "_mertens.md",
+        "_bernabei.md",
+    ];
+    let mut files = Vec::new();
+    user_facing_files(root(), &mut files);
+    let this = root().join("tests/tidy.rs");
+    let mut offences = Vec::new();
+    for file in files.iter().filter(|f| **f != this) {
+        let text = fs::read_to_string(file).unwrap_or_default();
+        for (n, line) in text.lines().enumerate() {
+            let lower = line.to_lowercase();
+            let issue = lower
+                .match_indices("issue ")
+                .any(|(i, _)| lower[i + 6..].starts_with(|c: char| c.is_ascii_digit()));
+            if issue || forbidden.iter().any(|f| lower.contains(f)) {
+                offences.push(format!("{}:{}: {line}", file.display(), n + 1));
+            }
+        }
+    }
+    assert!(offences.is_empty(), "{}", offences.join("\n"));
+}

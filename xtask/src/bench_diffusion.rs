@@ -1,5 +1,5 @@
 //! `cargo xtask bench-diffusion [N...]`: lucent-diffusion's multigrid on the marble sphere
-//! (note 002 T7: R = 10 mm, point source, Robin A = 2.341, embedded boundary) at N³ (64,
+//! (Mertens T7: R = 10 mm, point source, Robin A = 2.341, embedded boundary) at N³ (64,
 //! 128 and 256 by default), against the machine's copy bandwidth measured in the same run,
 //! and side by side with pyamg (Ruge–Stüben AMG + CG) and scipy CG on the same matrix,
 //! exported as NumPy arrays, when `python3 -c "import pyamg, scipy"` works.

@@ -1,7 +1,7 @@
 //! `cargo xtask bench-dom [N] [ORDER]`: a converged discrete-ordinates solve (relative
 //! tolerance 1e-4) of a procedural cloud at N³ (128 by default) with level-symmetric
 //! S_ORDER (6: 48 directions), Henyey–Greenstein g = 0.6, albedo 0.95, under a sun: the
-//! issue 9 benchmark, against Bernabei's 5.3 s per frame at 128³ for three unconverged
+//! the discrete-ordinates benchmark, against Bernabei's 5.3 s per frame at 128³ for three unconverged
 //! iterations on a GTX 580. Prints wall time (with `direct` and set-up), sweeps, sweep
 //! time, time per cell-direction update and the sweeps' GB/s by their minimal traffic.
 

@@ -1,6 +1,6 @@
 //! lucent-diffusion on its own: a marble sphere (R = 10 mm, η = 1.3) with a unit point
-//! source, solved by multigrid at a chosen resolution, against the closed form (note 002
-//! T7). `cargo run --release -p lucent-diffusion --example marble_sphere -- 128`
+//! source, solved by multigrid at a chosen resolution, against the closed form (Mertens
+//! T7, docs/reference-cases.md). `cargo run --release -p lucent-diffusion --example marble_sphere -- 128`
 
 use glam::DVec3;
 use lucent_core::Boundary;

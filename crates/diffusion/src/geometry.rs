@@ -10,13 +10,13 @@
 //!
 //! The boundary facet of a cut cell follows from the closed-surface identity
 //! Σ_f α_f A_f n_f + a_B n_B = 0: its area a_B and outward normal n_B are
-//! a_B n_B = Σ_axes (A_low − A_high) ê (note 002 §2.11), consistent with the apertures by
+//! a_B n_B = Σ_axes (A_low − A_high) ê (Mertens ch. 4), consistent with the apertures by
 //! construction, so the discrete divergence theorem holds cell by cell. Its signed distance
 //! from the cell's centre is −s(centre).
 //!
 //! [`Discretisation::Staircase`] is the finite-difference alternative: a cell is in or out
 //! by the sign of s at its centre, and the boundary is made of whole cell faces. Its surface
-//! area does not converge to the true one (a sphere's tends to 1.5 × 4πR², note 002 T16),
+//! area does not converge to the true one (a sphere's tends to 1.5 × 4πR², Mertens T16),
 //! which is why the embedded boundary is needed (Mertens' Figure 4.1).
 
 use glam::DVec3;
@@ -210,7 +210,7 @@ impl CellGeometry {
         let mut volume_fraction: Vec<f32> = cells.iter().map(|c| c.0).collect();
         let apertures = [ax, ay, az];
         // Any cell that a face aperture opens into must be an unknown, even if its sampled
-        // volume rounds to zero (otherwise flux leaks into inactive cells: note 002 §2.11).
+        // volume rounds to zero (otherwise flux leaks into inactive cells).
         let areas = [h.y * h.z, h.x * h.z, h.x * h.y];
         let mut patches = Vec::new();
         for (c, _) in cells.iter().enumerate().filter(|(_, cell)| cell.1) {
@@ -529,7 +529,7 @@ mod tests {
 
     #[test]
     fn staircase_area_tends_to_one_and_a_half_times_the_sphere() {
-        // Note 002 T16: 1.5067, 1.4973, 1.4998 at 64³, 128³, 256³ (of the sphere's area).
+        // Mertens T16: 1.5067, 1.4973, 1.4998 at 64³, 128³, 256³ (of the sphere's area).
         let geometry =
             GridGeometry::from_bounds([64; 3], DVec3::splat(-11.0), DVec3::splat(11.0)).unwrap();
         let g = CellGeometry::from_sdf(

@@ -1,5 +1,5 @@
 //! Steady diffusion of light with an embedded boundary, solved by geometric multigrid
-//! (Mertens 2005, chapter 4; `shared/notes/002_mertens.md` §2.11–2.14).
+//! (Mertens 2005, chapter 4; docs/reference-cases.md).
 //!
 //! # What it solves
 //!
@@ -7,7 +7,7 @@
 //! D = 1/(3σ_t′) (length), σ_t′ = σ_a + (1 − g)σ_s, σ_a (1/length), an isotropic source
 //! density Q₀ and first moment Q₁ (W/length³). The Q₁ sign is the one derived from the P1
 //! moment equations (Jensen et al. 2001, eq. 6); Mertens' thesis prints it reversed
-//! (note 002 §2.2, §8.1).
+//! (derived, not the thesis's: docs/reference-cases.md).
 //!
 //! Boundaries, on an embedded surface given by a signed distance function and on the
 //! grid's box, each with its own condition:

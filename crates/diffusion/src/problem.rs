@@ -2,7 +2,7 @@
 //! sources, assembled into the operator's finest level and a right-hand side; and the
 //! energy balance of a solution.
 //!
-//! Flux form, with E = −D∇φ + 3D Q₁ the diffuse flux (note 002 §2.2, sign derived, not the
+//! Flux form, with E = −D∇φ + 3D Q₁ the diffuse flux (docs/reference-cases.md, sign derived, not the
 //! thesis's): ∇·E + σ_a φ = Q₀. Integrated over cell i (volume fraction κ_i, volume V):
 //!
 //! Σ_f c_f (φ_i − φ_j) + Σ_p F_p + σ_a κ_i V φ_i = κ_i V Q₀ − Σ_f 3 D_f α_f A_f (Q₁·n_f)

@@ -1,4 +1,4 @@
-//! lucent-diffusion against closed-form diffusion solutions (note 002 T7, T8, T9).
+//! lucent-diffusion against closed-form diffusion solutions (Mertens T7, T8, T9 of docs/reference-cases.md).
 
 use glam::{DVec2, DVec3};
 use lucent_core::Stopping;
@@ -127,7 +127,7 @@ impl Sphere {
 
 #[test]
 fn t7_spheres_at_64_cubed() {
-    // Note 002 T7: marble red R = 10 and 5, skin1 red R = 5, Groenhuis A (η = 1.3). The
+    // Mertens T7: marble red R = 10 and 5, skin1 red R = 5, Groenhuis A (η = 1.3). The
     // issue asks ≤ 2% at R/4, R/2 and R at 64³; measured at most 0.97% (the worst cell
     // within h/2 of R/4 or R/2, marble R = 10 at R/4) and 0.05% (area-weighted surface
     // fluence; the facets' area off by more than 5% is 5e-7 of the total). Energy balance to
@@ -201,7 +201,7 @@ fn sphere_converges_at_second_order() {
 
 #[test]
 fn tilted_half_space_with_a_plane_source() {
-    // Note 002 T9 with the surface tilted off the grid's axes: medium {n·x < c}, a plane
+    // Mertens T9 with the surface tilted off the grid's axes: medium {n·x < c}, a plane
     // source of unit strength at depth z′ = 1 mm parallel to it (spread over one cell
     // height), Robin condition on the surface, reflecting box faces far from the compared
     // column. σ_a = 0.1, σ′_s = 0.9 per mm: diffusion length 1.8 mm, so the box's sides,
@@ -304,7 +304,7 @@ fn tilted_half_space_with_a_plane_source() {
     );
 }
 
-/// The 2D disc of note 002 §4 (Mertens' Figure 4.1): a 100 × 100 (or finer) grid over a
+/// The 2D disc of Mertens T8 (the thesis's Figure 4.1): a 100 × 100 (or finer) grid over a
 /// 10 mm square, one cell thick with reflecting faces, a circle of radius 4.37 mm and a
 /// unit source between the four middle cells. Returns the worst relative error of the cells
 /// that carry the boundary, against the analytic solution at their centres.
@@ -361,7 +361,7 @@ fn disc_boundary_error(n: usize, discretisation: Discretisation) -> (f64, f64) {
 
 #[test]
 fn figure_4_1_staircase_fails_where_the_embedded_boundary_holds() {
-    // Note 002 T8 and §4: the staircase's boundary cells are off by 13–27% and do not
+    // Mertens T8: the staircase's boundary cells are off by 13–27% and do not
     // converge (its rim is 8R long instead of 2πR, so it leaks too much); the embedded
     // boundary's must be within 2% at h = R/350. Measured: staircase −25% (N = 100) and
     // −26% (N = 400), leaking 0.5% too much at both; embedded boundary −0.24% already at

@@ -2,7 +2,7 @@
 //! directions, where sources and in-scattered radiance are kept per cell), the
 //! interpolation between them and the discrete phase matrix.
 //!
-//! # Storage and propagation (Bernabei §5.2, note 004 §2.8.1)
+//! # Storage and propagation (Bernabei §5.2; docs/reference-cases.md)
 //!
 //! Memory goes as M per cell, sweep accuracy (ray effects) as N, so Bernabei keeps M small
 //! and sweeps N ≫ M directions, interpolating the stored source to each propagation
@@ -23,7 +23,7 @@
 //! p̄(ω_n → ω_m) = p(ω_n·ω_m)/Σ_m′ w_m′ p(ω_n·ω_m′), normalised so that
 //! Σ_m w_m p̄ = 1 (energy is conserved exactly under the quadrature), then mixed with an
 //! isotropic (or one-direction) lobe so that its first moment equals the phase function's
-//! g: point-sampling a forward peak on a coarse set shifts g (note 004 §8.4: g = 0.6 comes
+//! g: point-sampling a forward peak on a coarse set shifts g (g = 0.6 comes
 //! out 0.79 on the 8 octant directions). Where the set cannot reach g (a forward peak
 //! sharper than its spacing) the closest achievable g is used.
 

@@ -24,7 +24,7 @@
 //!   (uniform inflow crosses an empty cell unchanged, and S s is added along the chord)
 //!   instead of a 0/0. Replacing the mean of e^{−σ_t s} by e^{−σ_t s̄} is exact for
 //!   σ_t = 0 and along axis-aligned directions (one chord length), and otherwise
-//!   overestimates attenuation: note 004 §8.2 measures 0.5% at σ_t h = 0.1, 1–5% at 1 and
+//!   overestimates attenuation: its measured error (docs/reference-cases.md) is 0.5% at σ_t h = 0.1, 1–5% at 1 and
 //!   up to 50% at 5 (reproduced in this crate's tests). ψ̄ then comes from the balance, so
 //!   the scheme conserves energy; in cells with σ_t h < 10⁻⁶ the balance is 0/0 and ψ̄ is
 //!   the flux-weighted mean of inflow and outflow instead.

@@ -1,4 +1,4 @@
-//! Discrete ordinates with transport sweeps (Bernabei's thesis, chapter 5; issue 9): the
+//! Discrete ordinates with transport sweeps (Bernabei's thesis, chapter 5): the
 //! accurate deterministic solver for media where diffusion fails (strongly anisotropic
 //! scattering, low albedo, optically thin regions).
 //!
@@ -19,7 +19,7 @@
 //!
 //! - [`angular`]: N propagation directions (level-symmetric S_N or the nested octahedral
 //!   family of `lucent-optics`), M ≤ N storage directions with a Sinkhorn-normalised
-//!   interpolation (Bernabei's is off by ±15%, note 004 §2.8.1), and a discrete phase
+//!   interpolation (Bernabei's is off by ±15%: docs/reference-cases.md), and a discrete phase
 //!   matrix normalised to conserve energy exactly and corrected to the phase function's g.
 //! - [`sweep`]: the eight octant sweeps, wavefronts of blocks (I + J + K = const), in
 //!   parallel over the blocks of a hyperplane and cell by cell inside each block.

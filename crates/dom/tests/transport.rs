@@ -180,7 +180,7 @@ fn energy_balances_to_1e8_at_albedo_half_and_099() {
 
 #[test]
 fn an_infinite_medium_gives_q_over_sigma_a_with_coarse_storage() {
-    // Note 004 §6 test 10: a uniform isotropic source q in an infinite medium (a box
+    // An exact case: a uniform isotropic source q in an infinite medium (a box
     // whose walls reflect everything diffusely) must give L = q/σ_a in every direction,
     // whatever the phase function, also when sources are stored on 8 directions and swept
     // on 80: the interpolation keeps an isotropic source isotropic and the phase matrix

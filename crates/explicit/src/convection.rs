@@ -1,6 +1,6 @@
 //! Zhang & Ma's illumination: per light, first-order upwind convection–absorption to
 //! steady state (Eq. 12, scheme Eq. 16), then one implicit diffusion step for the
-//! multiple scattering (Eq. 23), `shared/notes/001_zhangma.md`.
+//! multiple scattering (Eq. 23); checked cases in docs/reference-cases.md.
 //!
 //! Per light the energy density ρ obeys ∂ρ/∂t = −c u·∇ρ − σ_a ρ, marched with
 //!
@@ -17,7 +17,7 @@
 //! at the face centre, so a point light falls off as 1/r² in vacuum, and the absorption
 //! per step is σ_a cΔt, which makes the steady state independent of C.
 //!
-//! Stability (note 001 §2.10, T4): the paper states C ≤ 1, the one-dimensional bound. In
+//! Stability (Zhang & Ma T4): the paper states C ≤ 1, the one-dimensional bound. In
 //! 3D the scheme is monotone and stable only for C·(|u| + |v| + |w|) ≤ 1
 //! ([`crate::stability::upwind`]); `propagate` refuses larger C unless `allow_unstable`.
 

@@ -1,5 +1,5 @@
 //! Murray's time-dependent diffusion with FTCS (thesis ch. 4, Eq. 4.4/4.8;
-//! `shared/notes/000_murray.md` §2.10), marched to steady state.
+//! docs/reference-cases.md), marched to steady state.
 //!
 //! (1/c) ∂φ/∂t = D∇²φ + s ∇D·∇φ − σ_a φ + q, per step of cΔt:
 //!

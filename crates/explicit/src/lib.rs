@@ -1,6 +1,6 @@
 //! Explicit schemes of the seeds, implemented faithfully, with their true stability limits
-//! (Murray's thesis ch. 3–4, `shared/notes/000_murray.md`; Zhang & Ma,
-//! `shared/notes/001_zhangma.md`).
+//! (Murray's thesis ch. 3–4; Zhang & Ma's paper; the checked cases and corrections are in
+//! docs/reference-cases.md).
 //!
 //! | module | scheme | equation | stable for (correct bound) | the paper said |
 //! |---|---|---|---|---|

@@ -1,5 +1,5 @@
 //! The unsteady RTE over a set of discrete directions with upwind FTCS (Murray §3.4.1;
-//! note 000 §2.7), isotropic scattering:
+//! ch. 3; the sign of ω·∇L corrected, docs/reference-cases.md), isotropic scattering:
 //!
 //! (1/c) ∂L_d/∂t + ω_d·∇L_d = −σ_t L_d + (σ_s φ + q)/(4π),   φ = Σ_d w_d L_d,
 //!

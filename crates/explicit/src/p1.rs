@@ -1,4 +1,4 @@
-//! Murray's P1 moment system with FTCS (thesis §3.4.2, Eqs. 3.23–3.26; note 000 §2.8):
+//! Murray's P1 moment system with FTCS (thesis §3.4.2, Eqs. 3.23–3.26; its stability in docs/reference-cases.md):
 //!
 //! (1/c) ∂φ/∂t = −∇·E − σ_a φ + q,    (1/c) ∂E/∂t = −∇φ/3 − σ_t′ E,
 //!

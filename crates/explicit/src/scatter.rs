@@ -5,7 +5,7 @@
 //!
 //! The discrete operator conserves Σ L exactly (each face's flux leaves one cell and
 //! enters the other; the box's faces carry none), so the mass after a step differs from
-//! the mass before only by the solver's residual (note 001 T12). The impulse response of
+//! the mass before only by the solver's residual (Zhang & Ma T12, docs/reference-cases.md). The impulse response of
 //! one or several steps adding up to t has per-axis variance exactly 2σ_s t/Δx² cells²
 //! (T13). Gauss–Seidel's rate degrades as a grows (Jacobi's spectral radius is
 //! 6a/(1 + 6a)): a fixed sweep budget loses energy (T15), so this solves to a tolerance.

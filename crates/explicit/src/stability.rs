@@ -52,7 +52,7 @@ pub mod upwind {
     }
 
     /// The amplification of the checkerboard mode, the first to grow:
-    /// (1 − σ_a)·|1 − 2C(|u| + |v| + |w|)| (note 001 T4).
+    /// (1 − σ_a)·|1 − 2C(|u| + |v| + |w|)| (Zhang & Ma T4).
     pub fn checkerboard_growth(courant: f64, direction: DVec3, sigma_a: f64) -> f64 {
         (1.0 - sigma_a) * (1.0 - 2.0 * courant * direction.abs().element_sum()).abs()
     }

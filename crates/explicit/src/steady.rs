@@ -7,7 +7,7 @@
 //!   (λ_max ≤ max_i a_ii + Σ_j |a_ij|), which is exact for the homogeneous box's
 //!   checkerboard mode.
 //! - Jacobi: φ′ = φ + ω D⁻¹(b − Aφ), ω ∈ (0, 1]: FTCS at the positivity limit
-//!   cΔt = V/a_ii, cell by cell (note 000 §3.3: "FTCS at the positivity bound is Jacobi").
+//!   cΔt = V/a_ii, cell by cell (at the positivity bound FTCS is Jacobi: docs/reference-cases.md, Murray).
 //!
 //! Both converge at rate 1 − O(h²): explicit schemes pay for steady states with
 //! thousands of sweeps, which is what the pareto charts show against multigrid.

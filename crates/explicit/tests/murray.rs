@@ -1,4 +1,4 @@
-//! Murray's explicit schemes (note 000): FTCS diffusion's true stability boundary, the sign
+//! Murray's explicit schemes (docs/reference-cases.md): FTCS diffusion's true stability boundary, the sign
 //! of the ∇D·∇φ term, the P1 checkerboard and its staggered cure, the P1 bound, and ray
 //! effects of FTCS ordinates.
 
@@ -76,7 +76,7 @@ pub fn measured_blow_up(beta: f64, albedo: f64) -> f64 {
 
 #[test]
 fn ftcs_diffusion_blows_up_at_the_von_neumann_bound() {
-    // Note 000 §3.3's six (β, α) points: measured blow-up within 3% of von Neumann (the
+    // The six (β, α) points of docs/reference-cases.md (Murray, FTCS diffusion): measured blow-up within 3% of von Neumann (the
     // note measured 0.446, 0.304, 0.164, 0.334, 0.169, 0.626), well above the thesis's
     // Eq. 4.9 (2.2–3× below it) and at or above positivity.
     for (beta, albedo, note) in [

@@ -1,4 +1,4 @@
-//! Zhang & Ma's checkable cases (note 001 §6, T1–T6, T12, T13) and the upwind scheme's
+//! Zhang & Ma's checkable cases (Zhang & Ma T1–T6, T12, T13 of docs/reference-cases.md) and the upwind scheme's
 //! stability, known and enforced.
 
 use glam::DVec3;
@@ -56,7 +56,7 @@ fn t1_vacuum_transport_is_exact() {
 
 #[test]
 fn t2_discrete_beer_lambert() {
-    // ρ at the tenth cell = q¹⁰, q = (1 − σ_a)/(1 + σ_a) at C = ½ (note 001's table); and
+    // ρ at the tenth cell = q¹⁰, q = (1 − σ_a)/(1 + σ_a) at C = ½ (Zhang & Ma T2); and
     // for other C, q = (1 − σ_a)C/(σ_a + C − σ_a C).
     let lattice = Lattice::new([32, 1, 1], 1.0).unwrap();
     for (sa, expected) in [
@@ -170,7 +170,7 @@ fn checkerboard_growth(courant: f64, direction: DVec3, sigma_a: f64) -> f64 {
 
 #[test]
 fn t4_growth_factors_of_the_checkerboard() {
-    // Note 001 T4's table, within 1%; and the closed form of `stability::upwind`.
+    // Zhang & Ma T4's table (docs/reference-cases.md), within 1%; and the closed form of `stability::upwind`.
     let diagonal = DVec3::ONE.normalize();
     for (direction, c, sa, expected) in [
         (diagonal, 0.5, 0.0, 0.7321),
@@ -208,7 +208,7 @@ fn t4_growth_factors_of_the_checkerboard() {
 
 #[test]
 fn t6_warm_and_cold_starts_per_layer() {
-    // 1-D, k Jacobi updates per layer from zero: ρ at layer 128 = (1 − 2⁻ᵏ)¹²⁸ (note 001
+    // 1-D, k Jacobi updates per layer from zero: ρ at layer 128 = (1 − 2⁻ᵏ)¹²⁸ (Zhang & Ma
     // T6: 2.58e-4, 1.72e-2, 0.882); from the upstream layer: exactly 1.
     let lattice = Lattice::new([128, 1, 1], 1.0).unwrap();
     let one_pass = |iterations, warm_start, sa: f64| {

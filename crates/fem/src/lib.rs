@@ -1,8 +1,8 @@
-//! Finite elements for the RTE and for diffusion (Murray's thesis, chapter 3; issue 8).
+//! Finite elements for the RTE and for diffusion (Murray's thesis, chapter 3).
 //!
 //! - [`murray`]: Murray's discretisation of the steady RTE without in-scattering,
 //!   ω·∇L = Q_e − K_t L, Galerkin in the angular basis {1, ω_x, ω_y, ω_z} times trilinear
-//!   hat functions: the α, β, γ, δ matrices of `shared/notes/000_murray.md` §2.6, exactly.
+//!   hat functions: the α, β, γ, δ matrices of docs/reference-cases.md, exactly.
 //!   Jacobi on it diverges for every K_t: the iteration matrix's spectral radius is at least
 //!   19/8 (the mass matrix's off-diagonal sum 19/27 exceeds its diagonal 8/27), and grows
 //!   like 1/(K_tΔ) when streaming dominates. It is a non-symmetric system: Krylov methods
@@ -19,7 +19,7 @@
 //!
 //! - [`sphere`]: the same elements on boundary-fitted meshes of star-shaped bodies (the
 //!   cube lattice mapped radially onto the surface), isoparametric, for curved Robin
-//!   boundaries (note 002 T7): the ball, and any embedded SDF body through the registry.
+//!   boundaries (Mertens T7): the ball, and any embedded SDF body through the registry.
 //!
 //! - [`p1ls`]: the steady P1 system with in-scattering and anisotropy (σ_t′), stabilised
 //!   by least squares: SPD, no checkerboard, second order in φ; 4 unknowns per vertex and
@@ -28,7 +28,7 @@
 //! `fem-diffusion` takes every light (external ones through `direct`'s first-collision
 //! sources, like `diffusion-mg`) and is in the cross-check harness and the pareto charts.
 //!
-//! Tested against note 002's T7 (the ball) and T9 (the Robin half-space, per-face Robin
+//! Tested against Mertens T7 (the ball) and T9 (the Robin half-space, per-face Robin
 //! conditions on a column): second order, 0.03% and 0.017% at the finest meshes.
 //!
 //! With an embedded body, `fem-diffusion` meshes the body alone (it must be star-shaped

@@ -1,5 +1,5 @@
 //! Murray's finite-element discretisation of the steady RTE without in-scattering
-//! (thesis §3.3, App. A; `shared/notes/000_murray.md` §2.6):
+//! (thesis §3.3, App. A; docs/reference-cases.md):
 //!
 //! ω·∇L = Q_e − K_t L,  L(x, ω) = Σ_j Σ_l L_{jl} ψ_j(ω) ϕ_l(x),
 //!
@@ -14,7 +14,7 @@
 //! ([⅙, ⅔, ⅙]^⊗3 h³). The thesis's 1-D integral ∫ϕ_kϕ′_{k−1} is printed +½; it is −½ (the
 //! stencil it then prints is right).
 //!
-//! Jacobi on this system diverges whatever K_t (note 000 §3.4): its iteration matrix's
+//! Jacobi on this system diverges whatever K_t (docs/reference-cases.md): its iteration matrix's
 //! spectral radius is 19/8 = 2.375 once the mass term dominates (K_tΔ ≥ 10: the constant
 //! mode flips sign and grows ×19/8 per sweep, since the mass stencil's off-diagonal sum
 //! 19/27 exceeds its centre 8/27) and grows like 1/(K_tΔ) below (20.4 at K_tΔ = 0.1).

@@ -70,7 +70,7 @@ fn assembled_stencils_are_the_notes_exact_values() {
 
 #[test]
 fn jacobi_spectral_radius_is_at_least_nineteen_eighths() {
-    // Note 000 §3.4 (Fourier analysis): 2.375 = 19/8 for K_tΔ ≥ 10, 2.483 at 1, 20.39 at
+    // Jacobi's spectral radius (Fourier analysis, docs/reference-cases.md): 2.375 = 19/8 for K_tΔ ≥ 10, 2.483 at 1, 20.39 at
     // 0.1. Measured by power iteration on a periodic mesh (16³ for the small K_t, whose
     // worst Fourier mode an 8³ mesh misses: 19.87 there).
     for (kt, nodes, expected, tolerance) in [

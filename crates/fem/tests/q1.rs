@@ -76,7 +76,7 @@ fn q1_converges_at_second_order_and_mg_cg_counts_stay_flat() {
     assert!(counts[2] <= counts[1] + 1, "{counts:?}");
 }
 
-/// Note 002 T9 with Q1: a Robin half-space (surface z = 0, σ_a = 0.1, σ′_s = 1 /mm,
+/// Mertens T9 with Q1: a Robin half-space (surface z = 0, σ_a = 0.1, σ′_s = 1 /mm,
 /// Groenhuis A of η = 1.3) with a unit plane source at depth 1 mm, as a column 20 mm deep
 /// with reflecting sides (exact for a plane source) and floor (its image changes φ above
 /// 5 mm by e⁻¹⁷ relative, the diffusion length being 1.74 mm). The source lies on a layer of vertices, so the sheet is exact: b_k = ∫ϕ_k dA.

@@ -1,4 +1,4 @@
-//! Q1 on the boundary-fitted ball against the closed-form Robin sphere (note 002 T7).
+//! Q1 on the boundary-fitted ball against the closed-form Robin sphere (Mertens T7).
 
 use lucent_core::Stopping;
 use lucent_fem::q1::Q1Multigrid;
@@ -89,7 +89,7 @@ fn q1_on_the_ball_meets_t7_and_converges_at_second_order() {
     }
 }
 
-/// The suite's marble sphere (note 002 T7, R = 10 mm, η = 1.3, partial-current A) as a
+/// The suite's marble sphere (Mertens T7, R = 10 mm, η = 1.3, partial-current A) as a
 /// registry problem: the medium fills an n³ box of half-width 11 mm, the embedded SDF says
 /// where the body is.
 fn marble_problem(n: usize) -> lucent_core::Problem {

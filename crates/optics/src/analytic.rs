@@ -4,7 +4,7 @@
 //! −∇·(D∇φ) + σ_a φ = Q with D = 1/(3σ_t′), σ_tr = √(σ_a/D), and the Robin (extrapolated
 //! boundary) condition φ + 2AD ∂φ/∂n = 0 on the outward normal, whose outgoing flux
 //! (radiant exitance) is −D ∂φ/∂n = φ/(2A). Sources have unit power unless stated.
-//! Formulas and the errata they avoid are in `shared/notes/002_mertens.md` §2.2–2.6 and §6:
+//! Formulas, the errata they avoid and the checked values are in docs/reference-cases.md (Mertens):
 //! the virtual dipole source sits at z_v = z_r + 4AD above the surface (not the thesis's
 //! misprints), and the first-moment source term enters with a minus sign.
 //!
@@ -123,7 +123,7 @@ impl DiffusionMedium {
     }
 
     /// A disc of radius R > 0 (2D: an infinite cylinder) with a unit line source on its
-    /// axis (note 002 T8, the analogue of Mertens' Figure 4.1). Needs σ_a > 0.
+    /// axis (Mertens T8, the analogue of Mertens' Figure 4.1). Needs σ_a > 0.
     pub fn disc(&self, radius: f64) -> Result<RobinDisc, OpticsError> {
         RobinDisc::new(*self, radius)
     }
@@ -179,7 +179,7 @@ impl Dipole {
     }
 
     /// The exact total reflectance of the same source in a Robin half-space,
-    /// α′ e^{−σ_tr z_r}/(1 + 2ADσ_tr) (note 002, T5): the dipole's error is the difference.
+    /// α′ e^{−σ_tr z_r}/(1 + 2ADσ_tr) (Mertens T5): the dipole's error is the difference.
     pub fn total_reflectance_exact(&self) -> Result<f64, OpticsError> {
         let m = &self.medium;
         Ok(m.coefficients.albedo_reduced() * m.half_space(m.z_r())?.exitance())
@@ -187,7 +187,7 @@ impl Dipole {
 }
 
 /// A sphere of radius R with a unit isotropic point source at its centre and the Robin
-/// condition on its surface (note 002, T7):
+/// condition on its surface (Mertens T7):
 /// φ(r) = [e^{−σr}/r + C sinh(σr)/r]/(4πD), C = −(f + 2ADf′)/(g + 2ADg′) at r = R,
 /// with f = e^{−σr}/r and g = sinh(σr)/r.
 ///
@@ -404,7 +404,7 @@ impl RobinSphereOffCentre {
 }
 
 /// A disc (2D) of radius R with a unit line source at its centre and the Robin condition at
-/// r = R (note 002, T8): φ(r) = K₀(σr)/(2πD) + C I₀(σr), C from φ + 2AD φ′ = 0 at R.
+/// r = R (Mertens T8): φ(r) = K₀(σr)/(2πD) + C I₀(σr), C from φ + 2AD φ′ = 0 at R.
 /// Valid for any r > 0, also beyond R (the analytic continuation a cut-cell unknown whose
 /// centre lies outside the disc represents).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -529,7 +529,7 @@ fn bessel_k1(x: f64) -> f64 {
 }
 
 /// The half-space z ≥ 0 with a unit plane source at depth z′ and the Robin condition at
-/// z = 0 (note 002, T9):
+/// z = 0 (Mertens T9):
 /// φ(z) = [e^{−σ|z−z′|} − ((1 − 2ADσ)/(1 + 2ADσ)) e^{−σ(z+z′)}]/(2Dσ).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RobinHalfSpace {
@@ -571,7 +571,7 @@ impl RobinHalfSpace {
 /// A slab 0 ≤ z ≤ d with the dipole's unit source at depth ℓ = z_r and φ = 0 on both
 /// *extrapolated* boundaries, a distance z_b = 2AD outside each face (the approximation the
 /// dipole and the Donner–Jensen multipole make, not the exact Robin condition), integrated
-/// over the plane (note 002 §2.6, T10):
+/// over the plane (Mertens T10):
 /// R = α′ cosh(σz_b) sinh(σ(d + z_b − ℓ))/sinh(σ(d + 2z_b)),
 /// T = α′ cosh(σz_b) sinh(σ(ℓ + z_b))/sinh(σ(d + 2z_b)).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -8,7 +8,7 @@
 //! A = (1 + F_dr) / (1 − F_dr), where F_dr is the medium's *internal* diffuse reflectance
 //! F_dr(η) = 2 ∫₀¹ F_r(μ; 1/η) μ dμ, total internal reflection included. Mertens' thesis
 //! (L617) prints this integral without the 1/π that makes F_dr ≤ 1; the factor 2 above is
-//! the corrected form (`shared/notes/002_mertens.md` §2.3).
+//! the corrected form (docs/reference-cases.md, Mertens).
 
 use crate::error::{OpticsError, in_range, refractive_index};
 use crate::integrate::adaptive;

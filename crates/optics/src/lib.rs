@@ -25,7 +25,7 @@
 //! −∇·(D∇φ) + σ_a φ = Q₀ − 3∇·(D Q₁),
 //!
 //! (the sign of the first-moment term is printed wrongly in Mertens' thesis, see
-//! `shared/notes/002_mertens.md` §2.2), with the Robin boundary condition
+//! docs/reference-cases.md), with the Robin boundary condition
 //! φ + 2AD ∂φ/∂n = 0, A = (1 + F_dr)/(1 − F_dr), whose exitance is φ/(2A).
 //!
 //! ## Contents

@@ -2,7 +2,7 @@
 //!
 //! [`JENSEN_2001`] is the table of Jensen, Marschner, Levoy and Hanrahan, *A Practical Model
 //! for Subsurface Light Transport* (SIGGRAPH 2001), as tabulated in pbrt's
-//! `SubsurfaceParameterTable` (`shared/notes/anchors.md` §6.1; `002_mertens.md` appendix).
+//! `SubsurfaceParameterTable` (Jensen et al. 2001, Table 1).
 //! Values are per channel (R, G, B) in **mm⁻¹**, measured with η = 1.3. The paper gives
 //! reduced scattering only, so the coefficients built here use g = 0 unless a g is given:
 //! diffusion depends on σ_s′ alone, but a transport solver needs the real g.

@@ -20,7 +20,7 @@
 //!   directions of level L − 1, in the same order, and every direction knows its parent
 //!   cell. This is the nested family that separate storage and propagation resolutions need
 //!   (Bernabei's 8/24/48/120 counts are level-symmetric sizes, which are *not* nested:
-//!   `shared/notes/004_bernabei.md` §2.8.4). Design degree 3, with O(h²) convergence above.
+//!   Bernabei's thesis §5.3, docs/reference-cases.md). Design degree 3, with O(h²) convergence above.
 //! - **Fibonacci** (any even count): a golden-angle spiral on the upper hemisphere and its
 //!   mirror image, equal weights. Design degree 1, near-uniform coverage for any count.
 

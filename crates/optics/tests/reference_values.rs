@@ -1,4 +1,4 @@
-//! The optics against the checked values of `shared/notes/002_mertens.md` §6 (T1–T10).
+//! The optics against the checked values Mertens T1–T10 of docs/reference-cases.md.
 //!
 //! Tolerances follow the number of digits the note prints: a value printed with k
 //! significant digits is only known to ±0.5 in the last digit, so the test allows that
@@ -46,7 +46,8 @@ fn t1_hemispherical_transmittance_and_boundary_factor() {
             "hemispherical F_t",
         );
     }
-    // Note 002 §2.3: (η, F_dr fit, A fit, F_dr exact, A exact).
+    // Mertens' boundary factors (docs/reference-cases.md): (η, F_dr fit, A fit, F_dr exact,
+    // A exact).
     for (eta, f_fit, a_fit, f_exact, a_exact) in [
         (1.3, 0.4448, 2.6021, 0.4445, 2.6001),
         (1.33, 0.4724, 2.7904, 0.4719, 2.7875),
@@ -308,7 +309,7 @@ fn t10_slab_totals() {
         assert_printed(slab.total_transmittance(), t, 5, "slab T");
     }
     // A thick slab tends to the dipole, which makes the same extrapolated-boundary
-    // approximation (note 002 §2.6: 0.866541 whatever the thickness).
+    // approximation (Mertens T10: 0.866541 whatever the thickness).
     let thick = marble(0).slab(500.0).unwrap();
     assert!((thick.total_reflectance() - marble(0).dipole().total_reflectance()).abs() < 1e-12);
     assert!(thick.total_transmittance() < 1e-20);
@@ -329,7 +330,7 @@ fn closed_forms_refuse_what_they_cannot_represent() {
 
 #[test]
 fn measured_table_matches_the_anchors() {
-    // Reduced albedo column of anchors.md §6.1 (3 printed decimals), which also pins the
+    // Reduced albedo column of Jensen et al. 2001's Table 1 (3 printed decimals), which also pins the
     // table's transcription: a wrong digit in σ_s′ or σ_a changes these.
     let expected = [
         ("Apple", [0.999, 0.999, 0.977]),
@@ -361,7 +362,7 @@ fn measured_table_matches_the_anchors() {
 
 #[test]
 fn t8_robin_disc() {
-    // Note 002 T8: the 2D disc R = 4.37 mm, marble red (σ_a = .0021, σ′_s = 2.19), η = 1.3
+    // Mertens T8: the 2D disc R = 4.37 mm, marble red (σ_a = .0021, σ′_s = 2.19), η = 1.3
     // with the Groenhuis A, per unit line source; the A&S Bessel polynomials are good to
     // 2e-7, the printed values to 7 digits. And the second material (σ_a = .1, σ′_s = .9).
     let disc = |sigma_a: f64, sigma_s: f64| {

@@ -1,4 +1,4 @@
-//! Mitsuba 3's binary `.vol` grid (`shared/notes/anchors.md` §1.2), little-endian:
+//! Mitsuba 3's binary `.vol` grid (docs/reference-cases.md), little-endian:
 //!
 //! | bytes | content |
 //! |---|---|
