@@ -187,9 +187,6 @@ pub struct MediumSpec {
     /// The phase function.
     #[serde(default)]
     pub phase: PhaseSpec,
-    /// Relative refractive index of the boundary.
-    #[serde(default = "one")]
-    pub eta: f64,
 }
 
 fn one() -> f64 {
@@ -208,7 +205,6 @@ impl Default for MediumSpec {
             extinction_color: None,
             transfer: None,
             phase: PhaseSpec::Isotropic,
-            eta: 1.0,
         }
     }
 }
@@ -450,7 +446,6 @@ impl Scene {
             sigma_t,
             albedo,
             phase,
-            eta: m.eta,
         };
         let unit = |v: [f64; 3], what: &str| -> Result<DVec3, Error> {
             let d = DVec3::from_array(v);

@@ -145,7 +145,6 @@ fn cases() -> Vec<Case> {
                 sigma_t: vec![cloud.map(|d| 6.0 * d)],
                 albedo: vec![Field::Constant(0.9)],
                 phase: Phase::Isotropic,
-                eta: 1.0,
             },
             vec![
                 Light::Directional {
@@ -184,7 +183,6 @@ fn cases() -> Vec<Case> {
                 sigma_t: vec![Grid::filled(geometry, 3.0)],
                 albedo: vec![Field::Constant(0.8)],
                 phase: Phase::Isotropic,
-                eta: 1.0,
             },
             vec![Light::Directional {
                 direction: DVec3::new(0.35, -0.25, -0.9).normalize(),
@@ -216,7 +214,6 @@ fn cases() -> Vec<Case> {
                 sigma_t: vec![density],
                 albedo: vec![Field::Constant(0.7)],
                 phase: Phase::Isotropic,
-                eta: 1.0,
             },
             vec![
                 Light::Point {

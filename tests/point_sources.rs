@@ -21,7 +21,6 @@ fn scene(n: usize, eta: f64, source: DVec3) -> Problem {
         sigma_t: vec![Grid::filled(geometry, 2.1921)],
         albedo: vec![Field::Constant(0.999042)],
         phase: Phase::Isotropic,
-        eta,
     };
     let sdf = Grid::from_fn(geometry, |x| (x.length() - RADIUS) as f32);
     let light = Light::Point {

@@ -31,7 +31,6 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
         sigma_t: vec![density],
         albedo: vec![Field::Constant(0.95)],
         phase: lucent::optics::Phase::henyey_greenstein(0.6).map_err(|e| err(&e))?,
-        eta: 1.0,
     };
     let sun = Light::Directional {
         direction: DVec3::new(0.3, 0.4, -0.866).normalize(),

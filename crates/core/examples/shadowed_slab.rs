@@ -26,7 +26,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         sigma_t: vec![sigma_t],
         albedo: vec![Field::Constant(0.9)],
         phase: Phase::henyey_greenstein(0.5)?,
-        eta: 1.0,
     };
     let sun = Light::Directional {
         direction: -DVec3::Z,

@@ -28,6 +28,22 @@ pub enum SolveError {
         /// What is wrong.
         reason: String,
     },
+    /// A requested parameter lies beyond the scheme's stability limit (an explicit time
+    /// step, a Courant number); nothing was run. Ask for it anyway with the scheme's
+    /// `allow_unstable` where studying the blow-up is the point.
+    #[error(
+        "solver `{solver}`: {parameter} = {requested} is beyond its stability limit {limit} (`allow_unstable = true` runs it anyway)"
+    )]
+    Unstable {
+        /// The solver's name.
+        solver: String,
+        /// The parameter (time step, Courant number, fraction of the bound).
+        parameter: String,
+        /// The largest stable value.
+        limit: f64,
+        /// The value requested.
+        requested: f64,
+    },
     /// No solver of that name is registered.
     #[error("unknown solver `{name}`; available: {available}")]
     UnknownSolver {

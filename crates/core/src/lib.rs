@@ -42,7 +42,6 @@
 //!     sigma_t: vec![Grid::filled(geometry, 2.0)],
 //!     albedo: vec![Field::Constant(0.5)],
 //!     phase: Phase::Isotropic,
-//!     eta: 1.0,
 //! };
 //! let sun = Light::Directional { direction: DVec3::X, irradiance: Spectrum::Grey(1.0) };
 //! let problem = Problem::new(geometry, medium, vec![sun], Boundary::Vacuum, None)?;

@@ -46,10 +46,9 @@ pub struct Medium {
     pub sigma_t: Vec<Grid>,
     /// Single-scattering albedo in [0, 1], per channel.
     pub albedo: Vec<Field>,
-    /// Phase function (the same in every channel).
+    /// Phase function (the same in every channel). (The boundary's refractive index is
+    /// the problem's [`Boundary::Robin`], not the medium's.)
     pub phase: Phase,
-    /// Relative refractive index of the medium's boundary (1 = index-matched).
-    pub eta: f64,
 }
 
 impl Medium {
@@ -105,7 +104,6 @@ impl Medium {
                 })
                 .collect::<Result<_, _>>()?,
             phase: self.phase,
-            eta: self.eta,
         })
     }
 }
@@ -392,9 +390,6 @@ impl Problem {
                 }
                 _ => {}
             }
-        }
-        if !(medium.eta.is_finite() && medium.eta > 0.0) {
-            return bad("the refractive index must be finite and positive");
         }
         for light in &lights {
             if !light.spectrum().is_valid() {

@@ -241,15 +241,6 @@ pub enum StopReason {
         /// The iteration at which the solver gave up.
         iteration: usize,
     },
-    /// The requested parameters are beyond the scheme's stability limit; nothing was run.
-    UnstableParameters {
-        /// The parameter (time step, CFL number, ...).
-        parameter: String,
-        /// The largest stable value.
-        limit: f64,
-        /// The value requested.
-        requested: f64,
-    },
 }
 
 impl StopReason {

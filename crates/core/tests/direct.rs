@@ -18,7 +18,6 @@ fn medium(sigma_t: Grid) -> Medium {
         sigma_t: vec![sigma_t],
         albedo: vec![Field::Constant(0.8)],
         phase: Phase::Isotropic,
-        eta: 1.0,
     }
 }
 

@@ -367,7 +367,6 @@ fn the_registry_solution_in_scatters_what_it_carries() {
             sigma_t: vec![density.clone()],
             albedo: vec![Field::Constant(0.9)],
             phase,
-            eta: 1.0,
         };
         let sun = Light::Directional {
             direction: DVec3::new(0.2, 0.3, -0.9).normalize(),
@@ -522,7 +521,6 @@ fn a_point_light_inside_the_medium_keeps_its_power_at_every_resolution() {
                 sigma_t: vec![lucent_grid::Grid::filled(geometry, 1.0)],
                 albedo: vec![Field::Constant(0.95)],
                 phase: Phase::Isotropic,
-                eta: 1.0,
             };
             let light = Light::Point {
                 position,

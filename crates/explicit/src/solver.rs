@@ -48,7 +48,17 @@ fn invalid(name: &str, reason: impl Into<String>) -> SolveError {
 
 fn explicit_error(e: ExplicitError) -> SolveError {
     match e {
-        ExplicitError::Unstable { parameter, .. } => invalid(parameter, e.to_string()),
+        ExplicitError::Unstable {
+            scheme,
+            parameter,
+            limit,
+            requested,
+        } => SolveError::Unstable {
+            solver: scheme.into(),
+            parameter: parameter.into(),
+            limit,
+            requested,
+        },
         ExplicitError::Invalid(reason) => invalid("problem", reason),
     }
 }
@@ -364,6 +374,18 @@ impl Solver for ExplicitSolver {
                 iteration,
                 allow_unstable,
             } => {
+                if let SteadyKind::Ftcs { fraction } = iteration
+                    && *fraction > 1.0
+                    && !allow_unstable
+                {
+                    // The bound is computed per system below; as a fraction of it, 1.
+                    return Err(SolveError::Unstable {
+                        solver: self.name.into(),
+                        parameter: "step_fraction (of the FTCS bound)".into(),
+                        limit: 1.0,
+                        requested: *fraction,
+                    });
+                }
                 let volume = problem.geometry().cell_volume();
                 let (iteration, allow_unstable) = (*iteration, *allow_unstable);
                 DiffusionSolver::custom(self.name).solve_with(problem, options, &|d, s, stop| {

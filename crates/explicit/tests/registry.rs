@@ -15,7 +15,6 @@ fn problem(n: usize, sigma_t: f32, albedo: f64, lights: Vec<Light>, boundary: Bo
         sigma_t: vec![Grid::filled(geometry, sigma_t)],
         albedo: vec![Field::Constant(albedo as f32)],
         phase: Phase::Isotropic,
-        eta: 1.0,
     };
     Problem::new(geometry, medium, lights, boundary, None).unwrap()
 }
@@ -233,7 +232,6 @@ fn oblique_sun_error(model: &str, n: usize, layered: bool) -> f64 {
         sigma_t: vec![sigma_t],
         albedo: vec![Field::Constant(0.0)],
         phase: lucent_optics::Phase::Isotropic,
-        eta: 1.0,
     };
     let sun = Light::Directional {
         direction: DVec3::new(-0.3, -0.4, -0.8).normalize(),
@@ -294,4 +292,53 @@ fn short_characteristics_beat_upwinding_in_error_and_order() {
         let (e, _) = errors(model, true);
         assert!(e > 3.0 * kinked, "{model}: {e}");
     }
+}
+
+#[test]
+fn a_step_beyond_the_stability_bound_is_refused_with_the_numbers() {
+    // Through the registry a refused step is a typed `SolveError::Unstable` that carries
+    // the bound and the request (nothing runs); `allow_unstable` runs it and the growth
+    // monitor stops it.
+    use lucent_core::{ParamValue, SolveError};
+    let p = problem(
+        12,
+        1.0,
+        0.5,
+        vec![Light::Directional {
+            direction: DVec3::new(1.0, 1.0, 1.0).normalize(),
+            irradiance: Spectrum::Grey(1.0),
+        }],
+        Boundary::Vacuum,
+    );
+    let mut params = Params::default();
+    params
+        .0
+        .insert("model".into(), ParamValue::Text("conservative".into()));
+    params.0.insert("courant".into(), ParamValue::Float(0.9));
+    let err = (ExplicitSolver::CONVECTION_DIFFUSION.build)(&params)
+        .unwrap()
+        .solve(&p, &SolveOptions::default())
+        .unwrap_err();
+    match err {
+        SolveError::Unstable {
+            limit, requested, ..
+        } => {
+            // C (|u| + |v| + |w| + σh) ≤ 1 with |u| + |v| + |w| = √3 and σh = 1.
+            assert!((limit - 1.0 / (3f64.sqrt() + 1.0)).abs() < 1e-9, "{limit}");
+            assert_eq!(requested, 0.9);
+        }
+        other => panic!("{other}"),
+    }
+    let mut params = Params::default();
+    params
+        .0
+        .insert("step_fraction".into(), ParamValue::Float(1.5));
+    let err = (ExplicitSolver::FTCS_DIFFUSION.build)(&params)
+        .unwrap()
+        .solve(&p, &SolveOptions::default())
+        .unwrap_err();
+    assert!(
+        matches!(err, SolveError::Unstable { limit, requested, .. } if limit == 1.0 && requested == 1.5),
+        "{err}"
+    );
 }

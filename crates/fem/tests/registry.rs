@@ -12,7 +12,6 @@ fn problem(kt: f32) -> Problem {
         sigma_t: vec![Grid::filled(geometry, kt)],
         albedo: vec![Field::Constant(0.0)],
         phase: lucent_optics::Phase::Isotropic,
-        eta: 1.0,
     };
     let light = Light::Point {
         position: [4.5, 4.5, 4.5].into(),
@@ -73,7 +72,6 @@ fn fem_against_multigrid(n: usize) -> f64 {
         sigma_t: vec![Grid::filled(geometry, 2.2)],
         albedo: vec![Field::Constant(0.999)],
         phase: lucent_optics::Phase::Isotropic,
-        eta: 1.3,
     };
     let source: glam::DVec3 = [6.1, 5.8, 6.3].into();
     let light = Light::Point {
@@ -144,7 +142,6 @@ fn fem_diffusion_takes_external_lights_like_diffusion_mg() {
         sigma_t: vec![Grid::filled(geometry, 1.5)],
         albedo: vec![Field::Constant(0.95)],
         phase: lucent_optics::Phase::henyey_greenstein(0.7).unwrap(),
-        eta: 1.3,
     };
     let light = Light::Directional {
         direction: glam::DVec3::new(0.3, -0.2, 1.0).normalize(),

@@ -103,7 +103,6 @@ fn marble_problem(n: usize) -> lucent_core::Problem {
         sigma_t: vec![Grid::filled(geometry, 2.1921)],
         albedo: vec![Field::Constant(0.999042)],
         phase: lucent_optics::Phase::Isotropic,
-        eta: 1.3,
     };
     let light = Light::Point {
         position: glam::DVec3::ZERO,

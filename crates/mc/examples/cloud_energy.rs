@@ -22,7 +22,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         sigma_t: vec![cloud.map(|d| 25.0 * d)],
         albedo: vec![Field::Constant(0.95)],
         phase: Phase::henyey_greenstein(0.6)?,
-        eta: 1.0,
     };
     let sun = Light::Directional {
         direction: DVec3::new(0.3, 0.2, -0.93).normalize(),

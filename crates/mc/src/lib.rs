@@ -59,7 +59,7 @@
 //!
 //! // A pure absorber lit along +x: the transmitted power is e^{−σ_t L} of the emitted.
 //! let geometry = GridGeometry::new([4, 4, 4], DVec3::splat(0.25), DVec3::ZERO)?;
-//! let medium = Medium { sigma_t: vec![Grid::filled(geometry, 2.0)], albedo: vec![Field::Constant(0.0)], phase: Phase::Isotropic, eta: 1.0 };
+//! let medium = Medium { sigma_t: vec![Grid::filled(geometry, 2.0)], albedo: vec![Field::Constant(0.0)], phase: Phase::Isotropic};
 //! let sun = Light::Directional { direction: DVec3::X, irradiance: Spectrum::Grey(1.0) };
 //! let problem = Problem::new(geometry, medium, vec![sun], Boundary::Vacuum, None)?;
 //! let run = estimate(&problem, &McConfig { particles: 4000, batches: 8, ..Default::default() })?;

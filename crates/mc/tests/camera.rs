@@ -24,7 +24,6 @@ fn spectral_mis_agrees_with_per_channel_tracing() {
             Field::Constant(0.02),
         ],
         phase: Phase::henyey_greenstein(0.4).unwrap(),
-        eta: 1.0,
     };
     let lights = vec![
         Light::Directional {
@@ -122,7 +121,6 @@ fn an_index_matched_embedded_sphere_attenuates_by_its_chord() {
         sigma_t: vec![Grid::filled(geometry, sigma as f32)],
         albedo: vec![Field::Constant(0.0)],
         phase: Phase::Isotropic,
-        eta: 1.0,
     };
     let problem = Problem::new(geometry, medium, vec![], Boundary::Vacuum, Some(sphere)).unwrap();
     let (w, h, spp) = (12, 12, 1024);
@@ -170,7 +168,6 @@ fn emission_is_integrated_along_camera_paths() {
         sigma_t: vec![Grid::filled(geometry, 1.5)],
         albedo: vec![Field::Constant(0.0)],
         phase: Phase::Isotropic,
-        eta: 1.0,
     };
     let glow = Light::Emission {
         grid: Grid::filled(geometry, 1.0),
@@ -201,7 +198,6 @@ fn emission_particles_carry_the_emitted_power() {
         sigma_t: vec![Grid::filled(geometry, 2.0)],
         albedo: vec![Field::Constant(0.5)],
         phase: Phase::Isotropic,
-        eta: 1.0,
     };
     let glow = Light::Emission {
         grid: blob.clone(),

@@ -18,7 +18,6 @@ fn problem(sigma_t: Grid, albedo: f32, phase: Phase, lights: Vec<Light>) -> Prob
         sigma_t: vec![sigma_t],
         albedo: vec![Field::Constant(albedo)],
         phase,
-        eta: 1.0,
     };
     Problem::new(geometry, medium, lights, Boundary::Vacuum, None).unwrap()
 }
@@ -263,7 +262,6 @@ fn refuses_what_it_cannot_do() {
         sigma_t: vec![Grid::filled(g, 1.0)],
         albedo: vec![Field::Constant(0.5)],
         phase: Phase::Isotropic,
-        eta: 1.0,
     };
     let robin = Problem::new(g, medium, vec![beam()], Boundary::Robin { eta: 1.3 }, None).unwrap();
     assert!(
@@ -330,7 +328,6 @@ fn spectral_mis_fluence_agrees_with_per_channel_tracing() {
             Field::Constant(0.02),
         ],
         phase: Phase::henyey_greenstein(0.3).unwrap(),
-        eta: 1.0,
     };
     let p = Problem::new(
         g,

@@ -24,7 +24,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         sigma_t: vec![density.map(|d| 12.0 * d)],
         albedo: vec![Field::Constant(0.95)],
         phase: Phase::henyey_greenstein(0.4)?,
-        eta: 1.0,
     };
     let lights = vec![
         Light::Directional {

@@ -15,7 +15,6 @@ fn problem(sigma_t: f32, albedo: f32, lights: Vec<Light>) -> Problem {
         sigma_t: vec![Grid::filled(geometry, sigma_t)],
         albedo: vec![Field::Constant(albedo)],
         phase: Phase::Isotropic,
-        eta: 1.0,
     };
     Problem::new(geometry, medium, lights, Boundary::Vacuum, None).unwrap()
 }
