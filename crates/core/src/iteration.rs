@@ -7,12 +7,13 @@
 //! relative and the absolute tolerance (converged), then growth beyond `divergence` times
 //! the initial residual (diverged), then the iteration limit, then the time budget.
 
+use std::fmt;
 use std::time::{Duration, Instant};
 
-use crate::solver::{SolveOptions, StopReason};
+use crate::solver::{Progress, ProgressFn, SolveOptions, StopReason};
 
-/// When an iterative method stops.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// When an iterative method stops, and whom it tells how far it got.
+#[derive(Clone)]
 pub struct Stopping {
     /// Stop when the residual, relative to the method's reference (usually ‖b‖ or the first
     /// residual), falls to this.
@@ -26,6 +27,38 @@ pub struct Stopping {
     /// Stop as diverged when the relative residual grows beyond this many times
     /// max(initial relative residual, 1).
     pub divergence: f64,
+    /// Called after every recorded iteration with the iteration, its residual and the
+    /// fraction of the way from the initial residual to the tolerance (logarithmically).
+    pub progress: Option<ProgressFn>,
+}
+
+impl fmt::Debug for Stopping {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Stopping")
+            .field("relative_tolerance", &self.relative_tolerance)
+            .field("absolute_tolerance", &self.absolute_tolerance)
+            .field("max_iterations", &self.max_iterations)
+            .field("time_budget", &self.time_budget)
+            .field("divergence", &self.divergence)
+            .field("progress", &self.progress.as_ref().map(|_| "callback"))
+            .finish()
+    }
+}
+
+impl PartialEq for Stopping {
+    /// Equal rules; callbacks are equal when they are the same callback.
+    fn eq(&self, other: &Self) -> bool {
+        self.relative_tolerance == other.relative_tolerance
+            && self.absolute_tolerance == other.absolute_tolerance
+            && self.max_iterations == other.max_iterations
+            && self.time_budget == other.time_budget
+            && self.divergence == other.divergence
+            && match (&self.progress, &other.progress) {
+                (None, None) => true,
+                (Some(a), Some(b)) => std::sync::Arc::ptr_eq(a, b),
+                _ => false,
+            }
+    }
 }
 
 impl Default for Stopping {
@@ -36,6 +69,7 @@ impl Default for Stopping {
             max_iterations: 200,
             time_budget: None,
             divergence: 1e6,
+            progress: None,
         }
     }
 }
@@ -48,12 +82,38 @@ impl Stopping {
             absolute_tolerance: options.absolute_tolerance,
             max_iterations: options.max_iterations,
             time_budget: options.time_budget,
+            progress: options.progress.clone(),
             ..Self::default()
         }
     }
 
+    /// Tells the progress callback, if any, about `iteration` at `relative` residual from
+    /// `initial`: the fraction is how far ln(relative) has come from ln(initial) toward
+    /// ln(tolerance), or toward the iteration limit if that is nearer.
+    fn report(&self, iteration: usize, relative: f64, initial: f64) {
+        let Some(callback) = &self.progress else {
+            return;
+        };
+        let by_residual = if relative > 0.0
+            && initial > relative
+            && self.relative_tolerance > 0.0
+            && initial > self.relative_tolerance
+        {
+            ((initial / relative).ln() / (initial / self.relative_tolerance).ln()).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let by_count = iteration as f64 / self.max_iterations.max(1) as f64;
+        callback(Progress {
+            fraction: by_residual.max(by_count).min(1.0),
+            iteration,
+            residual: Some(relative),
+        });
+    }
+
     /// The verdict after `iteration` iterations at `relative` and `absolute` residual,
     /// `initial` being the relative residual the iteration started from; `None`: go on.
+    /// Tells the progress callback first.
     pub fn verdict(
         &self,
         iteration: usize,
@@ -62,6 +122,7 @@ impl Stopping {
         initial: f64,
         started: Instant,
     ) -> Option<StopReason> {
+        self.report(iteration, relative, initial);
         if !(relative.is_finite() && absolute.is_finite()) {
             return Some(StopReason::DivergedNonFinite { iteration });
         }
@@ -176,6 +237,7 @@ mod tests {
             max_iterations: 3,
             time_budget: None,
             divergence: 100.0,
+            progress: None,
         };
         let mut h = History::start();
         assert_eq!(h.record(&s, 1.0, 1.0), None);
@@ -214,7 +276,7 @@ mod tests {
         let budget = Stopping {
             time_budget: Some(Duration::ZERO),
             max_iterations: 100,
-            ..s
+            ..s.clone()
         };
         let mut h = History::start();
         assert!(matches!(

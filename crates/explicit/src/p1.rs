@@ -72,7 +72,7 @@ pub enum P1Edges {
 }
 
 /// Settings of [`march`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct P1Settings {
     /// Grid layout.
     pub layout: Layout,

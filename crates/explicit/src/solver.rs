@@ -400,7 +400,7 @@ impl Solver for ExplicitSolver {
                     };
                     let setup = t0.elapsed().as_secs_f64();
                     let settings = SteadySettings {
-                        stopping: *stop,
+                        stopping: stop.clone(),
                         allow_unstable,
                     };
                     let out = iterate(&system, kind, &settings)
@@ -428,15 +428,17 @@ impl Solver for ExplicitSolver {
                 settings,
                 scattering,
             } => {
-                // The caller's time budget bounds every light's march.
+                // The caller's time budget bounds every light's march, and its progress
+                // callback hears every pass.
                 let settings = UpwindSettings {
                     stopping: lucent_core::Stopping {
                         time_budget: options.time_budget,
-                        ..settings.stopping
+                        progress: options.progress.clone(),
+                        ..settings.stopping.clone()
                     },
                     ..settings.clone()
                 };
-                self.convection(problem, &settings, *scattering, started)
+                self.convection(problem, options, &settings, *scattering, started)
             }
             Scheme::P1 {
                 layout,
@@ -488,6 +490,7 @@ impl ExplicitSolver {
     fn convection(
         &self,
         problem: &Problem,
+        options: &SolveOptions,
         settings: &UpwindSettings,
         scattering: f64,
         started: Instant,
@@ -496,6 +499,9 @@ impl ExplicitSolver {
         let geometry = *problem.geometry();
         let (mut iterations, mut stop) = (0, StopReason::Exact);
         let mut fluence = Vec::new();
+        // One march per light and channel.
+        let marches = (problem.channels() * problem.lights().len()).max(1);
+        let mut marched = 0usize;
         for c in 0..problem.channels() {
             let sigma_t: Vec<f64> = problem
                 .medium()
@@ -540,6 +546,12 @@ impl ExplicitSolver {
                 };
                 let out = propagate(&l, &absorption, &light, settings).map_err(explicit_error)?;
                 iterations += out.iterations;
+                marched += 1;
+                options.report(lucent_core::Progress {
+                    fraction: marched as f64 / marches as f64,
+                    iteration: iterations,
+                    residual: out.residuals.last().copied(),
+                });
                 if !out.stop_reason.is_converged() {
                     stop = out.stop_reason.clone();
                 }

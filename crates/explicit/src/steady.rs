@@ -36,7 +36,7 @@ pub enum Iteration {
 }
 
 /// When to stop.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct SteadySettings {
     /// When to stop, on the relative residual ‖b − Aφ‖/‖b‖ (one sweep, one iteration).
     pub stopping: Stopping,

@@ -130,6 +130,7 @@ impl Solver for FemP1Solver {
                 relative_tolerance: options.relative_tolerance,
                 max_iterations: options.max_iterations,
                 time_budget: options.time_budget,
+                progress: options.progress.clone(),
                 ..default_stopping()
             };
             let mut x = vec![0.0; 4 * n];
@@ -428,6 +429,7 @@ impl Solver for FemDiffusionSolver {
                         relative_tolerance: options.relative_tolerance,
                         max_iterations: options.max_iterations,
                         time_budget: options.time_budget,
+                        progress: options.progress.clone(),
                         ..default_stopping()
                     },
                 )
@@ -666,6 +668,7 @@ impl FemDiffusionSolver {
                         relative_tolerance: options.relative_tolerance,
                         max_iterations: options.max_iterations,
                         time_budget: options.time_budget,
+                        progress: options.progress.clone(),
                         ..default_stopping()
                     },
                 )

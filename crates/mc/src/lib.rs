@@ -79,7 +79,9 @@ pub use camera::{CameraEstimate, camera_image, camera_image_with_progress};
 pub use majorant::MajorantGrid;
 pub use rng::PathRng;
 pub use solver::McSolver;
-pub use transport::{EnergyBalance, Estimate, McConfig, McEstimate, estimate};
+pub use transport::{
+    EnergyBalance, Estimate, McConfig, McEstimate, RunControl, estimate, estimate_with,
+};
 
 #[cfg(doc)]
 use lucent_core::Problem;

@@ -7,7 +7,7 @@ use lucent_core::{
     Solution, SolveError, SolveOptions, SolveReport, Solver, SolverEntry, StopReason,
 };
 
-use crate::transport::{McConfig, estimate};
+use crate::transport::{McConfig, RunControl, estimate_with};
 
 /// Monte Carlo particle tracing as a [`Solver`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -129,12 +129,19 @@ impl Solver for McSolver {
                 budget: options.memory_budget,
             });
         }
-        let result = options.install(|| estimate(problem, &self.config))??;
-        options.report(Progress {
-            fraction: 1.0,
-            iteration: self.config.batches,
-            residual: None,
-        });
+        // Progress after every round of batches; the time budget stops new rounds.
+        let report = |done: usize, total: usize| {
+            options.report(Progress {
+                fraction: done as f64 / total.max(1) as f64,
+                iteration: done,
+                residual: None,
+            })
+        };
+        let control = RunControl {
+            progress: Some(&report),
+            time_budget: options.time_budget,
+        };
+        let result = options.install(|| estimate_with(problem, &self.config, &control))??;
         // The achieved accuracy: the mean relative standard error over cells holding more
         // than a thousandth of the peak fluence.
         let phi = result.fluence[0].data();
@@ -153,11 +160,16 @@ impl Solver for McSolver {
             standard_error: Some(result.standard_error),
             report: SolveReport {
                 solver: Self::NAME.into(),
-                iterations: self.config.batches,
+                iterations: result.batches,
                 residual_history: Vec::new(),
                 wall_time_s: start.elapsed().as_secs_f64(),
                 peak_memory_bytes: needed,
-                stop_reason: StopReason::IterationLimit { residual: relative },
+                // Every batch asked for ran, or the time budget stopped the run early.
+                stop_reason: if result.batches < self.config.batches {
+                    StopReason::TimeLimit { residual: relative }
+                } else {
+                    StopReason::IterationLimit { residual: relative }
+                },
             },
         })
     }

@@ -83,6 +83,9 @@ pub struct McEstimate {
     pub energy: Vec<EnergyBalance>,
     /// Paths traced.
     pub paths: u64,
+    /// Batches run per channel (the fewest, where a time budget stopped groups
+    /// differently; `config.batches` unless a time budget stopped the run).
+    pub batches: usize,
 }
 
 /// Per-batch tallies of one tracing group (the channels sharing one extinction).
@@ -305,6 +308,28 @@ fn emit(
 /// Traces `config.particles` particles per light and batch and returns the batch-averaged
 /// fluence with standard errors and the energy balance.
 pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, SolveError> {
+    estimate_with(problem, config, &RunControl::default())
+}
+
+/// What a caller may ask of a run while it goes: progress after every round of batches,
+/// and a time budget after which no new batches start (at least two always run, for the
+/// standard errors).
+#[derive(Default)]
+pub struct RunControl<'a> {
+    /// Called with (batches done, batches asked for), over every tracing group.
+    pub progress: Option<&'a (dyn Fn(usize, usize) + Sync)>,
+    /// No new round of batches starts after this much time.
+    pub time_budget: Option<std::time::Duration>,
+}
+
+/// [`estimate`] under a [`RunControl`]; [`McEstimate::batches`] says how many batches ran
+/// (fewer than asked when the time budget stopped the run).
+pub fn estimate_with(
+    problem: &Problem,
+    config: &McConfig,
+    control: &RunControl<'_>,
+) -> Result<McEstimate, SolveError> {
+    let started = std::time::Instant::now();
     if config.batches < 2
         || config.particles == 0
         || config.max_depth == 0
@@ -343,6 +368,11 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
     let mut energy_sums = vec![[[0.0f64; 2]; 5]; channels];
     let batch_ids: Vec<usize> = (0..config.batches).collect();
     let group_size = rayon::current_num_threads().max(1);
+    // Batches run per channel (a time budget can stop a group early).
+    let mut done = vec![0usize; channels];
+    let total = config.batches * groups.len();
+    let mut finished = 0usize;
+    let traced = std::sync::atomic::AtomicUsize::new(0);
     for (extinction, members) in &groups {
         let max_extinction;
         let sigma_t = if *extinction == SPECTRAL {
@@ -359,11 +389,24 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
             medium.sigma_t(*extinction)
         };
         let majorant = MajorantGrid::for_config(sigma_t, config);
+        let mut ran = 0;
         for chunk in batch_ids.chunks(group_size) {
+            let out_of_time = control
+                .time_budget
+                .is_some_and(|budget| started.elapsed() >= budget);
+            if out_of_time && ran >= 2 {
+                break;
+            }
+            // Past the budget only the two batches the standard error needs are traced.
+            let chunk = if out_of_time {
+                &chunk[..chunk.len().min(2 - ran)]
+            } else {
+                chunk
+            };
             let tallies: Vec<Tally> = chunk
                 .par_iter()
                 .map(|&batch| {
-                    if *extinction == SPECTRAL {
+                    let tally = if *extinction == SPECTRAL {
                         trace_batch_spectral(
                             problem,
                             &lights,
@@ -383,7 +426,13 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
                             config,
                             batch as u64 + 1000 * *extinction as u64,
                         )
+                    };
+                    // One report per batch, as each finishes.
+                    let now = traced.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                    if let Some(progress) = control.progress {
+                        progress(now, total);
                     }
+                    tally
                 })
                 .collect();
             // Accumulate in batch order: the result does not depend on the thread count.
@@ -414,22 +463,34 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
                     }
                 }
             }
+            ran += chunk.len();
+            finished += chunk.len();
+        }
+        for &c in members {
+            done[c] = ran;
         }
     }
-    let b = config.batches as f64;
-    let stat = |s: f64, s2: f64| {
-        let mean = s / b;
-        let var = ((s2 / b - mean * mean) * b / (b - 1.0)).max(0.0);
-        Estimate {
-            mean,
-            std_error: (var / b).sqrt(),
+    let batches = done.iter().copied().min().unwrap_or(0).max(1);
+    let stats_for = |c: usize| {
+        let b = done[c].max(1) as f64;
+        move |s: f64, s2: f64| {
+            let mean = s / b;
+            let var = ((s2 / b - mean * mean) * b / (b - 1.0).max(1.0)).max(0.0);
+            Estimate {
+                mean,
+                std_error: (var / b).sqrt(),
+            }
         }
     };
     let fluence = (0..channels)
-        .map(|c| Grid::from_vec(geometry, sum[c].iter().map(|&s| (s / b) as f32).collect()))
+        .map(|c| {
+            let b = done[c].max(1) as f64;
+            Grid::from_vec(geometry, sum[c].iter().map(|&s| (s / b) as f32).collect())
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let standard_error = (0..channels)
         .map(|c| {
+            let stat = stats_for(c);
             Grid::from_vec(
                 geometry,
                 sum[c]
@@ -442,21 +503,25 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
         .collect::<Result<Vec<_>, _>>()?;
     let energy = energy_sums
         .iter()
-        .map(|e| EnergyBalance {
-            emitted: stat(e[0][0], e[0][1]),
-            absorbed: stat(e[1][0], e[1][1]),
-            escaped: stat(e[2][0], e[2][1]),
-            truncated: stat(e[3][0], e[3][1]),
-            imbalance: stat(e[4][0], e[4][1]),
+        .enumerate()
+        .map(|(c, e)| {
+            let stat = stats_for(c);
+            EnergyBalance {
+                emitted: stat(e[0][0], e[0][1]),
+                absorbed: stat(e[1][0], e[1][1]),
+                escaped: stat(e[2][0], e[2][1]),
+                truncated: stat(e[3][0], e[3][1]),
+                imbalance: stat(e[4][0], e[4][1]),
+            }
         })
         .collect();
-    let paths =
-        config.particles * lights.len() as u64 * config.batches as u64 * groups.len() as u64;
+    let paths = config.particles * lights.len() as u64 * finished as u64;
     Ok(McEstimate {
         fluence,
         standard_error,
         energy,
         paths,
+        batches,
     })
 }
 

@@ -1,0 +1,143 @@
+//! What every registered solver promises through the registry, checked solver by solver on
+//! a small problem each can take: it reports progress as it goes, a time budget stops it
+//! with `TimeLimit` and a finite field, and its result does not depend on the thread count.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use glam::DVec3;
+use lucent::core::{
+    Boundary, Field, Light, Medium, ParamValue, Params, Problem, Progress, SolveOptions, Spectrum,
+    StopReason,
+};
+use lucent::grid::{Grid, GridGeometry};
+use lucent::optics::Phase;
+
+/// A small problem the solver can take: a blob lit by a sun (or, for the solvers that take
+/// only point lights, a point light inside it), vacuum boundaries.
+fn problem_for(name: &str) -> Problem {
+    let n = 12;
+    let geometry =
+        GridGeometry::from_bounds([n; 3], DVec3::splat(-1.0), DVec3::splat(1.0)).unwrap();
+    let point_only = matches!(name, "ftcs-p1" | "ftcs-ordinates" | "fem-p1-jacobi");
+    let homogeneous = point_only;
+    let sigma_t = if homogeneous {
+        Grid::filled(geometry, 4.0)
+    } else {
+        Grid::from_fn(geometry, |x| {
+            (1.0 + 6.0 * (-2.0 * x.length_squared()).exp()) as f32
+        })
+    };
+    let albedo = if name == "fem-p1-jacobi" { 0.0 } else { 0.8 };
+    let medium = Medium {
+        sigma_t: vec![sigma_t],
+        albedo: vec![Field::Constant(albedo)],
+        phase: Phase::Isotropic,
+    };
+    let light = if point_only {
+        Light::Point {
+            position: DVec3::new(0.05, -0.04, 0.03),
+            intensity: Spectrum::Grey(1.0),
+        }
+    } else {
+        Light::Directional {
+            direction: DVec3::new(-0.3, -0.4, -0.8).normalize(),
+            irradiance: Spectrum::Grey(1.0),
+        }
+    };
+    Problem::new(geometry, medium, vec![light], Boundary::Vacuum, None).unwrap()
+}
+
+/// Cheap parameters where a solver's defaults would take long on every test run.
+fn params_for(name: &str) -> Params {
+    let mut p = Params::default();
+    if name == "mc" {
+        p.0.insert("particles".into(), ParamValue::Int(2000));
+        p.0.insert("batches".into(), ParamValue::Int(4));
+    }
+    p
+}
+
+fn names() -> Vec<String> {
+    lucent::registry()
+        .entries()
+        .iter()
+        .map(|e| e.name.to_owned())
+        .collect()
+}
+
+#[test]
+fn every_solver_reports_progress() {
+    for name in names() {
+        let problem = problem_for(&name);
+        let solver = lucent::registry().build(&name, &params_for(&name)).unwrap();
+        let calls = Arc::new(AtomicUsize::new(0));
+        let seen = Arc::clone(&calls);
+        let options = SolveOptions {
+            progress: Some(Arc::new(move |_: Progress| {
+                seen.fetch_add(1, Ordering::Relaxed);
+            })),
+            ..SolveOptions::default()
+        };
+        let solution = solver.solve(&problem, &options).unwrap();
+        let calls = calls.load(Ordering::Relaxed);
+        // At least one call per iteration of an iterative solver, at least one in all.
+        assert!(
+            calls >= 1 && calls >= solution.report.iterations,
+            "{name}: {calls} progress calls for {} iterations",
+            solution.report.iterations
+        );
+    }
+}
+
+#[test]
+fn every_solver_stops_at_its_time_budget_with_a_finite_field() {
+    for name in names() {
+        let problem = problem_for(&name);
+        let solver = lucent::registry().build(&name, &params_for(&name)).unwrap();
+        let options = SolveOptions {
+            time_budget: Some(Duration::ZERO),
+            relative_tolerance: 1e-12,
+            ..SolveOptions::default()
+        };
+        let solution = solver.solve(&problem, &options).unwrap();
+        let finite = solution
+            .fluence
+            .iter()
+            .all(|g| g.data().iter().all(|v| v.is_finite()));
+        assert!(finite, "{name}: a non-finite field");
+        // Exact methods finish; everything that iterates stops at the budget (or diverges
+        // first, as Murray's Jacobi must).
+        assert!(
+            matches!(
+                solution.report.stop_reason,
+                StopReason::TimeLimit { .. }
+                    | StopReason::Exact
+                    | StopReason::DivergedGrowth { .. }
+            ),
+            "{name}: {:?}",
+            solution.report.stop_reason
+        );
+    }
+}
+
+#[test]
+fn every_solver_gives_the_same_result_on_one_and_two_threads() {
+    let log = Mutex::new(Vec::new());
+    for name in names() {
+        let problem = problem_for(&name);
+        let solver = lucent::registry().build(&name, &params_for(&name)).unwrap();
+        let run = |threads| {
+            let options = SolveOptions {
+                threads: Some(threads),
+                ..SolveOptions::default()
+            };
+            solver.solve(&problem, &options).unwrap()
+        };
+        let (one, two) = (run(1), run(2));
+        let same = one.fluence == two.fluence;
+        log.lock().unwrap().push(format!("{name}: {same}"));
+        assert!(same, "{name}: results differ between 1 and 2 threads");
+    }
+}
