@@ -396,7 +396,7 @@ pub fn run(suite: &Path, cache: Option<&Path>) -> Result<Vec<Outcome>, Error> {
             })?;
         let solver = registry.build(&entry.solver, &entry.params)?;
         let capabilities = solver.capabilities();
-        let result = match capabilities.check(solver.name(), &scene.built.problem) {
+        let result = match solver.admits(&scene.built.problem) {
             Err(e) => CheckResult::Skipped(e.to_string()),
             Ok(()) => {
                 let start = Instant::now();

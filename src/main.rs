@@ -191,7 +191,7 @@ fn render(
             parsed.solver.params.clone()
         };
         let mc = lucent::mc::McSolver::from_params(&params)?;
-        mc.capabilities().check(mc.name(), &built.problem)?;
+        mc.admits(&built.problem)?;
         let s = built.settings;
         let background = s.background.unwrap_or_else(|| sky_radiance(&built.problem));
         let camera = built.camera;
@@ -393,7 +393,7 @@ fn info(scene: Option<&Path>) -> Result<(), Error> {
     }
     writeln!(out, "  boundary  {:?}", p.boundary()).map_err(io_err)?;
     let solver = lucent::registry().build(&parsed.solver.name, &parsed.solver.params)?;
-    let verdict = match solver.capabilities().check(solver.name(), p) {
+    let verdict = match solver.admits(p) {
         Ok(()) => "can solve this scene".to_owned(),
         Err(e) => e.to_string(),
     };

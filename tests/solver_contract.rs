@@ -141,3 +141,66 @@ fn every_solver_gives_the_same_result_on_one_and_two_threads() {
         assert!(same, "{name}: results differ between 1 and 2 threads");
     }
 }
+
+/// Every scene file of `examples/scenes/` and `examples/scenes/suite/`, built.
+fn example_problems() -> Vec<(String, Problem)> {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes");
+    let mut out = Vec::new();
+    for dir in [root.clone(), root.join("suite")] {
+        let mut paths: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| {
+                p.extension().is_some_and(|e| e == "toml")
+                    && p.file_name().is_some_and(|n| n != "tolerances.toml")
+            })
+            .collect();
+        paths.sort();
+        for path in paths {
+            let scene = lucent::scene::Scene::load(&path).unwrap();
+            match scene.build(path.parent().unwrap()) {
+                Ok(built) => out.push((path.display().to_string(), built.problem)),
+                // Scenes of the shared data need LUCENT_DATA (CI sets it).
+                Err(e) if std::env::var_os("LUCENT_DATA").is_none() => {
+                    eprintln!("skipping {}: {e}", path.display())
+                }
+                Err(e) => panic!("{}: {e}", path.display()),
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn info_says_can_solve_exactly_when_solve_does_not_refuse() {
+    // `lucent info --solver` answers with `Solver::admits`. With a memory budget of one
+    // byte an admitted solve must get as far as its memory estimate (every refusal comes
+    // before it) and a refused one must fail with the refusal admits gave.
+    let problems = example_problems();
+    assert!(problems.len() >= 12, "{} scenes", problems.len());
+    let mut disagreements = Vec::new();
+    for (path, problem) in &problems {
+        for name in names() {
+            let solver = lucent::registry().build(&name, &Params::default()).unwrap();
+            let admitted = solver.admits(problem);
+            let options = SolveOptions {
+                memory_budget: 1,
+                ..SolveOptions::default()
+            };
+            let solved = solver.solve(problem, &options);
+            let agree = match (&admitted, &solved) {
+                (Ok(()), Err(lucent::core::SolveError::OverBudget { .. })) => true,
+                (Err(a), Err(b)) => a.to_string() == b.to_string(),
+                _ => false,
+            };
+            if !agree {
+                disagreements.push(format!(
+                    "{name} on {path}: admits {:?}, solve {:?}",
+                    admitted.as_ref().err().map(|e| e.to_string()),
+                    solved.as_ref().err().map(|e| e.to_string())
+                ));
+            }
+        }
+    }
+    assert!(disagreements.is_empty(), "{}", disagreements.join("\n"));
+}

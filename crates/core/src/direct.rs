@@ -113,11 +113,12 @@ impl Solver for DirectSolver {
             ],
             output: OutputKind::AngularRadiance,
             fluence: FluenceKind::Uncollided,
+            ..Capabilities::default()
         }
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
-        self.capabilities().check(Self::NAME, problem)?;
+        self.admits(problem)?;
         options.validate()?;
         let start = Instant::now();
         let geometry = *problem.geometry();

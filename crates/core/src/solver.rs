@@ -11,23 +11,36 @@ use crate::problem::{BoundaryKind, LightKind, Problem};
 use crate::solution::Solution;
 
 /// What a solver's solution contains.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum OutputKind {
     /// The fluence φ only: the renderer in-scatters σ_s φ/(4π).
+    #[default]
     Fluence,
     /// Fluence and an angular representation: the renderer in-scatters phase-weighted.
     AngularRadiance,
 }
 
 /// What problems a solver handles. [`Capabilities::check`] turns a mismatch into a clear
-/// [`SolveError::Unsupported`].
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// [`SolveError::Unsupported`]; together with a solver's own [`Solver::admits`] it is every
+/// refusal the solver makes, so `lucent info` can say "can solve" exactly when a solve
+/// will run.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
 pub struct Capabilities {
     /// Handles a non-isotropic phase function.
     pub anisotropic: bool,
-    /// Handles spatially varying coefficients.
+    /// Handles spatially varying coefficients (extinction and albedo).
     pub heterogeneous: bool,
+    /// Needs cubic cells (equal spacing on the three axes).
+    pub cubic_cells_only: bool,
+    /// Takes a Neumann boundary only with zero flux (a reflecting box).
+    pub reflecting_neumann_only: bool,
+    /// Needs point lights inside the grid's box.
+    pub point_lights_inside_grid: bool,
+    /// Takes a Robin boundary only on an embedded surface (its interface).
+    pub robin_needs_embedded_surface: bool,
+    /// Needs absorption somewhere (σ_a > 0) to have a stable or finite solution.
+    pub needs_absorption: bool,
     /// Handles an embedded boundary (SDF).
     pub embedded_geometry: bool,
     /// Boundary conditions it implements.
@@ -41,12 +54,13 @@ pub struct Capabilities {
 }
 
 /// Which part of the light a solver's fluence counts: what it must be compared with.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FluenceKind {
     /// Only light that has not yet scattered (`direct`).
     Uncollided,
     /// All light, every order of scattering.
+    #[default]
     Total,
 }
 
@@ -84,10 +98,66 @@ impl Capabilities {
         if !self.anisotropic && !matches!(phase, lucent_optics::Phase::Isotropic) {
             return unsupported(format!("an anisotropic phase function ({phase:?})"));
         }
+        let medium = problem.medium();
         if !self.heterogeneous {
             let constant = |g: &lucent_grid::Grid| g.data().windows(2).all(|w| w[0] == w[1]);
-            if !problem.medium().sigma_t.iter().all(constant) {
+            if !medium.sigma_t.iter().all(constant) {
                 return unsupported("a heterogeneous medium".into());
+            }
+            let uniform = |f: &crate::problem::Field| match f {
+                crate::problem::Field::Constant(_) => true,
+                crate::problem::Field::Grid(g) => constant(g),
+            };
+            if !medium.albedo.iter().all(uniform) {
+                return unsupported("a heterogeneous albedo".into());
+            }
+        }
+        let h = problem.geometry().spacing();
+        if self.cubic_cells_only
+            && ((h.x - h.y).abs() > 1e-9 * h.x || (h.x - h.z).abs() > 1e-9 * h.x)
+        {
+            return unsupported(format!("non-cubic cells ({} × {} × {})", h.x, h.y, h.z));
+        }
+        if let crate::problem::Boundary::Neumann { flux } = problem.boundary()
+            && self.reflecting_neumann_only
+            && flux != 0.0
+        {
+            return unsupported(format!(
+                "a Neumann boundary with flux {flux} (only a reflecting box, flux 0)"
+            ));
+        }
+        if self.robin_needs_embedded_surface
+            && matches!(problem.boundary(), crate::problem::Boundary::Robin { .. })
+            && problem.embedded().is_none()
+        {
+            return unsupported(
+                "a Robin boundary without embedded geometry (its interface is the embedded surface)"
+                    .into(),
+            );
+        }
+        if self.point_lights_inside_grid {
+            let (lo, hi) = problem.geometry().bounds();
+            for light in problem.lights() {
+                if let crate::problem::Light::Point { position, .. }
+                | crate::problem::Light::Spot { position, .. } = light
+                    && !(position.cmpge(lo).all() && position.cmplt(hi).all())
+                {
+                    return unsupported(format!("a point light outside the grid (at {position})"));
+                }
+            }
+        }
+        if self.needs_absorption {
+            let absorbs = (0..problem.channels()).all(|c| {
+                let sigma_t = medium.sigma_t(c);
+                let g = *sigma_t.geometry();
+                sigma_t.data().iter().enumerate().any(|(i, &t)| {
+                    let [a, b, d] = g.coords(i);
+                    let x = g.cell_centre(a, b, d);
+                    f64::from(t) > f64::from(medium.sigma_s_at(c, x)) * (1.0 + 1e-6)
+                })
+            });
+            if !absorbs {
+                return unsupported("a medium without absorption".into());
             }
         }
         Ok(())
@@ -279,6 +349,13 @@ pub trait Solver: Send + Sync {
 
     /// What problems it handles.
     fn capabilities(&self) -> Capabilities;
+
+    /// `Ok` if [`Solver::solve`] will run on `problem` (it may still fail for lack of
+    /// memory or with a bad option): the capabilities' check plus anything specific to the
+    /// solver and its parameters. `solve` calls it first, so the two cannot disagree.
+    fn admits(&self, problem: &Problem) -> Result<(), SolveError> {
+        self.capabilities().check(self.name(), problem)
+    }
 
     /// Solves `problem`. Fails only when the solve cannot run (unsupported feature, bad
     /// option, over budget); a solve that ran returns its [`SolveReport`] with the reason it

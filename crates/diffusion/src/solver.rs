@@ -261,6 +261,7 @@ impl Solver for DiffusionSolver {
             ],
             output: OutputKind::AngularRadiance,
             fluence: FluenceKind::Total,
+            ..Capabilities::default()
         }
     }
 
@@ -308,7 +309,7 @@ impl DiffusionSolver {
         options: &SolveOptions,
         linear: &LinearSolve<'_>,
     ) -> Result<Solution, SolveError> {
-        self.capabilities().check(self.name, problem)?;
+        self.admits(problem)?;
         options.validate()?;
         let started = Instant::now();
         let geometry = *problem.geometry();

@@ -193,6 +193,8 @@ impl Solver for DomSolver {
             ],
             output: OutputKind::AngularRadiance,
             fluence: FluenceKind::Total,
+            reflecting_neumann_only: true,
+            ..Capabilities::default()
         }
     }
 
@@ -209,7 +211,7 @@ impl DomSolver {
         problem: &Problem,
         options: &SolveOptions,
     ) -> Result<(Solution, Vec<DomChannel>), SolveError> {
-        self.capabilities().check(self.name(), problem)?;
+        self.admits(problem)?;
         options.validate()?;
         let started = Instant::now();
         let g = *problem.geometry();
@@ -227,15 +229,8 @@ impl DomSolver {
                 budget: options.memory_budget,
             });
         }
-        let reflectance = match problem.boundary() {
-            Boundary::Neumann { flux } if flux != 0.0 => {
-                return Err(invalid(
-                    "boundary",
-                    "only a reflecting (zero-flux) Neumann box",
-                ));
-            }
-            b => b.diffuse_reflectance().unwrap_or(0.0),
-        };
+        // The capabilities refuse a Neumann flux other than 0.
+        let reflectance = problem.boundary().diffuse_reflectance().unwrap_or(0.0);
         // Point-like lights through `direct` (uncollided, exact).
         let pointlike: Vec<Light> = problem
             .lights()

@@ -352,6 +352,8 @@ impl Solver for ExplicitSolver {
                 } else {
                     FluenceKind::Total
                 },
+                cubic_cells_only: true,
+                ..Capabilities::default()
             },
             Scheme::P1 { .. } | Scheme::Ordinates { .. } => Capabilities {
                 anisotropic: matches!(self.scheme, Scheme::P1 { .. }),
@@ -361,13 +363,36 @@ impl Solver for ExplicitSolver {
                 lights: vec![LightKind::Point, LightKind::Emission],
                 output: OutputKind::Fluence,
                 fluence: FluenceKind::Total,
+                cubic_cells_only: true,
+                point_lights_inside_grid: true,
+                // P1 by FTCS has no stable step without absorption.
+                needs_absorption: matches!(self.scheme, Scheme::P1 { .. }),
+                ..Capabilities::default()
             },
         }
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
-        self.capabilities().check(self.name, problem)?;
+        self.admits(problem)?;
         options.validate()?;
+        // f64 working fields per cell: the assembled system (about 8 rows of 12 bytes and
+        // 6 vectors) for the steady schemes, two fields per light for convection, φ and E
+        // twice for P1, the radiance of every direction twice for ordinates.
+        let n = problem.geometry().voxel_count() as u64;
+        let per_cell = match &self.scheme {
+            Scheme::Steady { .. } => 8 * 12 + 6 * 8,
+            Scheme::Convection { .. } => 8 * (3 + 2 * problem.lights().len() as u64),
+            Scheme::P1 { .. } => 8 * 2 * 4 * 2,
+            Scheme::Ordinates { order, .. } => 8 * 2 * (order * (order + 2)) as u64 + 32,
+        };
+        let needed = n * per_cell * problem.channels() as u64;
+        if needed > options.memory_budget {
+            return Err(SolveError::OverBudget {
+                solver: self.name.into(),
+                needed,
+                budget: options.memory_budget,
+            });
+        }
         let started = Instant::now();
         match &self.scheme {
             Scheme::Steady {

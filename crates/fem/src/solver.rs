@@ -65,18 +65,18 @@ impl Solver for FemP1Solver {
             lights: vec![LightKind::Point, LightKind::Emission],
             output: OutputKind::Fluence,
             fluence: FluenceKind::Uncollided,
+            cubic_cells_only: true,
+            point_lights_inside_grid: true,
+            ..Capabilities::default()
         }
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
-        self.capabilities().check(self.name(), problem)?;
+        self.admits(problem)?;
         options.validate()?;
         let started = Instant::now();
         let g = *problem.geometry();
         let h = g.spacing();
-        if (h.x - h.y).abs() > 1e-9 * h.x || (h.x - h.z).abs() > 1e-9 * h.x {
-            return Err(invalid("grid", "cubic cells needed"));
-        }
         let mesh = Mesh {
             nodes: g.dims(),
             spacing: h.x,
@@ -218,30 +218,43 @@ impl Solver for FemDiffusionSolver {
             ],
             output: OutputKind::Fluence,
             fluence: FluenceKind::Total,
+            cubic_cells_only: true,
+            reflecting_neumann_only: true,
+            ..Capabilities::default()
         }
+    }
+
+    fn admits(&self, problem: &Problem) -> Result<(), SolveError> {
+        self.capabilities().check(self.name(), problem)?;
+        if let Some(sdf) = problem.embedded() {
+            body_mesh(problem, sdf)?;
+        }
+        Ok(())
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
         use lucent_optics::PhaseFunction;
-        self.capabilities().check(self.name(), problem)?;
+        self.admits(problem)?;
         options.validate()?;
+        // The assembled Q1 matrix with its Galerkin hierarchy: about 330 bytes per node
+        // (BENCHMARKS.md), plus the cell fields.
+        let needed = problem.geometry().voxel_count() as u64 * (400 + 32);
+        if needed > options.memory_budget {
+            return Err(SolveError::OverBudget {
+                solver: self.name().into(),
+                needed,
+                budget: options.memory_budget,
+            });
+        }
         if let Some(sdf) = problem.embedded() {
             return self.solve_embedded(problem, sdf, options);
         }
         let started = Instant::now();
         let g = *problem.geometry();
         let h = g.spacing();
-        if (h.x - h.y).abs() > 1e-9 * h.x || (h.x - h.z).abs() > 1e-9 * h.x {
-            return Err(invalid("grid", "cubic cells needed"));
-        }
+        // A reflecting box (the capabilities refuse other Neumann fluxes) or Robin.
         let robin = match problem.boundary() {
-            lucent_core::Boundary::Neumann { flux: 0.0 } => None,
-            lucent_core::Boundary::Neumann { .. } => {
-                return Err(invalid(
-                    "boundary",
-                    "only a reflecting (zero-flux) Neumann box",
-                ));
-            }
+            lucent_core::Boundary::Neumann { .. } => None,
             b => Some(b.robin_factor().unwrap_or(1.0)),
         };
         let n = g.voxel_count();
@@ -482,41 +495,9 @@ impl FemDiffusionSolver {
         let started = Instant::now();
         let g = *problem.geometry();
         let n = g.voxel_count();
-        let robin = match problem.boundary() {
-            lucent_core::Boundary::Neumann { .. } => {
-                return Err(invalid(
-                    "boundary",
-                    "an embedded body takes Robin or vacuum conditions on its surface",
-                ));
-            }
-            b => b.robin_factor().unwrap_or(1.0),
-        };
-        // The body's centroid and extent from its inside cells.
-        let (mut sum, mut count) = (DVec3::ZERO, 0usize);
-        let (mut lo, mut hi) = (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN));
-        for (cell, d) in sdf.data().iter().enumerate() {
-            if *d < 0.0 {
-                let [i, j, k] = g.coords(cell);
-                let p = g.cell_centre(i, j, k);
-                sum += p;
-                count += 1;
-                lo = lo.min(p);
-                hi = hi.max(p);
-            }
-        }
-        if count == 0 {
-            return Err(invalid("embedded", "the body covers no cell centre"));
-        }
-        let h = g.spacing().max_element();
-        let extent = (hi - lo).max_element() + 2.0 * h;
-        // Lattice cells: the grid's spacing across the body, a multiple of 8 (three
-        // multigrid levels at least).
-        let cells = ((extent / h / 8.0).ceil() as usize).max(1) * 8;
+        let robin = problem.boundary().robin_factor().unwrap_or(1.0);
+        let (mesh, cells, h) = body_mesh(problem, sdf)?;
         let sample = |p: DVec3| f64::from(sdf.sample_trilinear(p));
-        let reach = (g.extent()).length();
-        let mesh = StarMesh::from_sdf(cells, sum / count as f64, sample, reach, 0.25 * h)
-            .map_err(|e| invalid("embedded", e.to_string()))?;
-
         let inside = |p: DVec3| sample(p) < 0.0 && mesh.locate(p).is_some();
         let (mut points, mut emission, mut external) = (Vec::new(), Vec::new(), Vec::new());
         for light in problem.lights() {
@@ -721,4 +702,53 @@ fn finish(
             stop_reason: convergence.stop_reason,
         },
     })
+}
+
+/// The boundary-fitted mesh of a problem's embedded body, with its cells per axis and the
+/// grid's largest spacing: what `fem-diffusion` solves on, and every way it can refuse a
+/// body (a Neumann condition on it, a body that covers no cell centre or is not star-shaped
+/// from its centroid).
+fn body_mesh(problem: &Problem, sdf: &Grid) -> Result<(StarMesh, usize, f64), SolveError> {
+    use glam::DVec3;
+    if matches!(problem.boundary(), lucent_core::Boundary::Neumann { .. }) {
+        return Err(SolveError::Unsupported {
+            solver: "fem-diffusion".into(),
+            feature: "a Neumann condition on an embedded body (it takes Robin or vacuum)".into(),
+        });
+    }
+    let g = *problem.geometry();
+    // The body's centroid and extent from its inside cells.
+    let (mut sum, mut count) = (DVec3::ZERO, 0usize);
+    let (mut lo, mut hi) = (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN));
+    for (cell, d) in sdf.data().iter().enumerate() {
+        if *d < 0.0 {
+            let [i, j, k] = g.coords(cell);
+            let p = g.cell_centre(i, j, k);
+            sum += p;
+            count += 1;
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+    }
+    if count == 0 {
+        return Err(SolveError::Unsupported {
+            solver: "fem-diffusion".into(),
+            feature: "an embedded body that covers no cell centre".into(),
+        });
+    }
+    let h = g.spacing().max_element();
+    let extent = (hi - lo).max_element() + 2.0 * h;
+    // Lattice cells: the grid's spacing across the body, a multiple of 8 (three multigrid
+    // levels at least).
+    let cells = ((extent / h / 8.0).ceil() as usize).max(1) * 8;
+    let sample = |p: DVec3| f64::from(sdf.sample_trilinear(p));
+    let reach = (g.extent()).length();
+    let mesh =
+        StarMesh::from_sdf(cells, sum / count as f64, sample, reach, 0.25 * h).map_err(|e| {
+            SolveError::Unsupported {
+                solver: "fem-diffusion".into(),
+                feature: format!("this embedded body: {e}"),
+            }
+        })?;
+    Ok((mesh, cells, h))
 }

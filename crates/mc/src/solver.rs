@@ -102,19 +102,13 @@ impl Solver for McSolver {
             ],
             output: OutputKind::Fluence,
             fluence: FluenceKind::Total,
+            robin_needs_embedded_surface: true,
+            ..Capabilities::default()
         }
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
-        self.capabilities().check(Self::NAME, problem)?;
-        if matches!(problem.boundary(), lucent_core::Boundary::Robin { .. })
-            && problem.embedded().is_none()
-        {
-            return Err(SolveError::Unsupported {
-                solver: Self::NAME.into(),
-                feature: "a Robin boundary without embedded geometry (its dielectric interface is the embedded surface)".into(),
-            });
-        }
+        self.admits(problem)?;
         options.validate()?;
         let start = Instant::now();
         let voxels = problem.geometry().voxel_count() as u64;
