@@ -141,17 +141,23 @@ fn bar(quiet: bool, message: &'static str) -> ProgressBar {
     bar
 }
 
+/// The solver `--solver` names (with default parameters when it is not the scene's) or
+/// the scene's (with its parameters).
+fn build_solver(scene: &Scene, solver: Option<String>) -> Result<Box<dyn Solver>, Error> {
+    let registry = lucent::registry();
+    Ok(match solver {
+        Some(name) if name != scene.solver.name => registry.build(&name, &Default::default())?,
+        _ => registry.build(&scene.solver.name, &scene.solver.params)?,
+    })
+}
+
 fn run_solver(
     scene: &Scene,
     built: &BuiltScene,
     solver: Option<String>,
     quiet: bool,
 ) -> Result<(Box<dyn Solver>, Solution), Error> {
-    let registry = lucent::registry();
-    let solver = match solver {
-        Some(name) if name != scene.solver.name => registry.build(&name, &Default::default())?,
-        _ => registry.build(&scene.solver.name, &scene.solver.params)?,
-    };
+    let solver = build_solver(scene, solver)?;
     let progress = bar(quiet, "solve");
     let callback = progress.clone();
     let options = SolveOptions {
@@ -182,16 +188,10 @@ fn render(
         built.settings.width = w;
         built.settings.height = h;
     }
-    let name_of_solver = solver.clone().unwrap_or_else(|| parsed.solver.name.clone());
-    let (solver_name, solve_seconds, image) = if name_of_solver == lucent::mc::McSolver::NAME {
-        // Monte Carlo renders by path tracing from the camera: no fluence solve needed.
-        let params = if solver.is_some() && name_of_solver != parsed.solver.name {
-            Default::default()
-        } else {
-            parsed.solver.params.clone()
-        };
-        let mc = lucent::mc::McSolver::from_params(&params)?;
-        mc.admits(&built.problem)?;
+    // A solver that makes pictures itself (Monte Carlo's camera paths) says so; the rest
+    // hand the renderer a fluence.
+    let chosen = build_solver(&parsed, solver.clone())?;
+    let (solver_name, solve_seconds, image) = if let Some(imager) = chosen.images() {
         let s = built.settings;
         let background = s.background.unwrap_or_else(|| sky_radiance(&built.problem));
         let camera = built.camera;
@@ -199,19 +199,21 @@ fn render(
         let aspect = s.width as f64 / s.height as f64;
         let progress = bar(quiet, "trace");
         let callback = progress.clone();
-        let estimate = lucent::mc::camera_image_with_progress(
+        let ray = |u: f64, v: f64| {
+            camera
+                .ray(u, v, aspect)
+                .unwrap_or((glam::DVec3::ZERO, glam::DVec3::Z))
+        };
+        let report = move |f: f64| callback.set_position((f * 1000.0) as u64);
+        let estimate = imager.image(
             &built.problem,
-            s.width,
-            s.height,
-            mc.samples_per_pixel,
-            background,
-            &mc.config,
-            |u, v| {
-                camera
-                    .ray(u, v, aspect)
-                    .unwrap_or((glam::DVec3::ZERO, glam::DVec3::Z))
+            &lucent::core::ImageRequest {
+                width: s.width,
+                height: s.height,
+                background,
+                ray: &ray,
+                progress: Some(&report),
             },
-            Some(&move |f: f64| callback.set_position((f * 1000.0) as u64)),
         )?;
         progress.finish_and_clear();
         // The per-pixel standard error, linear, beside the picture.
@@ -233,7 +235,7 @@ fn render(
             height: estimate.height,
             pixels: estimate.radiance,
         };
-        ("mc".to_owned(), 0.0, image)
+        (chosen.name().to_owned(), 0.0, image)
     } else {
         let (solver, solution) = run_solver(&parsed, &built, solver, quiet)?;
         let progress = bar(quiet, "render");

@@ -71,8 +71,8 @@ pub use registry::{ParamValue, Params, Registry, SolverEntry};
 pub use singular::{SingularPart, point_source_singular_part};
 pub use solution::{Angular, LightTransmittance, OrdinateRadiance, Solution};
 pub use solver::{
-    Capabilities, FluenceKind, OutputKind, Progress, ProgressFn, SolveOptions, SolveReport, Solver,
-    StopReason,
+    Capabilities, FluenceKind, ImageEstimate, ImageRequest, ImageSolver, OutputKind, Progress,
+    ProgressFn, SolveOptions, SolveReport, Solver, StopReason,
 };
 pub use spectrum::Spectrum;
 pub use uncollided::{Uncollided, UncollidedCells, uncollided_cells};

@@ -361,4 +361,49 @@ pub trait Solver: Send + Sync {
     /// option, over budget); a solve that ran returns its [`SolveReport`] with the reason it
     /// stopped.
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError>;
+
+    /// The solver's way of making pictures directly, if it has one (Monte Carlo's camera
+    /// paths); `None` for solvers whose fluence the renderer ray-marches.
+    fn images(&self) -> Option<&dyn ImageSolver> {
+        None
+    }
+}
+
+/// What a picture asks of an [`ImageSolver`]: its size and the camera's rays. The camera
+/// stays in `lucent-render`; this sees only the ray through each image point.
+pub struct ImageRequest<'a> {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Radiance of camera rays that leave the medium (linear RGB).
+    pub background: [f64; 3],
+    /// The camera ray (origin, unit direction) through image point (u, v) ∈ [0, 1]², v down.
+    pub ray: &'a (dyn Fn(f64, f64) -> (glam::DVec3, glam::DVec3) + Sync),
+    /// Called with the fraction of the picture done.
+    pub progress: Option<&'a (dyn Fn(f64) + Sync)>,
+}
+
+/// A radiance image with its per-pixel standard error (linear RGB, rows from the top).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImageEstimate {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Mean radiance per pixel.
+    pub radiance: Vec<[f32; 3]>,
+    /// Its standard error.
+    pub std_error: Vec<[f32; 3]>,
+}
+
+/// A solver that estimates the radiance along camera rays itself instead of handing the
+/// renderer a fluence.
+pub trait ImageSolver {
+    /// The picture `request` asks for.
+    fn image(
+        &self,
+        problem: &Problem,
+        request: &ImageRequest<'_>,
+    ) -> Result<ImageEstimate, SolveError>;
 }

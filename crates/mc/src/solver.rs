@@ -3,8 +3,9 @@
 use std::time::Instant;
 
 use lucent_core::{
-    BoundaryKind, Capabilities, FluenceKind, LightKind, OutputKind, Params, Problem, Progress,
-    Solution, SolveError, SolveOptions, SolveReport, Solver, SolverEntry, StopReason,
+    BoundaryKind, Capabilities, FluenceKind, ImageEstimate, ImageRequest, ImageSolver, LightKind,
+    OutputKind, Params, Problem, Progress, Solution, SolveError, SolveOptions, SolveReport, Solver,
+    SolverEntry, StopReason,
 };
 
 use crate::transport::{McConfig, RunControl, estimate_with};
@@ -107,6 +108,10 @@ impl Solver for McSolver {
         }
     }
 
+    fn images(&self) -> Option<&dyn ImageSolver> {
+        Some(self)
+    }
+
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
         self.admits(problem)?;
         options.validate()?;
@@ -165,6 +170,34 @@ impl Solver for McSolver {
                     StopReason::IterationLimit { residual: relative }
                 },
             },
+        })
+    }
+}
+
+impl ImageSolver for McSolver {
+    /// Path-traced with next-event estimation, `samples_per_pixel` paths per pixel
+    /// ([`crate::camera_image`]).
+    fn image(
+        &self,
+        problem: &Problem,
+        request: &ImageRequest<'_>,
+    ) -> Result<ImageEstimate, SolveError> {
+        self.admits(problem)?;
+        let estimate = crate::camera_image_with_progress(
+            problem,
+            request.width,
+            request.height,
+            self.samples_per_pixel,
+            request.background,
+            &self.config,
+            request.ray,
+            request.progress,
+        )?;
+        Ok(ImageEstimate {
+            width: estimate.width,
+            height: estimate.height,
+            radiance: estimate.radiance,
+            std_error: estimate.std_error,
         })
     }
 }
