@@ -347,6 +347,14 @@ fn list_solvers() -> Result<(), Error> {
             "", c.anisotropic, c.heterogeneous, c.embedded_geometry, c.output, "", c.boundaries, "", c.lights
         )
         .map_err(io_err)?;
+        let params = (entry.params)();
+        if params.is_empty() {
+            writeln!(out, "{:<16} parameters: none", "").map_err(io_err)?;
+        }
+        for p in params {
+            let setting = format!("{} = {}", p.name, p.default);
+            writeln!(out, "{:<16} {setting:<28} {}", "", p.meaning).map_err(io_err)?;
+        }
     }
     Ok(())
 }

@@ -187,6 +187,56 @@ fn lists_solvers_with_capabilities() {
 }
 
 #[test]
+fn lists_every_parameter_of_every_solver_with_its_default() {
+    let out = lucent(&["solvers"], Path::new("."));
+    let text = String::from_utf8_lossy(&out.stdout);
+    for entry in lucent::registry().entries() {
+        for p in (entry.params)() {
+            let line = format!("{} = {}", p.name, p.default);
+            assert!(
+                text.contains(&line),
+                "`{line}` of {} missing:\n{text}",
+                entry.name
+            );
+        }
+    }
+    assert!(
+        text.contains("cycle = \"v\"") && text.contains("order = none"),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_bad_solver_parameter_is_one_line_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = std::fs::read_to_string(scene("point_light.toml")).unwrap();
+    for (solver, param, expected) in [
+        ("diffusion-mg", "cycle = \"x\"", "`cycle`"),
+        ("diffusion-mg", "cycles = 2", "`cycles`"),
+        ("dom", "order = \"eight\"", "`order`"),
+        ("mc", "batches = 1", "`batches`"),
+        ("ftcs-ordinates", "allow_unstable = 3", "`allow_unstable`"),
+    ] {
+        let text = format!("{base}\n[solver]\nname = \"{solver}\"\n[solver.params]\n{param}\n");
+        std::fs::write(dir.path().join("bad.toml"), text).unwrap();
+        for command in ["solve", "info"] {
+            let out = lucent(
+                &[command, "bad.toml", "-o", "x.npy"][..if command == "info" { 2 } else { 4 }],
+                dir.path(),
+            );
+            assert_clean_failure(&out, expected);
+            assert!(stderr(&out).contains(solver), "{}", stderr(&out));
+            assert_eq!(
+                stderr(&out).trim_end().lines().count(),
+                1,
+                "{}",
+                stderr(&out)
+            );
+        }
+    }
+}
+
+#[test]
 fn a_missing_scene_file() {
     let out = lucent(&["render", "no-such-scene.toml"], Path::new("."));
     assert_clean_failure(&out, "no-such-scene.toml");

@@ -204,3 +204,70 @@ fn info_says_can_solve_exactly_when_solve_does_not_refuse() {
     }
     assert!(disagreements.is_empty(), "{}", disagreements.join("\n"));
 }
+
+/// Every solver's parameters are typed and documented: each has a meaning, writing every
+/// default out explicitly builds the same solver, and an unknown key, an ill-typed value
+/// or a value out of range is an error naming the solver and the key.
+#[test]
+fn every_parameter_is_documented_typed_and_checked() {
+    let registry = lucent::registry();
+    for entry in registry.entries() {
+        let docs = (entry.params)();
+        let mut explicit = Params::default();
+        for p in &docs {
+            assert!(
+                !p.meaning.is_empty(),
+                "{}: `{}` undocumented",
+                entry.name,
+                p.name
+            );
+            if p.default != "none" {
+                let value: ParamValue = serde_json::from_str(&p.default).unwrap();
+                explicit.0.insert(p.name.clone(), value);
+            }
+        }
+        let by_default = registry.build(entry.name, &Params::default()).unwrap();
+        let written_out = registry
+            .build(entry.name, &explicit)
+            .unwrap_or_else(|e| panic!("{}: its own defaults refused: {e}", entry.name));
+        assert_eq!(
+            by_default.capabilities(),
+            written_out.capabilities(),
+            "{}",
+            entry.name
+        );
+        let mut unknown = Params::default();
+        unknown.0.insert("no_such_key".into(), ParamValue::Int(1));
+        let message = registry
+            .build(entry.name, &unknown)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            message.contains("no_such_key") && message.contains(entry.name),
+            "{message}"
+        );
+        // A value of the wrong type for every parameter.
+        for p in &docs {
+            let wrong = if p.default.starts_with('"') {
+                ParamValue::Int(-3)
+            } else {
+                ParamValue::Text("?".into())
+            };
+            let mut bad = Params::default();
+            bad.0.insert(p.name.clone(), wrong);
+            let message = registry
+                .build(entry.name, &bad)
+                .err()
+                .map(|e| e.to_string());
+            assert!(
+                message
+                    .as_ref()
+                    .is_some_and(|m| m.contains(&format!("`{}`", p.name))),
+                "{} `{}`: {message:?}",
+                entry.name,
+                p.name
+            );
+        }
+    }
+}

@@ -17,8 +17,6 @@
 //! marched once for all channels. Marching stops at τ = `max_optical_depth` (default 50,
 //! where e^{−τ} is below f32's normal range), which makes dense media cheaper.
 
-use std::time::Instant;
-
 use glam::DVec3;
 use lucent_grid::Grid;
 use lucent_optics::SphericalQuadrature;
@@ -26,14 +24,13 @@ use rayon::prelude::*;
 
 use crate::error::SolveError;
 use crate::problem::{BoundaryKind, Light, LightKind, Problem};
-use crate::registry::{Params, SolverEntry};
+use crate::registry::{Params, SolverEntry, SolverParams, param_docs};
 use crate::solution::{Angular, LightTransmittance, Solution};
-use crate::solver::{
-    Capabilities, FluenceKind, OutputKind, Progress, SolveOptions, SolveReport, Solver, StopReason,
-};
+use crate::solver::{Capabilities, FluenceKind, OutputKind, Progress, SolveOptions, Solver};
 
-/// The exact uncollided-light solver.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The exact uncollided-light solver; its fields are its registry parameters.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct DirectSolver {
     /// Refinement level of the octahedral sky quadrature (8·4^level directions).
     pub sky_level: usize,
@@ -50,39 +47,48 @@ impl Default for DirectSolver {
     }
 }
 
+impl SolverParams for DirectSolver {
+    const MEANINGS: &'static [(&'static str, &'static str)] = &[
+        (
+            "sky_level",
+            "octahedral sky quadrature level, 0 to 4 (8·4^level directions)",
+        ),
+        (
+            "max_optical_depth",
+            "optical depth (> 0) beyond which marching stops and light counts as gone",
+        ),
+    ];
+
+    fn validate(&self) -> Result<(), SolveError> {
+        let bad = |name: &str, reason: &str| SolveError::InvalidParameter {
+            name: name.into(),
+            reason: reason.into(),
+        };
+        if self.sky_level > 4 {
+            return Err(bad("sky_level", "at most 4 (2048 directions)"));
+        }
+        if self.max_optical_depth.is_nan() || self.max_optical_depth <= 0.0 {
+            return Err(bad("max_optical_depth", "must be positive"));
+        }
+        Ok(())
+    }
+}
+
 impl DirectSolver {
     /// The registry name.
     pub const NAME: &'static str = "direct";
 
-    /// The registry entry. Parameters: `sky_level` (0–4, default 1), `max_optical_depth`
-    /// (> 0, default 50).
+    /// The registry entry.
     pub const ENTRY: SolverEntry = SolverEntry {
         name: Self::NAME,
         summary: "uncollided light from every light to every cell by exact ray marching (single scattering)",
         build: |params| Ok(Box::new(Self::from_params(params)?)),
+        params: param_docs::<Self>,
     };
 
     /// Builds from registry parameters.
     pub fn from_params(params: &Params) -> Result<Self, SolveError> {
-        params.check_known(Self::NAME, &["sky_level", "max_optical_depth"])?;
-        let d = Self::default();
-        let solver = Self {
-            sky_level: params.usize_or("sky_level", d.sky_level)?,
-            max_optical_depth: params.f64_or("max_optical_depth", d.max_optical_depth)?,
-        };
-        if solver.sky_level > 4 {
-            return Err(SolveError::InvalidParameter {
-                name: "sky_level".into(),
-                reason: "at most 4 (2048 directions)".into(),
-            });
-        }
-        if solver.max_optical_depth.is_nan() || solver.max_optical_depth <= 0.0 {
-            return Err(SolveError::InvalidParameter {
-                name: "max_optical_depth".into(),
-                reason: "must be positive".into(),
-            });
-        }
-        Ok(solver)
+        params.parse(Self::NAME)
     }
 }
 
@@ -118,9 +124,6 @@ impl Solver for DirectSolver {
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
-        self.admits(problem)?;
-        options.validate()?;
-        let start = Instant::now();
         let geometry = *problem.geometry();
         let medium = problem.medium();
         let channels = problem.channels();
@@ -141,13 +144,25 @@ impl Solver for DirectSolver {
         let grid_bytes = geometry.voxel_count() as u64 * 4;
         let needed =
             grid_bytes * (point_lights.len() * extinction_channels + 2 * channels + 1) as u64;
-        if needed > options.memory_budget {
-            return Err(SolveError::OverBudget {
-                solver: Self::NAME.into(),
-                needed,
-                budget: options.memory_budget,
-            });
-        }
+        crate::driver::run(self, problem, options, needed, |context| {
+            self.transport(context, &point_lights, &sky, needed)
+        })
+    }
+}
+
+impl DirectSolver {
+    /// The uncollided light of `point_lights` (point-like) and `sky`.
+    fn transport(
+        &self,
+        context: &crate::driver::Context<'_>,
+        point_lights: &[&Light],
+        sky: &[&Light],
+        needed: u64,
+    ) -> Result<crate::driver::Outcome, SolveError> {
+        let problem = context.problem;
+        let geometry = *problem.geometry();
+        let medium = problem.medium();
+        let channels = problem.channels();
 
         let (lo, hi) = geometry.bounds();
         let far = 4.0 * (hi - lo).length() + 1.0;
@@ -162,10 +177,10 @@ impl Solver for DirectSolver {
             }
         })?;
 
-        let result = options.install(|| {
+        let result = {
             // Per-light transmittance, one grid per extinction channel.
             let mut per_light = Vec::with_capacity(point_lights.len());
-            for light in &point_lights {
+            for light in point_lights {
                 let grids: Vec<Grid> = medium
                     .sigma_t
                     .iter()
@@ -179,7 +194,7 @@ impl Solver for DirectSolver {
                     .collect();
                 per_light.push(grids);
                 done += 1.0;
-                options.report(Progress {
+                context.report(Progress {
                     fraction: done / work,
                     iteration: 0,
                     residual: None,
@@ -217,7 +232,7 @@ impl Solver for DirectSolver {
                         total
                     })
                     .collect();
-                options.report(Progress {
+                context.report(Progress {
                     fraction: 1.0,
                     iteration: 0,
                     residual: None,
@@ -225,7 +240,7 @@ impl Solver for DirectSolver {
                 sum
             });
             (per_light, sky_transmittance)
-        })?;
+        };
         let (per_light, sky_transmittance) = result;
 
         // Fluence per channel: point-like lights (irradiance × transmittance) plus the sky.
@@ -266,24 +281,17 @@ impl Solver for DirectSolver {
 
         let angular = LightTransmittance {
             phase: medium.phase,
-            lights: point_lights.into_iter().cloned().collect(),
+            lights: point_lights.iter().map(|&l| l.clone()).collect(),
             transmittance: per_light,
             far,
             min_distance,
             isotropic_fluence,
         };
-        Ok(Solution {
+        Ok(crate::driver::Outcome {
             fluence,
             angular: Some(Angular::Lights(angular)),
             standard_error: None,
-            report: SolveReport {
-                solver: Self::NAME.into(),
-                iterations: 0,
-                residual_history: Vec::new(),
-                wall_time_s: start.elapsed().as_secs_f64(),
-                peak_memory_bytes: needed,
-                stop_reason: StopReason::Exact,
-            },
+            record: crate::driver::Record::exact(needed),
         })
     }
 }

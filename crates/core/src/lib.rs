@@ -1,7 +1,7 @@
 //! # lucent-core: the problem, the `Solver` trait, solutions, and the `direct` solver
 //!
 //! One trait joins every solver in lucent. A [`Problem`] is a medium on a cell-centred grid
-//! (extinction σ_t, albedo, phase function, refractive index), lights, a boundary condition
+//! (extinction σ_t, albedo, phase function), lights, a boundary condition
 //! and optional embedded geometry. A [`Solver`] declares its [`Capabilities`] and turns a
 //! problem into a [`Solution`]: the fluence φ = ∫ L dω per channel, optionally an angular
 //! representation for phase-weighted in-scattering, and a [`SolveReport`] that says why it
@@ -23,6 +23,14 @@
 //! a non-finite residual (diverged), the relative then the absolute tolerance (converged),
 //! growth past `divergence` × the initial residual (diverged), the iteration limit, the
 //! time budget — in that order, each ending in its [`StopReason`].
+//!
+//! ## Driving a solver
+//! Every registered solver runs through the [`driver`]: admission, option validation, the
+//! memory estimate before allocation, the thread pool, progress and the time budget, and
+//! the report. Methods that solve channel by channel implement [`driver::ChannelMethod`];
+//! the driver then also sorts the lights, computes their uncollided light once, derives
+//! each channel's coefficients (D = 1/(3σ_t′) with its floor, written once) and merges the
+//! channels' reports by one rule.
 //!
 //! ## Solvers here
 //! - [`DirectSolver`] (`direct`): uncollided light by exact ray marching of the optical
@@ -53,6 +61,7 @@
 //! ```
 
 mod direct;
+pub mod driver;
 mod error;
 mod iteration;
 mod problem;
@@ -67,7 +76,7 @@ pub use direct::DirectSolver;
 pub use error::{ProblemError, SolveError};
 pub use iteration::{History, Stopping};
 pub use problem::{Boundary, BoundaryKind, Field, Light, LightKind, Medium, Problem};
-pub use registry::{ParamValue, Params, Registry, SolverEntry};
+pub use registry::{ParamDoc, ParamValue, Params, Registry, SolverEntry, SolverParams, param_docs};
 pub use singular::{SingularPart, point_source_singular_part};
 pub use solution::{Angular, LightTransmittance, OrdinateRadiance, Solution};
 pub use solver::{

@@ -3,6 +3,7 @@
 
 use std::collections::BTreeMap;
 
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::error::SolveError;
@@ -27,47 +28,107 @@ pub enum ParamValue {
 #[serde(transparent)]
 pub struct Params(pub BTreeMap<String, ParamValue>);
 
+/// A solver's parameters as one typed struct: serde reads them from a scene's
+/// `[solver.params]` (the struct says `#[serde(default, deny_unknown_fields)]`, its enums
+/// `rename_all = "kebab-case"`), `Default` gives the defaults, and [`SolverParams::MEANINGS`]
+/// says what each one means, for `lucent solvers`.
+pub trait SolverParams: Serialize + DeserializeOwned + Default {
+    /// Every parameter's key and meaning (with its allowed values and unit).
+    const MEANINGS: &'static [(&'static str, &'static str)];
+
+    /// Checks what serde cannot express (ranges); the error names the parameter.
+    fn validate(&self) -> Result<(), SolveError> {
+        Ok(())
+    }
+}
+
+/// One parameter of a solver, as `lucent solvers` prints it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct ParamDoc {
+    /// The key in a scene's `[solver.params]`.
+    pub name: String,
+    /// Its default, as TOML would write it (`none`: unset).
+    pub default: String,
+    /// What it means (empty when the solver's docs miss it: a test forbids that).
+    pub meaning: &'static str,
+}
+
+/// The parameters of `T` with their defaults and meanings: every key the default
+/// serialises to, in the order of [`SolverParams::MEANINGS`], then any it misses.
+pub fn param_docs<T: SolverParams>() -> Vec<ParamDoc> {
+    let defaults = match serde_json::to_value(T::default()) {
+        Ok(serde_json::Value::Object(map)) => map,
+        _ => serde_json::Map::new(),
+    };
+    let show = |v: Option<&serde_json::Value>| match v {
+        None | Some(serde_json::Value::Null) => "none".to_owned(),
+        Some(v) => v.to_string(),
+    };
+    let mut docs: Vec<ParamDoc> = T::MEANINGS
+        .iter()
+        .map(|(name, meaning)| ParamDoc {
+            name: (*name).to_owned(),
+            default: show(defaults.get(*name)),
+            meaning,
+        })
+        .collect();
+    for (name, value) in &defaults {
+        if !T::MEANINGS.iter().any(|(n, _)| n == name) {
+            docs.push(ParamDoc {
+                name: name.clone(),
+                default: show(Some(value)),
+                meaning: "",
+            });
+        }
+    }
+    docs
+}
+
+impl ParamValue {
+    fn to_json(&self) -> serde_json::Value {
+        match self {
+            ParamValue::Bool(b) => serde_json::Value::Bool(*b),
+            ParamValue::Int(i) => serde_json::Value::from(*i),
+            ParamValue::Float(f) => serde_json::Value::from(*f),
+            ParamValue::Text(t) => serde_json::Value::String(t.clone()),
+        }
+    }
+}
+
 impl Params {
-    /// Refuses names not in `known`, so that a typo is an error rather than a silent default.
-    pub fn check_known(&self, solver: &str, known: &[&str]) -> Result<(), SolveError> {
-        match self.0.keys().find(|k| !known.contains(&k.as_str())) {
-            Some(k) => Err(SolveError::InvalidParameter {
-                name: k.clone(),
-                reason: format!(
-                    "`{solver}` takes {}",
-                    if known.is_empty() {
-                        "no parameters".to_owned()
-                    } else {
-                        known.join(", ")
-                    }
-                ),
-            }),
-            None => Ok(()),
-        }
-    }
-
-    /// A number, or `default` when absent.
-    pub fn f64_or(&self, name: &str, default: f64) -> Result<f64, SolveError> {
-        match self.0.get(name) {
-            None => Ok(default),
-            Some(ParamValue::Float(v)) => Ok(*v),
-            Some(ParamValue::Int(v)) => Ok(*v as f64),
-            Some(other) => Err(SolveError::InvalidParameter {
-                name: name.into(),
-                reason: format!("expected a number, got {other:?}"),
-            }),
-        }
-    }
-
-    /// A non-negative integer, or `default` when absent.
-    pub fn usize_or(&self, name: &str, default: usize) -> Result<usize, SolveError> {
-        match self.0.get(name) {
-            None => Ok(default),
-            Some(ParamValue::Int(v)) if *v >= 0 => Ok(*v as usize),
-            Some(other) => Err(SolveError::InvalidParameter {
-                name: name.into(),
-                reason: format!("expected a non-negative integer, got {other:?}"),
-            }),
+    /// The typed parameters of `solver`: unknown keys, ill-typed values and values out of
+    /// range are an [`SolveError::InvalidParameter`] naming the solver, the key and what
+    /// is allowed (serde's "expected one of ...").
+    pub fn parse<T: SolverParams>(&self, solver: &str) -> Result<T, SolveError> {
+        let as_object = |keys: &mut dyn Iterator<Item = (&String, &ParamValue)>| {
+            serde_json::Value::Object(keys.map(|(k, v)| (k.clone(), v.to_json())).collect())
+        };
+        match serde_json::from_value::<T>(as_object(&mut self.0.iter())) {
+            Ok(typed) => {
+                typed.validate().map_err(|e| match e {
+                    SolveError::InvalidParameter { name, reason } => SolveError::InvalidParameter {
+                        name,
+                        reason: format!("{reason} (solver `{solver}`)"),
+                    },
+                    other => other,
+                })?;
+                Ok(typed)
+            }
+            Err(error) => {
+                // Name the key: the first that fails on its own.
+                let key = self
+                    .0
+                    .iter()
+                    .find(|(k, v)| {
+                        serde_json::from_value::<T>(as_object(&mut std::iter::once((*k, *v))))
+                            .is_err()
+                    })
+                    .map_or_else(|| "parameters".to_owned(), |(k, _)| k.clone());
+                Err(SolveError::InvalidParameter {
+                    name: key,
+                    reason: format!("{error} (solver `{solver}`)"),
+                })
+            }
         }
     }
 }
@@ -81,6 +142,9 @@ pub struct SolverEntry {
     pub summary: &'static str,
     /// Builds it from parameters.
     pub build: fn(&Params) -> Result<Box<dyn Solver>, SolveError>,
+    /// Its parameters with their defaults and meanings ([`param_docs`] of its
+    /// [`SolverParams`]).
+    pub params: fn() -> Vec<ParamDoc>,
 }
 
 /// The solvers known by name.

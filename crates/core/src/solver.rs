@@ -314,6 +314,20 @@ pub enum StopReason {
 }
 
 impl StopReason {
+    /// How badly a solve stopped, for merging the reports of several channels or phases:
+    /// 0 exact, 1 converged, 2 iteration limit, 3 time limit, 4 diverged by growth, 5 not
+    /// finite.
+    pub fn severity(&self) -> u8 {
+        match self {
+            StopReason::Exact => 0,
+            StopReason::ConvergedRelative { .. } | StopReason::ConvergedAbsolute { .. } => 1,
+            StopReason::IterationLimit { .. } => 2,
+            StopReason::TimeLimit { .. } => 3,
+            StopReason::DivergedGrowth { .. } => 4,
+            StopReason::DivergedNonFinite { .. } => 5,
+        }
+    }
+
     /// Whether the solution can be trusted (exact or converged).
     pub fn is_converged(&self) -> bool {
         matches!(

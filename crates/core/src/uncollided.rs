@@ -661,4 +661,74 @@ impl Uncollided {
             q1.iter().map(|v| v.as_vec3().to_array()).collect(),
         )
     }
+
+    /// Projects the point-like lights' first collisions in `channel` onto a set of
+    /// `directions` storage directions (what an angular method such as discrete ordinates
+    /// or Lattice-Boltzmann needs): adds, per cell and direction m,
+    /// (σ_s/σ_t)[(C − |D|)/4π + |D| p̄(D̂ → ω_m)]/V to `source[cell · directions + m]`,
+    /// with C the power that first collides in the cell and D its direction-weighted
+    /// integral ([`UncollidedCells`]), and `phase_from(D̂)` the method's discrete phase
+    /// function from D̂ toward each storage direction (normalised as its scattering
+    /// matrix is). The split keeps C and D exactly: the isotropic part carries no first
+    /// moment (the light that reaches a cell from many directions, as in the cell holding
+    /// a point light).
+    pub fn project_first_collisions(
+        &self,
+        channel: usize,
+        sigma_s: &[f32],
+        directions: usize,
+        phase_from: &(dyn Fn(DVec3) -> Vec<f64> + Sync),
+        source: &mut [f32],
+    ) {
+        let m = directions;
+        let sigma_t = self.sigma_t[channel.min(self.sigma_t.len() - 1)].data();
+        let inv_volume = 1.0 / self.direct.fluence(channel).geometry().cell_volume();
+        let isotropic = 1.0 / (4.0 * std::f64::consts::PI);
+        // Directional lights have one direction everywhere: their discrete phase once.
+        let constant: Vec<Option<Vec<f64>>> = self
+            .lights
+            .iter()
+            .map(|l| match l {
+                Light::Directional { direction, .. } => Some(phase_from(*direction)),
+                _ => None,
+            })
+            .collect();
+        source
+            .par_chunks_mut(m)
+            .enumerate()
+            .for_each(|(cell, row)| {
+                if sigma_t[cell] <= 0.0 || sigma_s[cell] <= 0.0 {
+                    return;
+                }
+                let scale = f64::from(sigma_s[cell]) / f64::from(sigma_t[cell]) * inv_volume;
+                for (l, light) in self.lights.iter().enumerate() {
+                    let cells = self.cells_of(l, channel);
+                    let colour = light.spectrum().channel(channel);
+                    let power = cells.collided[cell] * colour;
+                    if power <= 0.0 {
+                        continue;
+                    }
+                    let directed = cells.directed[cell] * colour;
+                    let beam = directed.length().min(power);
+                    let spread = (power - beam) * isotropic;
+                    let local;
+                    let phase = match &constant[l] {
+                        Some(p) => p,
+                        None if beam > 0.0 => {
+                            local = phase_from(directed / directed.length());
+                            &local
+                        }
+                        None => {
+                            for v in row.iter_mut() {
+                                *v += (scale * spread) as f32;
+                            }
+                            continue;
+                        }
+                    };
+                    for (v, p) in row.iter_mut().zip(phase) {
+                        *v += (scale * (spread + beam * p)) as f32;
+                    }
+                }
+            });
+    }
 }

@@ -65,6 +65,7 @@ pub mod geometry;
 mod krylov;
 mod level;
 mod multigrid;
+mod params;
 mod problem;
 mod solve;
 mod solver;
@@ -73,6 +74,10 @@ pub use error::DiffusionError;
 pub use geometry::{CellGeometry, Discretisation, Patch, Side};
 pub use krylov::optimal_sor_factor;
 pub use multigrid::{Convergence, Cycle, Multigrid, MultigridSettings, Prolongation, Smoother};
+pub use params::{
+    CgParams, CycleParam, DiscretisationParam, JacobiParams, MultigridParams, SmootherParam,
+    SorParams,
+};
 pub use problem::{AssembledSystem, Balance, Boundaries, Condition, DiffusionProblem, Sources};
 pub use solve::{DiffusionSolution, Method, solve};
 pub use solver::{DiffusionSolver, LinearSolve};

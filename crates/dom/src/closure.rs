@@ -30,7 +30,8 @@
 //!   the flux-weighted mean of inflow and outflow instead.
 
 /// A spatial closure.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Closure {
     /// Step (upwind) differencing.
     Step,

@@ -79,14 +79,16 @@ pub mod angular;
 pub mod closure;
 mod dsa;
 mod error;
+mod params;
 mod solve;
 mod solver;
 pub mod sweep;
 
 pub use closure::Closure;
 pub use error::DomError;
+pub use params::{DomParams, Family};
 pub use solve::{
     Acceleration, DomBalance, DomBoundary, DomConvergence, DomProblem, DomSettings, DomSolution,
-    solve,
+    SourceIteration, solve,
 };
 pub use solver::{DomChannel, DomSolver};

@@ -51,7 +51,8 @@ pub struct DomProblem {
 }
 
 /// Iteration acceleration.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Acceleration {
     /// Plain source iteration (one scattering order per sweep).
     None,
@@ -185,220 +186,324 @@ fn validate(problem: &DomProblem, m: usize) -> Result<(), DomError> {
     Ok(())
 }
 
-/// Solves `problem` on `ordinates`.
+/// Solves `problem` on `ordinates`: [`SourceIteration`] run to `stopping`.
 pub fn solve(
     problem: &DomProblem,
     ordinates: &Ordinates,
     settings: &DomSettings,
     stopping: &Stopping,
 ) -> Result<DomSolution, DomError> {
-    let started = Instant::now();
-    let m = ordinates.storage().len();
-    validate(problem, m)?;
-    if settings.block == 0 {
-        return Err(DomError::Invalid("block size 0".into()));
-    }
-    let g = problem.geometry;
-    let dims = g.dims();
-    let h = g.spacing().to_array();
-    let volume = h[0] * h[1] * h[2];
-    let layout = Layout::new(dims, settings.block);
-    let geometry: Vec<CellDirection> = ordinates
-        .propagation()
-        .directions()
-        .iter()
-        .map(|d| CellDirection::new(d.to_array(), h))
-        .collect();
-    let sigma_t = layout.to_blocks(&problem.sigma_t, 1);
-    let sigma_s = layout.to_blocks(&problem.sigma_s, 1);
-    let fixed = layout.to_blocks(&problem.fixed, m);
-    let mut previous = vec![0.0f32; layout.cells() * m];
-    let boundary = problem.boundary;
-    let mut inflow: [Vec<f64>; 6] = std::array::from_fn(|f| {
-        let a = f / 2;
-        vec![boundary.radiance; dims[(a + 1) % 3] * dims[(a + 2) % 3]]
-    });
-    let scatters = problem.sigma_s.iter().any(|&s| s > 0.0);
-    let reflects = boundary.reflectance > 0.0;
-    let mut dsa = match settings.acceleration {
-        Acceleration::Dsa if scatters => Dsa::new(
-            g,
-            &problem.sigma_t,
-            &problem.sigma_s,
-            ordinates.effective_g(),
-            boundary.reflectance,
-        )?,
-        _ => None,
-    };
-    let isotropic = ordinates.isotropic_inscatter();
-    let storage_weights = ordinates.storage().weights();
-    let n_dirs = ordinates.propagation().len();
-    let matrix = |v: &[f64], rows: usize, cols: usize| {
-        ndarray::Array2::from_shape_vec((rows, cols), v.to_vec())
-            .map_err(|e| DomError::Invalid(e.to_string()))
-    };
-    let scattering = matrix(ordinates.scattering(), n_dirs, m)?;
-    let interpolation = match ordinates.interpolation() {
-        None => None,
-        Some(w) => Some(
-            matrix(w, n_dirs, m)?
-                .reversed_axes()
-                .as_standard_layout()
-                .into_owned(),
-        ),
-    };
-    // Cell-average radiance per propagation direction, kept in f64 between the sweep and
-    // the scattering product: at albedo 0.99 light scatters ~100 times, so rounding in
-    // the in-scattered energy is amplified that much in the balance.
-    let mut work = vec![0.0f64; layout.cells() * n_dirs];
-    // Each octant's (first direction, count): contiguous by construction of `Ordinates`.
-    let octants: Vec<(usize, usize)> = (0..8)
-        .map(|o| ordinates.octant(o))
-        .filter(|d| !d.is_empty())
-        .map(|d| (d[0], d.len()))
-        .collect();
-    let mut inscattered = vec![0.0f32; layout.cells() * m];
-    let half_range: [f64; 3] = std::array::from_fn(|a| {
-        ordinates
-            .propagation()
-            .directions()
-            .iter()
-            .zip(ordinates.propagation().weights())
-            .filter(|(d, _)| d[a] > 0.0)
-            .map(|(d, w)| w * d[a])
-            .sum::<f64>()
-            .max(f64::MIN_POSITIVE)
-    });
+    SourceIteration::new(problem, ordinates, settings)?.run(stopping)
+}
 
-    let mut anderson = (settings.anderson > 0 && scatters).then(|| {
-        Anderson::new(
-            settings.anderson,
-            sigma_s.iter().map(|s| s * s).collect(),
-            storage_weights.iter().map(|w| *w as f32).collect(),
-        )
-    });
-    let mut residuals: Vec<f64> = Vec::new();
-    let mut sweep_seconds = 0.0;
-    let (mut scatter_seconds, mut dsa_seconds, mut anderson_seconds) = (0.0, 0.0, 0.0);
-    let mut spectral_radius = 0.0;
-    let mut first_change = None;
-    let mut best_change = f64::INFINITY;
-    let mut dsa_abandoned = None;
-    let mut last_improvement = 0;
-    let mut contractions: Vec<f64> = Vec::new();
-    let mut mixing = false;
-    let (stop_reason, last): (StopReason, SweepOutput) = loop {
-        // The source at the propagation directions, S_n = W (Q + σ_s J) (W = 1 when
-        // storage is propagation).
-        let t = Instant::now();
-        match &interpolation {
-            None => fill(&fixed, &previous, &sigma_s, &octants, &mut work),
-            Some(transposed) => {
-                interpolate(&fixed, &previous, &sigma_s, &octants, transposed, &mut work);
-            }
+/// Wall time per step of the iteration (s).
+#[derive(Debug, Clone, Copy, Default)]
+struct Timings {
+    sweep: f64,
+    scatter: f64,
+    dsa: f64,
+    anderson: f64,
+}
+
+/// What the iteration has seen: the changes, the measured contraction, and the state of
+/// the safeguards (DSA dropped when it amplifies the error, mixing once the iteration
+/// contracts slowly).
+#[derive(Debug, Clone, Default)]
+struct Monitor {
+    residuals: Vec<f64>,
+    spectral_radius: f64,
+    first_change: Option<f64>,
+    best_change: f64,
+    last_improvement: usize,
+    contractions: Vec<f64>,
+    mixing: bool,
+    dsa_abandoned: Option<usize>,
+}
+
+/// Source iteration on one channel, as a value whose steps are separate: [`Self::transport`]
+/// (the source at the propagation directions, one sweep, the in-scattered radiance; what a
+/// GPU sweep replaces), [`Self::accelerate`] (the diffusion correction; what a Krylov
+/// acceleration replaces), the change of the source, and Anderson mixing. [`Self::run`]
+/// is the loop that joins them with the stopping rule and the safeguards.
+pub struct SourceIteration<'a> {
+    ordinates: &'a Ordinates,
+    settings: &'a DomSettings,
+    boundary: DomBoundary,
+    layout: Layout,
+    spacing: [f64; 3],
+    /// Per propagation direction.
+    geometry: Vec<CellDirection>,
+    /// Block order, as are all per-cell arrays below.
+    sigma_t: Vec<f32>,
+    sigma_s: Vec<f32>,
+    fixed: Vec<f32>,
+    scattering: ndarray::Array2<f64>,
+    interpolation: Option<ndarray::Array2<f64>>,
+    octants: Vec<(usize, usize)>,
+    half_range: [f64; 3],
+    isotropic: Vec<f64>,
+    scatters: bool,
+    reflects: bool,
+    /// The in-scattered radiance the last sweep started from, and the one it produced.
+    previous: Vec<f32>,
+    inscattered: Vec<f32>,
+    /// Cell-average radiance per propagation direction, kept in f64 between the sweep and
+    /// the scattering product: at albedo 0.99 light scatters ~100 times, so rounding in
+    /// the in-scattered energy is amplified that much in the balance.
+    work: Vec<f64>,
+    inflow: [Vec<f64>; 6],
+    dsa: Option<Dsa>,
+    anderson: Option<Anderson>,
+    timings: Timings,
+    monitor: Monitor,
+}
+
+impl<'a> SourceIteration<'a> {
+    /// The iteration's operators and its state before the first sweep (zero scattering
+    /// source).
+    pub fn new(
+        problem: &DomProblem,
+        ordinates: &'a Ordinates,
+        settings: &'a DomSettings,
+    ) -> Result<Self, DomError> {
+        let m = ordinates.storage().len();
+        validate(problem, m)?;
+        if settings.block == 0 {
+            return Err(DomError::Invalid("block size 0".into()));
         }
-        scatter_seconds += t.elapsed().as_secs_f64();
-        let input = SweepInput {
-            layout: &layout,
+        let g = problem.geometry;
+        let dims = g.dims();
+        let h = g.spacing().to_array();
+        let layout = Layout::new(dims, settings.block);
+        let boundary = problem.boundary;
+        let scatters = problem.sigma_s.iter().any(|&s| s > 0.0);
+        let dsa = match settings.acceleration {
+            Acceleration::Dsa if scatters => Dsa::new(
+                g,
+                &problem.sigma_t,
+                &problem.sigma_s,
+                ordinates.effective_g(),
+                boundary.reflectance,
+            )?,
+            _ => None,
+        };
+        let n_dirs = ordinates.propagation().len();
+        let matrix = |v: &[f64], rows: usize, cols: usize| {
+            ndarray::Array2::from_shape_vec((rows, cols), v.to_vec())
+                .map_err(|e| DomError::Invalid(e.to_string()))
+        };
+        let interpolation = match ordinates.interpolation() {
+            None => None,
+            Some(w) => Some(
+                matrix(w, n_dirs, m)?
+                    .reversed_axes()
+                    .as_standard_layout()
+                    .into_owned(),
+            ),
+        };
+        let sigma_s = layout.to_blocks(&problem.sigma_s, 1);
+        let anderson = (settings.anderson > 0 && scatters).then(|| {
+            Anderson::new(
+                settings.anderson,
+                sigma_s.iter().map(|s| s * s).collect(),
+                ordinates
+                    .storage()
+                    .weights()
+                    .iter()
+                    .map(|w| *w as f32)
+                    .collect(),
+            )
+        });
+        Ok(Self {
             ordinates,
-            geometry: &geometry,
-            sigma_t: &sigma_t,
-            inflow: &inflow,
-            spacing: h,
-        };
-        let t = Instant::now();
-        let mut out = match settings.closure {
-            Closure::Step => sweep::<StepClosure>(&input, &mut work),
-            Closure::Diamond => sweep::<DiamondClosure>(&input, &mut work),
-            Closure::Exponential => sweep::<ExponentialClosure>(&input, &mut work),
-        };
-        // In-scattered radiance toward each storage direction: J = Ψ̄ (w p̄), one product
-        // of the (cells × N) radiance with the (N × M) scattering matrix.
-        sweep_seconds += t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        scatter(&work, &octants, &scattering, &mut inscattered);
-        scatter_seconds += t.elapsed().as_secs_f64();
-        let iteration = residuals.len() + 1;
-        if out.fluence.iter().any(|v| !v.is_finite()) {
-            break (StopReason::DivergedNonFinite { iteration }, out);
-        }
-        let t = Instant::now();
-        let mut dsa_failed = false;
-        if let Some(solver) = &dsa {
-            // σ_s(φ^{k+½} − φ^k), with φ^k = Σ_m w_m J_m of the source just swept.
-            let residual: Vec<f32> = out
-                .fluence
+            settings,
+            boundary,
+            geometry: ordinates
+                .propagation()
+                .directions()
                 .iter()
-                .zip(previous.chunks(m))
-                .zip(&sigma_s)
-                .map(|((new, row), s)| {
-                    let old: f64 = row
-                        .iter()
-                        .zip(storage_weights)
-                        .map(|(j, w)| f64::from(*j) * w)
-                        .sum();
-                    (f64::from(*s) * (new - old)) as f32
-                })
-                .collect();
-            let f = if residual.iter().all(|r| r.is_finite()) {
-                layout.to_blocks(&solver.correction(layout.to_grid(&residual, 1))?, 1)
-            } else {
-                vec![f64::NAN]
-            };
-            if f.iter().all(|v| v.is_finite()) {
-                let four_pi = 4.0 * std::f64::consts::PI;
-                for (cell, f) in f.iter().enumerate() {
-                    out.fluence[cell] += f;
-                    let row = &mut inscattered[cell * m..(cell + 1) * m];
-                    for (j, iso) in row.iter_mut().zip(&isotropic) {
-                        *j = (f64::from(*j) + f * iso / four_pi) as f32;
-                    }
+                .map(|d| CellDirection::new(d.to_array(), h))
+                .collect(),
+            sigma_t: layout.to_blocks(&problem.sigma_t, 1),
+            sigma_s,
+            fixed: layout.to_blocks(&problem.fixed, m),
+            scattering: matrix(ordinates.scattering(), n_dirs, m)?,
+            interpolation,
+            // Each octant's (first direction, count): contiguous by construction.
+            octants: (0..8)
+                .map(|o| ordinates.octant(o))
+                .filter(|d| !d.is_empty())
+                .map(|d| (d[0], d.len()))
+                .collect(),
+            half_range: std::array::from_fn(|a| {
+                ordinates
+                    .propagation()
+                    .directions()
+                    .iter()
+                    .zip(ordinates.propagation().weights())
+                    .filter(|(d, _)| d[a] > 0.0)
+                    .map(|(d, w)| w * d[a])
+                    .sum::<f64>()
+                    .max(f64::MIN_POSITIVE)
+            }),
+            isotropic: ordinates.isotropic_inscatter(),
+            scatters,
+            reflects: boundary.reflectance > 0.0,
+            previous: vec![0.0; layout.cells() * m],
+            inscattered: vec![0.0; layout.cells() * m],
+            work: vec![0.0; layout.cells() * n_dirs],
+            inflow: std::array::from_fn(|f| {
+                let a = f / 2;
+                vec![boundary.radiance; dims[(a + 1) % 3] * dims[(a + 2) % 3]]
+            }),
+            dsa,
+            anderson,
+            spacing: h,
+            layout,
+            timings: Timings::default(),
+            monitor: Monitor {
+                best_change: f64::INFINITY,
+                ..Monitor::default()
+            },
+        })
+    }
+
+    fn storage(&self) -> usize {
+        self.ordinates.storage().len()
+    }
+
+    /// One transport step: the source at the propagation directions,
+    /// S_n = W (Q + σ_s J) (W = 1 when storage is propagation), swept once with the
+    /// boundary's inflow, and the in-scattered radiance toward each storage direction
+    /// J = Ψ̄ (w p̄), one product of the (cells × N) radiance with the (N × M) scattering
+    /// matrix.
+    fn transport(&mut self) -> SweepOutput {
+        let t = Instant::now();
+        match &self.interpolation {
+            None => fill(
+                &self.fixed,
+                &self.previous,
+                &self.sigma_s,
+                &self.octants,
+                &mut self.work,
+            ),
+            Some(transposed) => interpolate(
+                &self.fixed,
+                &self.previous,
+                &self.sigma_s,
+                &self.octants,
+                transposed,
+                &mut self.work,
+            ),
+        }
+        self.timings.scatter += t.elapsed().as_secs_f64();
+        let input = SweepInput {
+            layout: &self.layout,
+            ordinates: self.ordinates,
+            geometry: &self.geometry,
+            sigma_t: &self.sigma_t,
+            inflow: &self.inflow,
+            spacing: self.spacing,
+        };
+        let t = Instant::now();
+        let out = match self.settings.closure {
+            Closure::Step => sweep::<StepClosure>(&input, &mut self.work),
+            Closure::Diamond => sweep::<DiamondClosure>(&input, &mut self.work),
+            Closure::Exponential => sweep::<ExponentialClosure>(&input, &mut self.work),
+        };
+        self.timings.sweep += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        scatter(
+            &self.work,
+            &self.octants,
+            &self.scattering,
+            &mut self.inscattered,
+        );
+        self.timings.scatter += t.elapsed().as_secs_f64();
+        out
+    }
+
+    /// The diffusion synthetic correction of the sweep's fluence and in-scattered
+    /// radiance, from σ_s(φ^{k+½} − φ^k) with φ^k = Σ_m w_m J_m of the source just swept;
+    /// `false` when it could not be applied (a non-finite correction).
+    fn accelerate(&mut self, out: &mut SweepOutput) -> Result<bool, DomError> {
+        let Some(solver) = &self.dsa else {
+            return Ok(true);
+        };
+        let t = Instant::now();
+        let m = self.storage();
+        let weights = self.ordinates.storage().weights();
+        let residual: Vec<f32> = out
+            .fluence
+            .iter()
+            .zip(self.previous.chunks(m))
+            .zip(&self.sigma_s)
+            .map(|((new, row), s)| {
+                let old: f64 = row
+                    .iter()
+                    .zip(weights)
+                    .map(|(j, w)| f64::from(*j) * w)
+                    .sum();
+                (f64::from(*s) * (new - old)) as f32
+            })
+            .collect();
+        let f = if residual.iter().all(|r| r.is_finite()) {
+            let layout = &self.layout;
+            layout.to_blocks(&solver.correction(layout.to_grid(&residual, 1))?, 1)
+        } else {
+            vec![f64::NAN]
+        };
+        let applied = f.iter().all(|v| v.is_finite());
+        if applied {
+            let four_pi = 4.0 * std::f64::consts::PI;
+            for (cell, f) in f.iter().enumerate() {
+                out.fluence[cell] += f;
+                let row = &mut self.inscattered[cell * m..(cell + 1) * m];
+                for (j, iso) in row.iter_mut().zip(&self.isotropic) {
+                    *j = (f64::from(*j) + f * iso / four_pi) as f32;
                 }
-            } else {
-                dsa_failed = true;
             }
         }
-        dsa_seconds += t.elapsed().as_secs_f64();
-        if dsa_failed {
-            abandon(
-                &mut dsa,
-                &mut dsa_abandoned,
-                iteration,
-                &mut previous,
-                &mut anderson,
-            );
-            residuals.push(f64::NAN);
-            continue;
-        }
-        // The scattering source's change, ‖σ_s ΔJ‖/‖σ_s J‖ over cells and storage
-        // directions, and the reflected inflow's.
-        let (num, den) = inscattered
+        self.timings.dsa += t.elapsed().as_secs_f64();
+        Ok(applied)
+    }
+
+    /// The scattering source's change, ‖σ_s ΔJ‖/‖σ_s J‖ over cells and storage
+    /// directions, and the reflected inflow's (updating the inflow from the sweep's
+    /// outgoing current).
+    fn source_change(&mut self, out: &SweepOutput) -> f64 {
+        let m = self.storage();
+        let weights = self.ordinates.storage().weights();
+        let (num, den) = self
+            .inscattered
             .par_chunks(m)
-            .zip(previous.par_chunks(m))
-            .zip(sigma_s.par_iter())
+            .zip(self.previous.par_chunks(m))
+            .zip(self.sigma_s.par_iter())
             .map(|((new, old), s)| {
                 let s2 = f64::from(*s).powi(2);
                 let (mut num, mut den) = (0.0, 0.0);
                 if s2 > 0.0 {
                     for q in 0..m {
                         let (a, b) = (f64::from(new[q]), f64::from(old[q]));
-                        num += s2 * storage_weights[q] * (a - b) * (a - b);
-                        den += s2 * storage_weights[q] * a * a;
+                        num += s2 * weights[q] * (a - b) * (a - b);
+                        den += s2 * weights[q] * a * a;
                     }
                 }
                 (num, den)
             })
             .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
         let mut change = if den > 0.0 { (num / den).sqrt() } else { 0.0 };
-        if reflects {
+        if self.reflects {
+            let boundary = self.boundary;
             let (mut num, mut den) = (0.0f64, 0.0f64);
             for f in 0..6 {
                 let axis = f / 2;
-                for (old, out) in inflow[f].iter_mut().zip(&out.outflow[f]) {
+                for (old, out) in self.inflow[f].iter_mut().zip(&out.outflow[f]) {
                     // Diffuse return of R times the outgoing partial current, normalised by
                     // the set's own half-range moment Σ_in w|ω_a| so that exactly R of the
                     // current comes back (Σ w|μ| over a hemisphere is π only in the limit).
-                    let new = boundary.radiance + boundary.reflectance * out / half_range[axis];
+                    let new =
+                        boundary.radiance + boundary.reflectance * out / self.half_range[axis];
                     num += (new - *old).powi(2);
                     den += new * new;
                     *old = new;
@@ -408,44 +513,118 @@ pub fn solve(
                 change = change.max((num / den).sqrt());
             }
         }
-        residuals.push(change);
+        change
+    }
+
+    /// Drops DSA and restarts the iteration from zero (plain source iteration, still
+    /// mixed).
+    fn drop_dsa(&mut self, iteration: usize) {
+        self.dsa = None;
+        self.monitor.dsa_abandoned = Some(iteration);
+        self.previous.fill(0.0);
+        if let Some(a) = self.anderson.as_mut() {
+            a.reset();
+        }
+    }
+
+    /// Anderson mixing of the new source with the previous ones, once the iteration
+    /// contracts slowly (by more than 0.3 per sweep: where DSA alone converges fast it
+    /// would only cost memory traffic); with mixing the contraction of the underlying map
+    /// is measured directly and the largest of the last three bounds the error.
+    fn mix(&mut self, change: f64) {
+        let monitor = &mut self.monitor;
+        if !monitor.mixing && monitor.residuals.len() >= 2 {
+            let ratio = change / monitor.residuals[monitor.residuals.len() - 2];
+            monitor.mixing = self.anderson.is_some() && (self.dsa.is_none() || ratio > 0.3);
+        }
+        let t = Instant::now();
+        if let Some(a) = self.anderson.as_mut().filter(|_| monitor.mixing)
+            && let Some(c) = a
+                .step(&self.previous, &mut self.inscattered)
+                .filter(|_| change > STORAGE_FLOOR)
+        {
+            monitor.contractions.push(c);
+            let recent = &monitor.contractions[monitor.contractions.len().saturating_sub(3)..];
+            monitor.spectral_radius = recent.iter().copied().fold(0.0, f64::max);
+        }
+        self.timings.anderson += t.elapsed().as_secs_f64();
+    }
+
+    /// Iterates to `stopping`: transport, acceleration, the change of the source, the
+    /// safeguards, the stopping rule, mixing.
+    pub fn run(mut self, stopping: &Stopping) -> Result<DomSolution, DomError> {
+        let started = Instant::now();
+        let (stop_reason, last) = loop {
+            let mut out = self.transport();
+            let iteration = self.monitor.residuals.len() + 1;
+            if out.fluence.iter().any(|v| !v.is_finite()) {
+                break (StopReason::DivergedNonFinite { iteration }, out);
+            }
+            if !self.accelerate(&mut out)? {
+                self.drop_dsa(iteration);
+                self.monitor.residuals.push(f64::NAN);
+                continue;
+            }
+            let change = self.source_change(&out);
+            if let Some(verdict) = self.judge(iteration, change, stopping, started) {
+                match verdict {
+                    Verdict::Stop(reason) => break (reason, out),
+                    Verdict::DropDsa => continue,
+                }
+            }
+            self.mix(change);
+            std::mem::swap(&mut self.previous, &mut self.inscattered);
+        };
+        Ok(self.finish(stop_reason, last))
+    }
+
+    /// Records `change` and decides: stop (with the reason), drop DSA and restart, or go
+    /// on (`None`).
+    fn judge(
+        &mut self,
+        iteration: usize,
+        change: f64,
+        stopping: &Stopping,
+        started: Instant,
+    ) -> Option<Verdict> {
+        let monitor = &mut self.monitor;
+        monitor.residuals.push(change);
         // Contraction per sweep, averaged over the last five.
+        let residuals = &monitor.residuals;
         let back = residuals.len().saturating_sub(6);
         let span = residuals.len() - 1 - back;
-        if !mixing && span > 0 && residuals[back] > 0.0 && change > STORAGE_FLOOR {
+        if !monitor.mixing && span > 0 && residuals[back] > 0.0 && change > STORAGE_FLOOR {
             // Below the floor the ratios are rounding noise: keep the last measured one.
-            spectral_radius = (change / residuals[back]).powf(1.0 / span as f64);
+            monitor.spectral_radius = (change / residuals[back]).powf(1.0 / span as f64);
         }
-        if !scatters && !reflects {
-            break (StopReason::ConvergedAbsolute { residual: 0.0 }, out);
+        if !self.scatters && !self.reflects {
+            return Some(Verdict::Stop(StopReason::ConvergedAbsolute {
+                residual: 0.0,
+            }));
         }
         if !change.is_finite() {
-            break (StopReason::DivergedNonFinite { iteration }, out);
+            return Some(Verdict::Stop(StopReason::DivergedNonFinite { iteration }));
         }
         // Inconsistent DSA can amplify errors in optically thick cells (see `dsa`): when
         // the change has grown tenfold over the best one seen, or has not halved in 16
-        // sweeps while still above 1%, it is dropped and the iteration restarts from zero without it (plain
-        // source iteration, still mixed).
-        let stalled = iteration >= last_improvement + 16 && change > 1e-2;
-        if dsa.is_some() && iteration >= 3 && (change > 10.0 * best_change || stalled) {
-            abandon(
-                &mut dsa,
-                &mut dsa_abandoned,
-                iteration,
-                &mut previous,
-                &mut anderson,
-            );
-            contractions.clear();
-            mixing = false;
-            best_change = f64::INFINITY;
-            last_improvement = iteration;
-            continue;
+        // sweeps while still above 1%, it is dropped and the iteration restarts from zero
+        // without it (plain source iteration, still mixed).
+        let stalled = iteration >= monitor.last_improvement + 16 && change > 1e-2;
+        if self.dsa.is_some() && iteration >= 3 && (change > 10.0 * monitor.best_change || stalled)
+        {
+            self.drop_dsa(iteration);
+            let monitor = &mut self.monitor;
+            monitor.contractions.clear();
+            monitor.mixing = false;
+            monitor.best_change = f64::INFINITY;
+            monitor.last_improvement = iteration;
+            return Some(Verdict::DropDsa);
         }
-        if change < 0.5 * best_change {
-            last_improvement = iteration;
+        if change < 0.5 * monitor.best_change {
+            monitor.last_improvement = iteration;
         }
-        best_change = best_change.min(change);
-        let first = *first_change.get_or_insert(change);
+        monitor.best_change = monitor.best_change.min(change);
+        let first = *monitor.first_change.get_or_insert(change);
         // Without DSA the change per sweep underestimates the distance to the fixed point
         // by 1/(1 − ρ), ρ the source iteration's contraction (≈ the albedo in thick
         // media): a plain change test would stop far from it. With DSA the slow modes are
@@ -454,10 +633,10 @@ pub fn solve(
         let remaining = if change <= 1e-3 * stopping.relative_tolerance {
             // Not moving at all: even at ρ = 0.999 what is left is below the tolerance.
             change
-        } else if iteration < 3 || dsa.is_some() {
+        } else if iteration < 3 || self.dsa.is_some() {
             change
-        } else if spectral_radius < 1.0 {
-            change / (1.0 - spectral_radius)
+        } else if monitor.spectral_radius < 1.0 {
+            change / (1.0 - monitor.spectral_radius)
         } else {
             f64::INFINITY
         };
@@ -469,86 +648,65 @@ pub fn solve(
             change
         };
         match stopping.verdict(iteration, estimate, change, first, started) {
-            Some(StopReason::ConvergedRelative { .. }) if !remaining.is_finite() => {}
-            Some(reason) => break (reason, out),
-            None => {}
+            Some(StopReason::ConvergedRelative { .. }) if !remaining.is_finite() => None,
+            Some(reason) => Some(Verdict::Stop(reason)),
+            None => None,
         }
-        // Mixing starts once the iteration contracts slowly (by more than 0.3 per sweep):
-        // where DSA alone converges fast it would only cost memory traffic.
-        if !mixing && residuals.len() >= 2 {
-            let ratio = change / residuals[residuals.len() - 2];
-            mixing = anderson.is_some() && (dsa.is_none() || ratio > 0.3);
+    }
+
+    /// The solution from the last sweep: fluence and in-scattered radiance in grid order,
+    /// the convergence record, the energy balance.
+    fn finish(self, stop_reason: StopReason, last: SweepOutput) -> DomSolution {
+        let m = self.storage();
+        let weights = self.ordinates.storage().weights();
+        let volume = self.spacing.iter().product::<f64>();
+        let emitted: f64 = self
+            .fixed
+            .chunks(m)
+            .map(|row| {
+                row.iter()
+                    .zip(weights)
+                    .map(|(q, w)| f64::from(*q) * w)
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            * volume;
+        let absorbed: f64 = last
+            .fluence
+            .iter()
+            .zip(self.sigma_t.iter().zip(&self.sigma_s))
+            .map(|(phi, (t, s))| phi * f64::from(t - s).max(0.0))
+            .sum::<f64>()
+            * volume;
+        let (monitor, timings) = (self.monitor, self.timings);
+        DomSolution {
+            fluence: self.layout.to_grid(&last.fluence, 1),
+            inscattered: self.layout.to_grid(&self.inscattered, m),
+            convergence: DomConvergence {
+                sweeps: monitor.residuals.len(),
+                residuals: monitor.residuals,
+                stop_reason,
+                spectral_radius: monitor.spectral_radius,
+                sweep_seconds: timings.sweep,
+                scatter_seconds: timings.scatter,
+                dsa_seconds: timings.dsa,
+                anderson_seconds: timings.anderson,
+                dsa_abandoned: monitor.dsa_abandoned,
+            },
+            balance: DomBalance {
+                emitted,
+                inflow: last.inflow_power,
+                absorbed,
+                outflow: last.outflow_power,
+            },
         }
-        let t = Instant::now();
-        if let Some(a) = anderson.as_mut().filter(|_| mixing) {
-            // With mixing, the contraction of the underlying map is measured directly;
-            // the largest of the last three (above the storage floor) bounds the error.
-            if let Some(c) = a
-                .step(&previous, &mut inscattered)
-                .filter(|_| change > STORAGE_FLOOR)
-            {
-                contractions.push(c);
-                let recent = &contractions[contractions.len().saturating_sub(3)..];
-                spectral_radius = recent.iter().copied().fold(0.0, f64::max);
-            }
-        }
-        anderson_seconds += t.elapsed().as_secs_f64();
-        std::mem::swap(&mut previous, &mut inscattered);
-    };
-    let emitted: f64 = fixed
-        .chunks(m)
-        .map(|row| {
-            row.iter()
-                .zip(storage_weights)
-                .map(|(q, w)| f64::from(*q) * w)
-                .sum::<f64>()
-        })
-        .sum::<f64>()
-        * volume;
-    let absorbed: f64 = last
-        .fluence
-        .iter()
-        .zip(sigma_t.iter().zip(&sigma_s))
-        .map(|(phi, (t, s))| phi * f64::from(t - s).max(0.0))
-        .sum::<f64>()
-        * volume;
-    Ok(DomSolution {
-        fluence: layout.to_grid(&last.fluence, 1),
-        inscattered: layout.to_grid(&inscattered, m),
-        convergence: DomConvergence {
-            sweeps: residuals.len(),
-            residuals,
-            stop_reason,
-            spectral_radius,
-            sweep_seconds,
-            scatter_seconds,
-            dsa_seconds,
-            anderson_seconds,
-            dsa_abandoned,
-        },
-        balance: DomBalance {
-            emitted,
-            inflow: last.inflow_power,
-            absorbed,
-            outflow: last.outflow_power,
-        },
-    })
+    }
 }
 
-/// Drops DSA and restarts the iteration from zero.
-fn abandon(
-    dsa: &mut Option<Dsa>,
-    abandoned: &mut Option<usize>,
-    iteration: usize,
-    previous: &mut [f32],
-    anderson: &mut Option<Anderson>,
-) {
-    *dsa = None;
-    *abandoned = Some(iteration);
-    previous.fill(0.0);
-    if let Some(a) = anderson.as_mut() {
-        a.reset();
-    }
+/// What [`SourceIteration::judge`] decides when it does not go on.
+enum Verdict {
+    Stop(StopReason),
+    DropDsa,
 }
 
 const ROWS: usize = 1024;

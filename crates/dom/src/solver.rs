@@ -25,19 +25,19 @@
 //! propagation set), `closure` (`diamond`, `step`, `exponential`), `acceleration` (`dsa`
 //! or `none`), `anderson` (mixing depth, 2; 0 off), `block` (wavefront block edge, 16).
 
-use std::time::Instant;
-
-use lucent_core::{
-    Angular, Boundary, BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OrdinateRadiance,
-    OutputKind, ParamValue, Params, Problem, Solution, SolveError, SolveOptions, SolveReport,
-    Solver, SolverEntry, StopReason,
+use lucent_core::driver::{
+    self, Channel, ChannelMethod, ChannelSolution, Coefficients, Context, Record, Route,
 };
-use lucent_grid::Grid;
+use lucent_core::{
+    Angular, BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OrdinateRadiance,
+    OutputKind, Params, Problem, Solution, SolveError, SolveOptions, Solver, SolverEntry,
+    Uncollided, param_docs,
+};
 use lucent_optics::SphericalQuadrature;
 
 use crate::angular::Ordinates;
-use crate::closure::Closure;
-use crate::solve::{Acceleration, DomBoundary, DomProblem, DomSettings, solve};
+use crate::params::{DomParams, Family};
+use crate::solve::{DomBoundary, DomProblem, DomSettings, solve};
 
 /// One channel's record of a [`DomSolver::solve_with_details`] run.
 #[derive(Debug, Clone, PartialEq)]
@@ -69,81 +69,28 @@ fn invalid(name: &str, reason: impl Into<String>) -> SolveError {
     }
 }
 
-fn text<'a>(p: &'a Params, name: &str, default: &'a str) -> Result<&'a str, SolveError> {
-    match p.0.get(name) {
-        None => Ok(default),
-        Some(ParamValue::Text(t)) => Ok(t),
-        Some(other) => Err(invalid(name, format!("expected text, got {other:?}"))),
-    }
-}
-
 impl DomSolver {
-    /// The registry entry.
+    /// The registry entry ([`DomParams`]).
     pub const ENTRY: SolverEntry = SolverEntry {
         name: "dom",
         summary: "discrete ordinates: octant wavefront sweeps, first-collision sources, DSA",
         build: |p: &Params| Ok(Box::new(DomSolver::from_params(p)?)),
+        params: param_docs::<DomParams>,
     };
 
     /// The solver for registry parameters.
     pub fn from_params(p: &Params) -> Result<Self, SolveError> {
-        p.check_known(
-            "dom",
-            &[
-                "order",
-                "family",
-                "storage_level",
-                "closure",
-                "acceleration",
-                "anderson",
-                "block",
-            ],
-        )?;
-        let octahedral = match text(p, "family", "level-symmetric")? {
-            "level-symmetric" => false,
-            "octahedral" => true,
-            other => {
-                return Err(invalid(
-                    "family",
-                    format!("{other}: level-symmetric or octahedral"),
-                ));
-            }
-        };
-        let order = p.usize_or("order", if octahedral { 2 } else { 8 })?;
-        let storage_level = match p.0.get("storage_level") {
-            None => None,
-            Some(_) => Some(p.usize_or("storage_level", 0)?),
-        };
-        let closure = match text(p, "closure", "diamond")? {
-            "diamond" => Closure::Diamond,
-            "step" => Closure::Step,
-            "exponential" => Closure::Exponential,
-            other => {
-                return Err(invalid(
-                    "closure",
-                    format!("{other}: diamond, step or exponential"),
-                ));
-            }
-        };
-        let acceleration = match text(p, "acceleration", "dsa")? {
-            "dsa" => Acceleration::Dsa,
-            "none" => Acceleration::None,
-            other => return Err(invalid("acceleration", format!("{other}: dsa or none"))),
-        };
-        let anderson = p.usize_or("anderson", 2)?;
-        let block = p.usize_or("block", 16)?;
-        if anderson > 16 || !(1..=256).contains(&block) {
-            return Err(invalid("anderson/block", "anderson ≤ 16, 1 ≤ block ≤ 256"));
-        }
+        let p: DomParams = p.parse("dom")?;
+        let octahedral = p.family == Family::Octahedral;
         let solver = Self {
             octahedral,
-            order,
-            storage_level,
+            order: p.order.unwrap_or(if octahedral { 2 } else { 8 }),
+            storage_level: p.storage_level,
             settings: DomSettings {
-                closure,
-                acceleration,
-                anderson,
-                block,
+                closure: p.closure,
+                acceleration: p.acceleration,
+                anderson: p.anderson,
+                block: p.block,
             },
         };
         solver.ordinates(lucent_optics::Phase::Isotropic)?;
@@ -211,102 +158,92 @@ impl DomSolver {
         problem: &Problem,
         options: &SolveOptions,
     ) -> Result<(Solution, Vec<DomChannel>), SolveError> {
-        self.admits(problem)?;
-        options.validate()?;
-        let started = Instant::now();
-        let g = *problem.geometry();
-        let n = g.voxel_count();
-        let medium = problem.medium();
-        let ordinates = self.ordinates(medium.phase)?;
-        let m = ordinates.storage().len();
-        let channels = problem.channels();
+        let (solution, extras) = driver::solve_per_channel(self, self, problem, options)?;
+        Ok((solution, extras.into_iter().map(|(_, r)| r).collect()))
+    }
+}
+
+impl ChannelMethod for DomSolver {
+    type Setup = Ordinates;
+    /// The in-scattered radiance per storage direction (taken for the renderer) and the
+    /// channel's record.
+    type Extra = (Vec<f32>, DomChannel);
+
+    fn memory_bytes(&self, problem: &Problem) -> u64 {
+        let m = self
+            .ordinates(problem.medium().phase)
+            .map_or(0, |o| o.storage().len());
         let anderson_vectors = 2 * self.settings.anderson + 2;
-        let bytes = (n * m * 4 * (3 + anderson_vectors) + n * 40) as u64 * channels as u64;
-        if bytes > options.memory_budget {
-            return Err(SolveError::OverBudget {
-                solver: self.name().into(),
-                needed: bytes,
-                budget: options.memory_budget,
-            });
+        let n = problem.geometry().voxel_count();
+        (n * m * 4 * (3 + anderson_vectors) + n * 40) as u64 * problem.channels() as u64
+    }
+
+    fn setup(&self, context: &Context<'_>) -> Result<Ordinates, SolveError> {
+        self.ordinates(context.problem.medium().phase)
+    }
+
+    /// Point-like lights through their uncollided light (cell integrals, so that first
+    /// collisions conserve each light's power, and `direct` at cell centres for the
+    /// renderer); the sky and emission are the sweeps' own.
+    fn route(&self, _: &Ordinates, _: &Problem, light: &Light) -> Route {
+        if light.is_pointlike() {
+            Route::Uncollided
+        } else {
+            Route::Own
+        }
+    }
+
+    fn solve_channel(
+        &self,
+        ordinates: &Ordinates,
+        channel: Channel<'_>,
+    ) -> Result<ChannelSolution<Self::Extra>, SolveError> {
+        let problem = channel.problem;
+        let g = *problem.geometry();
+        let m = ordinates.storage().len();
+        let c = channel.index;
+        let (emission, sky) = (channel.emission(), channel.sky_radiance());
+        let Coefficients {
+            sigma_t, sigma_s, ..
+        } = channel.coefficients;
+        // Emission as an isotropic fixed source, the uncollided light's first collisions
+        // projected onto the storage directions.
+        let mut fixed = vec![0.0f32; g.voxel_count() * m];
+        for (row, e) in fixed.chunks_mut(m).zip(emission) {
+            row.iter_mut().for_each(|v| *v += e as f32);
+        }
+        if let Some(uncollided) = channel.uncollided {
+            uncollided.project_first_collisions(
+                c,
+                &sigma_s,
+                m,
+                &|d| ordinates.phase_from(d),
+                &mut fixed,
+            );
         }
         // The capabilities refuse a Neumann flux other than 0.
         let reflectance = problem.boundary().diffuse_reflectance().unwrap_or(0.0);
-        // Point-like lights through `direct` (uncollided, exact).
-        let pointlike: Vec<Light> = problem
-            .lights()
-            .iter()
-            .filter(|l| l.is_pointlike())
-            .cloned()
-            .collect();
-        // Their uncollided light: cell integrals (the sweeps' unknowns are cell averages,
-        // and the first collisions must conserve each light's power), and `direct` at cell
-        // centres for the renderer's exact single scattering.
-        let direct = if pointlike.is_empty() {
-            None
-        } else {
-            let p = Problem::new(g, medium.clone(), pointlike.clone(), Boundary::Vacuum, None)?;
-            Some(lucent_core::Uncollided::new(&p, options)?)
+        let dom = DomProblem {
+            geometry: g,
+            sigma_t,
+            sigma_s,
+            fixed,
+            boundary: DomBoundary {
+                radiance: sky,
+                reflectance,
+            },
         };
-        let lights = direct.as_ref().and_then(|d| match &d.direct.angular {
-            Some(Angular::Lights(l)) => Some(l.clone()),
-            _ => None,
-        });
-        let stopping = lucent_core::Stopping::from_options(options);
-        let mut fluence = Vec::with_capacity(channels);
-        let mut inscattered = Vec::with_capacity(channels);
-        let mut report: Option<(Vec<f64>, StopReason)> = None;
-        let mut records = Vec::with_capacity(channels);
-        for c in 0..channels {
-            let sigma_t: Vec<f32> = medium.sigma_t(c).data().to_vec();
-            let sigma_s: Vec<f32> = (0..n)
-                .map(|cell| {
-                    let [i, j, k] = g.coords(cell);
-                    medium
-                        .sigma_s_at(c, g.cell_centre(i, j, k))
-                        .min(sigma_t[cell])
-                })
-                .collect();
-            let mut fixed = vec![0.0f32; n * m];
-            let mut sky = 0.0;
-            for light in problem.lights() {
-                match light {
-                    Light::Emission { grid, scale } => {
-                        let s = scale.channel(c);
-                        for (row, e) in fixed.chunks_mut(m).zip(grid.data()) {
-                            let q = (s * f64::from(*e)) as f32;
-                            row.iter_mut().for_each(|v| *v += q);
-                        }
-                    }
-                    Light::Sky { radiance } => sky += radiance.channel(c),
-                    _ => {}
-                }
-            }
-            if let Some(direct) = &direct {
-                first_collision(&ordinates, direct, c, &g, &sigma_t, &sigma_s, &mut fixed);
-            }
-            let dom = DomProblem {
-                geometry: g,
-                sigma_t,
-                sigma_s,
-                fixed,
-                boundary: DomBoundary {
-                    radiance: sky,
-                    reflectance,
-                },
-            };
-            let solution = solve(&dom, &ordinates, &self.settings, &stopping)
-                .map_err(|e| invalid("problem", e.to_string()))?;
-            let mut total = solution.fluence.clone();
-            // The whole problem's balance: the sweeps' own (whose fixed source holds the
-            // first collisions) plus the lights' uncollided power in, absorbed and out.
-            let mut balance = solution.balance;
-            let volume = g.cell_volume();
-            let uncollided = direct.as_ref().map_or(Vec::new(), |d| d.fluence(c));
-            for (t, u) in total.iter_mut().zip(&uncollided) {
+        let solution = solve(&dom, ordinates, &self.settings, &channel.stopping)
+            .map_err(|e| invalid("problem", e.to_string()))?;
+        // The whole problem's balance: the sweeps' own (whose fixed source holds the first
+        // collisions) plus the lights' uncollided power in, absorbed and out.
+        let mut balance = solution.balance;
+        let mut total = solution.fluence.clone();
+        if let Some(uncollided) = channel.uncollided {
+            for (t, u) in total.iter_mut().zip(uncollided.fluence(c)) {
                 *t += u;
             }
-            let lights_cells = direct.as_ref().map_or(&[][..], |d| &d.cells[..]);
-            for (light, cells) in pointlike.iter().zip(lights_cells) {
+            for (light, cells) in uncollided.lights.iter().zip(&uncollided.cells) {
                 let cells = &cells[c.min(cells.len() - 1)];
                 let scale = light.spectrum().channel(c);
                 let scattered: f64 = cells
@@ -319,109 +256,51 @@ impl DomSolver {
                 balance.emitted += scale * (cells.emitted - scattered);
                 balance.outflow += scale * cells.escaped;
             }
-            balance.absorbed = total
-                .iter()
-                .zip(dom.sigma_t.iter().zip(&dom.sigma_s))
-                .map(|(phi, (t, s))| phi * f64::from(t - s) * volume)
-                .sum();
-            let total: Vec<f32> = total.iter().map(|v| *v as f32).collect();
-            fluence.push(Grid::from_vec(g, total)?);
-            inscattered.push(solution.inscattered);
-            let conv = solution.convergence;
-            records.push(DomChannel {
-                convergence: conv.clone(),
-                balance,
-            });
-            let replace = match &report {
-                None => true,
-                Some((_, reason)) => reason.is_converged() && !conv.stop_reason.is_converged(),
-            };
-            if replace {
-                report = Some((conv.residuals, conv.stop_reason));
-            }
         }
-        let (residuals, stop_reason) = report.ok_or_else(|| invalid("problem", "no channel"))?;
-        let solution = Solution {
-            fluence,
-            angular: Some(Angular::Ordinates(OrdinateRadiance {
-                directions: ordinates.storage().directions().to_vec(),
-                kernel: ordinates.kernel(),
-                inscattered,
-                geometry: g,
-                lights,
-            })),
-            standard_error: None,
-            report: SolveReport {
-                solver: self.name().into(),
-                iterations: residuals.len(),
-                residual_history: residuals,
-                wall_time_s: started.elapsed().as_secs_f64(),
-                peak_memory_bytes: bytes,
-                stop_reason,
+        let volume = g.cell_volume();
+        balance.absorbed = total
+            .iter()
+            .zip(dom.sigma_t.iter().zip(&dom.sigma_s))
+            .map(|(phi, (t, s))| phi * f64::from(t - s) * volume)
+            .sum();
+        let conv = solution.convergence;
+        Ok(ChannelSolution {
+            // The driver adds the uncollided fluence.
+            fluence: solution.fluence.iter().map(|&v| v as f32).collect(),
+            record: Record {
+                iterations: conv.residuals.len(),
+                residuals: conv.residuals.clone(),
+                stop_reason: conv.stop_reason.clone(),
+                memory_bytes: 0,
             },
-        };
-        Ok((solution, records))
-    }
-}
-
-/// Adds each point-like light's first-collision source to `fixed` per cell and storage
-/// direction: (σ_s/σ_t)[(C − |D|)/4π + |D| p̄(D̂ → ω_m)]/V, with C the power that first
-/// collides in the cell and D its direction-weighted integral ([`lucent_core::UncollidedCells`]).
-/// The split keeps C and D exactly: the isotropic part carries no first moment.
-fn first_collision(
-    ordinates: &Ordinates,
-    uncollided: &lucent_core::Uncollided,
-    channel: usize,
-    geometry: &lucent_grid::GridGeometry,
-    sigma_t: &[f32],
-    sigma_s: &[f32],
-    fixed: &mut [f32],
-) {
-    use rayon::prelude::*;
-    let m = ordinates.storage().len();
-    let inv_volume = 1.0 / geometry.cell_volume();
-    let isotropic = 1.0 / (4.0 * std::f64::consts::PI);
-    // Directional lights have one direction everywhere: their discrete phase once.
-    let lights = &uncollided.lights;
-    let constant: Vec<Option<Vec<f64>>> = lights
-        .iter()
-        .map(|l| match l {
-            Light::Directional { direction, .. } => Some(ordinates.phase_from(*direction)),
-            _ => None,
+            extra: (
+                solution.inscattered,
+                DomChannel {
+                    convergence: conv,
+                    balance,
+                },
+            ),
         })
-        .collect();
-    fixed.par_chunks_mut(m).enumerate().for_each(|(cell, row)| {
-        if sigma_t[cell] <= 0.0 || sigma_s[cell] <= 0.0 {
-            return;
-        }
-        let albedo = f64::from(sigma_s[cell]) / f64::from(sigma_t[cell]);
-        for (l, light) in lights.iter().enumerate() {
-            let cells = &uncollided.cells[l][channel.min(uncollided.cells[l].len() - 1)];
-            let power = cells.collided[cell] * light.spectrum().channel(channel);
-            if power <= 0.0 {
-                continue;
-            }
-            let directed = cells.directed[cell] * light.spectrum().channel(channel);
-            let beam = directed.length().min(power);
-            let spread = (power - beam) * isotropic;
-            let scale = albedo * inv_volume;
-            let local;
-            let phase = match &constant[l] {
-                Some(p) => p,
-                None if beam > 0.0 => {
-                    local = ordinates.phase_from(directed / directed.length());
-                    &local
-                }
-                None => {
-                    for v in row.iter_mut() {
-                        *v += (scale * spread) as f32;
-                    }
-                    continue;
-                }
-            };
-            for (v, p) in row.iter_mut().zip(phase) {
-                *v += (scale * (spread + beam * p)) as f32;
-            }
-        }
-    });
+    }
+
+    fn angular(
+        &self,
+        ordinates: &Ordinates,
+        problem: &Problem,
+        extras: &mut [Self::Extra],
+        uncollided: Option<Uncollided>,
+    ) -> Result<Option<Angular>, SolveError> {
+        // `direct`'s per-light transmittance at cell centres for exact single scattering.
+        let lights = uncollided.and_then(|u| match u.direct.angular {
+            Some(Angular::Lights(l)) => Some(l),
+            _ => None,
+        });
+        Ok(Some(Angular::Ordinates(OrdinateRadiance {
+            directions: ordinates.storage().directions().to_vec(),
+            kernel: ordinates.kernel(),
+            inscattered: extras.iter_mut().map(|(s, _)| std::mem::take(s)).collect(),
+            geometry: *problem.geometry(),
+            lights,
+        })))
+    }
 }

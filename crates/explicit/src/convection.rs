@@ -50,7 +50,8 @@ pub enum Light {
 }
 
 /// The form of the convection–absorption equation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Model {
     /// Eq. 16 as printed: non-conservative, absorption a factor (1 − σ_a) per step.
     #[default]

@@ -44,6 +44,7 @@ pub mod ftcs;
 mod lattice;
 pub mod ordinates;
 pub mod p1;
+mod params;
 pub mod scatter;
 mod solver;
 pub mod stability;
@@ -51,4 +52,8 @@ pub mod steady;
 
 pub use error::ExplicitError;
 pub use lattice::Lattice;
+pub use params::{
+    ConvectionParams, FtcsDiffusionParams, JacobiDiffusionParams, OrdinatesParams, P1Params,
+    SweepParam,
+};
 pub use solver::ExplicitSolver;

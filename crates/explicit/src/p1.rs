@@ -23,7 +23,8 @@ use crate::error::ExplicitError;
 use crate::lattice::{GrowthMonitor, Lattice};
 
 /// Where the flux lives.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Layout {
     /// φ and E at cell centres.
     Collocated,

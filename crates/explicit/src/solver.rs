@@ -26,17 +26,23 @@
 
 use std::time::Instant;
 
+use lucent_core::driver::{
+    self, Channel, ChannelMethod, ChannelSolution, Context, Outcome, Record, Route,
+};
 use lucent_core::{
-    BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OutputKind, ParamValue, Params,
-    Problem, Solution, SolveError, SolveOptions, SolveReport, Solver, SolverEntry, StopReason,
+    BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OutputKind, Problem, Solution,
+    SolveError, SolveOptions, Solver, SolverEntry, param_docs,
 };
 use lucent_diffusion::{Convergence, DiffusionSolution, DiffusionSolver};
 use lucent_grid::Grid;
 use lucent_optics::PhaseFunction;
 
-use crate::convection::{Model, Sweep, UpwindSettings, compose, propagate};
+use crate::convection::{Model, UpwindSettings, compose, propagate};
 use crate::error::ExplicitError;
 use crate::lattice::Lattice;
+use crate::params::{
+    ConvectionParams, FtcsDiffusionParams, JacobiDiffusionParams, OrdinatesParams, P1Params,
+};
 use crate::steady::{Iteration, SteadySettings, ftcs_limit, iterate};
 
 fn invalid(name: &str, reason: impl Into<String>) -> SolveError {
@@ -61,33 +67,6 @@ fn explicit_error(e: ExplicitError) -> SolveError {
         },
         ExplicitError::Invalid(reason) => invalid("problem", reason),
     }
-}
-
-fn flag(params: &Params, name: &str) -> Result<bool, SolveError> {
-    match params.0.get(name) {
-        None => Ok(false),
-        Some(ParamValue::Bool(b)) => Ok(*b),
-        Some(other) => Err(invalid(
-            name,
-            format!("expected true or false, got {other:?}"),
-        )),
-    }
-}
-
-fn text<'a>(params: &'a Params, name: &str, default: &'a str) -> Result<&'a str, SolveError> {
-    match params.0.get(name) {
-        None => Ok(default),
-        Some(ParamValue::Text(t)) => Ok(t),
-        Some(other) => Err(invalid(name, format!("expected text, got {other:?}"))),
-    }
-}
-
-fn fraction(params: &Params) -> Result<f64, SolveError> {
-    let f = params.f64_or("step_fraction", 0.9)?;
-    if !(f > 0.0 && f.is_finite()) {
-        return Err(invalid("step_fraction", "a positive fraction of the bound"));
-    }
-    Ok(f)
 }
 
 /// The explicit schemes' registry entries.
@@ -126,147 +105,99 @@ enum SteadyKind {
 }
 
 impl ExplicitSolver {
-    /// `ftcs-diffusion`.
+    /// `ftcs-diffusion` ([`FtcsDiffusionParams`]).
     pub const FTCS_DIFFUSION: SolverEntry = SolverEntry {
         name: "ftcs-diffusion",
         summary: "FTCS to steady state on diffusion-mg's discrete problem (Murray ch. 4)",
         build: |p| {
-            p.check_known("ftcs-diffusion", &["step_fraction", "allow_unstable"])?;
+            let p: FtcsDiffusionParams = p.parse("ftcs-diffusion")?;
             Ok(Box::new(ExplicitSolver {
                 name: "ftcs-diffusion",
                 scheme: Scheme::Steady {
                     iteration: SteadyKind::Ftcs {
-                        fraction: fraction(p)?,
+                        fraction: p.step_fraction,
                     },
-                    allow_unstable: flag(p, "allow_unstable")?,
+                    allow_unstable: p.allow_unstable,
                 },
             }))
         },
+        params: param_docs::<FtcsDiffusionParams>,
     };
 
-    /// `jacobi-diffusion`.
+    /// `jacobi-diffusion` ([`JacobiDiffusionParams`]).
     pub const JACOBI_DIFFUSION: SolverEntry = SolverEntry {
         name: "jacobi-diffusion",
         summary: "Jacobi relaxation of the steady diffusion equation (FTCS at the positivity bound)",
         build: |p| {
-            p.check_known("jacobi-diffusion", &["omega"])?;
-            let omega = p.f64_or("omega", 1.0)?;
-            if !(omega > 0.0 && omega <= 1.0) {
-                return Err(invalid("omega", "in (0, 1]"));
-            }
+            let p: JacobiDiffusionParams = p.parse("jacobi-diffusion")?;
             Ok(Box::new(ExplicitSolver {
                 name: "jacobi-diffusion",
                 scheme: Scheme::Steady {
-                    iteration: SteadyKind::Jacobi { omega },
+                    iteration: SteadyKind::Jacobi { omega: p.omega },
                     allow_unstable: false,
                 },
             }))
         },
+        params: param_docs::<JacobiDiffusionParams>,
     };
 
-    /// `convection-diffusion`.
+    /// `convection-diffusion` ([`ConvectionParams`]).
     pub const CONVECTION_DIFFUSION: SolverEntry = SolverEntry {
         name: "convection-diffusion",
         summary: "Zhang & Ma: upwind convection-absorption per light, then implicit scattering",
         build: |p| {
-            p.check_known(
-                "convection-diffusion",
-                &["courant", "model", "sweep", "scattering", "allow_unstable"],
-            )?;
-            let model = match text(p, "model", "characteristic")? {
-                "characteristic" => Model::Characteristic,
-                "conservative" => Model::Conservative,
-                "paper" => Model::Paper,
-                other => {
-                    return Err(invalid(
-                        "model",
-                        format!("`{other}`: characteristic, conservative or paper"),
-                    ));
-                }
-            };
-            let sweep = match text(p, "sweep", "ordered")? {
-                "ordered" => Sweep::Ordered,
-                "layers" => Sweep::Layers {
-                    iterations: 5,
-                    warm_start: true,
-                },
-                "jacobi" => Sweep::Jacobi,
-                other => {
-                    return Err(invalid(
-                        "sweep",
-                        format!("`{other}`: ordered, layers or jacobi"),
-                    ));
-                }
-            };
-            let scattering = p.f64_or("scattering", 0.0)?;
-            if !(scattering >= 0.0 && scattering.is_finite()) {
-                return Err(invalid("scattering", "σ̂_s t ≥ 0 (length²)"));
-            }
+            let p: ConvectionParams = p.parse("convection-diffusion")?;
             Ok(Box::new(ExplicitSolver {
                 name: "convection-diffusion",
                 scheme: Scheme::Convection {
                     settings: UpwindSettings {
-                        courant: p.f64_or("courant", 0.5)?,
-                        model,
-                        sweep,
-                        allow_unstable: flag(p, "allow_unstable")?,
+                        courant: p.courant,
+                        model: p.model,
+                        sweep: p.sweep.into(),
+                        allow_unstable: p.allow_unstable,
                         ..UpwindSettings::default()
                     },
-                    scattering,
+                    scattering: p.scattering,
                 },
             }))
         },
+        params: param_docs::<ConvectionParams>,
     };
 
-    /// `ftcs-p1`.
+    /// `ftcs-p1` ([`P1Params`]).
     pub const FTCS_P1: SolverEntry = SolverEntry {
         name: "ftcs-p1",
         summary: "Murray's P1 moment system with FTCS, staggered or collocated grid",
         build: |p| {
-            p.check_known("ftcs-p1", &["layout", "step_fraction", "allow_unstable"])?;
-            let layout = match text(p, "layout", "staggered")? {
-                "staggered" => crate::p1::Layout::Staggered,
-                "collocated" => crate::p1::Layout::Collocated,
-                other => {
-                    return Err(invalid(
-                        "layout",
-                        format!("`{other}`: staggered or collocated"),
-                    ));
-                }
-            };
+            let p: P1Params = p.parse("ftcs-p1")?;
             Ok(Box::new(ExplicitSolver {
                 name: "ftcs-p1",
                 scheme: Scheme::P1 {
-                    layout,
-                    fraction: fraction(p)?,
-                    allow_unstable: flag(p, "allow_unstable")?,
+                    layout: p.layout,
+                    fraction: p.step_fraction,
+                    allow_unstable: p.allow_unstable,
                 },
             }))
         },
+        params: param_docs::<P1Params>,
     };
 
-    /// `ftcs-ordinates`.
+    /// `ftcs-ordinates` ([`OrdinatesParams`]).
     pub const FTCS_ORDINATES: SolverEntry = SolverEntry {
         name: "ftcs-ordinates",
         summary: "the unsteady RTE over discrete directions with upwind FTCS (Murray §3.4.1)",
         build: |p| {
-            p.check_known(
-                "ftcs-ordinates",
-                &["order", "step_fraction", "allow_unstable"],
-            )?;
-            let order = p.usize_or("order", 4)?;
-            if !(2..=16).contains(&order) || order % 2 == 1 {
-                return Err(invalid("order", "an even S_N order from 2 to 16"));
-            }
+            let p: OrdinatesParams = p.parse("ftcs-ordinates")?;
             Ok(Box::new(ExplicitSolver {
                 name: "ftcs-ordinates",
                 scheme: Scheme::Ordinates {
-                    order,
-                    fraction: fraction(p)?,
-                    allow_unstable: flag(p, "allow_unstable")?,
+                    order: p.order,
+                    fraction: p.step_fraction,
+                    allow_unstable: p.allow_unstable,
                 },
             }))
         },
+        params: param_docs::<OrdinatesParams>,
     };
 
     /// Every entry of this crate.
@@ -279,56 +210,30 @@ impl ExplicitSolver {
     ];
 }
 
-/// The lattice of a problem's grid (cubic cells only).
+/// The lattice of a problem's grid (the capabilities ask for cubic cells).
 fn lattice(problem: &Problem) -> Result<Lattice, SolveError> {
     let g = problem.geometry();
-    let h = g.spacing();
-    if (h.x - h.y).abs() > 1e-9 * h.x || (h.x - h.z).abs() > 1e-9 * h.x {
-        return Err(invalid(
-            "grid",
-            format!("cubic cells needed, spacing {h:?}"),
-        ));
-    }
-    let mut l = Lattice::new(g.dims(), h.x).map_err(explicit_error)?;
+    let mut l = Lattice::new(g.dims(), g.spacing().x).map_err(explicit_error)?;
     l.origin = g.origin();
     Ok(l)
 }
 
-/// Sources of P1 and ordinates for channel c: point lights (4πI into their cell) and
-/// emission (4π L_e), as power per volume.
-fn point_and_emission(problem: &Problem, c: usize) -> Result<Vec<f64>, SolveError> {
-    let g = problem.geometry();
-    let mut q = vec![0.0; g.voxel_count()];
-    for light in problem.lights() {
-        match light {
-            Light::Point {
-                position,
-                intensity,
-            } => {
-                // Cell i spans [i, i + 1) in these coordinates.
-                let v = g.world_to_voxel(*position) + 0.5;
-                let dims = g.dims();
-                let inside = (0..3).all(|a| v[a] >= 0.0 && v[a] < dims[a] as f64);
-                if !inside {
-                    return Err(invalid(
-                        "lights",
-                        "point lights must lie inside the grid for this solver",
-                    ));
-                }
-                q[g.index(v.x as usize, v.y as usize, v.z as usize)] +=
-                    4.0 * std::f64::consts::PI * intensity.channel(c) / g.cell_volume();
-            }
-            Light::Emission { grid, scale } => {
-                for (q, e) in q.iter_mut().zip(grid.data()) {
-                    *q += 4.0 * std::f64::consts::PI * scale.channel(c) * f64::from(*e);
-                }
-            }
-            other => {
-                return Err(invalid("lights", format!("{:?} lights", other.kind())));
-            }
-        }
+/// Sources of P1 and ordinates in a channel: point lights (4πI into the cell holding them;
+/// the capabilities keep them inside the grid) and emission (4π L_e), as power per volume.
+fn point_and_emission(channel: &Channel<'_>) -> Vec<f64> {
+    let g = channel.problem.geometry();
+    let mut q: Vec<f64> = channel
+        .emission()
+        .iter()
+        .map(|e| 4.0 * std::f64::consts::PI * e)
+        .collect();
+    for (position, power) in channel.point_sources() {
+        // Cell i spans [i, i + 1) in these coordinates.
+        let v = g.world_to_voxel(position) + 0.5;
+        let [i, j, k] = [0, 1, 2].map(|a| (v[a].max(0.0) as usize).min(g.dims()[a] - 1));
+        q[g.index(i, j, k)] += power / g.cell_volume();
     }
-    Ok(q)
+    q
 }
 
 impl Solver for ExplicitSolver {
@@ -373,27 +278,6 @@ impl Solver for ExplicitSolver {
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
-        self.admits(problem)?;
-        options.validate()?;
-        // f64 working fields per cell: the assembled system (about 8 rows of 12 bytes and
-        // 6 vectors) for the steady schemes, two fields per light for convection, φ and E
-        // twice for P1, the radiance of every direction twice for ordinates.
-        let n = problem.geometry().voxel_count() as u64;
-        let per_cell = match &self.scheme {
-            Scheme::Steady { .. } => 8 * 12 + 6 * 8,
-            Scheme::Convection { .. } => 8 * (3 + 2 * problem.lights().len() as u64),
-            Scheme::P1 { .. } => 8 * 2 * 4 * 2,
-            Scheme::Ordinates { order, .. } => 8 * 2 * (order * (order + 2)) as u64 + 32,
-        };
-        let needed = n * per_cell * problem.channels() as u64;
-        if needed > options.memory_budget {
-            return Err(SolveError::OverBudget {
-                solver: self.name.into(),
-                needed,
-                budget: options.memory_budget,
-            });
-        }
-        let started = Instant::now();
         match &self.scheme {
             Scheme::Steady {
                 iteration,
@@ -413,120 +297,103 @@ impl Solver for ExplicitSolver {
                 }
                 let volume = problem.geometry().cell_volume();
                 let (iteration, allow_unstable) = (*iteration, *allow_unstable);
-                DiffusionSolver::custom(self.name).solve_with(problem, options, &|d, s, stop| {
-                    let t0 = Instant::now();
-                    let system = d.assemble(s)?;
-                    let kind = match iteration {
-                        SteadyKind::Ftcs { fraction } => Iteration::Ftcs {
-                            time_step: fraction * ftcs_limit(&system, volume),
-                            cell_volume: volume,
-                        },
-                        SteadyKind::Jacobi { omega } => Iteration::Jacobi { omega },
-                    };
-                    let setup = t0.elapsed().as_secs_f64();
-                    let settings = SteadySettings {
-                        stopping: stop.clone(),
-                        allow_unstable,
-                    };
-                    let out = iterate(&system, kind, &settings)
-                        .map_err(|e| lucent_diffusion::DiffusionError::Invalid(e.to_string()))?;
-                    let mut fluence = vec![0.0; d.cells().geometry().voxel_count()];
-                    for (&c, v) in system.cells.iter().zip(&out.fluence) {
-                        fluence[c] = *v;
-                    }
-                    let balance = d.balance(s, &fluence);
-                    Ok(DiffusionSolution {
-                        convergence: Convergence {
-                            residuals: out.residuals,
-                            stop_reason: out.stop_reason,
-                        },
-                        balance,
-                        setup_seconds: setup,
-                        solve_seconds: t0.elapsed().as_secs_f64() - setup,
-                        levels: 1,
-                        memory_bytes: (system.matrix.nnz() * 16 + fluence.len() * 32) as u64,
-                        fluence,
-                    })
+                let memory = self.memory_bytes(problem);
+                let diffusion = DiffusionSolver::custom(self.name);
+                diffusion.solve_with(problem, options, memory, &|d, s, stop| {
+                    steady(d, s, stop, iteration, allow_unstable, volume)
                 })
             }
             Scheme::Convection {
                 settings,
                 scattering,
-            } => {
-                // The caller's time budget bounds every light's march, and its progress
-                // callback hears every pass.
-                let settings = UpwindSettings {
-                    stopping: lucent_core::Stopping {
-                        time_budget: options.time_budget,
-                        progress: options.progress.clone(),
-                        ..settings.stopping.clone()
-                    },
-                    ..settings.clone()
-                };
-                self.convection(problem, options, &settings, *scattering, started)
+            } => driver::run(
+                self,
+                problem,
+                options,
+                self.memory_bytes(problem),
+                |context| self.convection(context, settings, *scattering),
+            ),
+            Scheme::P1 { .. } | Scheme::Ordinates { .. } => {
+                driver::solve_per_channel(self, self, problem, options).map(|(s, _)| s)
             }
-            Scheme::P1 {
-                layout,
-                fraction,
-                allow_unstable,
-            } => self.p1(
-                problem,
-                options,
-                *layout,
-                *fraction,
-                *allow_unstable,
-                started,
-            ),
-            Scheme::Ordinates {
-                order,
-                fraction,
-                allow_unstable,
-            } => self.ordinates(
-                problem,
-                options,
-                *order,
-                *fraction,
-                *allow_unstable,
-                started,
-            ),
         }
     }
 }
 
+/// FTCS or Jacobi to steady state on one channel's assembled diffusion system.
+fn steady(
+    d: &lucent_diffusion::DiffusionProblem,
+    s: &lucent_diffusion::Sources,
+    stop: &lucent_core::Stopping,
+    iteration: SteadyKind,
+    allow_unstable: bool,
+    volume: f64,
+) -> Result<DiffusionSolution, lucent_diffusion::DiffusionError> {
+    let t0 = Instant::now();
+    let system = d.assemble(s)?;
+    let kind = match iteration {
+        SteadyKind::Ftcs { fraction } => Iteration::Ftcs {
+            time_step: fraction * ftcs_limit(&system, volume),
+            cell_volume: volume,
+        },
+        SteadyKind::Jacobi { omega } => Iteration::Jacobi { omega },
+    };
+    let setup = t0.elapsed().as_secs_f64();
+    let settings = SteadySettings {
+        stopping: stop.clone(),
+        allow_unstable,
+    };
+    let out = iterate(&system, kind, &settings)
+        .map_err(|e| lucent_diffusion::DiffusionError::Invalid(e.to_string()))?;
+    let mut fluence = vec![0.0; d.cells().geometry().voxel_count()];
+    for (&c, v) in system.cells.iter().zip(&out.fluence) {
+        fluence[c] = *v;
+    }
+    let balance = d.balance(s, &fluence);
+    Ok(DiffusionSolution {
+        convergence: Convergence {
+            residuals: out.residuals,
+            stop_reason: out.stop_reason,
+        },
+        balance,
+        setup_seconds: setup,
+        solve_seconds: t0.elapsed().as_secs_f64() - setup,
+        levels: 1,
+        memory_bytes: (system.matrix.nnz() * 16 + fluence.len() * 32) as u64,
+        fluence,
+    })
+}
+
 impl ExplicitSolver {
-    fn report(
-        &self,
-        started: Instant,
-        iterations: usize,
-        residual_history: Vec<f64>,
-        stop_reason: StopReason,
-        bytes: u64,
-    ) -> SolveReport {
-        SolveReport {
-            solver: self.name.into(),
-            iterations,
-            residual_history,
-            wall_time_s: started.elapsed().as_secs_f64(),
-            peak_memory_bytes: bytes,
-            stop_reason,
-        }
+    /// f64 working fields per cell: the assembled system (about 8 rows of 12 bytes and 6
+    /// vectors) for the steady schemes, two fields per light for convection, φ and E twice
+    /// for P1, the radiance of every direction twice for ordinates.
+    fn memory_bytes(&self, problem: &Problem) -> u64 {
+        let n = problem.geometry().voxel_count() as u64;
+        let per_cell = match &self.scheme {
+            Scheme::Steady { .. } => 8 * 12 + 6 * 8,
+            Scheme::Convection { .. } => 8 * (3 + 2 * problem.lights().len() as u64),
+            Scheme::P1 { .. } => 8 * 2 * 4 * 2,
+            Scheme::Ordinates { order, .. } => 8 * 2 * (order * (order + 2)) as u64 + 32,
+        };
+        n * per_cell * problem.channels() as u64
     }
 
+    /// Zhang & Ma: every light marched by convection–absorption per channel (one phase of
+    /// the progress and the time budget per march), composed, then the implicit
+    /// scattering step.
     fn convection(
         &self,
-        problem: &Problem,
-        options: &SolveOptions,
+        context: &Context<'_>,
         settings: &UpwindSettings,
         scattering: f64,
-        started: Instant,
-    ) -> Result<Solution, SolveError> {
+    ) -> Result<Outcome, SolveError> {
+        let problem = context.problem;
         let l = lattice(problem)?;
         let geometry = *problem.geometry();
-        let (mut iterations, mut stop) = (0, StopReason::Exact);
+        let mut record = Record::exact((l.len() * 8 * 4) as u64);
         let mut fluence = Vec::new();
-        // One march per light and channel.
         let marches = (problem.channels() * problem.lights().len()).max(1);
-        let mut marched = 0usize;
         for c in 0..problem.channels() {
             let sigma_t: Vec<f64> = problem
                 .medium()
@@ -544,7 +411,7 @@ impl ExplicitSolver {
                     .collect(),
             };
             let mut fields = Vec::new();
-            for light in problem.lights() {
+            for (i, light) in problem.lights().iter().enumerate() {
                 let (light, colour) = match light {
                     Light::Directional {
                         direction,
@@ -569,17 +436,25 @@ impl ExplicitSolver {
                     ),
                     other => return Err(invalid("lights", format!("{:?}", other.kind()))),
                 };
-                let out = propagate(&l, &absorption, &light, settings).map_err(explicit_error)?;
-                iterations += out.iterations;
-                marched += 1;
-                options.report(lucent_core::Progress {
-                    fraction: marched as f64 / marches as f64,
-                    iteration: iterations,
+                // The march's own tolerance; the caller's budget and progress.
+                let phase = context.stopping_for(c * problem.lights().len() + i, marches);
+                let settings = UpwindSettings {
+                    stopping: lucent_core::Stopping {
+                        time_budget: phase.time_budget,
+                        progress: phase.progress,
+                        ..settings.stopping.clone()
+                    },
+                    ..settings.clone()
+                };
+                let out = propagate(&l, &absorption, &light, &settings).map_err(explicit_error)?;
+                context.report(lucent_core::Progress {
+                    fraction: (c * problem.lights().len() + i + 1) as f64 / marches as f64,
+                    iteration: out.iterations,
                     residual: out.residuals.last().copied(),
                 });
-                if !out.stop_reason.is_converged() {
-                    stop = out.stop_reason.clone();
-                }
+                let mut march = Record::from_residuals(Vec::new(), out.stop_reason.clone(), 0);
+                march.iterations = out.iterations;
+                record = record.worse(march);
                 fields.push((out.density, vec![colour]));
             }
             let mut total = compose(&fields)
@@ -603,155 +478,150 @@ impl ExplicitSolver {
                 total.iter().map(|&v| v as f32).collect(),
             )?);
         }
-        let bytes = (l.len() * 8 * 4) as u64;
-        Ok(Solution {
+        Ok(Outcome {
             fluence,
             angular: None,
             standard_error: None,
-            report: self.report(started, iterations, Vec::new(), stop, bytes),
+            record,
         })
     }
+}
 
-    #[allow(clippy::too_many_arguments)]
-    fn p1(
+/// P1 and ordinates march each channel with the lights they take themselves.
+impl ChannelMethod for ExplicitSolver {
+    type Setup = Lattice;
+    type Extra = ();
+
+    fn memory_bytes(&self, problem: &Problem) -> u64 {
+        ExplicitSolver::memory_bytes(self, problem)
+    }
+
+    fn setup(&self, context: &Context<'_>) -> Result<Lattice, SolveError> {
+        lattice(context.problem)
+    }
+
+    fn route(&self, _: &Lattice, _: &Problem, _: &Light) -> Route {
+        Route::Own
+    }
+
+    fn solve_channel(
         &self,
-        problem: &Problem,
-        options: &SolveOptions,
-        layout: crate::p1::Layout,
-        fraction: f64,
-        allow_unstable: bool,
-        started: Instant,
-    ) -> Result<Solution, SolveError> {
-        let l = lattice(problem)?;
-        let g = problem.medium().phase.mean_cosine();
-        let mut fluence = Vec::new();
-        let mut last = (0, StopReason::Exact);
-        for c in 0..problem.channels() {
-            let sigma_t = f64::from(problem.medium().sigma_t(c).data()[0]);
-            let sigma_s = f64::from(
-                problem
-                    .medium()
-                    .sigma_s_at(c, problem.geometry().cell_centre(0, 0, 0)),
-            );
-            let (sigma_a, reduced) = (sigma_t - sigma_s, sigma_t - g * sigma_s);
-            let q = point_and_emission(problem, c)?;
-            let limit = |dt: f64| {
-                let (kp, ke) = (dt * sigma_a, dt * reduced);
-                match layout {
-                    crate::p1::Layout::Collocated => crate::stability::p1::collocated_limit(kp, ke),
-                    crate::p1::Layout::Staggered => crate::stability::p1::staggered_limit(kp, ke),
-                }
-            };
-            // The largest stable cΔt: r(cΔt) = cΔt/h must not exceed limit(cΔt); bisect.
-            let (mut lo, mut hi) = (0.0, 2.0 / reduced.max(1e-12));
-            for _ in 0..100 {
-                let mid = 0.5 * (lo + hi);
-                if mid / l.spacing <= limit(mid) {
-                    lo = mid
-                } else {
-                    hi = mid
-                }
-            }
-            let settings = crate::p1::P1Settings {
+        l: &Lattice,
+        channel: Channel<'_>,
+    ) -> Result<ChannelSolution<()>, SolveError> {
+        let q = point_and_emission(&channel);
+        let (fluence, record) = match &self.scheme {
+            Scheme::P1 {
                 layout,
-                damping: crate::p1::Damping::Consistent {
-                    sigma_a,
-                    sigma_t_reduced: reduced,
-                },
-                time_step: fraction * lo,
-                stopping: lucent_core::Stopping::from_options(options),
-                edges: crate::p1::P1Edges::Zero,
+                fraction,
                 allow_unstable,
-            };
-            if lo <= 0.0 {
-                return Err(invalid(
-                    "medium",
-                    "P1 FTCS has no stable step without absorption",
-                ));
-            }
-            let out = crate::p1::march(&l, &q, &settings, None).map_err(explicit_error)?;
-            last = (out.steps, out.stop_reason);
-            fluence.push(Grid::from_vec(
-                *problem.geometry(),
-                out.fluence.iter().map(|&v| v as f32).collect(),
-            )?);
-        }
-        Ok(Solution {
-            fluence,
-            angular: None,
-            standard_error: None,
-            report: self.report(
-                started,
-                last.0,
-                Vec::new(),
-                last.1,
-                (l.len() * 8 * 8) as u64,
-            ),
+            } => p1(l, &channel, &q, *layout, *fraction, *allow_unstable)?,
+            Scheme::Ordinates {
+                order,
+                fraction,
+                allow_unstable,
+            } => ordinates(l, &channel, &q, *order, *fraction, *allow_unstable)?,
+            _ => return Err(invalid("scheme", "not a per-channel march")),
+        };
+        Ok(ChannelSolution {
+            fluence: fluence.iter().map(|&v| v as f32).collect(),
+            record,
+            extra: (),
         })
     }
+}
 
-    #[allow(clippy::too_many_arguments)]
-    fn ordinates(
-        &self,
-        problem: &Problem,
-        options: &SolveOptions,
-        order: usize,
-        fraction: f64,
-        allow_unstable: bool,
-        started: Instant,
-    ) -> Result<Solution, SolveError> {
-        let l = lattice(problem)?;
-        let quadrature = lucent_optics::SphericalQuadrature::level_symmetric(order)
-            .map_err(|e| invalid("order", e.to_string()))?;
-        let s_max = quadrature
-            .directions()
-            .iter()
-            .map(|d| d.abs().element_sum())
-            .fold(0.0, f64::max);
-        let mut fluence = Vec::new();
-        let mut last = (0, Vec::new(), StopReason::Exact);
-        for c in 0..problem.channels() {
-            let geometry = problem.geometry();
-            let sigma_t: Vec<f64> = problem
-                .medium()
-                .sigma_t(c)
-                .data()
-                .iter()
-                .map(|&v| f64::from(v))
-                .collect();
-            let sigma_s: Vec<f64> = (0..geometry.voxel_count())
-                .map(|cell| {
-                    let [i, j, k] = geometry.coords(cell);
-                    f64::from(
-                        problem
-                            .medium()
-                            .sigma_s_at(c, geometry.cell_centre(i, j, k)),
-                    )
-                })
-                .collect();
-            let q = point_and_emission(problem, c)?;
-            let k_max = sigma_t.iter().fold(0.0f64, |a, &b| a.max(b));
-            // r ≤ (1 − K/2)/S with K = cΔt σ_t: cΔt ≤ h / (S + h σ_t/2).
-            let step = l.spacing / (s_max + 0.5 * l.spacing * k_max);
-            let settings = crate::ordinates::OrdinatesSettings {
-                time_step: fraction * step,
-                stopping: lucent_core::Stopping::from_options(options),
-                allow_unstable,
-            };
-            let out = crate::ordinates::march(&l, &quadrature, &sigma_t, &sigma_s, &q, &settings)
-                .map_err(explicit_error)?;
-            last = (out.steps, out.residuals, out.stop_reason);
-            fluence.push(Grid::from_vec(
-                *geometry,
-                out.fluence.iter().map(|&v| v as f32).collect(),
-            )?);
+/// Murray's P1 system by FTCS on one channel of a homogeneous medium, at `fraction` of
+/// the largest stable step.
+fn p1(
+    l: &Lattice,
+    channel: &Channel<'_>,
+    q: &[f64],
+    layout: crate::p1::Layout,
+    fraction: f64,
+    allow_unstable: bool,
+) -> Result<(Vec<f64>, Record), SolveError> {
+    let g = channel.problem.medium().phase.mean_cosine();
+    // Homogeneous (the capabilities ask for it): any cell's coefficients.
+    let coefficients = &channel.coefficients;
+    let sigma_t = f64::from(coefficients.sigma_t[0]);
+    let sigma_s = f64::from(coefficients.sigma_s[0]);
+    let (sigma_a, reduced) = (sigma_t - sigma_s, sigma_t - g * sigma_s);
+    let limit = |dt: f64| {
+        let (kp, ke) = (dt * sigma_a, dt * reduced);
+        match layout {
+            crate::p1::Layout::Collocated => crate::stability::p1::collocated_limit(kp, ke),
+            crate::p1::Layout::Staggered => crate::stability::p1::staggered_limit(kp, ke),
         }
-        let bytes = (l.len() * quadrature.len() * 16) as u64;
-        Ok(Solution {
-            fluence,
-            angular: None,
-            standard_error: None,
-            report: self.report(started, last.0, last.1, last.2, bytes),
-        })
+    };
+    // The largest stable cΔt: r(cΔt) = cΔt/h must not exceed limit(cΔt); bisect.
+    let (mut lo, mut hi) = (0.0, 2.0 / reduced.max(1e-12));
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if mid / l.spacing <= limit(mid) {
+            lo = mid
+        } else {
+            hi = mid
+        }
     }
+    if lo <= 0.0 {
+        return Err(invalid(
+            "medium",
+            "P1 FTCS has no stable step without absorption",
+        ));
+    }
+    let settings = crate::p1::P1Settings {
+        layout,
+        damping: crate::p1::Damping::Consistent {
+            sigma_a,
+            sigma_t_reduced: reduced,
+        },
+        time_step: fraction * lo,
+        stopping: channel.stopping.clone(),
+        edges: crate::p1::P1Edges::Zero,
+        allow_unstable,
+    };
+    let out = crate::p1::march(l, q, &settings, None).map_err(explicit_error)?;
+    let mut record = Record::exact((l.len() * 8 * 8) as u64);
+    record.iterations = out.steps;
+    record.stop_reason = out.stop_reason;
+    Ok((out.fluence, record))
+}
+
+/// Upwind FTCS ordinates on one channel at `fraction` of the positivity bound.
+fn ordinates(
+    l: &Lattice,
+    channel: &Channel<'_>,
+    q: &[f64],
+    order: usize,
+    fraction: f64,
+    allow_unstable: bool,
+) -> Result<(Vec<f64>, Record), SolveError> {
+    let quadrature = lucent_optics::SphericalQuadrature::level_symmetric(order)
+        .map_err(|e| invalid("order", e.to_string()))?;
+    let s_max = quadrature
+        .directions()
+        .iter()
+        .map(|d| d.abs().element_sum())
+        .fold(0.0, f64::max);
+    let widen = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>();
+    let sigma_t = widen(&channel.coefficients.sigma_t);
+    let sigma_s = widen(&channel.coefficients.sigma_s);
+    let k_max = sigma_t.iter().fold(0.0f64, |a, &b| a.max(b));
+    // r ≤ (1 − K/2)/S with K = cΔt σ_t: cΔt ≤ h / (S + h σ_t/2).
+    let step = l.spacing / (s_max + 0.5 * l.spacing * k_max);
+    let settings = crate::ordinates::OrdinatesSettings {
+        time_step: fraction * step,
+        stopping: channel.stopping.clone(),
+        allow_unstable,
+    };
+    let out = crate::ordinates::march(l, &quadrature, &sigma_t, &sigma_s, q, &settings)
+        .map_err(explicit_error)?;
+    let record = Record {
+        iterations: out.steps,
+        residuals: out.residuals,
+        stop_reason: out.stop_reason,
+        memory_bytes: (l.len() * quadrature.len() * 16) as u64,
+    };
+    Ok((out.fluence, record))
 }

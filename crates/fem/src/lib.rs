@@ -52,6 +52,7 @@ mod error;
 pub mod murray;
 mod operator;
 pub mod p1ls;
+mod params;
 pub mod q1;
 mod solver;
 pub mod solvers;
@@ -59,4 +60,5 @@ pub mod sphere;
 
 pub use error::FemError;
 pub use operator::{Dense, LinearOperator};
+pub use params::{FemDiffusionParams, FemP1Iteration, FemP1Params};
 pub use solver::{FemDiffusionSolver, FemP1Solver};

@@ -5,15 +5,20 @@
 //! `DivergedGrowth` and returns the last finite iterate. Parameter `solver`: `jacobi`
 //! (default), or `gmres` to see what the converged system gives.
 
-use std::time::Instant;
-
+use glam::DVec3;
+use lucent_core::driver::{
+    self, Channel, ChannelMethod, ChannelSolution, Coefficients, Context, Record, Route,
+};
 use lucent_core::{
-    BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OutputKind, ParamValue, Params,
-    Problem, Solution, SolveError, SolveOptions, SolveReport, Solver, SolverEntry,
+    BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OutputKind, Params, Problem,
+    Solution, SolveError, SolveOptions, Solver, SolverEntry, param_docs,
+    point_source_singular_part,
 };
 use lucent_grid::Grid;
+use lucent_optics::PhaseFunction;
 
 use crate::murray::{Mesh, MurraySystem};
+use crate::params::{FemDiffusionParams, FemP1Iteration, FemP1Params};
 use crate::solvers::{default_stopping, gmres, jacobi};
 use crate::sphere::StarMesh;
 use lucent_core::Stopping;
@@ -37,17 +42,12 @@ impl FemP1Solver {
         name: "fem-p1-jacobi",
         summary: "Murray's P1 x trilinear finite elements for the RTE, by Jacobi (diverges: kept for the study)",
         build: |p: &Params| {
-            p.check_known("fem-p1-jacobi", &["solver"])?;
-            let krylov = match p.0.get("solver") {
-                None => false,
-                Some(ParamValue::Text(t)) if t == "jacobi" => false,
-                Some(ParamValue::Text(t)) if t == "gmres" => true,
-                Some(other) => {
-                    return Err(invalid("solver", format!("{other:?}: jacobi or gmres")));
-                }
-            };
-            Ok(Box::new(FemP1Solver { krylov }))
+            let p: FemP1Params = p.parse("fem-p1-jacobi")?;
+            Ok(Box::new(FemP1Solver {
+                krylov: p.solver == FemP1Iteration::Gmres,
+            }))
         },
+        params: param_docs::<FemP1Params>,
     };
 }
 
@@ -72,93 +72,69 @@ impl Solver for FemP1Solver {
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
-        self.admits(problem)?;
-        options.validate()?;
-        let started = Instant::now();
-        let g = *problem.geometry();
-        let h = g.spacing();
-        let mesh = Mesh {
+        driver::solve_per_channel(self, self, problem, options).map(|(s, _)| s)
+    }
+}
+
+impl ChannelMethod for FemP1Solver {
+    type Setup = Mesh;
+    type Extra = ();
+
+    fn memory_bytes(&self, problem: &Problem) -> u64 {
+        // 27 blocks of 4 × 4 per row (f64 and an index), four unknowns per vertex.
+        problem.geometry().voxel_count() as u64 * 4 * 27 * 4 * 16
+    }
+
+    fn setup(&self, context: &Context<'_>) -> Result<Mesh, SolveError> {
+        let g = context.problem.geometry();
+        Ok(Mesh {
             nodes: g.dims(),
-            spacing: h.x,
+            spacing: g.spacing().x,
             periodic: false,
-        };
+        })
+    }
+
+    fn route(&self, _: &Mesh, _: &Problem, _: &Light) -> Route {
+        Route::Own
+    }
+
+    fn solve_channel(
+        &self,
+        mesh: &Mesh,
+        channel: Channel<'_>,
+    ) -> Result<ChannelSolution<()>, SolveError> {
+        let g = *channel.problem.geometry();
         let n = g.voxel_count();
-        let bytes = (n as u64) * 4 * 27 * 4 * 16;
-        if bytes > options.memory_budget {
-            return Err(SolveError::OverBudget {
-                solver: self.name().into(),
-                needed: bytes,
-                budget: options.memory_budget,
-            });
+        // Homogeneous (the capabilities ask for it): any cell's K_t.
+        let kt = f64::from(channel.coefficients.sigma_t[0]);
+        let system =
+            MurraySystem::assemble(*mesh, kt).map_err(|e| invalid("problem", e.to_string()))?;
+        // ∫ψ_0 ϕ_k Q_e with a lumped mass: 4π Q_k h³ per vertex (vertices at cell centres).
+        let mut b = vec![0.0; 4 * n];
+        for (k, e) in channel.emission().iter().enumerate() {
+            b[4 * k] += 4.0 * std::f64::consts::PI * e * g.cell_volume();
         }
-        let mut fluence = Vec::new();
-        let mut last = None;
-        for c in 0..problem.channels() {
-            let kt = f64::from(problem.medium().sigma_t(c).data()[0]);
-            let system =
-                MurraySystem::assemble(mesh, kt).map_err(|e| invalid("problem", e.to_string()))?;
-            // ∫ψ_0 ϕ_k Q_e with a lumped mass: 4π Q_k h³ per vertex.
-            let mut b = vec![0.0; 4 * n];
-            let volume = g.cell_volume();
-            for light in problem.lights() {
-                match light {
-                    Light::Point {
-                        position,
-                        intensity,
-                    } => {
-                        let v = g.world_to_voxel(*position).round();
-                        let inside = (0..3).all(|a| v[a] >= 0.0 && v[a] < g.dims()[a] as f64);
-                        if !inside {
-                            return Err(invalid("lights", "point lights must lie inside the grid"));
-                        }
-                        let k = g.index(v.x as usize, v.y as usize, v.z as usize);
-                        b[4 * k] += 4.0 * std::f64::consts::PI * intensity.channel(c);
-                    }
-                    Light::Emission { grid, scale } => {
-                        for (k, e) in grid.data().iter().enumerate() {
-                            b[4 * k] += 4.0
-                                * std::f64::consts::PI
-                                * scale.channel(c)
-                                * f64::from(*e)
-                                * volume;
-                        }
-                    }
-                    other => return Err(invalid("lights", format!("{:?}", other.kind()))),
-                }
-            }
-            let stopping = Stopping {
-                relative_tolerance: options.relative_tolerance,
-                max_iterations: options.max_iterations,
-                time_budget: options.time_budget,
-                progress: options.progress.clone(),
-                ..default_stopping()
-            };
-            let mut x = vec![0.0; 4 * n];
-            let convergence = if self.krylov {
-                gmres(&system.matrix, &b, &mut x, 60, &stopping)
-            } else {
-                jacobi(&system.matrix, &b, &mut x, &stopping)
-            }
-            .map_err(|e| invalid("problem", e.to_string()))?;
-            fluence.push(Grid::from_vec(
-                g,
-                system.fluence(&x).iter().map(|&v| v as f32).collect(),
-            )?);
-            last = Some(convergence);
+        for (position, power) in channel.point_sources() {
+            let v = g.world_to_voxel(position).round();
+            let [i, j, k] = [0, 1, 2].map(|a| (v[a].max(0.0) as usize).min(g.dims()[a] - 1));
+            b[4 * g.index(i, j, k)] += power;
         }
-        let convergence = last.ok_or_else(|| invalid("problem", "no channel"))?;
-        Ok(Solution {
-            fluence,
-            angular: None,
-            standard_error: None,
-            report: SolveReport {
-                solver: self.name().into(),
-                iterations: convergence.residuals.len().saturating_sub(1),
-                residual_history: convergence.residuals,
-                wall_time_s: started.elapsed().as_secs_f64(),
-                peak_memory_bytes: bytes,
-                stop_reason: convergence.stop_reason,
-            },
+        // Jacobi on this system must be seen to blow up, not merely stall.
+        let stopping = Stopping {
+            divergence: default_stopping().divergence,
+            ..channel.stopping
+        };
+        let mut x = vec![0.0; 4 * n];
+        let convergence = if self.krylov {
+            gmres(&system.matrix, &b, &mut x, 60, &stopping)
+        } else {
+            jacobi(&system.matrix, &b, &mut x, &stopping)
+        }
+        .map_err(|e| invalid("problem", e.to_string()))?;
+        Ok(ChannelSolution {
+            fluence: system.fluence(&x).iter().map(|&v| v as f32).collect(),
+            record: Record::from_residuals(convergence.residuals, convergence.stop_reason, 0),
+            extra: (),
         })
     }
 }
@@ -184,13 +160,10 @@ impl FemDiffusionSolver {
         name: "fem-diffusion",
         summary: "steady diffusion by Q1 Galerkin finite elements, multigrid-preconditioned CG",
         build: |p: &Params| {
-            p.check_known("fem-diffusion", &["sweeps"])?;
-            let sweeps = p.usize_or("sweeps", 2)?;
-            if !(1..=16).contains(&sweeps) {
-                return Err(invalid("sweeps", "1 to 16"));
-            }
-            Ok(Box::new(FemDiffusionSolver { sweeps }))
+            let p: FemDiffusionParams = p.parse("fem-diffusion")?;
+            Ok(Box::new(FemDiffusionSolver { sweeps: p.sweeps }))
         },
+        params: param_docs::<FemDiffusionParams>,
     };
 }
 
@@ -233,475 +206,351 @@ impl Solver for FemDiffusionSolver {
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
-        use lucent_optics::PhaseFunction;
-        self.admits(problem)?;
-        options.validate()?;
+        driver::solve_per_channel(self, self, problem, options).map(|(s, _)| s)
+    }
+}
+
+/// What every channel of `fem-diffusion` shares: the grid's own lattice of elements, or
+/// the mesh fitted to the embedded body.
+pub enum FemSetup {
+    /// Elements on the grid's cells, unknowns at their corners.
+    Grid,
+    /// The boundary-fitted mesh of the embedded body.
+    Body {
+        /// The mesh.
+        mesh: StarMesh,
+        /// Its cells per axis.
+        cells: usize,
+    },
+}
+
+impl ChannelMethod for FemDiffusionSolver {
+    type Setup = FemSetup;
+    type Extra = ();
+
+    fn memory_bytes(&self, problem: &Problem) -> u64 {
         // The assembled Q1 matrix with its Galerkin hierarchy: about 330 bytes per node
         // (BENCHMARKS.md), plus the cell fields.
-        let needed = problem.geometry().voxel_count() as u64 * (400 + 32);
-        if needed > options.memory_budget {
-            return Err(SolveError::OverBudget {
-                solver: self.name().into(),
-                needed,
-                budget: options.memory_budget,
-            });
+        problem.geometry().voxel_count() as u64 * (400 + 32)
+    }
+
+    fn setup(&self, context: &Context<'_>) -> Result<FemSetup, SolveError> {
+        Ok(match context.problem.embedded() {
+            Some(sdf) => {
+                let (mesh, cells, _) = body_mesh(context.problem, sdf)?;
+                FemSetup::Body { mesh, cells }
+            }
+            None => FemSetup::Grid,
+        })
+    }
+
+    /// With a body, a point light is the elements' own only where the mesh reaches it.
+    fn route(&self, setup: &FemSetup, problem: &Problem, light: &Light) -> Route {
+        match (setup, light) {
+            (FemSetup::Body { mesh, .. }, Light::Point { position, .. })
+                if mesh.locate(*position).is_none() =>
+            {
+                Route::Uncollided
+            }
+            _ => driver::default_route(problem, light),
         }
-        if let Some(sdf) = problem.embedded() {
-            return self.solve_embedded(problem, sdf, options);
+    }
+
+    fn solve_channel(
+        &self,
+        setup: &FemSetup,
+        channel: Channel<'_>,
+    ) -> Result<ChannelSolution<()>, SolveError> {
+        let (fluence, convergence, bytes) = match setup {
+            FemSetup::Grid => self.grid_channel(&channel)?,
+            FemSetup::Body { mesh, cells } => self.body_channel(mesh, *cells, &channel)?,
+        };
+        Ok(ChannelSolution {
+            fluence,
+            record: Record::from_residuals(convergence.residuals, convergence.stop_reason, bytes),
+            extra: (),
+        })
+    }
+}
+
+impl FemDiffusionSolver {
+    /// The multigrid-preconditioned CG's stopping rule: the channel's, diverging at 10⁸.
+    fn stopping(channel: &Channel<'_>) -> Stopping {
+        Stopping {
+            divergence: default_stopping().divergence,
+            ..channel.stopping.clone()
         }
-        let started = Instant::now();
+    }
+
+    /// One channel on the grid's own elements: Robin (A from η), vacuum (A at η = 1) or a
+    /// reflecting box; the fluence per cell is the mean of its 8 corners.
+    fn grid_channel(
+        &self,
+        channel: &Channel<'_>,
+    ) -> Result<(Vec<f32>, crate::solvers::Convergence, u64), SolveError> {
+        let problem = channel.problem;
         let g = *problem.geometry();
         let h = g.spacing();
+        let n = g.voxel_count();
         // A reflecting box (the capabilities refuse other Neumann fluxes) or Robin.
         let robin = match problem.boundary() {
             lucent_core::Boundary::Neumann { .. } => None,
             b => Some(b.robin_factor().unwrap_or(1.0)),
         };
-        let n = g.voxel_count();
-        let gbar = problem.medium().phase.mean_cosine();
-        // Lights the elements take directly, and the rest through `direct`.
-        let inside = |p: glam::DVec3| {
-            let v = g.world_to_voxel(p) + 0.5;
-            (0..3).all(|a| v[a] >= 0.0 && v[a] <= g.dims()[a] as f64)
+        let widen = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>();
+        let q1 = crate::q1::Q1Problem {
+            cells: g.dims(),
+            spacing: h.x,
+            diffusion: widen(&channel.coefficients.diffusion),
+            absorption: widen(&channel.coefficients.sigma_a),
+            robin: [robin; 6],
         };
-        let external: Vec<Light> = problem
-            .lights()
-            .iter()
-            .filter(|l| match l {
-                Light::Point { position, .. } => !inside(*position),
-                Light::Emission { .. } => false,
-                _ => true,
+        let matrix = q1
+            .assemble()
+            .map_err(|e| invalid("problem", e.to_string()))?;
+        let mut b = vec![0.0; matrix.rows()];
+        let origin = g.origin();
+        let volume = g.cell_volume();
+        let corners = |i: usize, j: usize, k: usize| {
+            (0..8usize).map(move |corner| {
+                let o = [corner & 1, (corner >> 1) & 1, corner >> 2];
+                (o, [i + o[0], j + o[1], k + o[2]])
             })
-            .cloned()
-            .collect();
-        let direct = if external.is_empty() {
-            None
-        } else {
-            let p = Problem::new(
-                g,
-                problem.medium().clone(),
-                external,
-                lucent_core::Boundary::Vacuum,
-                None,
-            )?;
-            Some(lucent_core::Uncollided::new(&p, options)?)
         };
-        let floor = 1e-3 / h.x;
-        let mut fluence = Vec::new();
-        let mut last = None;
-        let mut bytes = 0u64;
-        for c in 0..problem.channels() {
-            let (mut d, mut sa) = (Vec::with_capacity(n), Vec::with_capacity(n));
-            for cell in 0..n {
-                let [i, j, k] = g.coords(cell);
-                let st = f64::from(problem.medium().sigma_t(c).data()[cell]);
-                let ss = f64::from(problem.medium().sigma_s_at(c, g.cell_centre(i, j, k)));
-                let a = (st - ss).max(0.0);
-                d.push(1.0 / (3.0 * (a + (1.0 - gbar) * ss).max(floor)));
-                sa.push(a);
+        // Emission and first collisions lumped to the corners; the first moment enters
+        // the weak form as ∫ 3D Q₁·∇ϕ, ±h²/4 per axis over the cube.
+        let mut q0: Vec<f64> = channel
+            .emission()
+            .iter()
+            .map(|e| 4.0 * std::f64::consts::PI * e)
+            .collect();
+        let mut moment = Vec::new();
+        if let Some(uncollided) = channel.uncollided {
+            let gbar = problem.medium().phase.mean_cosine();
+            let (scattered, first) = uncollided.first_collision_sources(
+                channel.index,
+                &channel.coefficients.sigma_s,
+                gbar,
+            );
+            for (q, s) in q0.iter_mut().zip(scattered) {
+                *q += f64::from(s);
             }
-            let q1 = crate::q1::Q1Problem {
-                cells: g.dims(),
-                spacing: h.x,
-                diffusion: d,
-                absorption: sa,
-                robin: [robin; 6],
-            };
-            let matrix = q1
-                .assemble()
-                .map_err(|e| invalid("problem", e.to_string()))?;
-            let mut b = vec![0.0; matrix.rows()];
-            let origin = g.origin();
-            let volume = g.cell_volume();
-            if let Some(direct) = &direct {
-                let ss: Vec<f32> = (0..n)
-                    .map(|cell| {
-                        let [i, j, k] = g.coords(cell);
-                        problem.medium().sigma_s_at(c, g.cell_centre(i, j, k))
-                    })
-                    .collect();
-                let (scattered, moment) = direct.first_collision_sources(c, &ss, gbar);
-                let hh = h.x * h.x / 4.0;
-                for cell in 0..n {
-                    let [i, j, k] = g.coords(cell);
-                    for corner in 0..8 {
-                        let p = [corner & 1, (corner >> 1) & 1, corner >> 2];
-                        let node = q1.node([i + p[0], j + p[1], k + p[2]]);
-                        b[node] += f64::from(scattered[cell]) * volume / 8.0;
-                        if let Some(first) = moment.get(cell) {
-                            // ∫ 3D Q₁·∇ϕ over the cube: ±h²/4 per axis.
-                            let dq = 3.0 * q1.diffusion[cell];
-                            let grad: f64 = (0..3)
-                                .map(|a| {
-                                    let v = f64::from(first[a]);
-                                    if p[a] == 1 { v } else { -v }
-                                })
-                                .sum();
-                            b[node] += dq * grad * hh;
-                        }
-                    }
-                }
-            }
-            let mut singular = vec![0.0f32; n];
-            for light in problem.lights() {
-                match light {
-                    Light::Point {
-                        position,
-                        intensity,
-                    } if inside(*position) => {
-                        let power = 4.0 * std::f64::consts::PI * intensity.channel(c);
-                        // The singular part analytically where the medium allows (its
-                        // smooth remainder's source lumped like emission), else a point.
-                        let (d, sa): (Vec<f32>, Vec<f32>) = q1
-                            .diffusion
-                            .iter()
-                            .zip(&q1.absorption)
-                            .map(|(&d, &a)| (d as f32, a as f32))
-                            .unzip();
-                        if let Some(part) = lucent_core::point_source_singular_part(
-                            &g,
-                            &d,
-                            &sa,
-                            |_| true,
-                            *position,
-                            power,
-                        ) {
-                            // ∫ f ϕ_a over each element by 3×3×3 Gauss points: f varies on
-                            // the scale of the cut-off, which lumping would blur.
-                            let rule = [
-                                (0.5 - 0.5 * 0.6f64.sqrt(), 5.0 / 18.0),
-                                (0.5, 8.0 / 18.0),
-                                (0.5 + 0.5 * 0.6f64.sqrt(), 5.0 / 18.0),
-                            ];
-                            for (cell, f) in part.source.iter().enumerate() {
-                                if *f == 0.0 {
-                                    continue;
-                                }
-                                let [i, j, k] = g.coords(cell);
-                                let corner0 =
-                                    origin + glam::DVec3::new(i as f64, j as f64, k as f64) * h;
-                                for (x, wx) in rule {
-                                    for (y, wy) in rule {
-                                        for (z, wz) in rule {
-                                            let value = part
-                                                .source_at(corner0 + glam::DVec3::new(x, y, z) * h)
-                                                * wx
-                                                * wy
-                                                * wz
-                                                * volume;
-                                            for corner in 0..8usize {
-                                                let o =
-                                                    [corner & 1, (corner >> 1) & 1, corner >> 2];
-                                                let shape = [x, y, z]
-                                                    .iter()
-                                                    .zip(o)
-                                                    .map(|(t, o)| if o == 1 { *t } else { 1.0 - t })
-                                                    .product::<f64>();
-                                                b[q1.node([i + o[0], j + o[1], k + o[2]])] +=
-                                                    value * shape;
-                                            }
-                                        }
-                                    }
-                                }
-                            }
-                            for (s, v) in singular.iter_mut().zip(&part.fluence) {
-                                *s += v;
-                            }
-                            continue;
-                        }
-                        let x = *position - origin;
-                        let s = q1
-                            .point_source(x.to_array(), power)
-                            .map_err(|e| invalid("lights", e.to_string()))?;
-                        for (b, s) in b.iter_mut().zip(s) {
-                            *b += s;
-                        }
-                    }
-                    Light::Emission { grid, scale } => {
-                        for (cell, e) in grid.data().iter().enumerate() {
-                            let [i, j, k] = g.coords(cell);
-                            let q = 4.0 * std::f64::consts::PI * scale.channel(c) * f64::from(*e);
-                            for corner in 0..8 {
-                                let at =
-                                    [i + (corner & 1), j + ((corner >> 1) & 1), k + (corner >> 2)];
-                                b[q1.node(at)] += q * volume / 8.0;
-                            }
-                        }
-                    }
-                    _ => {}
-                }
-            }
-            bytes = bytes.max((matrix.nnz() * 12 + matrix.rows() * 40) as u64);
-            let mg = crate::q1::Q1Multigrid::new(&q1, matrix, self.sweeps);
-            let mut x = vec![0.0; b.len()];
-            let convergence = mg
-                .solve(
-                    &b,
-                    &mut x,
-                    &Stopping {
-                        relative_tolerance: options.relative_tolerance,
-                        max_iterations: options.max_iterations,
-                        time_budget: options.time_budget,
-                        progress: options.progress.clone(),
-                        ..default_stopping()
-                    },
-                )
-                .map_err(|e| invalid("problem", e.to_string()))?;
-            let cells: Vec<f32> = (0..n)
-                .map(|cell| {
-                    let [i, j, k] = g.coords(cell);
-                    let sum: f64 = (0..8)
-                        .map(|corner| {
-                            x[q1.node([
-                                i + (corner & 1),
-                                j + ((corner >> 1) & 1),
-                                k + (corner >> 2),
-                            ])]
+            moment = first;
+        }
+        let hh = h.x * h.x / 4.0;
+        for cell in 0..n {
+            let [i, j, k] = g.coords(cell);
+            for (o, at) in corners(i, j, k) {
+                let node = q1.node(at);
+                b[node] += q0[cell] * volume / 8.0;
+                if let Some(first) = moment.get(cell) {
+                    let dq = 3.0 * q1.diffusion[cell];
+                    let grad: f64 = (0..3)
+                        .map(|a| {
+                            let v = f64::from(first[a]);
+                            if o[a] == 1 { v } else { -v }
                         })
                         .sum();
-                    (sum / 8.0) as f32
-                })
-                .collect();
-            let mut total = Grid::from_vec(g, cells)?;
-            for (t, v) in total.data_mut().iter_mut().zip(&singular) {
-                *t += v;
-            }
-            if let Some(direct) = &direct {
-                for (t, u) in total.data_mut().iter_mut().zip(direct.fluence(c)) {
-                    *t += u as f32;
+                    b[node] += dq * grad * hh;
                 }
             }
-            fluence.push(total);
-            last = Some(convergence);
         }
-        finish(self.name(), fluence, last, started, bytes)
+        // Point sources: the singular part analytically where the medium allows (its
+        // smooth remainder's source integrated by 3×3×3 Gauss points per element: it varies
+        // on the scale of the cut-off, which lumping would blur), else a point.
+        let mut singular = vec![0.0f32; n];
+        let rule = [
+            (0.5 - 0.5 * 0.6f64.sqrt(), 5.0 / 18.0),
+            (0.5, 8.0 / 18.0),
+            (0.5 + 0.5 * 0.6f64.sqrt(), 5.0 / 18.0),
+        ];
+        let Coefficients {
+            diffusion: d,
+            sigma_a: sa,
+            ..
+        } = &channel.coefficients;
+        for (position, power) in channel.point_sources() {
+            let Some(part) = point_source_singular_part(&g, d, sa, |_| true, position, power)
+            else {
+                let s = q1
+                    .point_source((position - origin).to_array(), power)
+                    .map_err(|e| invalid("lights", e.to_string()))?;
+                for (b, s) in b.iter_mut().zip(s) {
+                    *b += s;
+                }
+                continue;
+            };
+            for (cell, f) in part.source.iter().enumerate() {
+                if *f == 0.0 {
+                    continue;
+                }
+                let [i, j, k] = g.coords(cell);
+                let corner0 = origin + DVec3::new(i as f64, j as f64, k as f64) * h;
+                for (x, wx) in rule {
+                    for (y, wy) in rule {
+                        for (z, wz) in rule {
+                            let value = part.source_at(corner0 + DVec3::new(x, y, z) * h)
+                                * (wx * wy * wz * volume);
+                            for (o, at) in corners(i, j, k) {
+                                let shape = [x, y, z]
+                                    .iter()
+                                    .zip(o)
+                                    .map(|(t, o)| if o == 1 { *t } else { 1.0 - t })
+                                    .product::<f64>();
+                                b[q1.node(at)] += value * shape;
+                            }
+                        }
+                    }
+                }
+            }
+            for (s, v) in singular.iter_mut().zip(&part.fluence) {
+                *s += v;
+            }
+        }
+        let bytes = (matrix.nnz() * 12 + matrix.rows() * 40) as u64;
+        let mg = crate::q1::Q1Multigrid::new(&q1, matrix, self.sweeps);
+        let mut x = vec![0.0; b.len()];
+        let convergence = mg
+            .solve(&b, &mut x, &Self::stopping(channel))
+            .map_err(|e| invalid("problem", e.to_string()))?;
+        let fluence = (0..n)
+            .map(|cell| {
+                let [i, j, k] = g.coords(cell);
+                let sum: f64 = corners(i, j, k).map(|(_, at)| x[q1.node(at)]).sum();
+                (sum / 8.0) as f32 + singular[cell]
+            })
+            .collect();
+        Ok((fluence, convergence, bytes))
     }
-}
 
-impl FemDiffusionSolver {
-    /// The embedded body {sdf < 0} on a boundary-fitted mesh ([`StarMesh::from_sdf`] from
-    /// the centroid of its inside cells; the body must be star-shaped from there), D and σ_a
-    /// sampled trilinearly at every Gauss point, Robin (A from η) or vacuum (A at η = 1) on its
-    /// surface. External lights are attenuated through the body only (σ_t set to zero
-    /// outside), as `diffusion-mg` does; cells outside the body get φ_u alone.
-    fn solve_embedded(
+    /// One channel on the body's boundary-fitted mesh: D and σ_a sampled trilinearly at
+    /// every Gauss point, Robin (A from η) or vacuum (A at η = 1) on its surface; cell
+    /// values interpolate the nodal solution at cell centres, zero outside the body (where
+    /// the driver adds the uncollided light alone).
+    fn body_channel(
         &self,
-        problem: &Problem,
-        sdf: &Grid,
-        options: &SolveOptions,
-    ) -> Result<Solution, SolveError> {
-        use glam::DVec3;
-        use lucent_optics::PhaseFunction;
-        let started = Instant::now();
+        mesh: &StarMesh,
+        cells: usize,
+        channel: &Channel<'_>,
+    ) -> Result<(Vec<f32>, crate::solvers::Convergence, u64), SolveError> {
+        let problem = channel.problem;
+        let sdf = problem
+            .embedded()
+            .ok_or_else(|| invalid("embedded", "a body mesh without a body"))?;
         let g = *problem.geometry();
         let n = g.voxel_count();
+        let c = channel.index;
         let robin = problem.boundary().robin_factor().unwrap_or(1.0);
-        let (mesh, cells, h) = body_mesh(problem, sdf)?;
-        let sample = |p: DVec3| f64::from(sdf.sample_trilinear(p));
-        let inside = |p: DVec3| sample(p) < 0.0 && mesh.locate(p).is_some();
-        let (mut points, mut emission, mut external) = (Vec::new(), Vec::new(), Vec::new());
-        for light in problem.lights() {
-            match light {
-                Light::Point { position, .. } if inside(*position) => points.push(light),
-                Light::Emission { .. } => emission.push(light),
-                _ => external.push(light.clone()),
-            }
-        }
-        let direct = if external.is_empty() {
-            None
-        } else {
-            let medium = problem.medium();
-            let masked = medium.masked(sdf);
-            let p = Problem::new(g, masked, external, lucent_core::Boundary::Vacuum, None)?;
-            Some(lucent_core::Uncollided::new(&p, options)?)
-        };
-
-        let gbar = problem.medium().phase.mean_cosine();
-        let floor = 1e-3 / h;
         let medium = problem.medium();
-        let coefficients = |c: usize, p: DVec3| {
-            let st = f64::from(medium.sigma_t(c).sample_trilinear(p));
-            let ss = f64::from(medium.sigma_s_at(c, p));
-            let a = (st - ss).max(0.0);
-            (1.0 / (3.0 * (a + (1.0 - gbar) * ss).max(floor)), a)
+        let gbar = medium.phase.mean_cosine();
+        let floor = Coefficients::reduced_floor(problem);
+        let coefficients = |p: DVec3| {
+            let (a, d) = Coefficients::absorption_and_diffusion(
+                f64::from(medium.sigma_t(c).sample_trilinear(p)),
+                f64::from(medium.sigma_s_at(c, p)),
+                gbar,
+                floor,
+            );
+            (d, a)
         };
-        let mut fluence = Vec::new();
-        let mut last = None;
-        let mut bytes = 0u64;
-        for c in 0..problem.channels() {
-            let matrix = mesh
-                .assemble_with(|p| coefficients(c, p), robin)
-                .map_err(|e| invalid("embedded", e.to_string()))?;
-            // Volumetric sources: emission and first-collision sources, sampled
-            // trilinearly from the grid at every Gauss point.
-            let mut q0 = vec![0.0f32; n];
-            for light in &emission {
-                if let Light::Emission { grid, scale } = light {
-                    let s = 4.0 * std::f64::consts::PI * scale.channel(c);
-                    for (q, e) in q0.iter_mut().zip(grid.data()) {
-                        *q += (s * f64::from(*e)) as f32;
-                    }
+        let matrix = mesh
+            .assemble_with(coefficients, robin)
+            .map_err(|e| invalid("embedded", e.to_string()))?;
+        // Volumetric sources: emission and first-collision sources, sampled trilinearly
+        // from the grid at every Gauss point.
+        let mut q0: Vec<f32> = channel
+            .emission()
+            .iter()
+            .map(|e| (4.0 * std::f64::consts::PI * e) as f32)
+            .collect();
+        let mut moment = [vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]];
+        if let Some(uncollided) = channel.uncollided {
+            let (scattered, first) =
+                uncollided.first_collision_sources(c, &channel.coefficients.sigma_s, gbar);
+            for (q, s) in q0.iter_mut().zip(scattered) {
+                *q += s;
+            }
+            for (cell, f) in first.iter().enumerate() {
+                for a in 0..3 {
+                    moment[a][cell] = f[a];
                 }
             }
-            let mut moment = [vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]];
-            if let Some(direct) = &direct {
-                let ss: Vec<f32> = (0..n)
-                    .map(|cell| {
-                        let [i, j, k] = g.coords(cell);
-                        medium.sigma_s_at(c, g.cell_centre(i, j, k))
-                    })
-                    .collect();
-                let (scattered, first) = direct.first_collision_sources(c, &ss, gbar);
-                for (q, s) in q0.iter_mut().zip(scattered) {
-                    *q += s;
-                }
-                for (cell, f) in first.iter().enumerate() {
-                    for a in 0..3 {
-                        moment[a][cell] = f[a];
-                    }
-                }
-            }
-            // Point sources: the singular part analytically where the medium around them is
-            // homogeneous and whole (the remainder's smooth source joins q0), else points.
-            let mut singular = vec![0.0f32; n];
-            let mut regularised = vec![false; points.len()];
-            let mut parts: Vec<lucent_core::SingularPart> = Vec::new();
-            {
-                let (d, sa): (Vec<f32>, Vec<f32>) = (0..n)
-                    .map(|cell| {
-                        let [i, j, k] = g.coords(cell);
-                        let (d, a) = coefficients(c, g.cell_centre(i, j, k));
-                        (d as f32, a as f32)
-                    })
-                    .unzip();
-                let half_diagonal = 0.5 * 3f64.sqrt() * h;
-                let whole = |cell: usize| f64::from(sdf.data()[cell]) < -half_diagonal;
-                for (l, light) in points.iter().enumerate() {
-                    if let Light::Point {
-                        position,
-                        intensity,
-                    } = light
-                    {
-                        let power = 4.0 * std::f64::consts::PI * intensity.channel(c);
-                        if let Some(part) = lucent_core::point_source_singular_part(
-                            &g, &d, &sa, whole, *position, power,
-                        ) {
-                            for (s, v) in singular.iter_mut().zip(&part.fluence) {
-                                *s += v;
-                            }
-                            regularised[l] = true;
-                            parts.push(part);
-                        }
-                    }
-                }
-            }
-            let q0 = Grid::from_vec(g, q0)?;
-            let moment = moment.map(|m| Grid::from_vec(g, m));
-            let [mx, my, mz] = moment;
-            let (mx, my, mz) = (mx?, my?, mz?);
-            let with_moment = direct.is_some();
-            let mut b = mesh
-                .load(|p| {
-                    // The remainders' sources exactly at the Gauss points: they vary on the
-                    // scale of the cut-off, which trilinear cell values would blur.
-                    let q = f64::from(q0.sample_trilinear(p))
-                        + parts.iter().map(|part| part.source_at(p)).sum::<f64>();
-                    if !with_moment {
-                        return (q, DVec3::ZERO);
-                    }
-                    let first = DVec3::new(
-                        f64::from(mx.sample_trilinear(p)),
-                        f64::from(my.sample_trilinear(p)),
-                        f64::from(mz.sample_trilinear(p)),
-                    );
-                    (q, 3.0 * coefficients(c, p).0 * first)
-                })
-                .map_err(|e| invalid("embedded", e.to_string()))?;
-            for (light, _) in points.iter().zip(&regularised).filter(|(_, r)| !**r) {
-                if let Light::Point {
-                    position,
-                    intensity,
-                } = light
-                {
-                    let (cell, xi) = mesh
-                        .locate(*position)
-                        .ok_or_else(|| invalid("lights", "a point light outside the mesh"))?;
-                    let power = 4.0 * std::f64::consts::PI * intensity.channel(c);
-                    let ids = mesh.element(cell);
-                    for (a, id) in ids.iter().enumerate() {
-                        let w = [a & 1, (a >> 1) & 1, a >> 2]
-                            .iter()
-                            .zip(xi)
-                            .map(|(&o, t)| if o == 1 { t } else { 1.0 - t })
-                            .product::<f64>();
-                        b[*id] += power * w;
-                    }
-                }
-            }
-            bytes = bytes.max((matrix.nnz() * 12 + matrix.rows() * 40) as u64);
-            let mg = crate::q1::Q1Multigrid::for_lattice([cells; 3], matrix, self.sweeps);
-            let mut x = vec![0.0; b.len()];
-            let convergence = mg
-                .solve(
-                    &b,
-                    &mut x,
-                    &Stopping {
-                        relative_tolerance: options.relative_tolerance,
-                        max_iterations: options.max_iterations,
-                        time_budget: options.time_budget,
-                        progress: options.progress.clone(),
-                        ..default_stopping()
-                    },
-                )
-                .map_err(|e| invalid("problem", e.to_string()))?;
-            let mut total = Grid::from_vec(
-                g,
-                (0..n)
-                    .map(|cell| {
-                        let [i, j, k] = g.coords(cell);
-                        let p = g.cell_centre(i, j, k);
-                        match sdf.data()[cell] < 0.0 {
-                            true => mesh.interpolate(&x, p).unwrap_or(0.0) as f32 + singular[cell],
-                            false => 0.0,
-                        }
-                    })
-                    .collect(),
-            )?;
-            if let Some(direct) = &direct {
-                for (t, u) in total.data_mut().iter_mut().zip(direct.fluence(c)) {
-                    *t += u as f32;
-                }
-            }
-            fluence.push(total);
-            last = Some(convergence);
         }
-        finish(self.name(), fluence, last, started, bytes)
+        // Point sources: the singular part analytically where the medium around them is
+        // homogeneous and whole (the remainder's smooth source joins q0), else points.
+        let mut singular = vec![0.0f32; n];
+        let mut parts = Vec::new();
+        let mut points = Vec::new();
+        let half_diagonal = 0.5 * 3f64.sqrt() * g.spacing().max_element();
+        let whole = |cell: usize| f64::from(sdf.data()[cell]) < -half_diagonal;
+        let Coefficients {
+            diffusion: d,
+            sigma_a: sa,
+            ..
+        } = &channel.coefficients;
+        for (position, power) in channel.point_sources() {
+            match point_source_singular_part(&g, d, sa, whole, position, power) {
+                Some(part) => {
+                    for (s, v) in singular.iter_mut().zip(&part.fluence) {
+                        *s += v;
+                    }
+                    parts.push(part);
+                }
+                None => points.push((position, power)),
+            }
+        }
+        let q0 = Grid::from_vec(g, q0)?;
+        let [mx, my, mz] = moment.map(|m| Grid::from_vec(g, m));
+        let (mx, my, mz) = (mx?, my?, mz?);
+        let with_moment = channel.uncollided.is_some();
+        let mut b = mesh
+            .load(|p| {
+                // The remainders' sources exactly at the Gauss points: they vary on the
+                // scale of the cut-off, which trilinear cell values would blur.
+                let q = f64::from(q0.sample_trilinear(p))
+                    + parts.iter().map(|part| part.source_at(p)).sum::<f64>();
+                if !with_moment {
+                    return (q, DVec3::ZERO);
+                }
+                let first = DVec3::new(
+                    f64::from(mx.sample_trilinear(p)),
+                    f64::from(my.sample_trilinear(p)),
+                    f64::from(mz.sample_trilinear(p)),
+                );
+                (q, 3.0 * coefficients(p).0 * first)
+            })
+            .map_err(|e| invalid("embedded", e.to_string()))?;
+        for (position, power) in points {
+            let (cell, xi) = mesh
+                .locate(position)
+                .ok_or_else(|| invalid("lights", "a point light outside the mesh"))?;
+            for (a, id) in mesh.element(cell).iter().enumerate() {
+                let w = [a & 1, (a >> 1) & 1, a >> 2]
+                    .iter()
+                    .zip(xi)
+                    .map(|(&o, t)| if o == 1 { t } else { 1.0 - t })
+                    .product::<f64>();
+                b[*id] += power * w;
+            }
+        }
+        let bytes = (matrix.nnz() * 12 + matrix.rows() * 40) as u64;
+        let mg = crate::q1::Q1Multigrid::for_lattice([cells; 3], matrix, self.sweeps);
+        let mut x = vec![0.0; b.len()];
+        let convergence = mg
+            .solve(&b, &mut x, &Self::stopping(channel))
+            .map_err(|e| invalid("problem", e.to_string()))?;
+        let fluence = (0..n)
+            .map(|cell| {
+                let [i, j, k] = g.coords(cell);
+                let p = g.cell_centre(i, j, k);
+                match sdf.data()[cell] < 0.0 {
+                    true => mesh.interpolate(&x, p).unwrap_or(0.0) as f32 + singular[cell],
+                    false => 0.0,
+                }
+            })
+            .collect();
+        Ok((fluence, convergence, bytes))
     }
-}
-
-/// The solution of `fem-diffusion` from the channels' fluence and the last channel's
-/// convergence.
-fn finish(
-    name: &str,
-    fluence: Vec<Grid>,
-    last: Option<crate::solvers::Convergence>,
-    started: Instant,
-    bytes: u64,
-) -> Result<Solution, SolveError> {
-    let convergence = last.ok_or_else(|| invalid("problem", "no channel"))?;
-    Ok(Solution {
-        fluence,
-        angular: None,
-        standard_error: None,
-        report: SolveReport {
-            solver: name.into(),
-            iterations: convergence.residuals.len().saturating_sub(1),
-            residual_history: convergence.residuals,
-            wall_time_s: started.elapsed().as_secs_f64(),
-            peak_memory_bytes: bytes,
-            stop_reason: convergence.stop_reason,
-        },
-    })
 }
 
 /// The boundary-fitted mesh of a problem's embedded body, with its cells per axis and the

@@ -71,12 +71,14 @@
 
 mod camera;
 mod majorant;
+mod params;
 mod rng;
 mod solver;
 mod transport;
 
 pub use camera::{CameraEstimate, camera_image, camera_image_with_progress};
 pub use majorant::MajorantGrid;
+pub use params::McParams;
 pub use rng::PathRng;
 pub use solver::McSolver;
 pub use transport::{

@@ -1,13 +1,13 @@
 //! The `mc` solver: the registry face of [`crate::estimate`].
 
-use std::time::Instant;
-
+use lucent_core::driver::{self, Outcome, Record};
 use lucent_core::{
     BoundaryKind, Capabilities, FluenceKind, ImageEstimate, ImageRequest, ImageSolver, LightKind,
-    OutputKind, Params, Problem, Progress, Solution, SolveError, SolveOptions, SolveReport, Solver,
-    SolverEntry, StopReason,
+    OutputKind, Params, Problem, Progress, Solution, SolveError, SolveOptions, Solver, SolverEntry,
+    StopReason, param_docs,
 };
 
+use crate::params::McParams;
 use crate::transport::{McConfig, RunControl, estimate_with};
 
 /// Monte Carlo particle tracing as a [`Solver`].
@@ -32,53 +32,28 @@ impl McSolver {
     /// The registry name.
     pub const NAME: &'static str = "mc";
 
-    /// The registry entry. Parameters: `particles` (per batch and light, default 50 000),
-    /// `batches` (≥ 2, default 16), `seed`, `max_depth` (default 10 000),
-    /// `majorant_cells` (default 8), `global_majorant` (default false), `spp` (paths per
-    /// pixel for camera images, default 64).
+    /// The registry entry ([`McParams`]).
     pub const ENTRY: SolverEntry = SolverEntry {
         name: Self::NAME,
         summary: "Monte Carlo particle tracing (delta tracking, track-length fluence with standard errors): the ground truth",
         build: |params| Ok(Box::new(Self::from_params(params)?)),
+        params: param_docs::<McParams>,
     };
 
     /// Builds from registry parameters.
     pub fn from_params(params: &Params) -> Result<Self, SolveError> {
-        params.check_known(
-            Self::NAME,
-            &[
-                "particles",
-                "batches",
-                "seed",
-                "max_depth",
-                "majorant_cells",
-                "global_majorant",
-                "spp",
-            ],
-        )?;
-        let d = McConfig::default();
-        let global = match params.0.get("global_majorant") {
-            None => d.global_majorant,
-            Some(lucent_core::ParamValue::Bool(b)) => *b,
-            Some(other) => {
-                return Err(SolveError::InvalidParameter {
-                    name: "global_majorant".into(),
-                    reason: format!("expected true or false, got {other:?}"),
-                });
-            }
-        };
+        let p: McParams = params.parse(Self::NAME)?;
         Ok(Self {
             config: McConfig {
-                particles: params.usize_or("particles", d.particles as usize)? as u64,
-                batches: params.usize_or("batches", d.batches)?,
-                seed: params.usize_or("seed", d.seed as usize)? as u64,
-                max_depth: u32::try_from(params.usize_or("max_depth", d.max_depth as usize)?)
-                    .unwrap_or(u32::MAX),
-                majorant_cells: params.usize_or("majorant_cells", d.majorant_cells)?,
-                global_majorant: global,
-                spectral_mis: d.spectral_mis,
+                particles: p.particles,
+                batches: p.batches,
+                seed: p.seed,
+                max_depth: p.max_depth,
+                majorant_cells: p.majorant_cells,
+                global_majorant: p.global_majorant,
+                ..McConfig::default()
             },
-            samples_per_pixel: params.usize_or("spp", 64)?.max(2),
+            samples_per_pixel: p.spp,
         })
     }
 }
@@ -113,63 +88,53 @@ impl Solver for McSolver {
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
-        self.admits(problem)?;
-        options.validate()?;
-        let start = Instant::now();
         let voxels = problem.geometry().voxel_count() as u64;
         let channels = problem.channels() as u64;
         let threads = options.threads.unwrap_or_else(rayon::current_num_threads) as u64;
         // Per running batch one f64 tally per channel, plus the f64 sums and the f32 results.
         let needed = voxels * channels * (8 * threads + 16 + 8);
-        if needed > options.memory_budget {
-            return Err(SolveError::OverBudget {
-                solver: Self::NAME.into(),
-                needed,
-                budget: options.memory_budget,
-            });
-        }
-        // Progress after every round of batches; the time budget stops new rounds.
-        let report = |done: usize, total: usize| {
-            options.report(Progress {
-                fraction: done as f64 / total.max(1) as f64,
-                iteration: done,
-                residual: None,
-            })
-        };
-        let control = RunControl {
-            progress: Some(&report),
-            time_budget: options.time_budget,
-        };
-        let result = options.install(|| estimate_with(problem, &self.config, &control))??;
-        // The achieved accuracy: the mean relative standard error over cells holding more
-        // than a thousandth of the peak fluence.
-        let phi = result.fluence[0].data();
-        let peak = phi.iter().copied().fold(0.0f32, f32::max);
-        let (sum, count) = phi
-            .iter()
-            .zip(result.standard_error[0].data())
-            .filter(|(p, _)| **p > 1e-3 * peak)
-            .fold((0.0, 0usize), |(s, n), (p, e)| {
-                (s + f64::from(*e / *p), n + 1)
-            });
-        let relative = if count > 0 { sum / count as f64 } else { 0.0 };
-        Ok(Solution {
-            fluence: result.fluence,
-            angular: None,
-            standard_error: Some(result.standard_error),
-            report: SolveReport {
-                solver: Self::NAME.into(),
-                iterations: result.batches,
-                residual_history: Vec::new(),
-                wall_time_s: start.elapsed().as_secs_f64(),
-                peak_memory_bytes: needed,
-                // Every batch asked for ran, or the time budget stopped the run early.
-                stop_reason: if result.batches < self.config.batches {
-                    StopReason::TimeLimit { residual: relative }
-                } else {
-                    StopReason::IterationLimit { residual: relative }
+        driver::run(self, problem, options, needed, |context| {
+            // Progress after every round of batches; the time budget stops new rounds.
+            let report = |done: usize, total: usize| {
+                context.report(Progress {
+                    fraction: done as f64 / total.max(1) as f64,
+                    iteration: done,
+                    residual: None,
+                })
+            };
+            let control = RunControl {
+                progress: Some(&report),
+                time_budget: context.remaining_budget(),
+            };
+            let result = estimate_with(problem, &self.config, &control)?;
+            // The achieved accuracy: the mean relative standard error over cells holding
+            // more than a thousandth of the peak fluence.
+            let phi = result.fluence[0].data();
+            let peak = phi.iter().copied().fold(0.0f32, f32::max);
+            let (sum, count) = phi
+                .iter()
+                .zip(result.standard_error[0].data())
+                .filter(|(p, _)| **p > 1e-3 * peak)
+                .fold((0.0, 0usize), |(s, n), (p, e)| {
+                    (s + f64::from(*e / *p), n + 1)
+                });
+            let relative = if count > 0 { sum / count as f64 } else { 0.0 };
+            Ok(Outcome {
+                fluence: result.fluence,
+                angular: None,
+                standard_error: Some(result.standard_error),
+                record: Record {
+                    iterations: result.batches,
+                    residuals: Vec::new(),
+                    // Every batch asked for ran, or the time budget stopped the run early.
+                    stop_reason: if result.batches < self.config.batches {
+                        StopReason::TimeLimit { residual: relative }
+                    } else {
+                        StopReason::IterationLimit { residual: relative }
+                    },
+                    memory_bytes: needed,
                 },
-            },
+            })
         })
     }
 }

@@ -1,0 +1,95 @@
+//! The registry parameters of `dom`, read from a scene's `[solver.params]` by serde
+//! (unknown keys and ill-typed values are errors naming the key) and printed with their
+//! defaults by `lucent solvers`.
+
+use lucent_core::{SolveError, SolverParams};
+use serde::{Deserialize, Serialize};
+
+use crate::closure::Closure;
+use crate::solve::Acceleration;
+
+/// The family of the propagation directions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Family {
+    /// Level-symmetric S_N (`order` = N).
+    #[default]
+    LevelSymmetric,
+    /// The nested octahedral sets (`order` = refinement level).
+    Octahedral,
+}
+
+/// The parameters of `dom`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DomParams {
+    /// S_N order, or the octahedral level; `None`: 8, or level 2.
+    pub order: Option<usize>,
+    /// The propagation set's family.
+    pub family: Family,
+    /// Store sources on the octahedral set of this level instead of the propagation set.
+    pub storage_level: Option<usize>,
+    /// Spatial closure of the sweeps.
+    pub closure: Closure,
+    /// Acceleration of the source iteration.
+    pub acceleration: Acceleration,
+    /// Anderson mixing depth (0: off).
+    pub anderson: usize,
+    /// Wavefront block edge, in cells.
+    pub block: usize,
+}
+
+impl Default for DomParams {
+    fn default() -> Self {
+        Self {
+            order: None,
+            family: Family::LevelSymmetric,
+            storage_level: None,
+            closure: Closure::Diamond,
+            acceleration: Acceleration::Dsa,
+            anderson: 2,
+            block: 16,
+        }
+    }
+}
+
+impl SolverParams for DomParams {
+    const MEANINGS: &'static [(&'static str, &'static str)] = &[
+        (
+            "order",
+            "level-symmetric S_N order (even, 2 to 16; none: 8) or, with family = \"octahedral\", the refinement level (none: 2)",
+        ),
+        (
+            "family",
+            "propagation directions: level-symmetric or octahedral",
+        ),
+        (
+            "storage_level",
+            "store sources on the octahedral set of this level instead of the propagation set (none: the propagation set)",
+        ),
+        (
+            "closure",
+            "spatial closure: diamond (second order), step or exponential (positive)",
+        ),
+        (
+            "acceleration",
+            "source-iteration acceleration: dsa (diffusion synthetic) or none",
+        ),
+        ("anderson", "Anderson mixing depth, 0 to 16 (0: off)"),
+        ("block", "wavefront block edge in cells, 1 to 256"),
+    ];
+
+    fn validate(&self) -> Result<(), SolveError> {
+        let bad = |name: &str, reason: &str| SolveError::InvalidParameter {
+            name: name.into(),
+            reason: reason.into(),
+        };
+        if self.anderson > 16 {
+            return Err(bad("anderson", "at most 16"));
+        }
+        if !(1..=256).contains(&self.block) {
+            return Err(bad("block", "1 to 256 cells"));
+        }
+        Ok(())
+    }
+}
