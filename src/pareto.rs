@@ -13,14 +13,21 @@
 //!   the uncollided fluence;
 //! - `dom`: the level-symmetric order S2–S12 with diamond difference, and step and
 //!   exponential closures at S8 (tolerance 1e-4), against the total fluence;
+//! - `ftcs-diffusion`, `jacobi-diffusion`: the stopping tolerance; `convection-diffusion`:
+//!   the characteristic and conservative models at 1× and 2× cells (against the uncollided
+//!   fluence); `ftcs-p1` and `ftcs-ordinates` (S2, S4) where the scene's lights are point
+//!   lights;
 //! - `mc`: particles per batch (8 batches).
+//!
+//! The knobs live in one table, [`runs`]; a run whose solver does not admit the scene is
+//! skipped.
 //!
 //! `cargo xtask pareto` writes `docs/pareto/<scene>.svg` and `.csv`.
 
 use std::path::Path;
 use std::time::Instant;
 
-use lucent_core::{FluenceKind, Light, ParamValue, Params, Problem, SolveOptions};
+use lucent_core::{FluenceKind, Light, Params, Problem, SolveOptions};
 use lucent_grid::Grid;
 use lucent_grid::resample::{resample, restrict};
 
@@ -38,24 +45,6 @@ pub struct Point {
     pub seconds: f64,
     /// Relative L2 error against the reference.
     pub error: f64,
-}
-
-fn params(pairs: &[(&str, i64)]) -> Params {
-    Params(
-        pairs
-            .iter()
-            .map(|(k, v)| ((*k).to_owned(), ParamValue::Int(*v)))
-            .collect(),
-    )
-}
-
-fn params_text(pairs: &[(&str, &str)]) -> Params {
-    Params(
-        pairs
-            .iter()
-            .map(|(k, v)| ((*k).to_owned(), ParamValue::Text((*v).to_owned())))
-            .collect(),
-    )
 }
 
 /// The same medium on `factor` times as many cells per axis: every grid resampled
@@ -99,39 +88,59 @@ fn refined(scene: &SuiteScene, factor: usize) -> Result<Problem, Error> {
     )?)
 }
 
-/// Sweeps `direct` and `mc` on `scene`.
-pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Vec<Point>, Error> {
-    let registry = crate::registry();
-    let mut points = Vec::new();
-    let uncollided = reference(scene, FluenceKind::Uncollided, 0.005, cache)?;
-    let total = reference(scene, FluenceKind::Total, 0.01, cache)?;
-    for factor in [1usize, 2] {
-        let problem = refined(scene, factor)?;
-        for sky_level in [0i64, 1] {
-            let solver = registry.build("direct", &params(&[("sky_level", sky_level)]))?;
-            if solver.capabilities().check("direct", &problem).is_err() {
-                continue;
-            }
-            let start = Instant::now();
-            let solution = solver.solve(&problem, &SolveOptions::default())?;
-            let seconds = start.elapsed().as_secs_f64();
-            let averaged: Vec<Grid> = solution
-                .fluence
-                .iter()
-                .map(|g| if factor == 2 { restrict(g) } else { g.clone() })
-                .collect();
-            points.push(Point {
-                solver: "direct".into(),
-                setting: format!("{factor}x cells, {} sky directions", 8 << (2 * sky_level)),
-                seconds,
-                error: compare(&averaged, &uncollided).relative_l2,
-            });
+/// One run of the sweep: a solver, its parameters (as a scene's `[solver.params]` would
+/// write them), the grid refinement and the options.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Run {
+    /// The curve it belongs to.
+    pub label: &'static str,
+    /// The registry name.
+    pub solver: &'static str,
+    /// Its parameters, in TOML.
+    pub params: String,
+    /// Cells per scene cell along each axis (the medium resampled, the result restricted
+    /// back).
+    pub factor: usize,
+    /// Relative tolerance of the iteration (the default when `None`).
+    pub tolerance: Option<f64>,
+    /// Iteration limit (the default when `None`).
+    pub max_iterations: Option<usize>,
+    /// The knob setting, in words.
+    pub setting: String,
+}
+
+impl Run {
+    fn new(solver: &'static str, params: String, factor: usize, setting: String) -> Self {
+        Self {
+            label: solver,
+            solver,
+            params,
+            factor,
+            tolerance: None,
+            max_iterations: None,
+            setting,
+        }
+    }
+}
+
+/// Every solver's knobs, in one place: what `cargo xtask pareto` sweeps.
+pub fn runs() -> Vec<Run> {
+    let mut runs = Vec::new();
+    // `direct`: resolution and sky quadrature.
+    for factor in [1, 2] {
+        for sky_level in [0, 1] {
+            runs.push(Run::new(
+                "direct",
+                format!("sky_level = {sky_level}"),
+                factor,
+                format!("{factor}x cells, {} sky directions", 8 << (2 * sky_level)),
+            ));
         }
     }
     // Diffusion: every iterative method on the same operator, over the stopping tolerance
     // and (for the multigrid ones) the grid resolution. Its error against the total
     // fluence levels off at the diffusion model's own error.
-    let diffusion_runs: [(&str, &[usize], &[f64]); 6] = [
+    let diffusion: [(&str, &[usize], &[f64]); 6] = [
         ("diffusion-mg", &[1, 2], &[1e-2, 1e-4, 1e-8]),
         ("diffusion-mgcg", &[1, 2], &[1e-4, 1e-8]),
         ("diffusion-cg", &[1], &[1e-2, 1e-4, 1e-8]),
@@ -139,139 +148,172 @@ pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Vec<Point>, Err
         ("diffusion-jacobi", &[1], &[1e-2]),
         ("fem-diffusion", &[1, 2], &[1e-4, 1e-8]),
     ];
-    for (name, factors, tolerances) in diffusion_runs {
-        let solver = registry.build(name, &Params::default())?;
-        if solver
-            .capabilities()
-            .check(name, &scene.built.problem)
-            .is_err()
-        {
-            continue;
-        }
+    for (solver, factors, tolerances) in diffusion {
         for &factor in factors {
-            // Q1 elements need cubic cells; skip scenes without them.
-            let h = scene.built.problem.geometry().spacing();
-            if name == "fem-diffusion"
-                && ((h.x - h.y).abs() > 1e-9 * h.x || (h.x - h.z).abs() > 1e-9 * h.x)
-            {
-                continue;
-            }
-            let problem = refined(scene, factor)?;
-            for &relative_tolerance in tolerances {
-                let options = SolveOptions {
-                    relative_tolerance,
-                    time_budget: Some(std::time::Duration::from_secs(60)),
-                    ..SolveOptions::default()
-                };
-                let start = Instant::now();
-                let solution = solver.solve(&problem, &options)?;
-                let seconds = start.elapsed().as_secs_f64();
-                let averaged: Vec<Grid> = solution
-                    .fluence
-                    .iter()
-                    .map(|g| if factor == 2 { restrict(g) } else { g.clone() })
-                    .collect();
-                points.push(Point {
-                    solver: name.into(),
-                    setting: format!("{factor}x cells, tolerance {relative_tolerance:.0e}"),
-                    seconds,
-                    error: compare(&averaged, &total).relative_l2,
+            for &tolerance in tolerances {
+                runs.push(Run {
+                    tolerance: Some(tolerance),
+                    ..Run::new(
+                        solver,
+                        String::new(),
+                        factor,
+                        format!("{factor}x cells, tolerance {tolerance:.0e}"),
+                    )
                 });
             }
         }
     }
     // Discrete ordinates over the angular order (ray effects shrink as N grows) and, at
     // S8, the spatial closure.
-    let dom_runs: [(i64, &str); 6] = [
+    for (order, closure) in [
         (2, "diamond"),
         (4, "diamond"),
         (8, "diamond"),
         (12, "diamond"),
         (8, "step"),
         (8, "exponential"),
-    ];
-    for (order, closure) in dom_runs {
-        let mut params = params(&[("order", order)]);
-        params
-            .0
-            .insert("closure".into(), ParamValue::Text(closure.into()));
-        let solver = registry.build("dom", &params)?;
-        if solver
-            .capabilities()
-            .check("dom", &scene.built.problem)
-            .is_err()
-        {
-            break;
-        }
-        let options = SolveOptions {
-            relative_tolerance: 1e-4,
-            time_budget: Some(std::time::Duration::from_secs(120)),
-            ..SolveOptions::default()
-        };
-        let start = Instant::now();
-        let solution = solver.solve(&scene.built.problem, &options)?;
-        points.push(Point {
-            solver: "dom".into(),
-            setting: format!("S{order} {closure}, tolerance 1e-4"),
-            seconds: start.elapsed().as_secs_f64(),
-            error: compare(&solution.fluence, &total).relative_l2,
+    ] {
+        runs.push(Run {
+            tolerance: Some(1e-4),
+            ..Run::new(
+                "dom",
+                format!("order = {order}\nclosure = \"{closure}\""),
+                1,
+                format!("S{order} {closure}, tolerance 1e-4"),
+            )
         });
     }
     // Murray's finite elements by Jacobi: the error grows with every iteration (the
     // iteration matrix's spectral radius is ≥ 19/8); GMRES on the same system shows what
-    // the Galerkin solution itself is worth.
-    let murray = registry.build("fem-p1-jacobi", &Params::default())?;
-    if murray
-        .capabilities()
-        .check("fem-p1-jacobi", &scene.built.problem)
-        .is_ok()
-    {
-        for iterations in [1usize, 2, 4, 8] {
-            let options = SolveOptions {
-                max_iterations: iterations,
-                ..SolveOptions::default()
-            };
-            let start = Instant::now();
-            let solution = murray.solve(&scene.built.problem, &options)?;
-            points.push(Point {
-                solver: "fem-p1-jacobi".into(),
-                setting: format!("{iterations} Jacobi iterations"),
-                seconds: start.elapsed().as_secs_f64(),
-                error: compare(&solution.fluence, &uncollided).relative_l2,
-            });
-        }
-        let gmres = registry.build("fem-p1-jacobi", &params_text(&[("solver", "gmres")]))?;
-        // One tolerance: restarted GMRES stagnates on this indefinite system at
-        // K_tΔ < 1, so tighter tolerances only cost time (14 s each at 16³).
-        let options = SolveOptions {
-            relative_tolerance: 1e-4,
-            ..SolveOptions::default()
-        };
-        let start = Instant::now();
-        let solution = gmres.solve(&scene.built.problem, &options)?;
-        points.push(Point {
-            solver: "fem-p1-gmres".into(),
-            setting: "GMRES to 1e-4".into(),
-            seconds: start.elapsed().as_secs_f64(),
-            error: compare(&solution.fluence, &uncollided).relative_l2,
+    // the Galerkin solution itself is worth (one tolerance: restarted GMRES stagnates on
+    // this indefinite system at K_tΔ < 1, so tighter tolerances only cost time).
+    for iterations in [1, 2, 4, 8] {
+        runs.push(Run {
+            max_iterations: Some(iterations),
+            ..Run::new(
+                "fem-p1-jacobi",
+                String::new(),
+                1,
+                format!("{iterations} Jacobi iterations"),
+            )
         });
     }
-    for particles in [1000i64, 4000, 16000, 64000] {
-        let solver = registry.build("mc", &params(&[("particles", particles), ("batches", 8)]))?;
-        if solver
-            .capabilities()
-            .check("mc", &scene.built.problem)
-            .is_err()
-        {
+    runs.push(Run {
+        label: "fem-p1-gmres",
+        tolerance: Some(1e-4),
+        ..Run::new(
+            "fem-p1-jacobi",
+            "solver = \"gmres\"".into(),
+            1,
+            "GMRES to 1e-4".into(),
+        )
+    });
+    // The explicit schemes: FTCS and Jacobi on diffusion-mg's discrete problem over the
+    // stopping tolerance (their cost is the point), Zhang & Ma's convection per model and
+    // resolution (against the uncollided fluence), Murray's P1 and ordinates by FTCS
+    // (point lights only).
+    for (solver, tolerances) in [
+        ("ftcs-diffusion", &[1e-2, 1e-3][..]),
+        ("jacobi-diffusion", &[1e-2][..]),
+    ] {
+        for &tolerance in tolerances {
+            runs.push(Run {
+                tolerance: Some(tolerance),
+                ..Run::new(
+                    solver,
+                    String::new(),
+                    1,
+                    format!("tolerance {tolerance:.0e}"),
+                )
+            });
+        }
+    }
+    for model in ["characteristic", "conservative"] {
+        for factor in [1, 2] {
+            runs.push(Run::new(
+                "convection-diffusion",
+                format!("model = \"{model}\""),
+                factor,
+                format!("{model}, {factor}x cells"),
+            ));
+        }
+    }
+    runs.push(Run {
+        tolerance: Some(1e-4),
+        ..Run::new("ftcs-p1", String::new(), 1, "tolerance 1e-4".into())
+    });
+    for order in [2, 4] {
+        runs.push(Run {
+            tolerance: Some(1e-4),
+            ..Run::new(
+                "ftcs-ordinates",
+                format!("order = {order}"),
+                1,
+                format!("S{order}, tolerance 1e-4"),
+            )
+        });
+    }
+    // Monte Carlo: paths (8 batches).
+    for particles in [1000, 4000, 16000, 64000] {
+        runs.push(Run::new(
+            "mc",
+            format!("particles = {particles}\nbatches = 8"),
+            1,
+            format!("{} paths", particles * 8),
+        ));
+    }
+    runs
+}
+
+/// Sweeps every [`runs`] entry the solver admits on `scene`, measuring each against the
+/// reference for what its solver computes (uncollided or total fluence).
+pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Vec<Point>, Error> {
+    let registry = crate::registry();
+    let mut points = Vec::new();
+    let uncollided = reference(scene, FluenceKind::Uncollided, 0.005, cache)?;
+    let total = reference(scene, FluenceKind::Total, 0.01, cache)?;
+    let mut problems: Vec<(usize, Problem)> = Vec::new();
+    for run in runs() {
+        let params: Params = toml::from_str(&run.params)
+            .map_err(|e| Error::Invalid(format!("pareto parameters `{}`: {e}", run.params)))?;
+        let solver = registry.build(run.solver, &params)?;
+        if !problems.iter().any(|(f, _)| *f == run.factor) {
+            problems.push((run.factor, refined(scene, run.factor)?));
+        }
+        let problem = &problems.iter().find(|(f, _)| *f == run.factor).unwrap().1;
+        if solver.admits(problem).is_err() {
             continue;
         }
+        let defaults = SolveOptions::default();
+        let options = SolveOptions {
+            relative_tolerance: run.tolerance.unwrap_or(defaults.relative_tolerance),
+            max_iterations: run.max_iterations.unwrap_or(defaults.max_iterations),
+            time_budget: Some(std::time::Duration::from_secs(120)),
+            ..defaults
+        };
         let start = Instant::now();
-        let solution = solver.solve(&scene.built.problem, &SolveOptions::default())?;
+        let solution = solver.solve(problem, &options)?;
+        let seconds = start.elapsed().as_secs_f64();
+        let averaged: Vec<Grid> = solution
+            .fluence
+            .iter()
+            .map(|g| {
+                if run.factor == 2 {
+                    restrict(g)
+                } else {
+                    g.clone()
+                }
+            })
+            .collect();
+        let reference = match solver.capabilities().fluence {
+            FluenceKind::Uncollided => &uncollided,
+            FluenceKind::Total => &total,
+        };
         points.push(Point {
-            solver: "mc".into(),
-            setting: format!("{} paths", particles * 8),
-            seconds: start.elapsed().as_secs_f64(),
-            error: compare(&solution.fluence, &total).relative_l2,
+            solver: run.label.into(),
+            setting: run.setting,
+            seconds,
+            error: compare(&averaged, reference).relative_l2,
         });
     }
     Ok(points)
@@ -390,4 +432,32 @@ pub fn svg(title: &str, points: &[Point]) -> String {
     }
     s.push_str("</svg>\n");
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every knob in the table is a parameter its solver takes, with a valid value, and
+    /// every registered solver is charted.
+    #[test]
+    fn every_run_builds_its_solver() {
+        let registry = crate::registry();
+        for entry in registry.entries() {
+            assert!(
+                runs().iter().any(|r| r.solver == entry.name),
+                "{} has no run",
+                entry.name
+            );
+        }
+        for run in runs() {
+            let params: Params = toml::from_str(&run.params).unwrap();
+            assert!(
+                registry.build(run.solver, &params).is_ok(),
+                "{} `{}`",
+                run.solver,
+                run.params
+            );
+        }
+    }
 }

@@ -90,6 +90,101 @@ fn architecture_lists_every_crate() {
     }
 }
 
+/// Every crate's numerics are optimised in the test profile: one
+/// `[profile.dev.package.<name>]` per crate in `crates/`, the directory being the one place
+/// the list comes from.
+#[test]
+fn every_crate_is_optimised_in_tests() {
+    let manifest = read("Cargo.toml");
+    for dir in crate_dirs() {
+        let name = package_name(&dir);
+        assert!(
+            manifest.contains(&format!("[profile.dev.package.{name}]\nopt-level = 3")),
+            "Cargo.toml lacks `[profile.dev.package.{name}]` with opt-level = 3"
+        );
+    }
+}
+
+/// ARCHITECTURE.md's "Adding a solver" checklist, checked for every crate that registers a
+/// solver (one that has `src/solver.rs`).
+#[test]
+fn adding_a_solver_checklist_holds() {
+    let architecture = read("ARCHITECTURE.md");
+    assert!(
+        architecture.contains("## Adding a solver"),
+        "ARCHITECTURE.md has its checklist"
+    );
+    let manifest = read("Cargo.toml");
+    let facade = read("src/lib.rs");
+    let pareto = read("src/pareto.rs");
+    let tolerances = read("examples/scenes/suite/tolerances.toml");
+    let mut solver_crates = 0;
+    for dir in crate_dirs() {
+        let solver = dir.join("src/solver.rs");
+        let name = package_name(&dir);
+        // lucent-core's solver.rs is the trait itself (its `direct` is the seam's own
+        // first solver, registered by `Registry::with_core_solvers`).
+        if !solver.exists() || name == "lucent-core" {
+            continue;
+        }
+        solver_crates += 1;
+        let folder = dir.file_name().unwrap().to_string_lossy().into_owned();
+        let adapter = fs::read_to_string(&solver).unwrap();
+        let params = fs::read_to_string(dir.join("src/params.rs"))
+            .unwrap_or_else(|_| panic!("{name}: its parameters go in src/params.rs"));
+        assert!(
+            params.contains("impl SolverParams for") && params.contains("deny_unknown_fields"),
+            "{name}: params.rs holds typed SolverParams with deny_unknown_fields"
+        );
+        assert!(
+            adapter.contains("impl Solver for") && adapter.contains("param_docs::<"),
+            "{name}: solver.rs implements Solver and its entries list their parameters"
+        );
+        assert!(
+            adapter.contains("driver::solve_per_channel") || adapter.contains("driver::run"),
+            "{name}: solves go through lucent_core::driver"
+        );
+        let crate_manifest = fs::read_to_string(dir.join("Cargo.toml")).unwrap();
+        assert!(
+            crate_manifest.contains("lucent-core") && crate_manifest.contains("serde"),
+            "{name}: depends on lucent-core and serde"
+        );
+        let module = name.replace('-', "_");
+        assert!(
+            manifest.contains(&format!("{name}.workspace = true"))
+                && manifest.contains(&format!("{name} = {{ path = \"crates/{folder}\"")),
+            "{name}: a workspace dependency of the root package"
+        );
+        assert!(
+            facade.contains(&format!("{module}::")),
+            "{name}: src/lib.rs registers its entries"
+        );
+        assert!(
+            architecture.contains(&format!("### `{name}` (`crates/{folder}`)")),
+            "{name}: ARCHITECTURE.md has its section"
+        );
+        // Every entry it defines is charted and cross-checked.
+        for line in adapter.lines() {
+            let Some(entry) = line
+                .trim()
+                .strip_prefix("name: \"")
+                .and_then(|r| r.strip_suffix("\","))
+            else {
+                continue;
+            };
+            assert!(
+                pareto.contains(&format!("\"{entry}\"")),
+                "{entry}: no run in src/pareto.rs"
+            );
+            assert!(
+                tolerances.contains(&format!("solver = \"{entry}\"")),
+                "{entry}: no row in tolerances.toml"
+            );
+        }
+    }
+    assert!(solver_crates >= 5, "found {solver_crates} solver crates");
+}
+
 #[test]
 fn readme_and_ci_agree_on_the_commands() {
     let readme = read("README.md");
