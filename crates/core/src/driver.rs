@@ -328,6 +328,25 @@ impl Channel<'_> {
         emitted
     }
 
+    /// The volumetric sources of a diffusion-type method in this channel: Q₀ = 4π L_e of
+    /// its emission plus the uncollided light's first collisions
+    /// ([`Uncollided::first_collision_sources`], power per volume), and their first
+    /// moment Q₁ (empty without uncollided light or when g = 0).
+    pub fn diffusion_sources(&self) -> (Vec<f64>, Vec<[f32; 3]>) {
+        let four_pi = 4.0 * std::f64::consts::PI;
+        let mut q0: Vec<f64> = self.emission().iter().map(|e| four_pi * e).collect();
+        let Some(uncollided) = self.uncollided else {
+            return (q0, Vec::new());
+        };
+        let g = self.problem.medium().phase.mean_cosine();
+        let (scattered, first) =
+            uncollided.first_collision_sources(self.index, &self.coefficients.sigma_s, g);
+        for (q, s) in q0.iter_mut().zip(scattered) {
+            *q += f64::from(s);
+        }
+        (q0, first)
+    }
+
     /// The method's point lights in this channel: position and power 4πI.
     pub fn point_sources(&self) -> Vec<(glam::DVec3, f64)> {
         self.lights

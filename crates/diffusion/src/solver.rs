@@ -34,7 +34,6 @@ use lucent_core::{
 
 use crate::params::{CgParams, JacobiParams, MultigridParams, SorParams};
 use lucent_grid::Grid;
-use lucent_optics::PhaseFunction;
 
 use crate::geometry::{CellGeometry, Discretisation};
 use crate::multigrid::{Cycle, MultigridSettings, Smoother};
@@ -284,7 +283,6 @@ impl ChannelMethod for Channels<'_, '_> {
         let geometry = *problem.geometry();
         let n = geometry.voxel_count();
         let Coefficients {
-            sigma_s,
             sigma_a,
             diffusion: d,
             ..
@@ -294,12 +292,10 @@ impl ChannelMethod for Channels<'_, '_> {
             DiffusionProblem::new(cells.clone(), d.clone(), sigma_a.clone(), boundaries)
                 .map_err(|e| invalid("problem", e.to_string()))?;
         let mut sources = Sources::default();
-        // Emission: Q₀ = 4π L_e.
-        let mut q0: Vec<f32> = channel
-            .emission()
-            .iter()
-            .map(|e| (4.0 * std::f64::consts::PI * e) as f32)
-            .collect();
+        // Emission and the other lights' first collisions.
+        let (q0, first_moment) = channel.diffusion_sources();
+        let mut q0: Vec<f32> = q0.iter().map(|&q| q as f32).collect();
+        sources.first_moment = first_moment;
         // Point sources: their singular part G̃ analytically where the medium around them
         // allows (the remainder's smooth source goes into q0), else as points.
         let mut singular = vec![0.0f32; n];
@@ -316,15 +312,6 @@ impl ChannelMethod for Channels<'_, '_> {
                 }
                 None => sources.points.push((position, power)),
             }
-        }
-        // The other lights' first collisions.
-        if let Some(uncollided) = channel.uncollided {
-            let g = problem.medium().phase.mean_cosine();
-            let (scattered, first) = uncollided.first_collision_sources(channel.index, sigma_s, g);
-            for (q, s) in q0.iter_mut().zip(scattered) {
-                *q += s;
-            }
-            sources.first_moment = first;
         }
         sources.volumetric = q0;
         let solution = (self.linear)(&diffusion, &sources, &channel.stopping)

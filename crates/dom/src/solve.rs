@@ -220,9 +220,9 @@ struct Monitor {
     dsa_abandoned: Option<usize>,
 }
 
-/// Source iteration on one channel, as a value whose steps are separate: [`Self::transport`]
+/// Source iteration on one channel, as a value whose steps are separate: `transport`
 /// (the source at the propagation directions, one sweep, the in-scattered radiance; what a
-/// GPU sweep replaces), [`Self::accelerate`] (the diffusion correction; what a Krylov
+/// GPU sweep replaces), `accelerate` (the diffusion correction; what a Krylov
 /// acceleration replaces), the change of the source, and Anderson mixing. [`Self::run`]
 /// is the loop that joins them with the stopping rule and the safeguards.
 pub struct SourceIteration<'a> {

@@ -547,23 +547,12 @@ fn p1(
     let sigma_t = f64::from(coefficients.sigma_t[0]);
     let sigma_s = f64::from(coefficients.sigma_s[0]);
     let (sigma_a, reduced) = (sigma_t - sigma_s, sigma_t - g * sigma_s);
-    let limit = |dt: f64| {
-        let (kp, ke) = (dt * sigma_a, dt * reduced);
-        match layout {
-            crate::p1::Layout::Collocated => crate::stability::p1::collocated_limit(kp, ke),
-            crate::p1::Layout::Staggered => crate::stability::p1::staggered_limit(kp, ke),
-        }
-    };
-    // The largest stable cΔt: r(cΔt) = cΔt/h must not exceed limit(cΔt); bisect.
-    let (mut lo, mut hi) = (0.0, 2.0 / reduced.max(1e-12));
-    for _ in 0..100 {
-        let mid = 0.5 * (lo + hi);
-        if mid / l.spacing <= limit(mid) {
-            lo = mid
-        } else {
-            hi = mid
-        }
-    }
+    let lo = crate::stability::p1::largest_step(
+        layout == crate::p1::Layout::Staggered,
+        sigma_a,
+        reduced,
+        l.spacing,
+    );
     if lo <= 0.0 {
         return Err(invalid(
             "medium",
@@ -608,8 +597,7 @@ fn ordinates(
     let sigma_t = widen(&channel.coefficients.sigma_t);
     let sigma_s = widen(&channel.coefficients.sigma_s);
     let k_max = sigma_t.iter().fold(0.0f64, |a, &b| a.max(b));
-    // r ≤ (1 − K/2)/S with K = cΔt σ_t: cΔt ≤ h / (S + h σ_t/2).
-    let step = l.spacing / (s_max + 0.5 * l.spacing * k_max);
+    let step = crate::stability::ordinates::largest_step(s_max, k_max, l.spacing);
     let settings = crate::ordinates::OrdinatesSettings {
         time_step: fraction * step,
         stopping: channel.stopping.clone(),

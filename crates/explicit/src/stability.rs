@@ -89,6 +89,31 @@ pub mod p1 {
     pub fn staggered_limit(k_phi: f64, k_flux: f64) -> f64 {
         0.5 * collocated_limit(k_phi, k_flux)
     }
+
+    /// The largest stable step cΔt (length) on cells of width `h` for absorption σ_a and
+    /// reduced extinction σ_t′: r(cΔt) = cΔt/h must not exceed the layout's limit at the
+    /// damping cΔt gives; bisected (the limit falls as cΔt grows). 0 without absorption
+    /// (no step is stable: the fluence's mode is undamped).
+    pub fn largest_step(staggered: bool, sigma_a: f64, sigma_t_reduced: f64, h: f64) -> f64 {
+        let limit = |dt: f64| {
+            let (k_phi, k_flux) = (dt * sigma_a, dt * sigma_t_reduced);
+            if staggered {
+                staggered_limit(k_phi, k_flux)
+            } else {
+                collocated_limit(k_phi, k_flux)
+            }
+        };
+        let (mut lo, mut hi) = (0.0, 2.0 / sigma_t_reduced.max(1e-12));
+        for _ in 0..100 {
+            let mid = 0.5 * (lo + hi);
+            if mid / h <= limit(mid) {
+                lo = mid
+            } else {
+                hi = mid
+            }
+        }
+        lo
+    }
 }
 
 /// FTCS with upwind differences on the unsteady RTE over discrete directions (Murray
@@ -103,5 +128,12 @@ pub mod ordinates {
     /// Positivity (all weights ≥ 0): r·S + K ≤ 1.
     pub fn positivity_limit(s_max: f64, k: f64) -> f64 {
         (1.0 - k) / s_max
+    }
+
+    /// The largest stable step cΔt (length) by [`von_neumann_limit`] on cells of width
+    /// `h` with extinction up to `sigma_t_max`: r ≤ (1 − K/2)/S with K = cΔt σ_t gives
+    /// cΔt ≤ h/(S + h σ_t/2).
+    pub fn largest_step(s_max: f64, sigma_t_max: f64, h: f64) -> f64 {
+        h / (s_max + 0.5 * h * sigma_t_max)
     }
 }

@@ -280,6 +280,84 @@ impl Q1Problem {
         b
     }
 
+    /// ∫Q₀ v + ∫ 3D Q₁·∇v for volumetric sources given per element: Q₀ (power/volume)
+    /// lumped to the 8 corners, and the first moment Q₁ (empty or one per element), whose
+    /// weak-form term over a cube is ±h²/4 per axis times 3D Q₁ (its boundary terms cancel
+    /// against the Robin condition's).
+    pub fn cell_load(&self, q0: &[f64], moment: &[[f32; 3]]) -> Vec<f64> {
+        let mut b = vec![0.0; self.nodes().iter().product()];
+        let h = self.spacing;
+        let (volume, hh) = (h * h * h, h * h / 4.0);
+        let [nx, ny, _] = self.cells;
+        for (cell, q) in q0.iter().enumerate() {
+            let (i, j, k) = (cell % nx, (cell / nx) % ny, cell / (nx * ny));
+            for corner in 0..8 {
+                let o = [corner & 1, (corner >> 1) & 1, corner >> 2];
+                let node = self.node([i + o[0], j + o[1], k + o[2]]);
+                b[node] += q * volume / 8.0;
+                if let Some(first) = moment.get(cell) {
+                    let grad: f64 = (0..3)
+                        .map(|a| {
+                            let v = f64::from(first[a]);
+                            if o[a] == 1 { v } else { -v }
+                        })
+                        .sum();
+                    b[node] += 3.0 * self.diffusion[cell] * grad * hh;
+                }
+            }
+        }
+        b
+    }
+
+    /// Adds ∫ f v over element `cell` to `b`, by 3×3×3 Gauss points: for a source that
+    /// varies within an element (a point source's smooth remainder near its cut-off),
+    /// which lumping would blur. `f` takes coordinates relative to the box's low corner.
+    pub fn add_element_source(&self, b: &mut [f64], cell: usize, f: impl Fn([f64; 3]) -> f64) {
+        let rule = [
+            (0.5 - 0.5 * 0.6f64.sqrt(), 5.0 / 18.0),
+            (0.5, 8.0 / 18.0),
+            (0.5 + 0.5 * 0.6f64.sqrt(), 5.0 / 18.0),
+        ];
+        let h = self.spacing;
+        let [nx, ny, _] = self.cells;
+        let at = [cell % nx, (cell / nx) % ny, cell / (nx * ny)];
+        for (x, wx) in rule {
+            for (y, wy) in rule {
+                for (z, wz) in rule {
+                    let t = [x, y, z];
+                    let value = f(std::array::from_fn(|a| (at[a] as f64 + t[a]) * h))
+                        * wx
+                        * wy
+                        * wz
+                        * h
+                        * h
+                        * h;
+                    for corner in 0..8usize {
+                        let o = [corner & 1, (corner >> 1) & 1, corner >> 2];
+                        let shape: f64 = (0..3)
+                            .map(|a| if o[a] == 1 { t[a] } else { 1.0 - t[a] })
+                            .product();
+                        b[self.node([at[0] + o[0], at[1] + o[1], at[2] + o[2]])] += value * shape;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The mean of each element's 8 corner values of the nodal field `x`: its cell value.
+    pub fn cell_means(&self, x: &[f64]) -> Vec<f64> {
+        let [nx, ny, nz] = self.cells;
+        (0..nx * ny * nz)
+            .map(|cell| {
+                let (i, j, k) = (cell % nx, (cell / nx) % ny, cell / (nx * ny));
+                (0..8)
+                    .map(|c| x[self.node([i + (c & 1), j + ((c >> 1) & 1), k + (c >> 2)])])
+                    .sum::<f64>()
+                    / 8.0
+            })
+            .collect()
+    }
+
     /// ∫Q v for a point source of power `power` at `x` (trilinear weights on its element's
     /// vertices), coordinates relative to the box's low corner.
     pub fn point_source(&self, x: [f64; 3], power: f64) -> Result<Vec<f64>, FemError> {

@@ -308,103 +308,40 @@ impl FemDiffusionSolver {
         let matrix = q1
             .assemble()
             .map_err(|e| invalid("problem", e.to_string()))?;
-        let mut b = vec![0.0; matrix.rows()];
-        let origin = g.origin();
-        let volume = g.cell_volume();
-        let corners = |i: usize, j: usize, k: usize| {
-            (0..8usize).map(move |corner| {
-                let o = [corner & 1, (corner >> 1) & 1, corner >> 2];
-                (o, [i + o[0], j + o[1], k + o[2]])
-            })
-        };
-        // Emission and first collisions lumped to the corners; the first moment enters
-        // the weak form as ∫ 3D Q₁·∇ϕ, ±h²/4 per axis over the cube.
-        let mut q0: Vec<f64> = channel
-            .emission()
-            .iter()
-            .map(|e| 4.0 * std::f64::consts::PI * e)
-            .collect();
-        let mut moment = Vec::new();
-        if let Some(uncollided) = channel.uncollided {
-            let gbar = problem.medium().phase.mean_cosine();
-            let (scattered, first) = uncollided.first_collision_sources(
-                channel.index,
-                &channel.coefficients.sigma_s,
-                gbar,
-            );
-            for (q, s) in q0.iter_mut().zip(scattered) {
-                *q += f64::from(s);
-            }
-            moment = first;
-        }
-        let hh = h.x * h.x / 4.0;
-        for cell in 0..n {
-            let [i, j, k] = g.coords(cell);
-            for (o, at) in corners(i, j, k) {
-                let node = q1.node(at);
-                b[node] += q0[cell] * volume / 8.0;
-                if let Some(first) = moment.get(cell) {
-                    let dq = 3.0 * q1.diffusion[cell];
-                    let grad: f64 = (0..3)
-                        .map(|a| {
-                            let v = f64::from(first[a]);
-                            if o[a] == 1 { v } else { -v }
-                        })
-                        .sum();
-                    b[node] += dq * grad * hh;
-                }
-            }
-        }
+        // Emission and first collisions: Q₀ lumped, the first moment in the weak form.
+        let (q0, moment) = channel.diffusion_sources();
+        let mut b = q1.cell_load(&q0, &moment);
         // Point sources: the singular part analytically where the medium allows (its
-        // smooth remainder's source integrated by 3×3×3 Gauss points per element: it varies
-        // on the scale of the cut-off, which lumping would blur), else a point.
+        // smooth remainder integrated per element by Gauss points), else a point.
         let mut singular = vec![0.0f32; n];
-        let rule = [
-            (0.5 - 0.5 * 0.6f64.sqrt(), 5.0 / 18.0),
-            (0.5, 8.0 / 18.0),
-            (0.5 + 0.5 * 0.6f64.sqrt(), 5.0 / 18.0),
-        ];
+        let origin = g.origin();
         let Coefficients {
             diffusion: d,
             sigma_a: sa,
             ..
         } = &channel.coefficients;
         for (position, power) in channel.point_sources() {
-            let Some(part) = point_source_singular_part(&g, d, sa, |_| true, position, power)
-            else {
-                let s = q1
-                    .point_source((position - origin).to_array(), power)
-                    .map_err(|e| invalid("lights", e.to_string()))?;
-                for (b, s) in b.iter_mut().zip(s) {
-                    *b += s;
-                }
-                continue;
-            };
-            for (cell, f) in part.source.iter().enumerate() {
-                if *f == 0.0 {
-                    continue;
-                }
-                let [i, j, k] = g.coords(cell);
-                let corner0 = origin + DVec3::new(i as f64, j as f64, k as f64) * h;
-                for (x, wx) in rule {
-                    for (y, wy) in rule {
-                        for (z, wz) in rule {
-                            let value = part.source_at(corner0 + DVec3::new(x, y, z) * h)
-                                * (wx * wy * wz * volume);
-                            for (o, at) in corners(i, j, k) {
-                                let shape = [x, y, z]
-                                    .iter()
-                                    .zip(o)
-                                    .map(|(t, o)| if o == 1 { *t } else { 1.0 - t })
-                                    .product::<f64>();
-                                b[q1.node(at)] += value * shape;
-                            }
+            match point_source_singular_part(&g, d, sa, |_| true, position, power) {
+                Some(part) => {
+                    for (cell, f) in part.source.iter().enumerate() {
+                        if *f != 0.0 {
+                            q1.add_element_source(&mut b, cell, |x| {
+                                part.source_at(origin + DVec3::from_array(x))
+                            });
                         }
                     }
+                    for (s, v) in singular.iter_mut().zip(&part.fluence) {
+                        *s += v;
+                    }
                 }
-            }
-            for (s, v) in singular.iter_mut().zip(&part.fluence) {
-                *s += v;
+                None => {
+                    let s = q1
+                        .point_source((position - origin).to_array(), power)
+                        .map_err(|e| invalid("lights", e.to_string()))?;
+                    for (b, s) in b.iter_mut().zip(s) {
+                        *b += s;
+                    }
+                }
             }
         }
         let bytes = (matrix.nnz() * 12 + matrix.rows() * 40) as u64;
@@ -413,12 +350,11 @@ impl FemDiffusionSolver {
         let convergence = mg
             .solve(&b, &mut x, &Self::stopping(channel))
             .map_err(|e| invalid("problem", e.to_string()))?;
-        let fluence = (0..n)
-            .map(|cell| {
-                let [i, j, k] = g.coords(cell);
-                let sum: f64 = corners(i, j, k).map(|(_, at)| x[q1.node(at)]).sum();
-                (sum / 8.0) as f32 + singular[cell]
-            })
+        let fluence = q1
+            .cell_means(&x)
+            .iter()
+            .zip(&singular)
+            .map(|(m, s)| *m as f32 + s)
             .collect();
         Ok((fluence, convergence, bytes))
     }
@@ -458,22 +394,12 @@ impl FemDiffusionSolver {
             .map_err(|e| invalid("embedded", e.to_string()))?;
         // Volumetric sources: emission and first-collision sources, sampled trilinearly
         // from the grid at every Gauss point.
-        let mut q0: Vec<f32> = channel
-            .emission()
-            .iter()
-            .map(|e| (4.0 * std::f64::consts::PI * e) as f32)
-            .collect();
+        let (q0, first) = channel.diffusion_sources();
+        let q0: Vec<f32> = q0.iter().map(|&q| q as f32).collect();
         let mut moment = [vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]];
-        if let Some(uncollided) = channel.uncollided {
-            let (scattered, first) =
-                uncollided.first_collision_sources(c, &channel.coefficients.sigma_s, gbar);
-            for (q, s) in q0.iter_mut().zip(scattered) {
-                *q += s;
-            }
-            for (cell, f) in first.iter().enumerate() {
-                for a in 0..3 {
-                    moment[a][cell] = f[a];
-                }
+        for (cell, f) in first.iter().enumerate() {
+            for a in 0..3 {
+                moment[a][cell] = f[a];
             }
         }
         // Point sources: the singular part analytically where the medium around them is
