@@ -187,6 +187,7 @@ fn render(
             .ok_or_else(|| Error::Invalid(format!("--size `{size}` is not WIDTHxHEIGHT")))?;
         built.settings.width = w;
         built.settings.height = h;
+        built.settings.validate()?;
     }
     // A solver that makes pictures itself (Monte Carlo's camera paths) says so; the rest
     // hand the renderer a fluence.

@@ -20,8 +20,21 @@ use serde::Deserialize;
 
 use crate::Error;
 
-/// The most bytes one scene grid may take (2 GiB: a scene holds several such grids).
-const MAX_GRID_BYTES: u64 = 2 << 30;
+/// The one memory budget of a scene: everything it allocates while being built (the
+/// volume file's read, payload and decoded grid together, then every field it derives)
+/// stays within it. Solvers have their own, `SolveOptions::memory_budget`.
+pub const SCENE_MEMORY_BUDGET: u64 = 8 << 30;
+
+/// The most bytes one scene grid may take: a scene holds up to eight fields on its grid
+/// (the volume, σ_t and albedo per channel, an embedded SDF), an eighth of the budget each
+/// (1 GiB: 645³ cells).
+const MAX_GRID_BYTES: u64 = SCENE_MEMORY_BUDGET / 8;
+
+/// What reading a volume file may take, its payload and its decoded grid together: three
+/// fields' worth (an f64 payload and its f32 grid of the largest field), so that a file
+/// claiming more (a decompression bomb, a VDB whose tree spans a huge box) is refused
+/// before anything is inflated or allocated.
+const MAX_READ_BYTES: u64 = 3 * MAX_GRID_BYTES;
 
 /// The built-in default scene: a procedural cloud lit by a sun-like directional light and a
 /// blue sky (`examples/scenes/default.toml`).
@@ -375,12 +388,31 @@ impl Scene {
         })
     }
 
-    /// Reads and parses a scene file.
+    /// Reads and parses a scene file (a regular file of at most 16 MiB: a scene is a few
+    /// hundred lines; a device or FIFO could block or never end).
     pub fn load(path: &Path) -> Result<Self, Error> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+        use std::io::Read;
+        const MAX_SCENE_BYTES: u64 = 16 << 20;
+        let fail = |reason: String| Error::Io {
             path: path.to_owned(),
-            reason: e.to_string(),
-        })?;
+            reason,
+        };
+        let metadata = std::fs::metadata(path).map_err(|e| fail(e.to_string()))?;
+        if !metadata.is_file() {
+            return Err(fail(
+                "not a regular file (devices, FIFOs and folders are not read)".into(),
+            ));
+        }
+        if metadata.len() > MAX_SCENE_BYTES {
+            return Err(fail(format!(
+                "{} bytes: a scene file is at most {MAX_SCENE_BYTES} bytes",
+                metadata.len()
+            )));
+        }
+        let mut text = String::new();
+        std::fs::File::open(path)
+            .and_then(|f| f.take(MAX_SCENE_BYTES).read_to_string(&mut text))
+            .map_err(|e| fail(e.to_string()))?;
         Self::parse(&text, path)
     }
 
@@ -509,6 +541,13 @@ impl Scene {
             step: i.step,
             background: i.background,
         };
+        settings.validate()?;
+        if !i.exposure.is_finite() || i.exposure.abs() > 64.0 {
+            return Err(Error::Invalid(format!(
+                "exposure {} stops (finite, within ±64)",
+                i.exposure
+            )));
+        }
         Ok(BuiltScene {
             problem,
             camera: self.camera,
@@ -581,6 +620,9 @@ impl Scene {
                 bounds,
             } => {
                 let path = resolve(base, path);
+                let read_budget = LoadOptions {
+                    memory_budget: MAX_READ_BYTES,
+                };
                 let mut grid = match raw {
                     Some(r) => {
                         let scalar = scalar_type(&r.scalar).ok_or_else(|| {
@@ -595,10 +637,12 @@ impl Scene {
                         if let Some(s) = r.spacing {
                             layout.spacing = DVec3::from_array(s);
                         }
-                        io::raw::read(&path, &layout, &LoadOptions::default())?
+                        io::raw::read(&path, &layout, &read_budget)?
                     }
-                    None => io::read_volume(&path)?,
+                    None => io::read_volume_with(&path, &read_budget)?,
                 };
+                // The file's own grid is a scene field too.
+                geometry(grid.dims(), [[0.0; 3], [1.0; 3]])?;
                 if let Some(b) = bounds {
                     grid = grid.clone().with_geometry(geometry(grid.dims(), *b)?)?;
                 }

@@ -236,6 +236,130 @@ fn a_bad_solver_parameter_is_one_line_naming_it() {
     }
 }
 
+/// A scene with one volume file and a sun, for the hostile-input tests.
+fn file_scene(volume: &str, extra: &str) -> String {
+    format!(
+        "[volume]\nkind = \"file\"\npath = \"{volume}\"\n[medium]\ndensity = 1.0\nalbedo = 0.5\n[[lights]]\nkind = \"directional\"\ndirection = [0.0, 0.0, -1.0]\nirradiance = 1.0\n[camera]\nkind = \"pinhole\"\nposition = [3, 0, 0]\nlook_at = [0, 0, 0]\n{extra}"
+    )
+}
+
+/// Each of these crashed, aborted, hung or wrote NaN before (docs/reliability.md); each
+/// must be one line and exit status 1, within seconds.
+#[test]
+fn hostile_inputs_are_one_clean_line() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A gzip NRRD whose header claims 1024³ (5 GiB once decoded) from 64 kB.
+    let mut file = std::fs::File::create(d.join("bomb.nrrd")).unwrap();
+    file.write_all(
+        b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 1024 1024 1024\nencoding: gzip\n\n",
+    )
+    .unwrap();
+    let mut gz = flate2::write::GzEncoder::new(file, flate2::Compression::best());
+    gz.write_all(&vec![0u8; 16 << 20]).unwrap();
+    gz.finish().unwrap();
+    std::fs::write(d.join("bomb.toml"), file_scene("bomb.nrrd", "")).unwrap();
+    // A detached payload on a device.
+    std::fs::write(
+        d.join("zero.nrrd"),
+        "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 41 41 41\nencoding: raw\ndata file: /dev/zero\n",
+    )
+    .unwrap();
+    std::fs::write(d.join("zero.toml"), file_scene("zero.nrrd", "")).unwrap();
+    // A volume with a NaN voxel.
+    let geometry =
+        lucent::grid::GridGeometry::new([4, 4, 4], glam::DVec3::ONE, glam::DVec3::ZERO).unwrap();
+    let mut grid = lucent::grid::Grid::filled(geometry, 1.0);
+    grid.data_mut()[21] = f32::NAN;
+    lucent::grid::io::npy::write(d.join("nan.npy"), &grid, lucent::grid::io::ScalarType::F32)
+        .unwrap();
+    std::fs::write(d.join("nan.toml"), file_scene("nan.npy", "")).unwrap();
+    let good = |extra: &str| {
+        lucent::grid::io::npy::write(
+            d.join("ok.npy"),
+            &lucent::grid::Grid::filled(geometry, 1.0),
+            lucent::grid::io::ScalarType::F32,
+        )
+        .unwrap();
+        file_scene("ok.npy", extra)
+    };
+    std::fs::write(d.join("exposure.toml"), good("[image]\nexposure = nan\n")).unwrap();
+    std::fs::write(d.join("step.toml"), good("[image]\nstep = 1e-9\n")).unwrap();
+    std::fs::write(
+        d.join("bright.toml"),
+        good("").replace("irradiance = 1.0", "irradiance = 1e300"),
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("thick.toml"),
+        good("").replace("density = 1.0", "density = 1e8"),
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("spp.toml"),
+        good("[solver]\nname = \"mc\"\n[solver.params]\nspp = 1000000000000\n"),
+    )
+    .unwrap();
+    let cases: [(&[&str], &str); 12] = [
+        (&["info", "bomb.toml"], "over the memory budget"),
+        (&["info", "zero.toml"], "not a regular file"),
+        (&["info", "/dev/zero"], "not a regular file"),
+        (&["info", "nan.toml"], "is NaN"),
+        (&["info", "exposure.toml"], "exposure"),
+        (&["info", "step.toml"], "step"),
+        (&["info", "bright.toml"], "at most 1e30"),
+        (
+            &["solve", "thick.toml", "--solver", "mc", "-o", "x.npy"],
+            "optically thick",
+        ),
+        (&["render", "spp.toml", "-o", "x.png"], "`spp`"),
+        (
+            &[
+                "render",
+                "ok.toml",
+                "--solver",
+                "mc",
+                "--size",
+                "9223372036854775808x2",
+                "-o",
+                "x.png",
+            ],
+            "image size",
+        ),
+        (
+            &[
+                "render",
+                "ok.toml",
+                "--size",
+                "4294967296x4294967296",
+                "-o",
+                "x.png",
+            ],
+            "image size",
+        ),
+        (
+            &["render", "ok.toml", "--size", "0x5", "-o", "x.png"],
+            "image size",
+        ),
+    ];
+    std::fs::write(d.join("ok.toml"), good("")).unwrap();
+    for (args, expected) in cases {
+        let started = std::time::Instant::now();
+        let out = lucent(args, d);
+        assert_clean_failure(&out, expected);
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(20),
+            "{args:?} took {:?}",
+            started.elapsed()
+        );
+        assert!(
+            !d.join("x.png").exists() && !d.join("x.npy").exists(),
+            "{args:?} wrote"
+        );
+    }
+}
+
 #[test]
 fn a_missing_scene_file() {
     let out = lucent(&["render", "no-such-scene.toml"], Path::new("."));

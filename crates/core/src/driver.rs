@@ -54,7 +54,8 @@ pub struct Record {
     pub residuals: Vec<f64>,
     /// Why it stopped.
     pub stop_reason: StopReason,
-    /// Bytes of working data at peak (0: the driver reports the method's estimate).
+    /// Bytes of working data at peak as the method counted them (the report keeps the
+    /// larger of this and the estimate checked against the budget; 0: no count).
     pub memory_bytes: u64,
 }
 
@@ -182,6 +183,7 @@ where
         });
     }
     let started = Instant::now();
+    let meter = crate::memory::PeakMeter::start();
     let context = Context {
         problem,
         options: SolveOptions {
@@ -191,6 +193,24 @@ where
         started,
     };
     let outcome = options.install(|| body(&context))??;
+    // No output holds NaN or infinity, whatever the method did.
+    let outputs = [
+        ("fluence", Some(&outcome.fluence)),
+        ("standard error", outcome.standard_error.as_ref()),
+    ];
+    for (what, grids) in outputs {
+        for (channel, grid) in grids.into_iter().flatten().enumerate() {
+            if let Some(index) = grid.data().iter().position(|v| !v.is_finite()) {
+                return Err(SolveError::NonFiniteOutput {
+                    solver: solver.name().into(),
+                    what,
+                    channel,
+                    cell: grid.geometry().coords(index),
+                    value: grid.data()[index],
+                });
+            }
+        }
+    }
     let record = outcome.record;
     Ok(Solution {
         fluence: outcome.fluence,
@@ -201,12 +221,11 @@ where
             iterations: record.iterations,
             residual_history: record.residuals,
             wall_time_s: started.elapsed().as_secs_f64(),
-            peak_memory_bytes: if record.memory_bytes > 0 {
-                record.memory_bytes
-            } else {
-                memory_bytes
-            },
+            // The estimate checked against the budget, or the method's own count if that
+            // came out larger.
+            peak_memory_bytes: memory_bytes.max(record.memory_bytes),
             stop_reason: record.stop_reason,
+            measured_peak_bytes: meter.and_then(|m| m.peak_bytes()),
         },
     })
 }
@@ -430,6 +449,20 @@ pub trait ChannelMethod: Sync {
     }
 }
 
+/// What [`solve_per_channel`] itself holds at peak, on top of the method's estimate: one
+/// channel's [`Coefficients`] (16 bytes per cell), the fluence of every channel (4), and
+/// the uncollided light of every point-like light and the sky as if all were routed to it:
+/// `direct`'s transmittance per light and extinction channel and its fluences, and each
+/// point-like light's cell integrals (40 bytes per cell and extinction channel).
+pub fn per_channel_bytes(problem: &Problem) -> u64 {
+    let cells = problem.geometry().voxel_count() as u64;
+    let channels = problem.channels() as u64;
+    let extinction = problem.medium().sigma_t.len() as u64;
+    let pointlike = problem.lights().iter().filter(|l| l.is_pointlike()).count() as u64;
+    let direct = 4 * (pointlike * extinction + 2 * channels + 1);
+    cells.saturating_mul(16 + 4 * channels + direct + 40 * pointlike * extinction)
+}
+
 /// Solves `problem` with a per-channel `method` on behalf of `solver` (whose name,
 /// capabilities and admission check apply): everything [`run`] does, then the method's
 /// setup, the lights sorted by [`ChannelMethod::route`], their uncollided light, and the
@@ -449,7 +482,9 @@ where
         solver,
         problem,
         options,
-        method.memory_bytes(problem),
+        method
+            .memory_bytes(problem)
+            .saturating_add(per_channel_bytes(problem)),
         |context| {
             let setup = method.setup(context)?;
             let (mut own, mut external) = (Vec::new(), Vec::new());
@@ -526,6 +561,57 @@ mod tests {
             residuals: vec![1.0; iterations + 1],
             stop_reason,
             memory_bytes,
+        }
+    }
+
+    /// A solver whose method returns NaN in one cell.
+    struct Broken;
+
+    impl Solver for Broken {
+        fn name(&self) -> &str {
+            "broken"
+        }
+        fn capabilities(&self) -> crate::Capabilities {
+            crate::Capabilities {
+                boundaries: vec![crate::BoundaryKind::Vacuum],
+                lights: vec![crate::LightKind::Directional],
+                heterogeneous: true,
+                ..Default::default()
+            }
+        }
+        fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
+            run(self, problem, options, 0, |context| {
+                let mut phi = Grid::filled(*context.problem.geometry(), 1.0);
+                phi.data_mut()[5] = f32::NAN;
+                Ok(Outcome {
+                    fluence: vec![phi],
+                    angular: None,
+                    standard_error: None,
+                    record: Record::exact(0),
+                })
+            })
+        }
+    }
+
+    #[test]
+    fn no_solution_leaves_the_driver_with_a_non_finite_value() {
+        let geometry =
+            lucent_grid::GridGeometry::new([4, 2, 2], glam::DVec3::ONE, glam::DVec3::ZERO).unwrap();
+        let medium = crate::Medium {
+            sigma_t: vec![Grid::filled(geometry, 1.0)],
+            albedo: vec![crate::Field::Constant(0.5)],
+            phase: lucent_optics::Phase::Isotropic,
+        };
+        let sun = Light::Directional {
+            direction: glam::DVec3::Z,
+            irradiance: crate::Spectrum::Grey(1.0),
+        };
+        let problem = Problem::new(geometry, medium, vec![sun], Boundary::Vacuum, None).unwrap();
+        match Broken.solve(&problem, &SolveOptions::default()) {
+            Err(SolveError::NonFiniteOutput { cell, what, .. }) => {
+                assert_eq!((cell, what), ([1, 1, 0], "fluence"));
+            }
+            other => panic!("{other:?}"),
         }
     }
 

@@ -62,6 +62,40 @@ pub enum SolveError {
         /// The budget.
         budget: u64,
     },
+    /// The solve produced a value that is not finite (an overflow the checks before it did
+    /// not foresee): refused rather than handed on, so no output holds NaN or infinity.
+    #[error(
+        "solver `{solver}` produced {value} in channel {channel}, cell {cell:?} of its {what}; nothing was written"
+    )]
+    NonFiniteOutput {
+        /// The solver's name.
+        solver: String,
+        /// Which output (`fluence`, `standard error`).
+        what: &'static str,
+        /// The channel.
+        channel: usize,
+        /// The first offending cell (i, j, k).
+        cell: [usize; 3],
+        /// Its value.
+        value: f32,
+    },
+    /// The work a solve would take, estimated before it runs, is beyond what the solver
+    /// accepts: it would not finish (or not in hours) rather than fail.
+    #[error(
+        "solver `{solver}`: {what} would be about {estimate:.3e}, beyond its limit of {limit:.0e}; {advice}"
+    )]
+    TooMuchWork {
+        /// The solver's name.
+        solver: String,
+        /// What was estimated.
+        what: String,
+        /// The estimate.
+        estimate: f64,
+        /// The limit.
+        limit: f64,
+        /// What to do instead.
+        advice: String,
+    },
     /// The problem is invalid.
     #[error(transparent)]
     Problem(#[from] ProblemError),

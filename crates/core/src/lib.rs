@@ -64,6 +64,7 @@ mod direct;
 pub mod driver;
 mod error;
 mod iteration;
+pub mod memory;
 mod problem;
 mod registry;
 mod singular;

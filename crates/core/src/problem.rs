@@ -393,7 +393,7 @@ impl Problem {
         }
         for light in &lights {
             if !light.spectrum().is_valid() {
-                return bad("light spectra must be finite and non-negative");
+                return bad("light spectra must be finite, non-negative and at most 1e30");
             }
             let unit = |d: DVec3| d.is_finite() && (d.length() - 1.0).abs() < 1e-9;
             let ok = match light {

@@ -350,8 +350,13 @@ pub struct SolveReport {
     pub residual_history: Vec<f64>,
     /// Wall time of the solve, in seconds.
     pub wall_time_s: f64,
-    /// Bytes the solver allocated for its working data and result, at peak.
+    /// Bytes the solver allocated for its working data and result, at peak: its own
+    /// estimate, checked against the budget before anything was allocated.
     pub peak_memory_bytes: u64,
+    /// The peak resident memory the operating system measured during the solve, above
+    /// what was resident before it ([`crate::memory::PeakMeter`]; the whole process's, so
+    /// it includes anything running beside the solve); `None` where it cannot be measured.
+    pub measured_peak_bytes: Option<u64>,
     /// Why it stopped.
     pub stop_reason: StopReason,
 }

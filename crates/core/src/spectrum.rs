@@ -30,9 +30,15 @@ impl Spectrum {
         }
     }
 
-    /// Whether every component is finite and ≥ 0.
+    /// The largest component a light may have (10³⁰): fluences are stored in f32
+    /// (largest 3.4 × 10³⁸), and a light brighter than this could overflow them to
+    /// infinity where it concentrates (a point light's 1/r² next to it, sums over lights
+    /// and channels).
+    pub const MAX: f64 = 1e30;
+
+    /// Whether every component is finite, non-negative and at most [`Self::MAX`].
     pub fn is_valid(&self) -> bool {
-        let ok = |v: f64| v.is_finite() && v >= 0.0;
+        let ok = |v: f64| v.is_finite() && (0.0..=Self::MAX).contains(&v);
         match self {
             Spectrum::Grey(v) => ok(*v),
             Spectrum::Rgb(c) => c.iter().all(|&v| ok(v)),

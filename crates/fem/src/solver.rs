@@ -81,8 +81,11 @@ impl ChannelMethod for FemP1Solver {
     type Extra = ();
 
     fn memory_bytes(&self, problem: &Problem) -> u64 {
-        // 27 blocks of 4 × 4 per row (f64 and an index), four unknowns per vertex.
-        problem.geometry().voxel_count() as u64 * 4 * 27 * 4 * 16
+        // Assembly goes through element triplets: 8 × 8 blocks of 4 × 4 per element at 24
+        // bytes each (24.6 kB per cell), then the CSR matrix of 27 blocks of 4 × 4 per
+        // vertex (6.9 kB): 32 kB per cell, against 32.6 measured at 40³
+        // (`tests/memory_estimates.rs`).
+        problem.geometry().voxel_count() as u64 * (8 * 8 * 16 * 24 + 27 * 16 * 16 + 1024)
     }
 
     fn setup(&self, context: &Context<'_>) -> Result<Mesh, SolveError> {
@@ -229,9 +232,11 @@ impl ChannelMethod for FemDiffusionSolver {
     type Extra = ();
 
     fn memory_bytes(&self, problem: &Problem) -> u64 {
-        // The assembled Q1 matrix with its Galerkin hierarchy: about 330 bytes per node
-        // (BENCHMARKS.md), plus the cell fields.
-        problem.geometry().voxel_count() as u64 * (400 + 32)
+        // The assembled Q1 matrix (27 non-zeros per row), the triplets it is built from,
+        // its Galerkin hierarchy and the sparse prolongations' triplets: measured at 1030
+        // bytes per cell at 48³ and 1420 at 96³ (`tests/memory_estimates.rs`; the finest
+        // level's share grows with the grid), 330 for the matrices alone (BENCHMARKS.md).
+        problem.geometry().voxel_count() as u64 * 1600
     }
 
     fn setup(&self, context: &Context<'_>) -> Result<FemSetup, SolveError> {

@@ -87,6 +87,25 @@ pub enum GridError {
         /// The configured budget.
         budget: u64,
     },
+    /// A path that is not a regular file (a device, a FIFO, a folder): reading it could
+    /// block or never end.
+    #[error("{path}: not a regular file (devices, FIFOs and folders are not read)")]
+    NotAFile {
+        /// The path.
+        path: PathBuf,
+    },
+    /// A volume holding NaN or an infinity.
+    #[error("{path}: voxel {index} (cell {cell:?}) is {value}; volumes must be finite")]
+    NonFinite {
+        /// The file.
+        path: PathBuf,
+        /// Linear index of the first offending voxel.
+        index: usize,
+        /// Its cell (i, j, k).
+        cell: [usize; 3],
+        /// Its value.
+        value: f32,
+    },
     /// Values that the target format cannot represent without loss.
     #[error("{path}: voxel {index} = {value} cannot be written as {target} without loss")]
     Lossy {

@@ -64,11 +64,18 @@ pub fn camera_image_with_progress(
     progress: Option<&(dyn Fn(f64) + Sync)>,
 ) -> Result<CameraEstimate, SolveError> {
     let rows_done = std::sync::atomic::AtomicUsize::new(0);
-    if width == 0 || height == 0 || samples < 2 || width * height > 1 << 26 {
+    crate::transport::check_optical_reach(problem)?;
+    // Sizes multiply without overflow: at most 2^26 pixels and 2^36 paths in all (hours
+    // on two cores); more is refused before anything runs.
+    let pixel_count = width
+        .checked_mul(height)
+        .filter(|&p| width > 0 && height > 0 && p <= 1 << 26);
+    let paths = pixel_count.and_then(|p| p.checked_mul(samples));
+    if pixel_count.is_none() || samples < 2 || paths.is_none_or(|p| p > 1 << 36) {
         return Err(SolveError::InvalidParameter {
             name: "image".into(),
             reason: format!(
-                "{width}×{height} pixels with {samples} samples (need ≥ 1 pixel and ≥ 2 samples)"
+                "{width}×{height} pixels with {samples} samples (1 to 2^26 pixels, at least 2 samples, at most 2^36 paths)"
             ),
         });
     }

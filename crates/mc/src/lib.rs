@@ -82,7 +82,8 @@ pub use params::McParams;
 pub use rng::PathRng;
 pub use solver::McSolver;
 pub use transport::{
-    EnergyBalance, Estimate, McConfig, McEstimate, RunControl, estimate, estimate_with,
+    EnergyBalance, Estimate, MAX_OPTICAL_REACH, McConfig, McEstimate, RunControl,
+    check_optical_reach, estimate, estimate_with,
 };
 
 #[cfg(doc)]

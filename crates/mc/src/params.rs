@@ -59,7 +59,7 @@ impl SolverParams for McParams {
             "global_majorant",
             "true: one majorant for the whole grid instead of one per block",
         ),
-        ("spp", "paths per pixel for camera images, at least 2"),
+        ("spp", "paths per pixel for camera images, 2 to 2^20"),
     ];
 
     fn validate(&self) -> Result<(), SolveError> {
@@ -70,8 +70,8 @@ impl SolverParams for McParams {
         if self.batches < 2 {
             return Err(bad("batches", "at least 2"));
         }
-        if self.spp < 2 {
-            return Err(bad("spp", "at least 2"));
+        if !(2..=1 << 20).contains(&self.spp) {
+            return Err(bad("spp", "2 to 2^20 paths per pixel"));
         }
         if self.particles == 0 || self.majorant_cells == 0 {
             return Err(bad("particles", "particles and majorant_cells at least 1"));

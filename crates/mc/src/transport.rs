@@ -322,6 +322,35 @@ pub struct RunControl<'a> {
     pub time_budget: Option<std::time::Duration>,
 }
 
+/// The most tentative collisions delta tracking may need to cross the box once
+/// (the largest σ_t times the box's diagonal).
+pub const MAX_OPTICAL_REACH: f64 = 1e6;
+
+/// Refuses a medium so thick that delta tracking could not finish: crossing the box takes
+/// about max σ_t × diagonal tentative collisions per flight, and a path makes many flights.
+/// At 10⁶ (a box a million mean free paths across) light is diffuse long before it gets
+/// anywhere, and the diffusion solvers are the tool.
+pub fn check_optical_reach(problem: &Problem) -> Result<(), SolveError> {
+    let (lo, hi) = problem.geometry().bounds();
+    let peak = problem
+        .medium()
+        .sigma_t
+        .iter()
+        .flat_map(|g| g.data().iter())
+        .fold(0.0f64, |m, &v| m.max(f64::from(v)));
+    let reach = peak * (hi - lo).length();
+    if reach > MAX_OPTICAL_REACH {
+        return Err(SolveError::TooMuchWork {
+            solver: "mc".into(),
+            what: "the tentative collisions to cross the box once (largest σ_t × diagonal)".into(),
+            estimate: reach,
+            limit: MAX_OPTICAL_REACH,
+            advice: "a medium this optically thick is diffusive: use a diffusion solver".into(),
+        });
+    }
+    Ok(())
+}
+
 /// [`estimate`] under a [`RunControl`]; [`McEstimate::batches`] says how many batches ran
 /// (fewer than asked when the time budget stopped the run).
 pub fn estimate_with(
@@ -340,6 +369,7 @@ pub fn estimate_with(
             reason: "needs ≥ 2 batches, ≥ 1 particle, max_depth ≥ 1 and majorant_cells ≥ 1".into(),
         });
     }
+    check_optical_reach(problem)?;
     let geometry = *problem.geometry();
     let medium = problem.medium();
     let channels = problem.channels();

@@ -39,6 +39,45 @@ impl Default for RenderSettings {
     }
 }
 
+impl RenderSettings {
+    /// The most pixels an image may have (2²⁶: 8192 × 8192).
+    pub const MAX_PIXELS: usize = 1 << 26;
+    /// The smallest step, as a fraction of the smallest cell: below it a ray takes more
+    /// steps than the picture is worth (a 256³ grid's diagonal is 4.4 × 10⁵ steps).
+    pub const MIN_STEP: f64 = 1e-3;
+
+    /// The pixel count, after checking the size (1 to [`Self::MAX_PIXELS`] pixels, the
+    /// product computed without overflow), the step ([`Self::MIN_STEP`] to 4 cells) and
+    /// the background (finite, ≥ 0).
+    pub fn validate(&self) -> Result<usize, RenderError> {
+        let pixels = self
+            .width
+            .checked_mul(self.height)
+            .filter(|&p| self.width > 0 && self.height > 0 && p <= Self::MAX_PIXELS)
+            .ok_or_else(|| {
+                RenderError::Invalid(format!(
+                    "image size {}×{} (1 to 2^26 pixels)",
+                    self.width, self.height
+                ))
+            })?;
+        if !(self.step >= Self::MIN_STEP && self.step <= 4.0) {
+            return Err(RenderError::Invalid(format!(
+                "step {} (a fraction of the smallest cell, {} to 4)",
+                self.step,
+                Self::MIN_STEP
+            )));
+        }
+        if let Some(b) = self.background
+            && !b.iter().all(|v| v.is_finite() && *v >= 0.0)
+        {
+            return Err(RenderError::Invalid(format!(
+                "background {b:?} must be finite and ≥ 0"
+            )));
+        }
+        Ok(pixels)
+    }
+}
+
 /// A per-pixel jitter in [0, 1) from a hash of the pixel (deterministic).
 fn jitter(x: usize, y: usize) -> f64 {
     let mut h = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
@@ -58,18 +97,7 @@ pub fn render(
     progress: Option<&(dyn Fn(f64) + Sync)>,
 ) -> Result<Image, RenderError> {
     camera.validate()?;
-    if settings.width == 0 || settings.height == 0 || settings.width * settings.height > 1 << 26 {
-        return Err(RenderError::Invalid(format!(
-            "image size {}×{} (1 to 2^26 pixels)",
-            settings.width, settings.height
-        )));
-    }
-    if !(settings.step > 0.0 && settings.step.is_finite()) {
-        return Err(RenderError::Invalid(format!(
-            "step {} must be positive",
-            settings.step
-        )));
-    }
+    let pixel_count = settings.validate()?;
     let geometry = problem.geometry();
     let (lo, hi) = geometry.bounds();
     let step = settings.step * geometry.spacing().min_element();
@@ -92,7 +120,7 @@ pub fn render(
     let aspect = settings.width as f64 / settings.height as f64;
     let rows_done = std::sync::atomic::AtomicUsize::new(0);
 
-    let mut pixels = vec![[0f32; 3]; settings.width * settings.height];
+    let mut pixels = vec![[0f32; 3]; pixel_count];
     pixels
         .par_chunks_mut(settings.width)
         .enumerate()

@@ -221,7 +221,7 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, G
         }
         decode(data, scalar, endian)
     };
-    Grid::from_vec(geometry, samples)
+    super::finite_grid(path, geometry, samples)
 }
 
 /// Writes `path` as `.mha` (samples attached) when its extension is `mha`, otherwise as a

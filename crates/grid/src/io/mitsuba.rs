@@ -119,7 +119,8 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Vec<Gri
     );
     (0..channels)
         .map(|ch| {
-            Grid::from_vec(
+            super::finite_grid(
+                path,
                 geometry,
                 values.iter().skip(ch).step_by(channels).copied().collect(),
             )

@@ -263,15 +263,64 @@ pub(crate) fn encode(
     Ok(out)
 }
 
-/// Reads a whole file, naming it in the error, within the budget.
+/// Reads a whole file, naming it in the error, within the budget. Only regular files:
+/// a device such as `/dev/zero` reports no length and never ends, a FIFO blocks.
 pub(crate) fn read_file(path: &Path, options: &LoadOptions) -> Result<Vec<u8>, GridError> {
     let io = |source| GridError::Io {
         path: path.to_owned(),
         source,
     };
-    let len = fs::metadata(path).map_err(io)?.len();
+    let metadata = fs::metadata(path).map_err(io)?;
+    if !metadata.is_file() {
+        return Err(GridError::NotAFile {
+            path: path.to_owned(),
+        });
+    }
+    let len = metadata.len();
     options.reserve(path, len)?;
-    fs::read(path).map_err(io)
+    let mut bytes = Vec::new();
+    // At most what the metadata promised (plus one byte to notice a file that grew).
+    fs::File::open(path)
+        .map_err(io)?
+        .take(len.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
+    if bytes.len() as u64 != len {
+        return Err(GridError::SizeMismatch {
+            path: path.to_owned(),
+            expected: len,
+            found: bytes.len() as u64,
+        });
+    }
+    Ok(bytes)
+}
+
+/// The grid of decoded `samples`, refusing the first non-finite one by its cell: a NaN in a
+/// volume file is an error naming the file and the voxel, never silently zero.
+pub(crate) fn finite_grid(
+    path: &Path,
+    geometry: crate::GridGeometry,
+    samples: Vec<f32>,
+) -> Result<Grid, GridError> {
+    check_finite(path, &geometry, &samples)?;
+    Grid::from_vec(geometry, samples)
+}
+
+/// The first non-finite value of `samples` as a [`GridError::NonFinite`].
+pub(crate) fn check_finite(
+    path: &Path,
+    geometry: &crate::GridGeometry,
+    samples: &[f32],
+) -> Result<(), GridError> {
+    match samples.iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(index) => Err(GridError::NonFinite {
+            path: path.to_owned(),
+            index,
+            cell: geometry.coords(index),
+            value: samples[index],
+        }),
+    }
 }
 
 /// Writes a whole file, naming it in the error.

@@ -99,7 +99,7 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, G
     }
     let payload = c.take(expected as usize, "array data")?;
     let geometry = super::geometry(path, "npy", dims, DVec3::ONE, DVec3::ZERO)?;
-    Grid::from_vec(geometry, decode(payload, scalar, endian))
+    super::finite_grid(path, geometry, decode(payload, scalar, endian))
 }
 
 /// The text after `'key':` in a Python dict literal, up to the next top-level comma.

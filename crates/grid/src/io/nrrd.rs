@@ -239,7 +239,7 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, G
                 });
             }
         };
-    Grid::from_vec(geometry, samples)
+    super::finite_grid(path, geometry, samples)
 }
 
 /// Whitespace-separated numbers.

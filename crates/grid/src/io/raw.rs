@@ -83,7 +83,7 @@ pub fn parse(
             found: bytes.len() as u64,
         });
     }
-    Grid::from_vec(geometry, decode(bytes, layout.scalar, layout.endian))
+    super::finite_grid(path, geometry, decode(bytes, layout.scalar, layout.endian))
 }
 
 /// Writes the grid's values as `scalar` samples; fails with [`GridError::Lossy`] if a value

@@ -122,8 +122,21 @@ pub fn parse(
     let _uuid = c.take(36, "uuid")?;
     let _file_metadata = read_metadata(&mut c)?;
     let grid_count = c.u32("grid count")?;
+    // Each descriptor takes at least three empty strings and three offsets (36 bytes), and
+    // each must end after it starts: a count or an end offset read from the file can then
+    // neither loop nor grow the list beyond the file.
+    if u64::from(grid_count) * 36 > c.remaining() as u64 {
+        return Err(malformed(
+            path,
+            format!(
+                "{grid_count} grids cannot fit in the {} bytes left",
+                c.remaining()
+            ),
+        ));
+    }
     let mut descriptors = Vec::new();
     for _ in 0..grid_count {
+        let start = c.pos;
         let name = read_string(&mut c, "grid name")?;
         let grid_type = read_string(&mut c, "grid type")?;
         let instance_parent = read_string(&mut c, "instance parent")?;
@@ -134,6 +147,14 @@ pub fn parse(
             return Err(malformed(
                 path,
                 format!("grid `{name}` has offsets beyond the file"),
+            ));
+        }
+        if end_pos <= c.pos as u64 || grid_pos < start as u64 {
+            return Err(malformed(
+                path,
+                format!(
+                    "grid `{name}`'s data (at {grid_pos}, ending at {end_pos}) does not follow its descriptor (at {start})"
+                ),
             ));
         }
         descriptors.push(Descriptor {
@@ -509,6 +530,14 @@ fn read_grid(
     let geometry = super::geometry(path, "OpenVDB", dims, spacing, first_centre - 0.5 * spacing)?;
     let mut grid = Grid::filled(geometry, background);
     let data = grid.data_mut();
+    if !background.is_finite() {
+        return Err(GridError::NonFinite {
+            path: path.to_owned(),
+            index: 0,
+            cell: [0; 3],
+            value: background,
+        });
+    }
     let mut fill = |min: [i32; 3], size: i32, value: f32| {
         let range = |a: usize| {
             let start = (i64::from(min[a]) - i64::from(lo[a])).max(0);
@@ -558,6 +587,7 @@ fn read_grid(
             }
         }
     }
+    super::check_finite(path, &geometry, grid.data())?;
     Ok(VdbVolume {
         name: d.name.clone(),
         grid,

@@ -201,7 +201,7 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, G
         }
         values
     };
-    Grid::from_vec(geometry, samples)
+    super::finite_grid(path, geometry, samples)
 }
 
 /// Writes a BINARY legacy VTK file (big-endian samples of `scalar`).

@@ -1,0 +1,92 @@
+//! Every solver's memory estimate bounds what it really takes, and the budget refuses a
+//! solve before it allocates.
+//!
+//! The peak is measured by the operating system (the process's peak resident set since
+//! the solve started, `lucent_core::memory::PeakMeter`). It is the whole process's, so this
+//! file holds one test that runs the solvers one after another: nothing else runs beside
+//! them. Linux only; elsewhere the measured peak is `None` and only the budget is checked.
+
+use glam::DVec3;
+use lucent::core::{
+    Boundary, Field, Light, Medium, ParamValue, Params, Problem, SolveError, SolveOptions, Spectrum,
+};
+use lucent::grid::{Grid, GridGeometry};
+use lucent::optics::Phase;
+
+/// A 40³ problem each solver takes: a blob with a point light inside (homogeneous and
+/// absorbing for the solvers that need it).
+fn problem_for(name: &str) -> Problem {
+    let geometry =
+        GridGeometry::from_bounds([40; 3], DVec3::splat(-1.0), DVec3::splat(1.0)).unwrap();
+    let homogeneous = matches!(name, "ftcs-p1" | "fem-p1-jacobi");
+    let sigma_t = if homogeneous {
+        Grid::filled(geometry, 4.0)
+    } else {
+        Grid::from_fn(geometry, |x| {
+            (1.0 + 6.0 * (-2.0 * x.length_squared()).exp()) as f32
+        })
+    };
+    let medium = Medium {
+        sigma_t: vec![sigma_t],
+        albedo: vec![Field::Constant(0.8)],
+        phase: Phase::Isotropic,
+    };
+    let light = Light::Point {
+        position: DVec3::new(0.05, -0.04, 0.03),
+        intensity: Spectrum::Grey(1.0),
+    };
+    Problem::new(geometry, medium, vec![light], Boundary::Vacuum, None).unwrap()
+}
+
+fn params_for(name: &str) -> Params {
+    let mut p = Params::default();
+    if name == "mc" {
+        p.0.insert("particles".into(), ParamValue::Int(2000));
+        p.0.insert("batches".into(), ParamValue::Int(4));
+    }
+    p
+}
+
+#[test]
+fn every_estimate_bounds_the_measured_peak_and_the_budget_refuses_first() {
+    let registry = lucent::registry();
+    for entry in registry.entries() {
+        let name = entry.name;
+        let problem = problem_for(name);
+        let solver = registry.build(name, &params_for(name)).unwrap();
+        if solver.admits(&problem).is_err() {
+            continue;
+        }
+        // A modest iteration count: memory does not grow with iterations.
+        let options = SolveOptions {
+            max_iterations: 50,
+            threads: Some(2),
+            ..SolveOptions::default()
+        };
+        let solution = solver
+            .solve(&problem, &options)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let report = &solution.report;
+        let estimate = report.peak_memory_bytes;
+        if let Some(measured) = report.measured_peak_bytes {
+            // The allowance: rayon's worker stacks and the allocator's arenas, which no
+            // estimate counts (a few MiB), and the measurement's page granularity.
+            let allowance = 16 << 20;
+            assert!(
+                measured <= estimate + allowance,
+                "{name}: measured {measured} bytes, estimated {estimate}"
+            );
+        }
+        // The same estimate is what the budget is checked against, before allocating.
+        for budget in [1, estimate / 2] {
+            let tight = SolveOptions {
+                memory_budget: budget,
+                ..options.clone()
+            };
+            match solver.solve(&problem, &tight) {
+                Err(SolveError::OverBudget { needed, .. }) => assert!(needed > budget),
+                other => panic!("{name} with a budget of {budget} bytes: {other:?}"),
+            }
+        }
+    }
+}
