@@ -29,6 +29,7 @@
 //! ```
 
 pub mod crosscheck;
+pub mod fuzzing;
 pub mod pareto;
 pub mod scene;
 

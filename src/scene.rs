@@ -25,16 +25,20 @@ use crate::Error;
 /// stays within it. Solvers have their own, `SolveOptions::memory_budget`.
 pub const SCENE_MEMORY_BUDGET: u64 = 8 << 30;
 
-/// The most bytes one scene grid may take: a scene holds up to eight fields on its grid
-/// (the volume, σ_t and albedo per channel, an embedded SDF), an eighth of the budget each
-/// (1 GiB: 645³ cells).
-const MAX_GRID_BYTES: u64 = SCENE_MEMORY_BUDGET / 8;
+/// The most bytes one scene grid may take under a budget: a scene holds up to eight
+/// fields on its grid (the volume, σ_t and albedo per channel, an embedded SDF), an eighth
+/// of the budget each (1 GiB, 645³ cells, under the default).
+fn max_grid_bytes(budget: u64) -> u64 {
+    budget / 8
+}
 
 /// What reading a volume file may take, its payload and its decoded grid together: three
 /// fields' worth (an f64 payload and its f32 grid of the largest field), so that a file
 /// claiming more (a decompression bomb, a VDB whose tree spans a huge box) is refused
 /// before anything is inflated or allocated.
-const MAX_READ_BYTES: u64 = 3 * MAX_GRID_BYTES;
+fn max_read_bytes(budget: u64) -> u64 {
+    3 * max_grid_bytes(budget)
+}
 
 /// The built-in default scene: a procedural cloud lit by a sun-like directional light and a
 /// blue sky (`examples/scenes/default.toml`).
@@ -421,11 +425,16 @@ impl Scene {
         Self::parse(DEFAULT_SCENE, Path::new("<built-in default scene>"))
     }
 
-    /// Builds the problem, camera and image settings; `base` is the folder that relative
-    /// volume paths start from.
+    /// Builds the problem, camera and image settings within [`SCENE_MEMORY_BUDGET`];
+    /// `base` is the folder that relative volume paths start from.
     pub fn build(&self, base: &Path) -> Result<BuiltScene, Error> {
+        self.build_within(base, SCENE_MEMORY_BUDGET)
+    }
+
+    /// [`Scene::build`] within `memory_budget` bytes for everything the scene allocates.
+    pub fn build_within(&self, base: &Path, memory_budget: u64) -> Result<BuiltScene, Error> {
         let invalid = |reason: String| Error::Invalid(reason);
-        let volume = self.load_volume(base)?;
+        let volume = self.load_volume(base, memory_budget)?;
         let geometry = *volume.geometry();
         let m = &self.medium;
         let (sigma_t_base, albedo): (Grid, Vec<Field>) = match &m.transfer {
@@ -558,7 +567,7 @@ impl Scene {
         })
     }
 
-    fn load_volume(&self, base: &Path) -> Result<Grid, Error> {
+    fn load_volume(&self, base: &Path, budget: u64) -> Result<Grid, Error> {
         // A scene builds a handful of grids of this size (volume, σ_t and albedo per channel,
         // per-light transmittance): refuse resolutions that could not fit before allocating.
         let geometry =
@@ -569,11 +578,11 @@ impl Scene {
                     DVec3::from_array(bounds[1]),
                 )?;
                 let bytes = g.voxel_count() as u64 * 4;
-                if bytes > MAX_GRID_BYTES {
+                if bytes > max_grid_bytes(budget) {
                     return Err(Error::Invalid(format!(
-                        "a {resolution:?} grid needs {:.1} GiB per field; the limit is {} GiB",
+                        "a {resolution:?} grid needs {:.2} GiB per field; the limit is {:.2} GiB",
                         bytes as f64 / (1u64 << 30) as f64,
-                        MAX_GRID_BYTES >> 30
+                        max_grid_bytes(budget) as f64 / (1u64 << 30) as f64
                     )));
                 }
                 Ok(g)
@@ -621,7 +630,7 @@ impl Scene {
             } => {
                 let path = resolve(base, path);
                 let read_budget = LoadOptions {
-                    memory_budget: MAX_READ_BYTES,
+                    memory_budget: max_read_bytes(budget),
                 };
                 let mut grid = match raw {
                     Some(r) => {

@@ -42,10 +42,13 @@ mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-fem [N...] | bench-dom [N] [ORDER] | stability>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-fem [N...] | bench-dom [N] [ORDER] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
+    if command.as_deref() == Some("fuzz") {
+        return fuzz(std::env::args().skip(2).collect());
+    }
     if command.as_deref() == Some("crosscheck") {
         return crosscheck();
     }
@@ -438,4 +441,80 @@ fn lucent_json(fields: &[(&str, String)]) -> String {
         .map(|(k, v)| format!("\"{k}\": {v}"))
         .collect();
     format!("{{{}}}", inner.join(", "))
+}
+
+/// `cargo xtask fuzz [TARGET...] [--runs N] [--seed S]`: the stable mutation harness over
+/// `lucent::fuzzing`'s targets (all by default, 10⁶ runs each), starting from their seeds
+/// and the committed regression corpus. A crash or a slow input is written to
+/// `fuzz/artifacts/<target>/` and fails the command.
+fn fuzz(args: Vec<String>) -> ExitCode {
+    use lucent::fuzzing::{Target, campaign};
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let (mut runs, mut seed, mut targets) = (1_000_000u64, 1u64, Vec::new());
+    let mut args = args.into_iter();
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--runs" => runs = args.next().and_then(|v| v.parse().ok()).unwrap_or(runs),
+            "--seed" => seed = args.next().and_then(|v| v.parse().ok()).unwrap_or(seed),
+            name => match Target::from_name(name) {
+                Some(t) => targets.push(t),
+                None => {
+                    eprintln!("xtask: fuzz: unknown target `{name}`");
+                    return ExitCode::FAILURE;
+                }
+            },
+        }
+    }
+    if targets.is_empty() {
+        targets = Target::ALL.to_vec();
+    }
+    println!(
+        "| target | executions | accepted | distinct outcomes | crashes | slow (> 1 s) | seconds | executions/s |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    let mut failed = false;
+    for target in targets {
+        let corpus = root.join("fuzz/regressions").join(target.name());
+        let extra: Vec<Vec<u8>> = std::fs::read_dir(&corpus)
+            .map(|entries| {
+                entries
+                    .filter_map(|e| e.ok())
+                    .filter_map(|e| std::fs::read(e.path()).ok())
+                    .collect()
+            })
+            .unwrap_or_default();
+        let f = campaign(target, runs, seed, &extra);
+        println!(
+            "| {} | {} | {} | {} | {} | {} | {:.0} | {:.0} |",
+            target.name(),
+            f.executions,
+            f.accepted,
+            f.distinct_outcomes,
+            f.crashes.len(),
+            f.slow.len(),
+            f.seconds,
+            f.executions as f64 / f.seconds.max(1e-9)
+        );
+        let artifacts = root.join("fuzz/artifacts").join(target.name());
+        for (i, (input, message)) in f.crashes.iter().enumerate() {
+            let _ = std::fs::create_dir_all(&artifacts);
+            let _ = std::fs::write(artifacts.join(format!("crash-{i}")), input);
+            eprintln!("xtask: fuzz: {} crash {i}: {message}", target.name());
+            failed = true;
+        }
+        for (i, (input, seconds)) in f.slow.iter().enumerate() {
+            let _ = std::fs::create_dir_all(&artifacts);
+            let _ = std::fs::write(artifacts.join(format!("slow-{i}")), input);
+            eprintln!(
+                "xtask: fuzz: {} slow input {i}: {seconds:.1} s",
+                target.name()
+            );
+            failed = true;
+        }
+    }
+    if failed {
+        ExitCode::FAILURE
+    } else {
+        ExitCode::SUCCESS
+    }
 }

@@ -226,8 +226,12 @@ impl fmt::Debug for SolveOptions {
 }
 
 impl SolveOptions {
-    /// Checks the numbers (tolerances ≥ 0 and finite, at least one iteration, at least one
-    /// thread).
+    /// The most worker threads a solve may ask for: a pool of more would cost more to
+    /// start than any solve here gains.
+    pub const MAX_THREADS: usize = 1024;
+
+    /// Checks the numbers (tolerances ≥ 0 and finite, at least one iteration, 1 to
+    /// [`Self::MAX_THREADS`] threads).
     pub fn validate(&self) -> Result<(), SolveError> {
         let bad = |name: &str, reason: &str| {
             Err(SolveError::InvalidParameter {
@@ -244,8 +248,11 @@ impl SolveOptions {
         if self.max_iterations == 0 {
             return bad("max_iterations", "must be at least 1");
         }
-        if self.threads == Some(0) {
-            return bad("threads", "must be at least 1");
+        if self
+            .threads
+            .is_some_and(|n| !(1..=Self::MAX_THREADS).contains(&n))
+        {
+            return bad("threads", "1 to 1024");
         }
         Ok(())
     }
