@@ -170,6 +170,8 @@ pub fn seeds(target: Target) -> Vec<Vec<u8>> {
         return Vec::new();
     };
     let grid = seed_grid();
+    // Integer samples for the integer voxel types (writers refuse a lossy conversion).
+    let counts = grid.map(|v| (10.0 * v).abs().round());
     let file = |name: &str, write: &dyn Fn(&Path) -> Result<(), lucent_grid::GridError>| {
         let path = dir.join(name);
         write(&path).ok()?;
@@ -182,7 +184,7 @@ pub fn seeds(target: Target) -> Vec<Vec<u8>> {
                 io::nrrd::write(p, &grid, ScalarType::F32, io::nrrd::Encoding::Raw)
             }),
             file("b.nrrd", &|p| {
-                io::nrrd::write(p, &grid, ScalarType::U16, io::nrrd::Encoding::Gzip)
+                io::nrrd::write(p, &counts, ScalarType::U16, io::nrrd::Encoding::Gzip)
             }),
         ],
         Target::Mhd => vec![file("a.mha", &|p| {
@@ -194,7 +196,7 @@ pub fn seeds(target: Target) -> Vec<Vec<u8>> {
         Target::Vol => vec![file("a.vol", &|p| io::mitsuba::write(p, &[&grid]))],
         Target::Npy => vec![
             file("a.npy", &|p| io::npy::write(p, &grid, ScalarType::F32)),
-            file("b.npy", &|p| io::npy::write(p, &grid, ScalarType::U8)),
+            file("b.npy", &|p| io::npy::write(p, &counts, ScalarType::U8)),
         ],
         Target::Vdb => vec![Some(minimal_vdb())],
         Target::Scene => {
@@ -546,6 +548,11 @@ mod tests {
         for target in Target::ALL {
             let seeds = seeds(target);
             assert!(!seeds.is_empty(), "{target:?} has no seeds");
+            let expected = match target {
+                Target::Nrrd | Target::Npy => 2,
+                _ => 1,
+            };
+            assert!(seeds.len() >= expected, "{target:?}: {} seeds", seeds.len());
             for seed in &seeds {
                 if target == Target::Scene {
                     // Example scenes may point at shared data that is not here.

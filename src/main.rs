@@ -10,7 +10,8 @@
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 use clap::{Parser, Subcommand};
@@ -76,6 +77,8 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Ctrl-C from here on stops a solve cleanly instead of killing the process.
+    cancel_flag();
     let result = match cli.command {
         None => render(None, None, Path::new("lucent.png"), None, cli.quiet),
         Some(Command::Render {
@@ -102,6 +105,9 @@ fn main() -> ExitCode {
         }
     };
     match result {
+        // Interrupted: what was computed has been written; the conventional status of a
+        // process stopped by SIGINT.
+        Ok(()) if interrupted() => ExitCode::from(130),
         Ok(()) => ExitCode::SUCCESS,
         Err(Error::Io { reason, .. }) if reason.contains("Broken pipe") => ExitCode::SUCCESS,
         Err(e) => {
@@ -109,6 +115,34 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// The flag a Ctrl-C sets: the solve stops at its next iteration, batch or march and its
+/// result is written as usual (its report says `interrupted`); a second Ctrl-C ends the
+/// process at once. The handler is installed on first use.
+fn cancel_flag() -> Arc<AtomicBool> {
+    static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+    FLAG.get_or_init(|| {
+        let flag = Arc::new(AtomicBool::new(false));
+        let seen = Arc::clone(&flag);
+        // Without a handler (another one installed), Ctrl-C keeps its default: exit.
+        let _ = ctrlc::set_handler(move || {
+            if seen.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+            let _ = writeln!(
+                io::stderr(),
+                "lucent: interrupted; stopping at the next iteration and writing what was computed (Ctrl-C again to abort)"
+            );
+        });
+        flag
+    })
+    .clone()
+}
+
+/// Whether a Ctrl-C arrived.
+fn interrupted() -> bool {
+    cancel_flag().load(Ordering::SeqCst)
 }
 
 /// Loads a scene (or the default one) and builds it; relative paths start at its folder.
@@ -164,6 +198,7 @@ fn run_solver(
         progress: Some(Arc::new(move |p: Progress| {
             callback.set_position((p.fraction * 1000.0) as u64)
         })),
+        cancel: Some(cancel_flag()),
         ..SolveOptions::default()
     };
     let solution = solver.solve(&built.problem, &options)?;

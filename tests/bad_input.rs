@@ -139,6 +139,7 @@ proptest! {
             threads,
             memory_budget: memory,
             progress: None,
+            cancel: None,
         };
         every_solver_survives(&problem, &options);
     }

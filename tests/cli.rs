@@ -360,6 +360,44 @@ fn hostile_inputs_are_one_clean_line() {
     }
 }
 
+/// Ctrl-C stops a long solve at its next iteration; what was computed is written, the
+/// report says `interrupted`, and the exit status is 130.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_writes_what_was_computed() {
+    let dir = tempfile::tempdir().unwrap();
+    let slow = DEFAULT_WITH_TYPO
+        .replace("[8, 8, 8]", "[96, 96, 96]")
+        .replace("densty = 3.0", "density = 20.0\nalbedo = 0.9\n[[lights]]\nkind = \"point\"\nposition = [0.5, 0.5, 0.5]\nintensity = 1.0");
+    std::fs::write(dir.path().join("slow.toml"), slow).unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_lucent"))
+        .args([
+            "solve",
+            "slow.toml",
+            "--solver",
+            "diffusion-jacobi",
+            "-o",
+            "phi.npy",
+            "--quiet",
+        ])
+        .current_dir(dir.path())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Jacobi on 96³ to 1e-6 takes far longer than this.
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
+    let report = std::fs::read_to_string(dir.path().join("phi.json")).unwrap();
+    assert!(report.contains("\"interrupted\""), "{report}");
+    assert!(dir.path().join("phi.npy").exists());
+}
+
 #[test]
 fn a_missing_scene_file() {
     let out = lucent(&["render", "no-such-scene.toml"], Path::new("."));

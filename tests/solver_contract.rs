@@ -122,6 +122,39 @@ fn every_solver_stops_at_its_time_budget_with_a_finite_field() {
     }
 }
 
+/// A Ctrl-C (the caller's cancel flag) stops every iterative solver at its next check with
+/// what it has, reported as interrupted; the field is finite.
+#[test]
+fn every_solver_stops_when_interrupted_with_a_finite_field() {
+    for name in names() {
+        let problem = problem_for(&name);
+        let solver = lucent::registry().build(&name, &params_for(&name)).unwrap();
+        let options = SolveOptions {
+            cancel: Some(Arc::new(std::sync::atomic::AtomicBool::new(true))),
+            relative_tolerance: 1e-12,
+            ..SolveOptions::default()
+        };
+        let solution = solver.solve(&problem, &options).unwrap();
+        assert!(
+            solution
+                .fluence
+                .iter()
+                .all(|g| g.data().iter().all(|v| v.is_finite())),
+            "{name}: a non-finite field"
+        );
+        assert!(
+            matches!(
+                solution.report.stop_reason,
+                StopReason::Interrupted { .. }
+                    | StopReason::Exact
+                    | StopReason::DivergedGrowth { .. }
+            ),
+            "{name}: {:?}",
+            solution.report.stop_reason
+        );
+    }
+}
+
 #[test]
 fn every_solver_gives_the_same_result_on_one_and_two_threads() {
     let log = Mutex::new(Vec::new());

@@ -443,7 +443,8 @@ fn lucent_json(fields: &[(&str, String)]) -> String {
     format!("{{{}}}", inner.join(", "))
 }
 
-/// `cargo xtask fuzz [TARGET...] [--runs N] [--seed S]`: the stable mutation harness over
+/// `cargo xtask fuzz [TARGET...] [--runs N] [--seed S]`, or `--write-seeds` to write the
+/// libFuzzer harness's starting corpus: the stable mutation harness over
 /// `lucent::fuzzing`'s targets (all by default, 10⁶ runs each), starting from their seeds
 /// and the committed regression corpus. A crash or a slow input is written to
 /// `fuzz/artifacts/<target>/` and fails the command.
@@ -456,6 +457,18 @@ fn fuzz(args: Vec<String>) -> ExitCode {
         match a.as_str() {
             "--runs" => runs = args.next().and_then(|v| v.parse().ok()).unwrap_or(runs),
             "--seed" => seed = args.next().and_then(|v| v.parse().ok()).unwrap_or(seed),
+            "--write-seeds" => {
+                // The starting corpus of the libFuzzer harness: fuzz/corpus/<target>/.
+                for target in Target::ALL {
+                    let dir = root.join("fuzz/corpus").join(target.name());
+                    let _ = std::fs::create_dir_all(&dir);
+                    for (i, input) in lucent::fuzzing::seeds(target).iter().enumerate() {
+                        let _ = std::fs::write(dir.join(format!("seed-{i}")), input);
+                    }
+                }
+                println!("wrote fuzz/corpus/<target>/seed-*");
+                return ExitCode::SUCCESS;
+            }
             name => match Target::from_name(name) {
                 Some(t) => targets.push(t),
                 None => {

@@ -5,7 +5,8 @@
 //!
 //! The order of the tests is fixed: a non-finite residual first (diverged), then the
 //! relative and the absolute tolerance (converged), then growth beyond `divergence` times
-//! the initial residual (diverged), then the iteration limit, then the time budget.
+//! the initial residual (diverged), then the iteration limit, then the time budget, then
+//! the caller's interruption.
 
 use std::fmt;
 use std::time::{Duration, Instant};
@@ -30,6 +31,8 @@ pub struct Stopping {
     /// Called after every recorded iteration with the iteration, its residual and the
     /// fraction of the way from the initial residual to the tolerance (logarithmically).
     pub progress: Option<ProgressFn>,
+    /// Stop as interrupted once this is set (the caller's [`SolveOptions::cancel`]).
+    pub cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
 impl fmt::Debug for Stopping {
@@ -41,6 +44,7 @@ impl fmt::Debug for Stopping {
             .field("time_budget", &self.time_budget)
             .field("divergence", &self.divergence)
             .field("progress", &self.progress.as_ref().map(|_| "callback"))
+            .field("cancel", &self.cancel)
             .finish()
     }
 }
@@ -58,6 +62,11 @@ impl PartialEq for Stopping {
                 (Some(a), Some(b)) => std::sync::Arc::ptr_eq(a, b),
                 _ => false,
             }
+            && match (&self.cancel, &other.cancel) {
+                (None, None) => true,
+                (Some(a), Some(b)) => std::sync::Arc::ptr_eq(a, b),
+                _ => false,
+            }
     }
 }
 
@@ -70,6 +79,7 @@ impl Default for Stopping {
             time_budget: None,
             divergence: 1e6,
             progress: None,
+            cancel: None,
         }
     }
 }
@@ -83,6 +93,7 @@ impl Stopping {
             max_iterations: options.max_iterations,
             time_budget: options.time_budget,
             progress: options.progress.clone(),
+            cancel: options.cancel.clone(),
             ..Self::default()
         }
     }
@@ -143,6 +154,13 @@ impl Stopping {
         }
         if self.time_budget.is_some_and(|t| started.elapsed() >= t) {
             return Some(StopReason::TimeLimit { residual: relative });
+        }
+        if self
+            .cancel
+            .as_ref()
+            .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed))
+        {
+            return Some(StopReason::Interrupted { residual: relative });
         }
         None
     }
@@ -238,6 +256,7 @@ mod tests {
             time_budget: None,
             divergence: 100.0,
             progress: None,
+            cancel: None,
         };
         let mut h = History::start();
         assert_eq!(h.record(&s, 1.0, 1.0), None);

@@ -195,6 +195,9 @@ pub struct SolveOptions {
     pub memory_budget: u64,
     /// Called as the solve advances.
     pub progress: Option<ProgressFn>,
+    /// Set by the caller (a Ctrl-C handler) to stop the solve at its next iteration, batch
+    /// or march with what it has computed ([`StopReason::Interrupted`]).
+    pub cancel: Option<Arc<std::sync::atomic::AtomicBool>>,
 }
 
 impl Default for SolveOptions {
@@ -207,6 +210,7 @@ impl Default for SolveOptions {
             threads: None,
             memory_budget: 8 << 30,
             progress: None,
+            cancel: None,
         }
     }
 }
@@ -221,6 +225,7 @@ impl fmt::Debug for SolveOptions {
             .field("threads", &self.threads)
             .field("memory_budget", &self.memory_budget)
             .field("progress", &self.progress.as_ref().map(|_| "callback"))
+            .field("cancel", &self.cancel)
             .finish()
     }
 }
@@ -272,6 +277,13 @@ impl SolveOptions {
         }
     }
 
+    /// Whether the caller has asked the solve to stop.
+    pub fn cancelled(&self) -> bool {
+        self.cancel
+            .as_ref()
+            .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed))
+    }
+
     /// Reports progress if a callback is set.
     pub fn report(&self, progress: Progress) {
         if let Some(callback) = &self.progress {
@@ -306,6 +318,12 @@ pub enum StopReason {
         /// Relative residual when stopped.
         residual: f64,
     },
+    /// The caller interrupted the solve ([`SolveOptions::cancel`]): the result is what
+    /// was computed so far.
+    Interrupted {
+        /// Relative residual when stopped.
+        residual: f64,
+    },
     /// A NaN or infinity appeared.
     DivergedNonFinite {
         /// The iteration at which it appeared.
@@ -322,16 +340,17 @@ pub enum StopReason {
 
 impl StopReason {
     /// How badly a solve stopped, for merging the reports of several channels or phases:
-    /// 0 exact, 1 converged, 2 iteration limit, 3 time limit, 4 diverged by growth, 5 not
-    /// finite.
+    /// 0 exact, 1 converged, 2 iteration limit, 3 time limit, 4 interrupted, 5 diverged by
+    /// growth, 6 not finite.
     pub fn severity(&self) -> u8 {
         match self {
             StopReason::Exact => 0,
             StopReason::ConvergedRelative { .. } | StopReason::ConvergedAbsolute { .. } => 1,
             StopReason::IterationLimit { .. } => 2,
             StopReason::TimeLimit { .. } => 3,
-            StopReason::DivergedGrowth { .. } => 4,
-            StopReason::DivergedNonFinite { .. } => 5,
+            StopReason::Interrupted { .. } => 4,
+            StopReason::DivergedGrowth { .. } => 5,
+            StopReason::DivergedNonFinite { .. } => 6,
         }
     }
 

@@ -444,6 +444,7 @@ impl ExplicitSolver {
                     stopping: lucent_core::Stopping {
                         time_budget: phase.time_budget,
                         progress: phase.progress,
+                        cancel: phase.cancel,
                         ..settings.stopping.clone()
                     },
                     ..settings.clone()

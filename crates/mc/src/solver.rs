@@ -105,6 +105,7 @@ impl Solver for McSolver {
             let control = RunControl {
                 progress: Some(&report),
                 time_budget: context.remaining_budget(),
+                cancel: context.options.cancel.as_deref(),
             };
             let result = estimate_with(problem, &self.config, &control)?;
             // The achieved accuracy: the mean relative standard error over cells holding
@@ -128,7 +129,11 @@ impl Solver for McSolver {
                     residuals: Vec::new(),
                     // Every batch asked for ran, or the time budget stopped the run early.
                     stop_reason: if result.batches < self.config.batches {
-                        StopReason::TimeLimit { residual: relative }
+                        if context.options.cancelled() {
+                            StopReason::Interrupted { residual: relative }
+                        } else {
+                            StopReason::TimeLimit { residual: relative }
+                        }
                     } else {
                         StopReason::IterationLimit { residual: relative }
                     },

@@ -320,6 +320,9 @@ pub struct RunControl<'a> {
     pub progress: Option<&'a (dyn Fn(usize, usize) + Sync)>,
     /// No new round of batches starts after this much time.
     pub time_budget: Option<std::time::Duration>,
+    /// No new round of batches starts once this is set (the caller interrupted the run);
+    /// as with the time budget, at least two batches run.
+    pub cancel: Option<&'a std::sync::atomic::AtomicBool>,
 }
 
 /// The most tentative collisions delta tracking may need to cross the box once
@@ -423,7 +426,10 @@ pub fn estimate_with(
         for chunk in batch_ids.chunks(group_size) {
             let out_of_time = control
                 .time_budget
-                .is_some_and(|budget| started.elapsed() >= budget);
+                .is_some_and(|budget| started.elapsed() >= budget)
+                || control
+                    .cancel
+                    .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed));
             if out_of_time && ran >= 2 {
                 break;
             }
