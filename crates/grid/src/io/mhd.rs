@@ -13,8 +13,8 @@ use std::path::Path;
 use glam::DVec3;
 
 use super::{
-    Endian, LoadOptions, ScalarType, checked_voxels, decode, encode, inflate, read_file, sibling,
-    write_file,
+    Endian, LoadOptions, ScalarType, checked_voxels, decode, encode, inflate_decode, read_file,
+    sibling, write_file,
 };
 use crate::dense::Grid;
 use crate::error::GridError;
@@ -193,11 +193,7 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, G
         (&detached.1, &detached.0[..])
     };
     let samples = if compressed {
-        decode(
-            &inflate(data_path, payload, expected, false)?,
-            scalar,
-            endian,
-        )
+        inflate_decode(data_path, payload, expected, false, scalar, endian)?
     } else {
         let start = match header_size {
             -1 => payload.len().saturating_sub(expected as usize),

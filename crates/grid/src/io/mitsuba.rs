@@ -143,6 +143,10 @@ pub fn write(path: impl AsRef<Path>, channels: &[&Grid]) -> Result<(), GridError
             "all channels of a .vol file share one geometry".into(),
         ));
     }
+    // No file lucent writes holds NaN or an infinity.
+    for grid in channels {
+        super::check_finite(path, grid.geometry(), grid.data())?;
+    }
     let dims = first.dims();
     let to_i32 = |n: usize| {
         i32::try_from(n)

@@ -230,6 +230,15 @@ pub(crate) fn encode(
     scalar: ScalarType,
     endian: Endian,
 ) -> Result<Vec<u8>, GridError> {
+    // No file lucent writes holds NaN or an infinity (readers refuse them too).
+    if let Some(index) = values.iter().position(|v| !v.is_finite()) {
+        return Err(GridError::NonFinite {
+            path: path.to_owned(),
+            index,
+            cell: [index, 0, 0],
+            value: values[index],
+        });
+    }
     if let Some(index) = values.iter().position(|&v| !scalar.represents(v)) {
         return Err(GridError::Lossy {
             path: path.to_owned(),
@@ -360,6 +369,58 @@ pub(crate) fn inflate(
             path: path.to_owned(),
             expected,
             found: out.len() as u64,
+        });
+    }
+    Ok(out)
+}
+
+/// Inflates a zlib (`gzip = false`) or gzip stream of `expected` bytes of `scalar`
+/// samples and decodes it as it goes, a megabyte at a time: the inflated payload never
+/// exists whole (the peak is the compressed bytes and the decoded grid), and no more than
+/// `expected` bytes are ever inflated (no decompression bombs).
+pub(crate) fn inflate_decode(
+    path: &Path,
+    compressed: &[u8],
+    expected: u64,
+    gzip: bool,
+    scalar: ScalarType,
+    endian: Endian,
+) -> Result<Vec<f32>, GridError> {
+    let mut reader: Box<dyn Read + '_> = if gzip {
+        Box::new(flate2::read::MultiGzDecoder::new(compressed))
+    } else {
+        Box::new(flate2::read::ZlibDecoder::new(compressed))
+    };
+    let size = scalar.size();
+    let mut out = Vec::with_capacity(usize::try_from(expected).unwrap_or(0) / size);
+    let mut chunk = vec![0u8; (1 << 20) / size * size];
+    let (mut pending, mut total) = (0usize, 0u64);
+    loop {
+        let n = reader
+            .read(&mut chunk[pending..])
+            .map_err(|e| GridError::Malformed {
+                path: path.to_owned(),
+                format: if gzip { "gzip" } else { "zlib" },
+                reason: e.to_string(),
+            })?;
+        if n == 0 {
+            break;
+        }
+        pending += n;
+        total += n as u64;
+        if total > expected {
+            break;
+        }
+        let whole = pending / size * size;
+        out.extend(decode(&chunk[..whole], scalar, endian));
+        chunk.copy_within(whole..pending, 0);
+        pending -= whole;
+    }
+    if total != expected {
+        return Err(GridError::SizeMismatch {
+            path: path.to_owned(),
+            expected,
+            found: total,
         });
     }
     Ok(out)

@@ -13,8 +13,8 @@ use std::path::Path;
 use glam::DVec3;
 
 use super::{
-    Endian, LoadOptions, ScalarType, checked_voxels, decode, encode, inflate, read_file, sibling,
-    split_header, write_file,
+    Endian, LoadOptions, ScalarType, checked_voxels, decode, encode, inflate_decode, read_file,
+    sibling, split_header, write_file,
 };
 use crate::dense::Grid;
 use crate::error::GridError;
@@ -202,16 +202,14 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, G
             "gzip" | "gz" => {
                 let skip = usize::try_from(byte_skip)
                     .map_err(|_| malformed(path, "`byte skip` -1 needs raw encoding"))?;
-                decode(
-                    &inflate(
-                        data_path,
-                        payload.get(skip..).unwrap_or(&[]),
-                        expected,
-                        true,
-                    )?,
+                inflate_decode(
+                    data_path,
+                    payload.get(skip..).unwrap_or(&[]),
+                    expected,
+                    true,
                     scalar,
                     endian,
-                )
+                )?
             }
             "ascii" | "text" | "txt" => {
                 let text = std::str::from_utf8(payload)
