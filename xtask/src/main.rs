@@ -458,11 +458,15 @@ fn fuzz(args: Vec<String>) -> ExitCode {
             "--runs" => runs = args.next().and_then(|v| v.parse().ok()).unwrap_or(runs),
             "--seed" => seed = args.next().and_then(|v| v.parse().ok()).unwrap_or(seed),
             "--write-seeds" => {
-                // The starting corpus of the libFuzzer harness: fuzz/corpus/<target>/.
+                // The starting corpus of the libFuzzer harness: fuzz/corpus/<target>/, the
+                // generated seeds and the real files of $LUCENT_DATA.
                 for target in Target::ALL {
                     let dir = root.join("fuzz/corpus").join(target.name());
                     let _ = std::fs::create_dir_all(&dir);
-                    for (i, input) in lucent::fuzzing::seeds(target).iter().enumerate() {
+                    let all = lucent::fuzzing::seeds(target)
+                        .into_iter()
+                        .chain(real_files(target));
+                    for (i, input) in all.enumerate() {
                         let _ = std::fs::write(dir.join(format!("seed-{i}")), input);
                     }
                 }
@@ -488,7 +492,7 @@ fn fuzz(args: Vec<String>) -> ExitCode {
     let mut failed = false;
     for target in targets {
         let corpus = root.join("fuzz/regressions").join(target.name());
-        let extra: Vec<Vec<u8>> = std::fs::read_dir(&corpus)
+        let mut extra: Vec<Vec<u8>> = std::fs::read_dir(&corpus)
             .map(|entries| {
                 entries
                     .filter_map(|e| e.ok())
@@ -496,6 +500,7 @@ fn fuzz(args: Vec<String>) -> ExitCode {
                     .collect()
             })
             .unwrap_or_default();
+        extra.extend(real_files(target));
         let f = campaign(target, runs, seed, &extra);
         println!(
             "| {} | {} | {} | {} | {} | {} | {:.0} | {:.0} |",
@@ -530,4 +535,38 @@ fn fuzz(args: Vec<String>) -> ExitCode {
     } else {
         ExitCode::SUCCESS
     }
+}
+
+/// The real volumes of `$LUCENT_DATA` (default `../shared/data/volumes`) in `target`'s
+/// format, up to 512 kB each (larger ones make every execution slow; `smoke.vdb` is 2.5 MB
+/// and the VDB target starts from a minimal file instead).
+fn real_files(target: lucent::fuzzing::Target) -> Vec<Vec<u8>> {
+    let extensions: &[&str] = match target.name() {
+        "nrrd" => &["nrrd", "nhdr"],
+        "mhd" => &["mhd", "mha"],
+        "vtk" => &["vtk"],
+        "vol" => &["vol"],
+        "npy" => &["npy"],
+        "vdb" => &["vdb"],
+        _ => &[],
+    };
+    let dir = std::env::var_os("LUCENT_DATA").map_or_else(
+        || std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/volumes"),
+        std::path::PathBuf::from,
+    );
+    std::fs::read_dir(dir)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok())
+                .map(|e| e.path())
+                .filter(|p| {
+                    p.extension()
+                        .and_then(|x| x.to_str())
+                        .is_some_and(|x| extensions.contains(&x))
+                })
+                .filter(|p| std::fs::metadata(p).is_ok_and(|m| m.len() <= 512 << 10))
+                .filter_map(|p| std::fs::read(p).ok())
+                .collect()
+        })
+        .unwrap_or_default()
 }
