@@ -51,7 +51,7 @@ fn parse_quickly(bytes: &[u8]) -> GridError {
         &LoadOptions::default(),
     );
     assert!(started.elapsed() < Duration::from_secs(1));
-    result.err().expect("a crafted file is refused")
+    result.expect_err("a crafted file is refused")
 }
 
 #[test]

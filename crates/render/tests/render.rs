@@ -30,6 +30,7 @@ fn dark_solution(problem: &Problem) -> Solution {
             residual_history: vec![],
             wall_time_s: 0.0,
             peak_memory_bytes: 0,
+            measured_peak_bytes: None,
             stop_reason: StopReason::Exact,
         },
     }
