@@ -379,7 +379,7 @@ const NUMBERS: [&str; 12] = [
 
 /// One random edit of `input`, drawing on `others` for splices: bit flips, byte and
 /// interesting-value overwrites, inserts, deletions, duplications, truncation, splices, and
-/// (for text) a number replaced by one of [`NUMBERS`].
+/// (for text) a number replaced by `nan`, `inf`, `1e300`, a 64-bit limit and the like.
 pub fn mutate(input: &[u8], others: &[Vec<u8>], rng: &mut Stream) -> Vec<u8> {
     let mut b = input.to_vec();
     let edits = 1 + rng.below(4);
