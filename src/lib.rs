@@ -31,6 +31,7 @@
 pub mod crosscheck;
 pub mod fuzzing;
 pub mod pareto;
+pub mod progress;
 pub mod scene;
 
 use std::path::PathBuf;
@@ -84,6 +85,17 @@ pub enum Error {
     /// A scene value that makes no sense.
     #[error("invalid scene: {0}")]
     Invalid(String),
+    /// An output the job could not write (checked before any solving).
+    #[error("output {path}: {reason}")]
+    Output {
+        /// The output file.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+    /// A command-line argument that makes no sense.
+    #[error("{0}")]
+    Usage(String),
     /// From reading or building grids.
     #[error(transparent)]
     Grid(#[from] lucent_grid::GridError),

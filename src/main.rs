@@ -1,8 +1,12 @@
 //! The `lucent` command: render a scene, solve it to a fluence grid, list solvers.
 //!
 //! `cargo run --release` with no arguments renders the built-in default scene to
-//! `lucent.png`. Errors print one line (`lucent: ...`) and exit with status 1; usage errors
-//! exit with 2.
+//! `lucent.png`; `lucent [SCENE] [-o out.png] ...` is short for `lucent render ...`.
+//! Exit status: 0 done; 1 an error (one line on stderr: bad input, a refused solver, an
+//! output that cannot be written); 2 a usage error; 3 the solve ran but did not converge
+//! (iteration or time limit); 4 it diverged; 130 interrupted by Ctrl-C (what was computed
+//! is written). With 3 and 4 no image or fluence is written, only the JSON report of
+//! `solve`, unless `--allow-unconverged` asks for them (the status is then 0).
 
 // Printing is this binary's job; the lint guards the libraries.
 #![allow(clippy::print_stdout)]
@@ -12,54 +16,124 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use lucent::Error;
-use lucent::core::{Progress, Solution, SolveOptions, Solver};
+use lucent::core::{ParamValue, Params, Solution, SolveOptions, Solver, StopReason};
 use lucent::grid::io::ScalarType;
+use lucent::optics::Significant as S;
 use lucent::optics::materials::{JENSEN_2001, LENGTH_UNIT};
 use lucent::optics::{Dielectric, DiffuseFresnel, DiffusionMedium};
+use lucent::progress::Meter;
 use lucent::scene::{BuiltScene, Scene};
+
+/// The solve ran to its end but did not converge (iteration or time limit).
+const EXIT_UNCONVERGED: u8 = 3;
+/// The solve diverged (a residual that grew without bound, or NaN).
+const EXIT_DIVERGED: u8 = 4;
+/// Interrupted by Ctrl-C (the conventional 128 + SIGINT).
+const EXIT_INTERRUPTED: u8 = 130;
+
+const EXIT_STATUS_HELP: &str = "Exit status: 0 done; 1 error (one line on stderr); 2 usage error; \
+3 the solve did not converge (iteration or time limit); 4 it diverged; 130 interrupted by \
+Ctrl-C. With 3 and 4 nothing but `solve`'s JSON report is written, unless --allow-unconverged.";
 
 #[derive(Parser)]
 #[command(
     name = "lucent",
     version,
-    about = "Light transport in participating media: solve a scene, render a picture."
+    about = "Light transport in participating media: solve a scene, render a picture.",
+    after_help = EXIT_STATUS_HELP,
+    args_conflicts_with_subcommands = true
 )]
 struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
+    /// Without a command: `lucent render` with these arguments.
+    #[command(flatten)]
+    render: RenderArgs,
     /// No progress bars.
     #[arg(long, short, global = true)]
     quiet: bool,
 }
 
+/// Which solver, with which parameters, and what to accept.
+#[derive(Args, Clone, Default)]
+struct SolverArgs {
+    /// Solver to use instead of the scene's (its parameters are the scene's only when it
+    /// is the scene's solver).
+    #[arg(long)]
+    solver: Option<String>,
+    /// A solver parameter, KEY=VALUE (repeatable; overrides the scene's; `lucent solvers`
+    /// lists them).
+    #[arg(long = "param", value_name = "KEY=VALUE")]
+    params: Vec<String>,
+    /// Write the result even when the solve did not converge or diverged (exit 0, with
+    /// a warning).
+    #[arg(long)]
+    allow_unconverged: bool,
+    /// Stop iterating when the residual has fallen to this fraction of its start.
+    #[arg(long, value_name = "RELATIVE", default_value_t = SolveOptions::default().relative_tolerance)]
+    tolerance: f64,
+    /// Stop after this many iterations (cycles, sweeps, time steps, batches).
+    #[arg(long, value_name = "N", default_value_t = SolveOptions::default().max_iterations)]
+    max_iterations: usize,
+    /// Stop after this many seconds of solving.
+    #[arg(long, value_name = "SECONDS")]
+    time_limit: Option<f64>,
+}
+
+impl SolverArgs {
+    /// The solve options these arguments ask for, with a progress callback and Ctrl-C.
+    fn options(&self, progress: lucent::core::ProgressFn) -> Result<SolveOptions, Error> {
+        let time_budget = match self.time_limit {
+            None => None,
+            Some(t) if t > 0.0 && t.is_finite() && t < 1e9 => Some(Duration::from_secs_f64(t)),
+            Some(t) => {
+                return Err(Error::Usage(format!(
+                    "--time-limit {t}: a positive number of seconds"
+                )));
+            }
+        };
+        Ok(SolveOptions {
+            relative_tolerance: self.tolerance,
+            max_iterations: self.max_iterations,
+            time_budget,
+            progress: Some(progress),
+            cancel: Some(cancel_flag()),
+            ..SolveOptions::default()
+        })
+    }
+}
+
+#[derive(Args, Clone)]
+struct RenderArgs {
+    /// Scene file (TOML); the built-in default scene if omitted.
+    scene: Option<PathBuf>,
+    #[command(flatten)]
+    solver: SolverArgs,
+    /// Output image, .png (sRGB) or .exr (linear).
+    #[arg(short, long, default_value = "lucent.png")]
+    output: PathBuf,
+    /// Image size WIDTHxHEIGHT instead of the scene's.
+    #[arg(long)]
+    size: Option<String>,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Solve a scene and render it to PNG (sRGB) or EXR (linear).
-    Render {
-        /// Scene file (TOML); the built-in default scene if omitted.
-        scene: Option<PathBuf>,
-        /// Solver to use instead of the scene's (with default parameters).
-        #[arg(long)]
-        solver: Option<String>,
-        /// Output image, .png or .exr.
-        #[arg(short, long, default_value = "lucent.png")]
-        output: PathBuf,
-        /// Image size WIDTHxHEIGHT instead of the scene's.
-        #[arg(long)]
-        size: Option<String>,
-    },
+    #[command(after_help = EXIT_STATUS_HELP)]
+    Render(RenderArgs),
     /// Solve a scene and write the fluence grid (.npy or .vol) and a JSON report beside it.
+    #[command(after_help = EXIT_STATUS_HELP)]
     Solve {
         /// Scene file (TOML).
         scene: PathBuf,
-        /// Solver to use instead of the scene's (with default parameters).
-        #[arg(long)]
-        solver: Option<String>,
+        #[command(flatten)]
+        solver: SolverArgs,
         /// Output grid, .npy or .vol.
         #[arg(short, long)]
         output: PathBuf,
@@ -70,9 +144,18 @@ enum Command {
     Info {
         /// Scene file (TOML); the built-in default scene if omitted.
         scene: Option<PathBuf>,
+        #[command(flatten)]
+        solver: SolverArgs,
     },
     /// Print the diffusion optics of the measured materials (Jensen et al. 2001).
     Materials,
+}
+
+/// How a job ended, when it ran.
+enum Ended {
+    Done,
+    Unconverged,
+    Diverged,
 }
 
 fn main() -> ExitCode {
@@ -80,41 +163,46 @@ fn main() -> ExitCode {
     // Ctrl-C from here on stops a solve cleanly instead of killing the process.
     cancel_flag();
     let result = match cli.command {
-        None => render(None, None, Path::new("lucent.png"), None, cli.quiet),
-        Some(Command::Render {
-            scene,
-            solver,
-            output,
-            size,
-        }) => render(scene.as_deref(), solver, &output, size, cli.quiet),
+        None => render(&cli.render, cli.quiet),
+        Some(Command::Render(args)) => render(&args, cli.quiet),
         Some(Command::Solve {
             scene,
             solver,
             output,
-        }) => solve_to_file(&scene, solver, &output, cli.quiet),
-        Some(Command::Solvers) => list_solvers(),
-        Some(Command::Info { scene }) => info(scene.as_deref()),
-        Some(Command::Materials) => {
-            materials_table(&mut io::stdout().lock()).map_err(|e| match e {
+        }) => solve_to_file(&scene, &solver, &output, cli.quiet),
+        Some(Command::Solvers) => list_solvers().map(|()| Ended::Done),
+        Some(Command::Info { scene, solver }) => info(scene.as_deref(), &solver).map(|()| Ended::Done),
+        Some(Command::Materials) => materials_table(&mut io::stdout().lock())
+            .map(|()| Ended::Done)
+            .map_err(|e| match e {
                 TableError::Io(e) => Error::Io {
                     path: "<stdout>".into(),
                     reason: e.to_string(),
                 },
                 TableError::Optics(e) => Error::Optics(e),
-            })
-        }
+            }),
     };
-    match result {
-        // Interrupted: what was computed has been written; the conventional status of a
-        // process stopped by SIGINT.
-        Ok(()) if interrupted() => ExitCode::from(130),
-        Ok(()) => ExitCode::SUCCESS,
+    let status = match result {
+        // Interrupted: what was computed has been written.
+        Ok(_) if interrupted() => ExitCode::from(EXIT_INTERRUPTED),
+        Ok(Ended::Done) => ExitCode::SUCCESS,
+        Ok(Ended::Unconverged) => ExitCode::from(EXIT_UNCONVERGED),
+        Ok(Ended::Diverged) => ExitCode::from(EXIT_DIVERGED),
         Err(Error::Io { reason, .. }) if reason.contains("Broken pipe") => ExitCode::SUCCESS,
         Err(e) => {
             let _ = writeln!(io::stderr(), "lucent: {e}");
             ExitCode::FAILURE
         }
+    };
+    if std::env::var_os("LUCENT_COUNTERS").is_some() {
+        // For tests: proof that bad input was refused before any solving (last line).
+        let _ = writeln!(
+            io::stderr(),
+            "lucent: counters: solves started {}",
+            lucent::core::driver::solves_started()
+        );
     }
+    status
 }
 
 /// The flag a Ctrl-C sets: the solve stops at its next iteration, batch or march and its
@@ -128,7 +216,7 @@ fn cancel_flag() -> Arc<AtomicBool> {
         // Without a handler (another one installed), Ctrl-C keeps its default: exit.
         let _ = ctrlc::set_handler(move || {
             if seen.swap(true, Ordering::SeqCst) {
-                std::process::exit(130);
+                std::process::exit(i32::from(EXIT_INTERRUPTED));
             }
             let _ = writeln!(
                 io::stderr(),
@@ -163,84 +251,240 @@ fn load(scene: Option<&Path>) -> Result<(Scene, BuiltScene, String), Error> {
     Ok((parsed, built, name))
 }
 
-fn bar(quiet: bool, message: &'static str) -> ProgressBar {
-    if quiet {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::new(1000).with_message(message);
-    bar.set_style(
-        ProgressStyle::with_template("{msg:>8} [{bar:40}] {percent:>3}% {elapsed_precise}")
+/// A progress bar for one job (hidden with `--quiet` or when stderr is not a terminal):
+/// the phase and the solver's words, the fraction, and an elapsed time that ticks on its
+/// own while nothing reports.
+fn bar(quiet: bool, prefix: &'static str) -> (ProgressBar, Arc<Meter>) {
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        let bar = ProgressBar::new(1000).with_prefix(prefix);
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{prefix:>6} [{bar:30}] {percent:>3}% {elapsed_precise} {wide_msg}",
+            )
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    bar
+        );
+        bar.enable_steady_tick(Duration::from_millis(250));
+        bar
+    };
+    let shown = bar.clone();
+    let meter = Meter::new(Arc::new(move |s: &lucent::progress::Shown| {
+        shown.set_position(s.permille);
+        shown.set_message(s.message.clone());
+    }));
+    (bar, meter)
 }
 
-/// The solver `--solver` names (with default parameters when it is not the scene's) or
-/// the scene's (with its parameters).
-fn build_solver(scene: &Scene, solver: Option<String>) -> Result<Box<dyn Solver>, Error> {
+/// The solver a job runs: `--solver` or the scene's; the scene's parameters only for its
+/// own solver (said on stderr when `--solver` leaves them behind); `--param` on top.
+struct Chosen {
+    solver: Box<dyn Solver>,
+    params: Params,
+    resolved: serde_json::Value,
+}
+
+fn choose_solver(scene: &Scene, args: &SolverArgs) -> Result<Chosen, Error> {
     let registry = lucent::registry();
-    Ok(match solver {
-        Some(name) if name != scene.solver.name => registry.build(&name, &Default::default())?,
-        _ => registry.build(&scene.solver.name, &scene.solver.params)?,
+    let name = args.solver.as_deref().unwrap_or(&scene.solver.name);
+    let entry = registry.entry(name)?;
+    let mut params = if name == scene.solver.name {
+        scene.solver.params.clone()
+    } else {
+        if !scene.solver.params.0.is_empty() {
+            let _ = writeln!(
+                io::stderr(),
+                "lucent: note: the scene's [solver.params] belong to `{}`; `{name}` runs with its defaults{}",
+                scene.solver.name,
+                if args.params.is_empty() {
+                    ""
+                } else {
+                    " and --param"
+                }
+            );
+        }
+        Params::default()
+    };
+    for text in &args.params {
+        let (key, value) = parse_param(text)?;
+        params.0.insert(key, value);
+    }
+    let solver = (entry.build)(&params)?;
+    let resolved = (entry.resolved)(&params)?;
+    Ok(Chosen {
+        solver,
+        params,
+        resolved,
     })
 }
 
-fn run_solver(
-    scene: &Scene,
-    built: &BuiltScene,
-    solver: Option<String>,
-    quiet: bool,
-) -> Result<(Box<dyn Solver>, Solution), Error> {
-    let solver = build_solver(scene, solver)?;
-    let progress = bar(quiet, "solve");
-    let callback = progress.clone();
-    let options = SolveOptions {
-        progress: Some(Arc::new(move |p: Progress| {
-            callback.set_position((p.fraction * 1000.0) as u64)
-        })),
-        cancel: Some(cancel_flag()),
-        ..SolveOptions::default()
+/// `KEY=VALUE`: the value as TOML would read it (`true`, `3`, `0.5`, `"text"`), or as bare
+/// text (`closure=diamond`).
+fn parse_param(text: &str) -> Result<(String, ParamValue), Error> {
+    let (key, value) = text
+        .split_once('=')
+        .map(|(k, v)| (k.trim(), v.trim()))
+        .filter(|(k, v)| !k.is_empty() && !v.is_empty())
+        .ok_or_else(|| Error::Usage(format!("--param `{text}` is not KEY=VALUE")))?;
+    let parsed = toml::from_str::<toml::Table>(&format!("v = {value}"))
+        .ok()
+        .and_then(|mut t| t.remove("v"));
+    let value = match parsed {
+        Some(toml::Value::Boolean(b)) => ParamValue::Bool(b),
+        Some(toml::Value::Integer(i)) => ParamValue::Int(i),
+        Some(toml::Value::Float(f)) => ParamValue::Float(f),
+        Some(toml::Value::String(s)) => ParamValue::Text(s),
+        Some(_) => {
+            return Err(Error::Usage(format!(
+                "--param `{text}`: a parameter is a boolean, a number or text"
+            )));
+        }
+        None => ParamValue::Text(value.to_owned()),
     };
-    let solution = solver.solve(&built.problem, &options)?;
-    progress.finish_and_clear();
-    Ok((solver, solution))
+    Ok((key.to_owned(), value))
 }
 
-fn render(
-    scene: Option<&Path>,
-    solver: Option<String>,
-    output: &Path,
-    size: Option<String>,
+/// Checks, before anything is solved, that `path` can be written: its extension is one of
+/// `extensions` (`kinds` says what they are), it is not a folder, and its folder exists
+/// and takes a new file.
+fn check_output(path: &Path, extensions: &[&str], kinds: &str) -> Result<(), Error> {
+    let fail = |reason: String| Error::Output {
+        path: path.to_owned(),
+        reason,
+    };
+    let extension = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if !extension
+        .as_deref()
+        .is_some_and(|e| extensions.contains(&e))
+    {
+        return Err(fail(kinds.to_owned()));
+    }
+    if path.is_dir() {
+        return Err(fail("is a folder".into()));
+    }
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if !folder.is_dir() {
+        return Err(fail(format!("the folder {} does not exist", folder.display())));
+    }
+    if path.exists() {
+        std::fs::OpenOptions::new()
+            .append(true)
+            .open(path)
+            .map_err(|e| fail(format!("cannot be overwritten: {e}")))?;
+    } else {
+        let probe = folder.join(format!(".lucent-write-test-{}", std::process::id()));
+        std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&probe)
+            .map_err(|e| fail(format!("cannot write in {}: {e}", folder.display())))?;
+        let _ = std::fs::remove_file(&probe);
+    }
+    Ok(())
+}
+
+/// A progress callback that shows nothing (to check options before a bar exists).
+fn meter_free() -> lucent::core::ProgressFn {
+    Arc::new(|_| {})
+}
+
+/// Runs the chosen solver with a progress bar and Ctrl-C.
+fn run_solver(
+    chosen: &Chosen,
+    built: &BuiltScene,
+    args: &SolverArgs,
     quiet: bool,
-) -> Result<(), Error> {
+) -> Result<Solution, Error> {
+    let (progress, meter) = bar(quiet, "solve");
+    let options = args.options(meter.solver_callback())?;
+    let solution = chosen.solver.solve(&built.problem, &options);
+    progress.finish_and_clear();
+    Ok(solution?)
+}
+
+/// How a solve that stopped for `reason` ends the job; says so on stderr when it did not
+/// converge. `Ok(None)`: write the result.
+fn verdict(
+    solver: &str,
+    reason: &StopReason,
+    iterations: usize,
+    allow: bool,
+    what: &str,
+) -> Option<Ended> {
+    if reason.is_converged() || matches!(reason, StopReason::Interrupted { .. }) {
+        return None;
+    }
+    let ended = if reason.is_diverged() {
+        Ended::Diverged
+    } else {
+        Ended::Unconverged
+    };
+    let (consequence, outcome) = if allow {
+        (format!("{what} written anyway (--allow-unconverged)"), None)
+    } else {
+        (
+            format!("no {what} written (--allow-unconverged writes it anyway)"),
+            Some(ended),
+        )
+    };
+    let _ = writeln!(
+        io::stderr(),
+        "lucent: `{solver}` {reason} after {iterations} iterations; {consequence}"
+    );
+    outcome
+}
+
+fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
     let start = Instant::now();
-    let (parsed, mut built, name) = load(scene)?;
-    if let Some(size) = size {
+    let (parsed, mut built, name) = load(args.scene.as_deref())?;
+    let chosen = choose_solver(&parsed, &args.solver)?;
+    // Everything about the output is checked before any solving.
+    if let Some(size) = &args.size {
         let (w, h) = size
             .split_once('x')
             .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
-            .ok_or_else(|| Error::Invalid(format!("--size `{size}` is not WIDTHxHEIGHT")))?;
+            .ok_or_else(|| Error::Output {
+                path: args.output.clone(),
+                reason: format!("--size `{size}` is not WIDTHxHEIGHT"),
+            })?;
         built.settings.width = w;
         built.settings.height = h;
-        built.settings.validate()?;
+        built.settings.validate().map_err(|e| Error::Output {
+            path: args.output.clone(),
+            reason: e.to_string(),
+        })?;
     }
+    let output = &args.output;
+    check_output(
+        output,
+        &["png", "exr"],
+        "images are written as .png or .exr (sRGB or linear)",
+    )?;
+    chosen.solver.admits(&built.problem)?;
+    args.solver.options(meter_free())?.validate()?;
     // A solver that makes pictures itself (Monte Carlo's camera paths) says so; the rest
     // hand the renderer a fluence.
-    let chosen = build_solver(&parsed, solver.clone())?;
-    let (solver_name, solve_seconds, image) = if let Some(imager) = chosen.images() {
+    let (solve_seconds, image) = if let Some(imager) = chosen.solver.images() {
+        let error_path = output.with_extension("stderr.exr");
+        check_output(&error_path, &["exr"], "the standard error is written as .exr")?;
         let s = built.settings;
         let background = s.background.unwrap_or_else(|| sky_radiance(&built.problem));
         let camera = built.camera;
         camera.validate()?;
         let aspect = s.width as f64 / s.height as f64;
-        let progress = bar(quiet, "trace");
-        let callback = progress.clone();
+        let (progress, meter) = bar(quiet, "trace");
+        let report = meter.fraction_callback("camera paths");
         let ray = |u: f64, v: f64| {
             camera
                 .ray(u, v, aspect)
                 .unwrap_or((glam::DVec3::ZERO, glam::DVec3::Z))
         };
-        let report = move |f: f64| callback.set_position((f * 1000.0) as u64);
         let estimate = imager.image(
             &built.problem,
             &lucent::core::ImageRequest {
@@ -250,10 +494,10 @@ fn render(
                 ray: &ray,
                 progress: Some(&report),
             },
-        )?;
+        );
         progress.finish_and_clear();
+        let estimate = estimate?;
         // The per-pixel standard error, linear, beside the picture.
-        let error_path = output.with_extension("stderr.exr");
         lucent::render::Image {
             width: estimate.width,
             height: estimate.height,
@@ -271,32 +515,42 @@ fn render(
             height: estimate.height,
             pixels: estimate.radiance,
         };
-        (chosen.name().to_owned(), 0.0, image)
+        (0.0, image)
     } else {
-        let (solver, solution) = run_solver(&parsed, &built, solver, quiet)?;
-        let progress = bar(quiet, "render");
-        let callback = progress.clone();
+        let solution = run_solver(&chosen, &built, &args.solver, quiet)?;
+        let report = &solution.report;
+        if let Some(ended) = verdict(
+            chosen.solver.name(),
+            &report.stop_reason,
+            report.iterations,
+            args.solver.allow_unconverged,
+            "image",
+        ) {
+            return Ok(ended);
+        }
+        let (progress, meter) = bar(quiet, "render");
         let image = lucent::render::render(
             &built.problem,
             &solution,
             &built.camera,
             &built.settings,
-            Some(&move |f: f64| callback.set_position((f * 1000.0) as u64)),
-        )?;
+            Some(&meter.fraction_callback("ray marching")),
+        );
         progress.finish_and_clear();
-        (solver.name().to_owned(), solution.report.wall_time_s, image)
+        (report.wall_time_s, image?)
     };
     image.write(output, built.exposure, built.tone)?;
     if !quiet {
         println!(
-            "lucent: rendered {name} with `{solver_name}` to {} ({}×{}) in {:.2} s (solve {solve_seconds:.2} s)",
+            "lucent: rendered {name} with `{}` to {} ({}×{}) in {:.2} s (solve {solve_seconds:.2} s)",
+            chosen.solver.name(),
             output.display(),
             image.width,
             image.height,
             start.elapsed().as_secs_f64(),
         );
     }
-    Ok(())
+    Ok(Ended::Done)
 }
 
 /// The sky's radiance per channel (what escaping camera rays see by default).
@@ -313,58 +567,83 @@ fn sky_radiance(problem: &lucent::core::Problem) -> [f64; 3] {
 
 fn solve_to_file(
     scene: &Path,
-    solver: Option<String>,
+    args: &SolverArgs,
     output: &Path,
     quiet: bool,
-) -> Result<(), Error> {
+) -> Result<Ended, Error> {
     let (parsed, built, name) = load(Some(scene))?;
-    let (solver, solution) = run_solver(&parsed, &built, solver, quiet)?;
-    let grids: Vec<&lucent::grid::Grid> = solution.fluence.iter().collect();
-    match output
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .as_deref()
-    {
-        Some("npy") => lucent::grid::io::npy::write_channels(output, &grids, ScalarType::F32)?,
-        Some("vol") => lucent::grid::io::mitsuba::write(output, &grids)?,
-        _ => {
-            return Err(Error::Invalid(format!(
-                "{}: the fluence is written as .npy or .vol",
-                output.display()
-            )));
+    let chosen = choose_solver(&parsed, args)?;
+    check_output(
+        output,
+        &["npy", "vol"],
+        "the fluence is written as .npy or .vol (NumPy or Mitsuba)",
+    )?;
+    let report_path = output.with_extension("json");
+    check_output(&report_path, &["json"], "the report is written as .json")?;
+    chosen.solver.admits(&built.problem)?;
+    args.options(meter_free())?.validate()?;
+    let solution = run_solver(&chosen, &built, args, quiet)?;
+    let stop = &solution.report.stop_reason;
+    let ended = verdict(
+        chosen.solver.name(),
+        stop,
+        solution.report.iterations,
+        args.allow_unconverged,
+        "fluence",
+    );
+    if ended.is_none() {
+        let grids: Vec<&lucent::grid::Grid> = solution.fluence.iter().collect();
+        let is_npy = output
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+        if is_npy {
+            lucent::grid::io::npy::write_channels(output, &grids, ScalarType::F32)?;
+        } else {
+            lucent::grid::io::mitsuba::write(output, &grids)?;
         }
     }
-    let report_path = output.with_extension("json");
+    // The report is written either way: it says why the solve stopped.
     let g = built.problem.geometry();
     let report = serde_json::json!({
         "scene": name,
-        "solver": solver.name(),
-        "params": parsed.solver.params,
-        "capabilities": solver.capabilities(),
+        "solver": chosen.solver.name(),
+        "params": chosen.resolved,
+        "params_given": chosen.params,
+        "options": {
+            "tolerance": args.tolerance,
+            "max_iterations": args.max_iterations,
+            "time_limit_s": args.time_limit,
+        },
+        "capabilities": chosen.solver.capabilities(),
         "channels": solution.fluence.len(),
         "dims": g.dims(),
         "spacing": g.spacing().to_array(),
         "origin": g.origin().to_array(),
-        "fluence": output.file_name().map(|n| n.to_string_lossy().into_owned()),
+        "fluence": ended.is_none().then(|| output.file_name().map(|n| n.to_string_lossy().into_owned())).flatten(),
+        "converged": stop.is_converged(),
         "report": solution.report,
     });
-    let text = serde_json::to_string_pretty(&report).map_err(|e| Error::Invalid(e.to_string()))?;
+    let text = serde_json::to_string_pretty(&report).map_err(|e| Error::Io {
+        path: report_path.clone(),
+        reason: e.to_string(),
+    })?;
     std::fs::write(&report_path, text + "\n").map_err(|e| Error::Io {
         path: report_path.clone(),
         reason: e.to_string(),
     })?;
+    if let Some(ended) = ended {
+        return Ok(ended);
+    }
     if !quiet {
         println!(
-            "lucent: solved {name} with `{}` ({:?}) in {:.2} s; fluence {} and report {}",
-            solver.name(),
-            solution.report.stop_reason,
+            "lucent: solved {name} with `{}`: {stop}, {:.2} s; fluence {} and report {}",
+            chosen.solver.name(),
             solution.report.wall_time_s,
             output.display(),
             report_path.display()
         );
     }
-    Ok(())
+    Ok(Ended::Done)
 }
 
 fn list_solvers() -> Result<(), Error> {
@@ -376,11 +655,20 @@ fn list_solvers() -> Result<(), Error> {
     for entry in lucent::registry().entries() {
         let solver = (entry.build)(&Default::default())?;
         let c = solver.capabilities();
+        let list = |items: Vec<String>| items.join(", ");
         writeln!(out, "{:<16} {}", entry.name, entry.summary).map_err(io_err)?;
         writeln!(
             out,
-            "{:<16} anisotropic: {}, heterogeneous: {}, embedded geometry: {}, output: {:?}\n{:<16} boundaries: {:?}\n{:<16} lights: {:?}",
-            "", c.anisotropic, c.heterogeneous, c.embedded_geometry, c.output, "", c.boundaries, "", c.lights
+            "{:<16} anisotropic: {}, heterogeneous: {}, embedded geometry: {}, output: {}\n{:<16} boundaries: {}\n{:<16} lights: {}",
+            "",
+            yes_no(c.anisotropic),
+            yes_no(c.heterogeneous),
+            yes_no(c.embedded_geometry),
+            kebab(&c.output),
+            "",
+            list(c.boundaries.iter().map(kebab).collect()),
+            "",
+            list(c.lights.iter().map(kebab).collect()),
         )
         .map_err(io_err)?;
         let params = (entry.params)();
@@ -395,7 +683,20 @@ fn list_solvers() -> Result<(), Error> {
     Ok(())
 }
 
-fn info(scene: Option<&Path>) -> Result<(), Error> {
+fn yes_no(b: bool) -> &'static str {
+    if b { "yes" } else { "no" }
+}
+
+/// A serialisable enum as its kebab-case name (`directional`, `robin`).
+fn kebab<T: serde::Serialize>(value: &T) -> String {
+    match serde_json::to_value(value) {
+        Ok(serde_json::Value::String(s)) => s,
+        Ok(other) => other.to_string(),
+        Err(_) => "?".into(),
+    }
+}
+
+fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
     let (parsed, built, name) = load(scene)?;
     let p = &built.problem;
     let g = p.geometry();
@@ -406,47 +707,74 @@ fn info(scene: Option<&Path>) -> Result<(), Error> {
         reason: e.to_string(),
     };
     let (lo, hi) = g.bounds();
+    let v = |a: glam::DVec3| format!("({}, {}, {})", S(a.x), S(a.y), S(a.z));
+    let [nx, ny, nz] = g.dims();
+    let h = g.spacing();
+    let cells = if h.x == h.y && h.y == h.z {
+        format!("cubic cells of {}", S(h.x))
+    } else {
+        format!("cells of {} × {} × {}", S(h.x), S(h.y), S(h.z))
+    };
     writeln!(out, "{name}").map_err(io_err)?;
     writeln!(
         out,
-        "  grid      {:?} cells of {}, box {} to {}",
-        g.dims(),
-        g.spacing(),
-        lo,
-        hi
+        "  grid      {nx} × {ny} × {nz} {cells}, box {} to {} (scene units)",
+        v(lo),
+        v(hi)
     )
     .map_err(io_err)?;
     writeln!(
         out,
-        "  volume    min {} max {} mean {:.4} non-zero {:.1}%",
-        s.min,
-        s.max,
-        s.mean,
-        100.0 * s.nonzero_fraction
+        "  volume    values {} to {}, mean {}, {}% of cells non-zero",
+        S(f64::from(s.min)),
+        S(f64::from(s.max)),
+        S(s.mean),
+        S(100.0 * s.nonzero_fraction)
     )
     .map_err(io_err)?;
-    let sigma = p.medium().sigma_t(0).stats();
-    writeln!(
-        out,
-        "  medium    sigma_t up to {} (channels: {}), phase {:?}",
-        sigma.max,
-        p.channels(),
-        p.medium().phase
-    )
-    .map_err(io_err)?;
-    for light in p.lights() {
-        writeln!(out, "  light     {:?} {:?}", light.kind(), light.spectrum()).map_err(io_err)?;
+    let medium = p.medium();
+    // One line when every channel shares σ_t and albedo (a grey medium under coloured light).
+    let distinct = medium.sigma_t.len().max(medium.albedo.len());
+    for c in 0..distinct {
+        let sigma = medium.sigma_t(c).stats();
+        let albedo = match medium.albedo(c) {
+            lucent::core::Field::Constant(a) => S(f64::from(*a)).to_string(),
+            lucent::core::Field::Grid(grid) => {
+                let a = grid.stats();
+                format!("{} to {} per cell", S(f64::from(a.min)), S(f64::from(a.max)))
+            }
+        };
+        let label = if distinct > 1 {
+            format!("medium {}", ["R", "G", "B"].get(c).copied().unwrap_or("?"))
+        } else {
+            "medium".to_owned()
+        };
+        writeln!(
+            out,
+            "  {label:<10}sigma_t up to {} per unit (mean {}), albedo {albedo}",
+            S(f64::from(sigma.max)),
+            S(sigma.mean)
+        )
+        .map_err(io_err)?;
     }
-    writeln!(out, "  boundary  {:?}", p.boundary()).map_err(io_err)?;
-    let solver = lucent::registry().build(&parsed.solver.name, &parsed.solver.params)?;
-    let verdict = match solver.admits(p) {
+    writeln!(out, "  phase     {}", medium.phase).map_err(io_err)?;
+    for light in p.lights() {
+        writeln!(out, "  light     {light}").map_err(io_err)?;
+    }
+    writeln!(out, "  boundary  {}", p.boundary()).map_err(io_err)?;
+    if p.embedded().is_some() {
+        writeln!(out, "  embedded  a body given by its signed distance (the medium is its inside)")
+            .map_err(io_err)?;
+    }
+    let chosen = choose_solver(&parsed, args)?;
+    let verdict = match chosen.solver.admits(p) {
         Ok(()) => "can solve this scene".to_owned(),
         Err(e) => e.to_string(),
     };
-    writeln!(out, "  solver    `{}`: {verdict}", solver.name()).map_err(io_err)?;
+    writeln!(out, "  solver    `{}`: {verdict}", chosen.solver.name()).map_err(io_err)?;
     writeln!(
         out,
-        "  image     {}×{}, camera {:?}",
+        "  image     {} × {} pixels, {}",
         built.settings.width, built.settings.height, built.camera
     )
     .map_err(io_err)?;

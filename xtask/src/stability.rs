@@ -130,7 +130,7 @@ fn upwind_rows() -> Vec<Row> {
             let measured = bisect(0.3 * limit, 3.0 * limit, 2e-3, |c| {
                 let run = |steps| {
                     let settings = UpwindSettings {
-                        courant: c,
+                        courant: Some(c),
                         sweep: Sweep::Jacobi,
                         edges: Edges::Periodic,
                         stopping: Stopping {

@@ -24,7 +24,7 @@ use rayon::prelude::*;
 
 use crate::error::SolveError;
 use crate::problem::{BoundaryKind, Light, LightKind, Problem};
-use crate::registry::{Params, SolverEntry, SolverParams, param_docs};
+use crate::registry::{Params, SolverEntry, SolverParams, param_docs, resolved_params};
 use crate::solution::{Angular, LightTransmittance, Solution};
 use crate::solver::{Capabilities, FluenceKind, OutputKind, Progress, SolveOptions, Solver};
 
@@ -84,6 +84,7 @@ impl DirectSolver {
         summary: "uncollided light from every light to every cell by exact ray marching (single scattering)",
         build: |params| Ok(Box::new(Self::from_params(params)?)),
         params: param_docs::<Self>,
+        resolved: |p| resolved_params::<Self>(p, Self::NAME),
     };
 
     /// Builds from registry parameters.
@@ -195,6 +196,7 @@ impl DirectSolver {
                 per_light.push(grids);
                 done += 1.0;
                 context.report(Progress {
+                    stage: "light transmittance",
                     fraction: done / work,
                     iteration: 0,
                     residual: None,
@@ -233,6 +235,7 @@ impl DirectSolver {
                     })
                     .collect();
                 context.report(Progress {
+                    stage: "sky transmittance",
                     fraction: 1.0,
                     iteration: 0,
                     residual: None,

@@ -98,6 +98,17 @@ impl Stopping {
         }
     }
 
+    /// The same rule, its progress reports naming `stage` (`source iteration`, `V-cycle`,
+    /// `time step`) instead of `iteration`.
+    pub fn with_stage(mut self, stage: &'static str) -> Self {
+        if let Some(callback) = self.progress.take() {
+            self.progress = Some(std::sync::Arc::new(move |p: Progress| {
+                callback(Progress { stage, ..p })
+            }));
+        }
+        self
+    }
+
     /// Tells the progress callback, if any, about `iteration` at `relative` residual from
     /// `initial`: the fraction is how far ln(relative) has come from ln(initial) toward
     /// ln(tolerance), or toward the iteration limit if that is nearer.
@@ -116,6 +127,7 @@ impl Stopping {
         };
         let by_count = iteration as f64 / self.max_iterations.max(1) as f64;
         callback(Progress {
+            stage: "iteration",
             fraction: by_residual.max(by_count).min(1.0),
             iteration,
             residual: Some(relative),

@@ -77,7 +77,9 @@ pub use direct::DirectSolver;
 pub use error::{ProblemError, SolveError};
 pub use iteration::{History, Stopping};
 pub use problem::{Boundary, BoundaryKind, Field, Light, LightKind, Medium, Problem};
-pub use registry::{ParamDoc, ParamValue, Params, Registry, SolverEntry, SolverParams, param_docs};
+pub use registry::{
+    ParamDoc, ParamValue, Params, Registry, SolverEntry, SolverParams, param_docs, resolved_params,
+};
 pub use singular::{SingularPart, point_source_singular_part};
 pub use solution::{Angular, LightTransmittance, OrdinateRadiance, Solution};
 pub use solver::{

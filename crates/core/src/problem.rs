@@ -171,6 +171,57 @@ pub enum LightKind {
     Emission,
 }
 
+/// A point or direction as `(x, y, z)`, four significant digits.
+pub(crate) struct Triple(pub glam::DVec3);
+
+impl std::fmt::Display for Triple {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use lucent_optics::Significant as S;
+        write!(f, "({}, {}, {})", S(self.0.x), S(self.0.y), S(self.0.z))
+    }
+}
+
+impl std::fmt::Display for Light {
+    /// In words with units (lengths in the scene's unit): `directional along (-0.3,
+    /// -0.38, -0.8), irradiance (10, 9.3, 8.2) (power/area)`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use lucent_optics::Significant as S;
+        match self {
+            Light::Directional {
+                direction,
+                irradiance,
+            } => write!(
+                f,
+                "directional along {}, irradiance {irradiance} (power/area)",
+                Triple(*direction)
+            ),
+            Light::Point {
+                position,
+                intensity,
+            } => write!(f, "point at {}, intensity {intensity} (power/sr)", Triple(*position)),
+            Light::Spot {
+                position,
+                direction,
+                intensity,
+                inner_angle,
+                outer_angle,
+            } => write!(
+                f,
+                "spot at {} along {}, intensity {intensity} (power/sr), cone {}° to {}°",
+                Triple(*position),
+                Triple(*direction),
+                S(inner_angle.to_degrees()),
+                S(outer_angle.to_degrees())
+            ),
+            Light::Sky { radiance } => write!(f, "uniform sky, radiance {radiance} (power/(area sr))"),
+            Light::Emission { scale, .. } => write!(
+                f,
+                "volume emission, {scale} (power/(volume sr)) per unit of the volume's value"
+            ),
+        }
+    }
+}
+
 impl Light {
     /// The light's kind.
     pub fn kind(&self) -> LightKind {
@@ -272,6 +323,19 @@ pub enum Boundary {
         /// Outward normal flux.
         flux: f64,
     },
+}
+
+impl std::fmt::Display for Boundary {
+    /// In words, four significant digits.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use lucent_optics::Significant as S;
+        match *self {
+            Boundary::Vacuum => f.write_str("vacuum (index-matched: nothing comes back)"),
+            Boundary::Robin { eta } => write!(f, "Robin, relative refractive index {}", S(eta)),
+            Boundary::Dirichlet { value } => write!(f, "Dirichlet, fluence {} on the boundary", S(value)),
+            Boundary::Neumann { flux } => write!(f, "Neumann, outward flux {}", S(flux)),
+        }
+    }
 }
 
 /// What kind a boundary is, for capability checks.

@@ -84,6 +84,16 @@ pub fn param_docs<T: SolverParams>() -> Vec<ParamDoc> {
     docs
 }
 
+/// The parameters `params` give `T`, every default filled in, as JSON: what a solver
+/// built from `params` runs with (a report records this, not what was written).
+pub fn resolved_params<T: SolverParams>(params: &Params, solver: &str) -> Result<serde_json::Value, SolveError> {
+    let typed: T = params.parse(solver)?;
+    serde_json::to_value(typed).map_err(|e| SolveError::InvalidParameter {
+        name: "parameters".into(),
+        reason: e.to_string(),
+    })
+}
+
 impl ParamValue {
     fn to_json(&self) -> serde_json::Value {
         match self {
@@ -145,6 +155,9 @@ pub struct SolverEntry {
     /// Its parameters with their defaults and meanings ([`param_docs`] of its
     /// [`SolverParams`]).
     pub params: fn() -> Vec<ParamDoc>,
+    /// The parameters it runs with when built from these, defaults filled in
+    /// ([`resolved_params`] of its [`SolverParams`]).
+    pub resolved: fn(&Params) -> Result<serde_json::Value, SolveError>,
 }
 
 /// The solvers known by name.
@@ -179,8 +192,12 @@ impl Registry {
 
     /// Builds the solver called `name` with `params`.
     pub fn build(&self, name: &str, params: &Params) -> Result<Box<dyn Solver>, SolveError> {
-        let entry = self
-            .entries
+        (self.entry(name)?.build)(params)
+    }
+
+    /// The entry of the solver called `name`.
+    pub fn entry(&self, name: &str) -> Result<&SolverEntry, SolveError> {
+        self.entries
             .iter()
             .find(|e| e.name == name)
             .ok_or_else(|| SolveError::UnknownSolver {
@@ -191,7 +208,6 @@ impl Registry {
                     .map(|e| e.name)
                     .collect::<Vec<_>>()
                     .join(", "),
-            })?;
-        (entry.build)(params)
+            })
     }
 }

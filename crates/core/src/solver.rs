@@ -165,14 +165,41 @@ impl Capabilities {
 }
 
 /// Progress of a running solve, passed to [`SolveOptions::progress`].
+///
+/// Through [`crate::driver::run`] (every registered solver) the fraction the caller sees
+/// never decreases and reaches 1 once, in the last report, sent when the solve is done
+/// (stage [`Progress::DONE`]); the phases of a solve (the uncollided light, each channel)
+/// have their shares of it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Progress {
+    /// What the solver is doing, in words for a person: `uncollided light`,
+    /// `source iteration`, `V-cycle`, `batch`, ...
+    pub stage: &'static str,
     /// Fraction done in [0, 1] (iterative solvers: an estimate from the residual).
     pub fraction: f64,
     /// Iterations so far (0 for direct methods).
     pub iteration: usize,
     /// Current relative residual, if the solver has one.
     pub residual: Option<f64>,
+}
+
+impl Progress {
+    /// The stage of the last report of a finished solve.
+    pub const DONE: &'static str = "done";
+}
+
+impl fmt::Display for Progress {
+    /// `source iteration 7, residual 3.0e-4`; `uncollided light`; `batch 12`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.stage)?;
+        if self.iteration > 0 {
+            write!(f, " {}", self.iteration)?;
+        }
+        if let Some(r) = self.residual.filter(|r| r.is_finite()) {
+            write!(f, ", residual {r:.1e}")?;
+        }
+        Ok(())
+    }
 }
 
 /// A progress callback.
@@ -308,6 +335,12 @@ pub enum StopReason {
         /// Final residual.
         residual: f64,
     },
+    /// A stochastic method ran every sample it was asked for: the result is an unbiased
+    /// estimate whose accuracy is its standard error, not a residual.
+    Sampled {
+        /// The mean relative standard error over the cells that hold light.
+        relative_error: f64,
+    },
     /// The iteration limit was reached first.
     IterationLimit {
         /// Relative residual when stopped.
@@ -345,7 +378,9 @@ impl StopReason {
     pub fn severity(&self) -> u8 {
         match self {
             StopReason::Exact => 0,
-            StopReason::ConvergedRelative { .. } | StopReason::ConvergedAbsolute { .. } => 1,
+            StopReason::ConvergedRelative { .. }
+            | StopReason::ConvergedAbsolute { .. }
+            | StopReason::Sampled { .. } => 1,
             StopReason::IterationLimit { .. } => 2,
             StopReason::TimeLimit { .. } => 3,
             StopReason::Interrupted { .. } => 4,
@@ -354,14 +389,63 @@ impl StopReason {
         }
     }
 
-    /// Whether the solution can be trusted (exact or converged).
+    /// Whether the solution can be trusted (exact, converged, or every sample taken).
     pub fn is_converged(&self) -> bool {
         matches!(
             self,
             StopReason::Exact
                 | StopReason::ConvergedRelative { .. }
                 | StopReason::ConvergedAbsolute { .. }
+                | StopReason::Sampled { .. }
         )
+    }
+
+    /// Whether the solve blew up (a residual that grew without bound, or NaN/infinity).
+    pub fn is_diverged(&self) -> bool {
+        matches!(
+            self,
+            StopReason::DivergedGrowth { .. } | StopReason::DivergedNonFinite { .. }
+        )
+    }
+}
+
+impl fmt::Display for StopReason {
+    /// In words, for a person: `converged to a relative residual of 8.2e-9`,
+    /// `stopped at the iteration limit with a relative residual of 4.1e-2`, ...
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StopReason::Exact => f.write_str("finished (a direct method: exact up to its discretisation)"),
+            StopReason::ConvergedRelative { residual } => {
+                write!(f, "converged to a relative residual of {residual:.1e}")
+            }
+            StopReason::ConvergedAbsolute { residual } => {
+                write!(f, "converged to an absolute residual of {residual:.1e}")
+            }
+            StopReason::Sampled { relative_error } => write!(
+                f,
+                "took every sample asked for (mean relative standard error {relative_error:.1e})"
+            ),
+            StopReason::IterationLimit { residual } => write!(
+                f,
+                "did not converge: stopped at the iteration limit with a relative residual of {residual:.1e}"
+            ),
+            StopReason::TimeLimit { residual } => write!(
+                f,
+                "did not converge: ran out of time with a relative residual of {residual:.1e}"
+            ),
+            StopReason::Interrupted { residual } => write!(
+                f,
+                "was interrupted with a relative residual of {residual:.1e}"
+            ),
+            StopReason::DivergedNonFinite { iteration } => write!(
+                f,
+                "diverged: NaN or infinity at iteration {iteration}"
+            ),
+            StopReason::DivergedGrowth { growth, iteration } => write!(
+                f,
+                "diverged: the residual grew {growth:.1e}-fold by iteration {iteration}"
+            ),
+        }
     }
 }
 

@@ -51,6 +51,17 @@ impl Spectrum {
     }
 }
 
+impl std::fmt::Display for Spectrum {
+    /// `0.9` (grey) or `(10, 9.3, 8.2)` (red, green, blue), four significant digits.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use lucent_optics::Significant as S;
+        match self {
+            Spectrum::Grey(v) => write!(f, "{}", S(*v)),
+            Spectrum::Rgb([r, g, b]) => write!(f, "({}, {}, {})", S(*r), S(*g), S(*b)),
+        }
+    }
+}
+
 impl Default for Spectrum {
     fn default() -> Self {
         Spectrum::Grey(0.0)

@@ -25,7 +25,7 @@
 use lucent_core::driver::{
     self, Channel, ChannelMethod, ChannelSolution, Coefficients, Context, Record,
 };
-use lucent_core::param_docs;
+use lucent_core::{param_docs, resolved_params};
 use lucent_core::{
     Angular, Boundary, BoundaryKind, Capabilities, FluenceKind, LightKind, OutputKind, Problem,
     Solution, SolveError, SolveOptions, Solver, SolverEntry, Uncollided,
@@ -70,6 +70,7 @@ impl DiffusionSolver {
             }))
         },
         params: param_docs::<MultigridParams>,
+        resolved: |p| resolved_params::<MultigridParams>(p, "diffusion-mg"),
     };
 
     /// `diffusion-mgcg`: CG preconditioned by one multigrid cycle (same parameters).
@@ -87,6 +88,7 @@ impl DiffusionSolver {
             }))
         },
         params: param_docs::<MultigridParams>,
+        resolved: |p| resolved_params::<MultigridParams>(p, "diffusion-mgcg"),
     };
 
     /// `diffusion-cg`: Jacobi-preconditioned CG ([`CgParams`]).
@@ -102,6 +104,7 @@ impl DiffusionSolver {
             }))
         },
         params: param_docs::<CgParams>,
+        resolved: |p| resolved_params::<CgParams>(p, "diffusion-cg"),
     };
 
     /// `diffusion-sor`: red–black SOR ([`SorParams`]).
@@ -117,6 +120,7 @@ impl DiffusionSolver {
             }))
         },
         params: param_docs::<SorParams>,
+        resolved: |p| resolved_params::<SorParams>(p, "diffusion-sor"),
     };
 
     /// `diffusion-jacobi`: Jacobi iteration ([`JacobiParams`]).
@@ -132,6 +136,7 @@ impl DiffusionSolver {
             }))
         },
         params: param_docs::<JacobiParams>,
+        resolved: |p| resolved_params::<JacobiParams>(p, "diffusion-jacobi"),
     };
 
     /// Every entry.
@@ -238,6 +243,12 @@ impl DiffusionSolver {
         linear: &LinearSolve<'_>,
     ) -> Result<Solution, SolveError> {
         let method = Channels {
+            stage: match self.name() {
+                "diffusion-mg" => "V-cycle",
+                "diffusion-mgcg" | "diffusion-cg" => "CG iteration",
+                "diffusion-sor" => "SOR sweep",
+                _ => "Jacobi sweep",
+            },
             discretisation: self.discretisation,
             memory_bytes,
             linear,
@@ -250,6 +261,7 @@ impl DiffusionSolver {
 /// channel's coefficients, its point lights and emission, and the other lights' uncollided
 /// light; it maps them to a [`DiffusionProblem`] and its [`Sources`] and calls `linear`.
 struct Channels<'a, 'b> {
+    stage: &'static str,
     discretisation: Discretisation,
     memory_bytes: u64,
     linear: &'a LinearSolve<'b>,
@@ -257,6 +269,11 @@ struct Channels<'a, 'b> {
 
 impl ChannelMethod for Channels<'_, '_> {
     type Setup = CellGeometry;
+
+    fn stage(&self) -> &'static str {
+        self.stage
+    }
+
     /// The scattered fluence (without the singular parts and the uncollided light): what
     /// in-scatters isotropically in the renderer.
     type Extra = Grid;

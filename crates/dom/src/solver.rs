@@ -31,7 +31,7 @@ use lucent_core::driver::{
 use lucent_core::{
     Angular, BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OrdinateRadiance,
     OutputKind, Params, Problem, Solution, SolveError, SolveOptions, Solver, SolverEntry,
-    Uncollided, param_docs,
+    Uncollided, param_docs, resolved_params,
 };
 use lucent_optics::SphericalQuadrature;
 
@@ -76,6 +76,7 @@ impl DomSolver {
         summary: "discrete ordinates: octant wavefront sweeps, first-collision sources, DSA",
         build: |p: &Params| Ok(Box::new(DomSolver::from_params(p)?)),
         params: param_docs::<DomParams>,
+        resolved: |p| resolved_params::<DomParams>(p, "dom"),
     };
 
     /// The solver for registry parameters.
@@ -165,6 +166,11 @@ impl DomSolver {
 
 impl ChannelMethod for DomSolver {
     type Setup = Ordinates;
+
+    fn stage(&self) -> &'static str {
+        "source iteration"
+    }
+
     /// The in-scattered radiance per storage direction (taken for the renderer) and the
     /// channel's record.
     type Extra = (Vec<f32>, DomChannel);

@@ -106,8 +106,9 @@ pub enum Edges {
 /// Settings of [`propagate`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct UpwindSettings {
-    /// Courant number C = cΔt/Δx (the paper: ½).
-    pub courant: f64,
+    /// Courant number C = cΔt/Δx; `None`: [`DEFAULT_COURANT`] (the paper's ½) or the
+    /// light's stability bound where that is lower ([`courant_bound`]).
+    pub courant: Option<f64>,
     /// Paper or conservative form.
     pub model: Model,
     /// Ordered (default: exact and fast), the paper's layers, or global Jacobi.
@@ -127,7 +128,7 @@ pub struct UpwindSettings {
 impl Default for UpwindSettings {
     fn default() -> Self {
         Self {
-            courant: 0.5,
+            courant: None,
             model: Model::Paper,
             sweep: Sweep::Ordered,
             edges: Edges::Inflow,
@@ -518,6 +519,32 @@ impl Setup<'_> {
     }
 }
 
+/// The Courant number an upwind march uses when none is given: the paper's ½, or the
+/// stability bound of the light at hand where that is lower ([`courant_bound`]).
+pub const DEFAULT_COURANT: f64 = 0.5;
+
+/// The largest stable Courant number of an upwind march of `light` over `absorption`:
+/// 1/(|u| + |v| + |w|) for [`Model::Paper`] (the largest over the cells' directions, for a
+/// point light), 1/(|u| + |v| + |w| + h·max σ_a) for [`Model::Conservative`]; unbounded
+/// for [`Model::Characteristic`], which does not march in time.
+pub fn courant_bound(lattice: &Lattice, light: &Light, model: Model, absorption: &[f64]) -> f64 {
+    let s_max = match *light {
+        Light::Distant { direction, .. } => direction.normalize_or_zero().abs().element_sum(),
+        Light::Point { position, .. } => (0..lattice.len())
+            .map(|c| {
+                let x = lattice.centre(lattice.coords(c).map(|v| v as isize));
+                (x - position).normalize_or_zero().abs().element_sum()
+            })
+            .fold(0.0, f64::max),
+    };
+    let extra = match model {
+        Model::Paper => 0.0,
+        Model::Characteristic => return f64::INFINITY,
+        Model::Conservative => lattice.spacing * absorption.iter().fold(0.0f64, |a, &b| a.max(b)),
+    };
+    1.0 / (s_max + extra)
+}
+
 /// Marches one light to steady state over `absorption` (per step in [0, 1] for
 /// [`Model::Paper`], a rate in 1/length for [`Model::Conservative`]).
 pub fn propagate(
@@ -570,47 +597,31 @@ pub fn propagate(
             *light
         }
     };
-    if !(settings.courant > 0.0 && settings.courant.is_finite()) {
-        return Err(ExplicitError::Invalid(format!(
-            "Courant number {}",
-            settings.courant
-        )));
+    let limit = courant_bound(lattice, &light, settings.model, absorption);
+    let courant = settings.courant.unwrap_or(DEFAULT_COURANT.min(limit));
+    if !(courant > 0.0 && courant.is_finite()) {
+        return Err(ExplicitError::Invalid(format!("Courant number {courant}")));
     }
-    let n = lattice.len();
-    let h = lattice.spacing;
-    // The stability bound over every cell's direction.
-    let s_max = match light {
-        Light::Distant { direction, .. } => direction.abs().element_sum(),
-        Light::Point { position, .. } => (0..n)
-            .map(|c| {
-                let x = lattice.centre(lattice.coords(c).map(|v| v as isize));
-                (x - position).normalize_or_zero().abs().element_sum()
-            })
-            .fold(0.0, f64::max),
-    };
-    let extra = match settings.model {
-        Model::Paper | Model::Characteristic => 0.0,
-        Model::Conservative => h * absorption.iter().fold(0.0f64, |a, &b| a.max(b)),
-    };
-    let limit = 1.0 / (s_max + extra);
     // Short characteristics are not a time march: no Courant number applies.
     if settings.model != Model::Characteristic
-        && settings.courant > limit * (1.0 + 1e-12)
+        && courant > limit * (1.0 + 1e-12)
         && !settings.allow_unstable
     {
         return Err(ExplicitError::Unstable {
             scheme: "upwind convection",
             parameter: "Courant number",
             limit,
-            requested: settings.courant,
+            requested: courant,
         });
     }
+    let n = lattice.len();
+    let h = lattice.spacing;
     let mut setup = Setup {
         lattice,
         light,
         model: settings.model,
         edges: settings.edges,
-        courant: settings.courant,
+        courant,
         absorption,
         fixed: vec![None; n],
     };

@@ -116,8 +116,9 @@ impl From<SweepParam> for Sweep {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ConvectionParams {
-    /// Courant number of the upwind models.
-    pub courant: f64,
+    /// Courant number of the upwind models (`None`: ½, or the light's stability bound
+    /// where that is lower).
+    pub courant: Option<f64>,
     /// The form of the convection–absorption equation.
     pub model: Model,
     /// How the upwind models march.
@@ -131,7 +132,7 @@ pub struct ConvectionParams {
 impl Default for ConvectionParams {
     fn default() -> Self {
         Self {
-            courant: 0.5,
+            courant: None,
             model: Model::Characteristic,
             sweep: SweepParam::Ordered,
             scattering: 0.0,
@@ -144,7 +145,7 @@ impl SolverParams for ConvectionParams {
     const MEANINGS: &'static [(&'static str, &'static str)] = &[
         (
             "courant",
-            "Courant number cΔt/h of the upwind models (conservative, paper)",
+            "Courant number cΔt/h of the upwind models (conservative, paper); unset: ½, or each light's stability bound where that is lower",
         ),
         (
             "model",
@@ -165,7 +166,7 @@ impl SolverParams for ConvectionParams {
         if !(self.scattering >= 0.0 && self.scattering.is_finite()) {
             return Err(invalid("scattering", "σ̂_s t ≥ 0 (length²)"));
         }
-        if !(self.courant > 0.0 && self.courant.is_finite()) {
+        if self.courant.is_some_and(|c| !(c > 0.0 && c.is_finite())) {
             return Err(invalid("courant", "a positive Courant number"));
         }
         Ok(())

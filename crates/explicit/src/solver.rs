@@ -31,13 +31,15 @@ use lucent_core::driver::{
 };
 use lucent_core::{
     BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OutputKind, Problem, Solution,
-    SolveError, SolveOptions, Solver, SolverEntry, param_docs,
+    SolveError, SolveOptions, Solver, SolverEntry, param_docs, resolved_params,
 };
 use lucent_diffusion::{Convergence, DiffusionSolution, DiffusionSolver};
 use lucent_grid::Grid;
 use lucent_optics::PhaseFunction;
 
-use crate::convection::{Model, UpwindSettings, compose, propagate};
+use crate::convection::{
+    DEFAULT_COURANT, Model, UpwindSettings, compose, courant_bound, propagate,
+};
 use crate::error::ExplicitError;
 use crate::lattice::Lattice;
 use crate::params::{
@@ -122,6 +124,7 @@ impl ExplicitSolver {
             }))
         },
         params: param_docs::<FtcsDiffusionParams>,
+        resolved: |p| resolved_params::<FtcsDiffusionParams>(p, "ftcs-diffusion"),
     };
 
     /// `jacobi-diffusion` ([`JacobiDiffusionParams`]).
@@ -139,6 +142,7 @@ impl ExplicitSolver {
             }))
         },
         params: param_docs::<JacobiDiffusionParams>,
+        resolved: |p| resolved_params::<JacobiDiffusionParams>(p, "jacobi-diffusion"),
     };
 
     /// `convection-diffusion` ([`ConvectionParams`]).
@@ -162,6 +166,7 @@ impl ExplicitSolver {
             }))
         },
         params: param_docs::<ConvectionParams>,
+        resolved: |p| resolved_params::<ConvectionParams>(p, "convection-diffusion"),
     };
 
     /// `ftcs-p1` ([`P1Params`]).
@@ -180,6 +185,7 @@ impl ExplicitSolver {
             }))
         },
         params: param_docs::<P1Params>,
+        resolved: |p| resolved_params::<P1Params>(p, "ftcs-p1"),
     };
 
     /// `ftcs-ordinates` ([`OrdinatesParams`]).
@@ -198,6 +204,7 @@ impl ExplicitSolver {
             }))
         },
         params: param_docs::<OrdinatesParams>,
+        resolved: |p| resolved_params::<OrdinatesParams>(p, "ftcs-ordinates"),
     };
 
     /// Every entry of this crate.
@@ -404,14 +411,6 @@ impl ExplicitSolver {
                 .iter()
                 .map(|&v| f64::from(v))
                 .collect();
-            let absorption: Vec<f64> = match settings.model {
-                Model::Conservative | Model::Characteristic => sigma_t,
-                // The paper's per-step absorption: the opacity of one step cΔt = C h.
-                Model::Paper => sigma_t
-                    .iter()
-                    .map(|s| 1.0 - (-s * settings.courant * l.spacing).exp())
-                    .collect(),
-            };
             let mut fields = Vec::new();
             for (i, light) in problem.lights().iter().enumerate() {
                 let (light, colour) = match light {
@@ -438,9 +437,23 @@ impl ExplicitSolver {
                     ),
                     other => return Err(invalid("lights", format!("{:?}", other.kind()))),
                 };
+                // The paper's per-step absorption is the opacity of one step cΔt = C h, so
+                // its Courant number (given, or the light's bound where that is below ½)
+                // comes first.
+                let courant = settings.courant.unwrap_or_else(|| {
+                    DEFAULT_COURANT.min(courant_bound(&l, &light, settings.model, &sigma_t))
+                });
+                let absorption: Vec<f64> = match settings.model {
+                    Model::Conservative | Model::Characteristic => sigma_t.clone(),
+                    Model::Paper => sigma_t
+                        .iter()
+                        .map(|s| 1.0 - (-s * courant * l.spacing).exp())
+                        .collect(),
+                };
                 // The march's own tolerance; the caller's budget and progress.
                 let phase = context.stopping_for(c * problem.lights().len() + i, marches);
                 let settings = UpwindSettings {
+                    courant: Some(courant),
                     stopping: lucent_core::Stopping {
                         time_budget: phase.time_budget,
                         progress: phase.progress,
@@ -451,6 +464,7 @@ impl ExplicitSolver {
                 };
                 let out = propagate(&l, &absorption, &light, &settings).map_err(explicit_error)?;
                 context.report(lucent_core::Progress {
+                    stage: "light march",
                     fraction: (c * problem.lights().len() + i + 1) as f64 / marches as f64,
                     iteration: out.iterations,
                     residual: out.residuals.last().copied(),
@@ -494,6 +508,17 @@ impl ExplicitSolver {
 impl ChannelMethod for ExplicitSolver {
     type Setup = Lattice;
     type Extra = ();
+
+    fn stage(&self) -> &'static str {
+        match self.scheme {
+            Scheme::Steady {
+                iteration: SteadyKind::Jacobi { .. },
+                ..
+            } => "Jacobi sweep",
+            Scheme::Convection { .. } => "light march",
+            _ => "time step",
+        }
+    }
 
     fn memory_bytes(&self, problem: &Problem) -> u64 {
         ExplicitSolver::memory_bytes(self, problem)

@@ -342,3 +342,47 @@ fn a_step_beyond_the_stability_bound_is_refused_with_the_numbers() {
         "{err}"
     );
 }
+
+#[test]
+fn the_default_courant_number_is_stable_for_every_light_and_model() {
+    // Without `courant`, each upwind march runs at ½ or at its light's bound where that is
+    // lower: oblique suns (|u| + |v| + |w| up to √3, bound 0.58 for Paper and lower for
+    // Conservative, whose bound also holds h·σ_a) and a point light in the box all run,
+    // and the stopping rule sees them converge. Before the default came from the bound,
+    // these were refused as unstable at 0.5.
+    use lucent_core::{ParamValue, SolveError};
+    let suns = [
+        DVec3::new(-0.3, -0.4, -0.8),
+        DVec3::new(1.0, 1.0, 1.0),
+        DVec3::new(0.2, -0.9, 0.1),
+    ];
+    for model in ["conservative", "paper"] {
+        for sigma_t in [0.3f32, 1.0] {
+            let mut lights: Vec<Light> = suns
+                .iter()
+                .map(|d| Light::Directional {
+                    direction: d.normalize(),
+                    irradiance: Spectrum::Grey(1.0),
+                })
+                .collect();
+            lights.push(Light::Point {
+                position: DVec3::new(3.3, 4.1, 5.7),
+                intensity: Spectrum::Grey(1.0),
+            });
+            let p = problem(10, sigma_t, 0.0, lights, Boundary::Vacuum);
+            let mut params = Params::default();
+            params
+                .0
+                .insert("model".into(), ParamValue::Text(model.into()));
+            let solution = (ExplicitSolver::CONVECTION_DIFFUSION.build)(&params)
+                .unwrap()
+                .solve(&p, &SolveOptions::default())
+                .unwrap_or_else(|e: SolveError| panic!("{model}, σ_t {sigma_t}: {e}"));
+            assert!(
+                solution.report.stop_reason.is_converged(),
+                "{model}, σ_t {sigma_t}: {:?}",
+                solution.report.stop_reason
+            );
+        }
+    }
+}

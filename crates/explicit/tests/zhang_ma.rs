@@ -90,7 +90,7 @@ fn t2_discrete_beer_lambert() {
     }
     for (c, ratio) in [(0.25, 0.5), (0.5, 2.0 / 3.0), (1.0, 0.8)] {
         let settings = UpwindSettings {
-            courant: c,
+            courant: Some(c),
             stopping: Stopping {
                 relative_tolerance: 1e-15,
                 ..UpwindSettings::default().stopping
@@ -144,7 +144,7 @@ fn checkerboard_growth(courant: f64, direction: DVec3, sigma_a: f64) -> f64 {
         .collect();
     let run = |steps| {
         let settings = UpwindSettings {
-            courant,
+            courant: Some(courant),
             sweep: Sweep::Jacobi,
             edges: Edges::Periodic,
             stopping: Stopping {
@@ -192,7 +192,7 @@ fn t4_growth_factors_of_the_checkerboard() {
     // The paper's C ≤ 1 admits C = 0.6 on the diagonal; the correct bound refuses it.
     let lattice = Lattice::new([8; 3], 1.0).unwrap();
     let settings = UpwindSettings {
-        courant: 0.6,
+        courant: Some(0.6),
         ..UpwindSettings::default()
     };
     match propagate(&lattice, &[0.0; 512], &distant(diagonal), &settings) {
@@ -378,7 +378,7 @@ proptest! {
             .collect();
         for steps in [1, 7, 40] {
             let settings = UpwindSettings {
-                courant,
+                courant: Some(courant),
                 sweep: Sweep::Jacobi,                stopping: Stopping { relative_tolerance: 0.0, max_iterations: steps, ..Stopping::default() },
                 ..UpwindSettings::default()
             };
@@ -397,7 +397,7 @@ proptest! {
         let courant = factor * stability::upwind::courant_limit(direction);
         let lattice = Lattice::new([8; 3], 1.0).unwrap();
         let refused = propagate(&lattice, &[0.0; 512], &distant(direction), &UpwindSettings {
-            courant,
+            courant: Some(courant),
             ..UpwindSettings::default()
         });
         let is_unstable = matches!(refused, Err(ExplicitError::Unstable { .. }));
@@ -406,7 +406,7 @@ proptest! {
             .map(|c| { let [i, j, k] = lattice.coords(c); if (i + j + k) % 2 == 0 { 1.0 } else { -1.0 } })
             .collect();
         let out = propagate(&lattice, &[0.0; 512], &distant(direction), &UpwindSettings {
-            courant,
+            courant: Some(courant),
             sweep: Sweep::Jacobi,
             edges: Edges::Periodic,            stopping: Stopping { relative_tolerance: 0.0, max_iterations: 100_000, ..Stopping::default() },
             allow_unstable: true,

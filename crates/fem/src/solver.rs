@@ -11,7 +11,7 @@ use lucent_core::driver::{
 };
 use lucent_core::{
     BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OutputKind, Params, Problem,
-    Solution, SolveError, SolveOptions, Solver, SolverEntry, param_docs,
+    Solution, SolveError, SolveOptions, Solver, SolverEntry, param_docs, resolved_params,
     point_source_singular_part,
 };
 use lucent_grid::Grid;
@@ -48,6 +48,7 @@ impl FemP1Solver {
             }))
         },
         params: param_docs::<FemP1Params>,
+        resolved: |p| resolved_params::<FemP1Params>(p, "fem-p1-jacobi"),
     };
 }
 
@@ -167,6 +168,7 @@ impl FemDiffusionSolver {
             Ok(Box::new(FemDiffusionSolver { sweeps: p.sweeps }))
         },
         params: param_docs::<FemDiffusionParams>,
+        resolved: |p| resolved_params::<FemDiffusionParams>(p, "fem-diffusion"),
     };
 }
 
@@ -230,6 +232,10 @@ pub enum FemSetup {
 impl ChannelMethod for FemDiffusionSolver {
     type Setup = FemSetup;
     type Extra = ();
+
+    fn stage(&self) -> &'static str {
+        "CG iteration"
+    }
 
     fn memory_bytes(&self, problem: &Problem) -> u64 {
         // The assembled Q1 matrix (27 non-zeros per row), the triplets it is built from,

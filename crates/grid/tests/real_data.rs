@@ -266,3 +266,38 @@ fn mutated_smoke_vdb_never_panics() {
         );
     }
 }
+
+#[test]
+fn both_vtkjs_vti_folders_load_with_their_readme_statistics() {
+    // README: headsq 64 x 64 x 93 int16, min 0, max 3926, mean 507.687, non-zero 0.8462,
+    // spacing 3.2 3.2 1.5; LIDC2 256 x 256 x 133 uint8, min 0, max 255, mean 7.05451,
+    // non-zero 0.1639, spacing 1.40625 1.40625 2.5. Both by folder and by index.json.
+    let Some(dir) = data_dir() else { return };
+    for (name, dims, max, mean, nonzero, spacing) in [
+        (
+            "headsq.vti",
+            [64, 64, 93],
+            3926.0,
+            507.687,
+            0.8462,
+            DVec3::new(3.2, 3.2, 1.5),
+        ),
+        (
+            "LIDC2.vti",
+            [256, 256, 133],
+            255.0,
+            7.05451,
+            0.1639,
+            DVec3::new(1.40625, 1.40625, 2.5),
+        ),
+    ] {
+        for path in [dir.join(name), dir.join(name).join("index.json")] {
+            let grid = io::read_volume(&path).unwrap_or_else(|e| panic!("{e}"));
+            check(name, &grid, dims, 0.0, max, mean, 6);
+            assert_printed(grid.stats().nonzero_fraction, nonzero, 4, name);
+            assert!((grid.geometry().spacing() - spacing).abs().max_element() < 1e-12);
+            // Point samples are cell centres: the first sits at the origin (0, 0, 0).
+            assert!((grid.geometry().cell_centre(0, 0, 0)).abs().max_element() < 1e-12);
+        }
+    }
+}

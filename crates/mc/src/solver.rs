@@ -4,7 +4,7 @@ use lucent_core::driver::{self, Outcome, Record};
 use lucent_core::{
     BoundaryKind, Capabilities, FluenceKind, ImageEstimate, ImageRequest, ImageSolver, LightKind,
     OutputKind, Params, Problem, Progress, Solution, SolveError, SolveOptions, Solver, SolverEntry,
-    StopReason, param_docs,
+    StopReason, param_docs, resolved_params,
 };
 
 use crate::params::McParams;
@@ -38,6 +38,7 @@ impl McSolver {
         summary: "Monte Carlo particle tracing (delta tracking, track-length fluence with standard errors): the ground truth",
         build: |params| Ok(Box::new(Self::from_params(params)?)),
         params: param_docs::<McParams>,
+        resolved: |p| resolved_params::<McParams>(p, Self::NAME),
     };
 
     /// Builds from registry parameters.
@@ -97,6 +98,7 @@ impl Solver for McSolver {
             // Progress after every round of batches; the time budget stops new rounds.
             let report = |done: usize, total: usize| {
                 context.report(Progress {
+                    stage: "batch",
                     fraction: done as f64 / total.max(1) as f64,
                     iteration: done,
                     residual: None,
@@ -135,7 +137,9 @@ impl Solver for McSolver {
                             StopReason::TimeLimit { residual: relative }
                         }
                     } else {
-                        StopReason::IterationLimit { residual: relative }
+                        StopReason::Sampled {
+                            relative_error: relative,
+                        }
                     },
                     memory_bytes: needed,
                 },

@@ -81,6 +81,7 @@ pub mod materials;
 pub mod milne;
 pub mod phase;
 pub mod quadrature;
+mod significant;
 
 pub use analytic::{DiffusionMedium, RobinDisc};
 pub use coefficients::OpticalCoefficients;
@@ -89,3 +90,4 @@ pub use fresnel::{Dielectric, DiffuseFresnel};
 pub use materials::MeasuredMaterial;
 pub use phase::{Phase, PhaseFunction, PhaseSample};
 pub use quadrature::SphericalQuadrature;
+pub use significant::Significant;

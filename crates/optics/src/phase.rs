@@ -274,6 +274,28 @@ impl Phase {
     }
 }
 
+impl std::fmt::Display for Phase {
+    /// `isotropic`, `Henyey–Greenstein g = 0.5`, `double Henyey–Greenstein 0.7 × (g = 0.8)
+    /// + 0.3 × (g = -0.3)`, `Rayleigh`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use crate::Significant as S;
+        match self {
+            Phase::Isotropic => f.write_str("isotropic"),
+            Phase::HenyeyGreenstein(hg) => write!(f, "Henyey–Greenstein g = {}", S(hg.g)),
+            Phase::DoubleHenyeyGreenstein(d) => write!(
+                f,
+                "double Henyey–Greenstein {} × (g = {}) + {} × (g = {}), mean cosine {}",
+                S(d.weight),
+                S(d.first.g),
+                S(1.0 - d.weight),
+                S(d.second.g),
+                S(self.mean_cosine())
+            ),
+            Phase::Rayleigh => f.write_str("Rayleigh"),
+        }
+    }
+}
+
 macro_rules! dispatch {
     ($self:ident, $p:ident => $e:expr) => {
         match $self {

@@ -52,6 +52,42 @@ struct Frame {
     forward: DVec3,
 }
 
+impl std::fmt::Display for Camera {
+    /// In words, four significant digits.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use lucent_optics::Significant as S;
+        let v = |a: &[f64; 3]| format!("({}, {}, {})", S(a[0]), S(a[1]), S(a[2]));
+        match self {
+            Camera::Pinhole {
+                position,
+                look_at,
+                up,
+                fov,
+            } => write!(
+                f,
+                "pinhole at {} looking at {}, up {}, {}° vertical field of view",
+                v(position),
+                v(look_at),
+                v(up),
+                S(*fov)
+            ),
+            Camera::Orthographic {
+                position,
+                look_at,
+                up,
+                height,
+            } => write!(
+                f,
+                "orthographic at {} looking at {}, up {}, {} units tall",
+                v(position),
+                v(look_at),
+                v(up),
+                S(*height)
+            ),
+        }
+    }
+}
+
 impl Camera {
     fn frame(&self) -> Result<Frame, RenderError> {
         let (position, look_at, up) = match *self {

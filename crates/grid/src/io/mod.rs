@@ -6,6 +6,7 @@
 //! | NRRD (attached / detached header, raw / gzip) | [`nrrd`] | ✓ | ✓ |
 //! | MetaImage `.mhd` / `.mha` (raw / zlib) | [`mhd`] | ✓ | ✓ |
 //! | legacy VTK `STRUCTURED_POINTS` (binary / ASCII) | [`vtk`] | ✓ | ✓ |
+//! | VTK XML ImageData `.vti` (ascii, base64, raw appended; zlib) and vtk.js `.vti` folders | [`vti`] | ✓ | ✓ (XML) |
 //! | Mitsuba `.vol` (1, 3 or 6 channels) | [`mitsuba`] | ✓ | ✓ |
 //! | NumPy `.npy` (f32, u8, u16 and more) | [`npy`] | ✓ | ✓ |
 //! | OpenVDB float grids (half or full float, uncompressed or zlib) | [`vdb`] | ✓ | – |
@@ -24,6 +25,7 @@ pub mod npy;
 pub mod nrrd;
 pub mod raw;
 pub mod vdb;
+pub mod vti;
 pub mod vtk;
 
 use std::fs;
@@ -75,8 +77,12 @@ impl LoadOptions {
     }
 }
 
+/// The volume formats [`read_volume`] knows, for messages.
+pub const SUPPORTED: &str = ".nrrd/.nhdr, .mhd/.mha, .vtk, .vti (VTK XML ImageData, or a vtk.js folder), .vol (Mitsuba), .npy, .vdb, and headerless .raw with its layout";
+
 /// Reads any supported file by its extension with default options: `.nrrd`/`.nhdr`,
-/// `.mhd`/`.mha`, `.vtk`, `.vol` (single channel), `.npy`, `.vdb` (the first float grid).
+/// `.mhd`/`.mha`, `.vtk`, `.vti` (file or vtk.js folder), `.vol` (single channel), `.npy`,
+/// `.vdb` (the first float grid).
 /// Headerless raw files need their layout: use [`raw::read`].
 pub fn read_volume(path: impl AsRef<Path>) -> Result<Grid, GridError> {
     read_volume_with(path, &LoadOptions::default())
@@ -90,17 +96,27 @@ pub fn read_volume_with(path: impl AsRef<Path>, options: &LoadOptions) -> Result
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
+    // A vtk.js folder's index.json is read as its folder.
+    let in_vti_folder = path.file_name().is_some_and(|n| n == "index.json")
+        && path
+            .parent()
+            .and_then(Path::extension)
+            .is_some_and(|e| e.eq_ignore_ascii_case("vti"));
+    if in_vti_folder {
+        return vti::read(path, options);
+    }
     match ext.as_str() {
         "nrrd" | "nhdr" => nrrd::read(path, options),
         "mhd" | "mha" => mhd::read(path, options),
         "vtk" => vtk::read(path, options),
+        "vti" => vti::read(path, options),
         "vol" => mitsuba::read(path, options),
         "npy" => npy::read(path, options),
         "vdb" => vdb::read(path, None, options),
         _ => Err(GridError::Unsupported {
             path: path.to_owned(),
             what: "file extension",
-            value: ext,
+            value: format!("`.{ext}` (lucent reads {SUPPORTED})"),
         }),
     }
 }
