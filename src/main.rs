@@ -171,7 +171,9 @@ fn main() -> ExitCode {
             output,
         }) => solve_to_file(&scene, &solver, &output, cli.quiet),
         Some(Command::Solvers) => list_solvers().map(|()| Ended::Done),
-        Some(Command::Info { scene, solver }) => info(scene.as_deref(), &solver).map(|()| Ended::Done),
+        Some(Command::Info { scene, solver }) => {
+            info(scene.as_deref(), &solver).map(|()| Ended::Done)
+        }
         Some(Command::Materials) => materials_table(&mut io::stdout().lock())
             .map(|()| Ended::Done)
             .map_err(|e| match e {
@@ -189,6 +191,10 @@ fn main() -> ExitCode {
         Ok(Ended::Unconverged) => ExitCode::from(EXIT_UNCONVERGED),
         Ok(Ended::Diverged) => ExitCode::from(EXIT_DIVERGED),
         Err(Error::Io { reason, .. }) if reason.contains("Broken pipe") => ExitCode::SUCCESS,
+        Err(e @ Error::Usage(_)) => {
+            let _ = writeln!(io::stderr(), "lucent: {e}");
+            ExitCode::from(2)
+        }
         Err(e) => {
             let _ = writeln!(io::stderr(), "lucent: {e}");
             ExitCode::FAILURE
@@ -280,20 +286,30 @@ fn bar(quiet: bool, prefix: &'static str) -> (ProgressBar, Arc<Meter>) {
 /// own solver (said on stderr when `--solver` leaves them behind); `--param` on top.
 struct Chosen {
     solver: Box<dyn Solver>,
+    /// Said on stderr just before solving (after every check has passed).
+    note: Option<String>,
     params: Params,
     resolved: serde_json::Value,
+}
+
+impl Chosen {
+    fn say_note(&self) {
+        if let Some(note) = &self.note {
+            let _ = writeln!(io::stderr(), "{note}");
+        }
+    }
 }
 
 fn choose_solver(scene: &Scene, args: &SolverArgs) -> Result<Chosen, Error> {
     let registry = lucent::registry();
     let name = args.solver.as_deref().unwrap_or(&scene.solver.name);
     let entry = registry.entry(name)?;
+    let mut note = None;
     let mut params = if name == scene.solver.name {
         scene.solver.params.clone()
     } else {
         if !scene.solver.params.0.is_empty() {
-            let _ = writeln!(
-                io::stderr(),
+            note = Some(format!(
                 "lucent: note: the scene's [solver.params] belong to `{}`; `{name}` runs with its defaults{}",
                 scene.solver.name,
                 if args.params.is_empty() {
@@ -301,7 +317,7 @@ fn choose_solver(scene: &Scene, args: &SolverArgs) -> Result<Chosen, Error> {
                 } else {
                     " and --param"
                 }
-            );
+            ));
         }
         Params::default()
     };
@@ -313,6 +329,7 @@ fn choose_solver(scene: &Scene, args: &SolverArgs) -> Result<Chosen, Error> {
     let resolved = (entry.resolved)(&params)?;
     Ok(Chosen {
         solver,
+        note,
         params,
         resolved,
     })
@@ -370,7 +387,10 @@ fn check_output(path: &Path, extensions: &[&str], kinds: &str) -> Result<(), Err
         _ => Path::new("."),
     };
     if !folder.is_dir() {
-        return Err(fail(format!("the folder {} does not exist", folder.display())));
+        return Err(fail(format!(
+            "the folder {} does not exist",
+            folder.display()
+        )));
     }
     if path.exists() {
         std::fs::OpenOptions::new()
@@ -401,6 +421,7 @@ fn run_solver(
     args: &SolverArgs,
     quiet: bool,
 ) -> Result<Solution, Error> {
+    chosen.say_note();
     let (progress, meter) = bar(quiet, "solve");
     let options = args.options(meter.solver_callback())?;
     let solution = chosen.solver.solve(&built.problem, &options);
@@ -472,12 +493,17 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
     // hand the renderer a fluence.
     let (solve_seconds, image) = if let Some(imager) = chosen.solver.images() {
         let error_path = output.with_extension("stderr.exr");
-        check_output(&error_path, &["exr"], "the standard error is written as .exr")?;
+        check_output(
+            &error_path,
+            &["exr"],
+            "the standard error is written as .exr",
+        )?;
         let s = built.settings;
         let background = s.background.unwrap_or_else(|| sky_radiance(&built.problem));
         let camera = built.camera;
         camera.validate()?;
         let aspect = s.width as f64 / s.height as f64;
+        chosen.say_note();
         let (progress, meter) = bar(quiet, "trace");
         let report = meter.fraction_callback("camera paths");
         let ray = |u: f64, v: f64| {
@@ -741,7 +767,11 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
             lucent::core::Field::Constant(a) => S(f64::from(*a)).to_string(),
             lucent::core::Field::Grid(grid) => {
                 let a = grid.stats();
-                format!("{} to {} per cell", S(f64::from(a.min)), S(f64::from(a.max)))
+                format!(
+                    "{} to {} per cell",
+                    S(f64::from(a.min)),
+                    S(f64::from(a.max))
+                )
             }
         };
         let label = if distinct > 1 {
@@ -763,8 +793,11 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
     }
     writeln!(out, "  boundary  {}", p.boundary()).map_err(io_err)?;
     if p.embedded().is_some() {
-        writeln!(out, "  embedded  a body given by its signed distance (the medium is its inside)")
-            .map_err(io_err)?;
+        writeln!(
+            out,
+            "  embedded  a body given by its signed distance (the medium is its inside)"
+        )
+        .map_err(io_err)?;
     }
     let chosen = choose_solver(&parsed, args)?;
     let verdict = match chosen.solver.admits(p) {

@@ -124,10 +124,26 @@ pub enum VolumeSpec {
         /// Resample to this resolution.
         #[serde(default)]
         resolution: Option<[usize; 3]>,
-        /// Place the volume in this box instead of where the file puts it.
+        /// Place the volume in this box instead of where the file puts it (after `up`).
         #[serde(default)]
         bounds: Option<[[f64; 3]; 2]>,
+        /// The file's up axis: `"y"` for volumes authored Y-up (Houdini, Maya, OpenVDB's
+        /// convention: the default for `.vdb`), turned so that their up is lucent's z
+        /// (a point (x, y, z) of the file lands at (x, −z, y)); `"z"` keeps the file's axes
+        /// (the default for every other format).
+        #[serde(default)]
+        up: Option<UpAxis>,
     },
+}
+
+/// The up axis of a volume file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum UpAxis {
+    /// Y-up (Houdini, Maya, OpenVDB).
+    Y,
+    /// Z-up (lucent, Blender, 3ds Max; medical volumes' slice axis).
+    Z,
 }
 
 /// A procedural shape.
@@ -388,7 +404,7 @@ impl Scene {
     pub fn parse(text: &str, origin: &Path) -> Result<Self, Error> {
         toml::from_str(text).map_err(|e| Error::Scene {
             path: origin.to_owned(),
-            reason: e.to_string(),
+            reason: pinpoint(text, &e).unwrap_or_else(|| e.to_string()),
         })
     }
 
@@ -627,6 +643,7 @@ impl Scene {
                 raw,
                 resolution,
                 bounds,
+                up,
             } => {
                 let path = resolve(base, path);
                 let read_budget = LoadOptions {
@@ -652,6 +669,13 @@ impl Scene {
                 };
                 // The file's own grid is a scene field too.
                 geometry(grid.dims(), [[0.0; 3], [1.0; 3]])?;
+                let is_vdb = path
+                    .extension()
+                    .is_some_and(|e| e.eq_ignore_ascii_case("vdb"));
+                let default_up = if is_vdb { UpAxis::Y } else { UpAxis::Z };
+                if up.unwrap_or(default_up) == UpAxis::Y {
+                    grid = grid.y_up_to_z_up();
+                }
                 if let Some(b) = bounds {
                     grid = grid.clone().with_geometry(geometry(grid.dims(), *b)?)?;
                 }
@@ -663,6 +687,81 @@ impl Scene {
             }
         })
     }
+}
+
+/// A TOML error that serde could only pin to a whole table (internally tagged enums such
+/// as `[volume]`, `[[lights]]` and `phase` buffer their fields and lose the spans), moved
+/// to the line of the key it is about: the unknown key, or the key whose value has the
+/// wrong type. `None` when the error already points at a key or the key is not found.
+fn pinpoint(text: &str, error: &toml::de::Error) -> Option<String> {
+    let span = error.span()?;
+    let lines: Vec<&str> = text.lines().collect();
+    let start_line = text.get(..span.start)?.matches('\n').count();
+    let header = lines.get(start_line)?.trim_start();
+    let inline = text.get(span.clone())?.trim_start().starts_with('{');
+    if !header.starts_with('[') && !inline {
+        return None;
+    }
+    let message = error.message();
+    // The lines the table spans: an inline table's own text, or a section up to the next.
+    let section: Vec<(usize, &str)> = if inline {
+        let first = start_line;
+        let last = text.get(..span.end)?.matches('\n').count();
+        (first..=last).map(|l| (l, lines[l])).collect()
+    } else {
+        lines
+            .iter()
+            .enumerate()
+            .skip(start_line + 1)
+            .take_while(|(_, l)| !l.trim_start().starts_with('['))
+            .map(|(n, l)| (n, *l))
+            .collect()
+    };
+    let between = |m: &str, open: &str, close: char| -> Option<String> {
+        let at = m.find(open)? + open.len();
+        Some(m[at..].split(close).next()?.to_owned())
+    };
+    // Where in the section: `key =` for an unknown key, the value's text for a bad type.
+    let (line, column) = if let Some(key) = between(message, "unknown field `", '`') {
+        section.iter().find_map(|(n, l)| {
+            let column = find_key(l, &key)?;
+            Some((*n, column))
+        })?
+    } else if message.starts_with("invalid type:") || message.starts_with("invalid value:") {
+        let shown = between(message, "\"", '"')
+            .map(|v| format!("\"{v}\""))
+            .or_else(|| between(message, "`", '`'))?;
+        section.iter().find_map(|(n, l)| {
+            let eq = l.find('=')?;
+            let column = l[eq..].find(shown.as_str())? + eq;
+            Some((*n, column))
+        })?
+    } else {
+        return None;
+    };
+    let number = line + 1;
+    let gutter = " ".repeat(number.to_string().len());
+    Some(format!(
+        "TOML parse error at line {number}, column {}\n{gutter} |\n{number} | {}\n{gutter} | {}^\n{message}\n",
+        column + 1,
+        lines[line],
+        " ".repeat(column)
+    ))
+}
+
+/// The column of `key` as a key (`key =`, `key=`, or `, key =` in an inline table) in `line`.
+fn find_key(line: &str, key: &str) -> Option<usize> {
+    let mut from = 0;
+    while let Some(at) = line[from..].find(key).map(|a| a + from) {
+        let before = line[..at].trim_end();
+        let after = line[at + key.len()..].trim_start();
+        let starts = before.is_empty() || before.ends_with(',') || before.ends_with('{');
+        if starts && after.starts_with('=') {
+            return Some(at);
+        }
+        from = at + key.len();
+    }
+    None
 }
 
 fn to_shape(spec: ShapeSpec) -> Shape {

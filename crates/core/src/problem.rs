@@ -198,7 +198,11 @@ impl std::fmt::Display for Light {
             Light::Point {
                 position,
                 intensity,
-            } => write!(f, "point at {}, intensity {intensity} (power/sr)", Triple(*position)),
+            } => write!(
+                f,
+                "point at {}, intensity {intensity} (power/sr)",
+                Triple(*position)
+            ),
             Light::Spot {
                 position,
                 direction,
@@ -213,7 +217,9 @@ impl std::fmt::Display for Light {
                 S(inner_angle.to_degrees()),
                 S(outer_angle.to_degrees())
             ),
-            Light::Sky { radiance } => write!(f, "uniform sky, radiance {radiance} (power/(area sr))"),
+            Light::Sky { radiance } => {
+                write!(f, "uniform sky, radiance {radiance} (power/(area sr))")
+            }
             Light::Emission { scale, .. } => write!(
                 f,
                 "volume emission, {scale} (power/(volume sr)) per unit of the volume's value"
@@ -332,7 +338,9 @@ impl std::fmt::Display for Boundary {
         match *self {
             Boundary::Vacuum => f.write_str("vacuum (index-matched: nothing comes back)"),
             Boundary::Robin { eta } => write!(f, "Robin, relative refractive index {}", S(eta)),
-            Boundary::Dirichlet { value } => write!(f, "Dirichlet, fluence {} on the boundary", S(value)),
+            Boundary::Dirichlet { value } => {
+                write!(f, "Dirichlet, fluence {} on the boundary", S(value))
+            }
             Boundary::Neumann { flux } => write!(f, "Neumann, outward flux {}", S(flux)),
         }
     }

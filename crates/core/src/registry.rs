@@ -86,7 +86,10 @@ pub fn param_docs<T: SolverParams>() -> Vec<ParamDoc> {
 
 /// The parameters `params` give `T`, every default filled in, as JSON: what a solver
 /// built from `params` runs with (a report records this, not what was written).
-pub fn resolved_params<T: SolverParams>(params: &Params, solver: &str) -> Result<serde_json::Value, SolveError> {
+pub fn resolved_params<T: SolverParams>(
+    params: &Params,
+    solver: &str,
+) -> Result<serde_json::Value, SolveError> {
     let typed: T = params.parse(solver)?;
     serde_json::to_value(typed).map_err(|e| SolveError::InvalidParameter {
         name: "parameters".into(),

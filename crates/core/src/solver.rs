@@ -192,6 +192,9 @@ impl fmt::Display for Progress {
     /// `source iteration 7, residual 3.0e-4`; `uncollided light`; `batch 12`.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.stage)?;
+        if self.stage == Self::DONE {
+            return Ok(());
+        }
         if self.iteration > 0 {
             write!(f, " {}", self.iteration)?;
         }
@@ -414,7 +417,9 @@ impl fmt::Display for StopReason {
     /// `stopped at the iteration limit with a relative residual of 4.1e-2`, ...
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            StopReason::Exact => f.write_str("finished (a direct method: exact up to its discretisation)"),
+            StopReason::Exact => {
+                f.write_str("finished (a direct method: exact up to its discretisation)")
+            }
             StopReason::ConvergedRelative { residual } => {
                 write!(f, "converged to a relative residual of {residual:.1e}")
             }
@@ -437,10 +442,9 @@ impl fmt::Display for StopReason {
                 f,
                 "was interrupted with a relative residual of {residual:.1e}"
             ),
-            StopReason::DivergedNonFinite { iteration } => write!(
-                f,
-                "diverged: NaN or infinity at iteration {iteration}"
-            ),
+            StopReason::DivergedNonFinite { iteration } => {
+                write!(f, "diverged: NaN or infinity at iteration {iteration}")
+            }
             StopReason::DivergedGrowth { growth, iteration } => write!(
                 f,
                 "diverged: the residual grew {growth:.1e}-fold by iteration {iteration}"

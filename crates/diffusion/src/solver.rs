@@ -25,12 +25,12 @@
 use lucent_core::driver::{
     self, Channel, ChannelMethod, ChannelSolution, Coefficients, Context, Record,
 };
-use lucent_core::{param_docs, resolved_params};
 use lucent_core::{
     Angular, Boundary, BoundaryKind, Capabilities, FluenceKind, LightKind, OutputKind, Problem,
     Solution, SolveError, SolveOptions, Solver, SolverEntry, Uncollided,
     point_source_singular_part,
 };
+use lucent_core::{param_docs, resolved_params};
 
 use crate::params::{CgParams, JacobiParams, MultigridParams, SorParams};
 use lucent_grid::Grid;

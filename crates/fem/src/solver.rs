@@ -11,8 +11,8 @@ use lucent_core::driver::{
 };
 use lucent_core::{
     BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OutputKind, Params, Problem,
-    Solution, SolveError, SolveOptions, Solver, SolverEntry, param_docs, resolved_params,
-    point_source_singular_part,
+    Solution, SolveError, SolveOptions, Solver, SolverEntry, param_docs,
+    point_source_singular_part, resolved_params,
 };
 use lucent_grid::Grid;
 use lucent_optics::PhaseFunction;

@@ -192,6 +192,34 @@ impl Grid {
         }
     }
 
+    /// The same volume with its y axis made the z axis: a volume authored Y-up (Houdini,
+    /// Maya, OpenVDB's convention) seen Z-up (lucent's, as Blender's): a point (x, y, z)
+    /// of the file goes to (x, −z, y), a right-handed rotation of a quarter turn about x,
+    /// as Blender's importers do. Cell centres map onto cell centres; the box rotates
+    /// with them.
+    pub fn y_up_to_z_up(&self) -> Self {
+        let g = self.geometry();
+        let [nx, ny, nz] = g.dims();
+        let h = g.spacing();
+        let (lo, hi) = g.bounds();
+        let geometry = GridGeometry::new(
+            [nx, nz, ny],
+            DVec3::new(h.x, h.z, h.y),
+            DVec3::new(lo.x, -hi.z, lo.y),
+        )
+        .unwrap_or(*g);
+        let source = self.data();
+        let mut data = vec![0.0f32; source.len()];
+        // New cell (i, j', k') is old (i, nz − 1 − j', k').
+        for (k_new, slab) in data.chunks_mut(nx * nz).enumerate() {
+            for (j_new, row) in slab.chunks_mut(nx).enumerate() {
+                let old = (nz - 1 - j_new) * nx * ny + k_new * nx;
+                row.copy_from_slice(&source[old..old + nx]);
+            }
+        }
+        Self::from_vec(geometry, data).unwrap_or_else(|_| self.clone())
+    }
+
     /// A new grid with `f` applied to every value.
     pub fn map(&self, f: impl Fn(f32) -> f32 + Sync) -> Self {
         Self {

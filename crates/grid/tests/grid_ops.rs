@@ -252,3 +252,36 @@ fn invalid_geometry_and_parameters_are_refused() {
     assert!(BrickedGrid::from_dense(&grid, 128).is_err());
     assert!(resample(&grid, [0, 2, 2]).is_err());
 }
+
+proptest! {
+    #[test]
+    fn y_up_to_z_up_moves_every_cell_to_its_rotated_place(
+        nx in 1usize..7, ny in 1usize..7, nz in 1usize..7,
+        hx in 0.1f64..2.0, hy in 0.1f64..2.0, hz in 0.1f64..2.0,
+        ox in -3.0f64..3.0, oy in -3.0f64..3.0, oz in -3.0f64..3.0,
+    ) {
+        // (x, y, z) → (x, −z, y): the value at each old cell centre is found at the rotated
+        // centre, the spacing permutes, and the box's volume is kept.
+        let g = GridGeometry::new([nx, ny, nz], DVec3::new(hx, hy, hz), DVec3::new(ox, oy, oz)).unwrap();
+        let mut grid = Grid::filled(g, 0.0);
+        for (n, v) in grid.data_mut().iter_mut().enumerate() {
+            *v = n as f32;
+        }
+        let turned = grid.y_up_to_z_up();
+        let t = turned.geometry();
+        prop_assert_eq!(t.dims(), [nx, nz, ny]);
+        prop_assert_eq!(t.spacing(), DVec3::new(hx, hz, hy));
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let c = g.cell_centre(i, j, k);
+                    let v = t.world_to_voxel(DVec3::new(c.x, -c.z, c.y));
+                    let r = v.round();
+                    prop_assert!((v - r).abs().max_element() < 1e-9, "{v}");
+                    let new = t.index(r.x as usize, r.y as usize, r.z as usize);
+                    prop_assert_eq!(turned.data()[new], grid.data()[g.index(i, j, k)]);
+                }
+            }
+        }
+    }
+}

@@ -42,7 +42,11 @@ fn every_encoding_of_vtks_writer_reads_the_same_image() {
     ] {
         let grid = io::read_volume(fixture(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(grid.dims(), [5, 4, 3], "{name}");
-        assert_eq!(grid.geometry().spacing(), DVec3::new(0.5, 0.25, 2.0), "{name}");
+        assert_eq!(
+            grid.geometry().spacing(),
+            DVec3::new(0.5, 0.25, 2.0),
+            "{name}"
+        );
         assert_eq!(
             grid.geometry().cell_centre(0, 0, 0),
             DVec3::new(1.0, 2.0, 3.0),
@@ -65,8 +69,12 @@ fn cell_data_fill_the_cells_between_the_points() {
 fn lucents_writer_round_trips_raw_and_compressed() {
     // Odd dimensions (not multiples of 8), a non-trivial origin, f32 and u16.
     let dir = tempfile::tempdir().unwrap();
-    let g = GridGeometry::new([7, 5, 9], DVec3::new(0.3, 0.2, 0.7), DVec3::new(-1.0, 0.5, 2.0))
-        .unwrap();
+    let g = GridGeometry::new(
+        [7, 5, 9],
+        DVec3::new(0.3, 0.2, 0.7),
+        DVec3::new(-1.0, 0.5, 2.0),
+    )
+    .unwrap();
     let mut grid = Grid::filled(g, 0.0);
     for (index, v) in grid.data_mut().iter_mut().enumerate() {
         let [i, j, k] = g.coords(index);
@@ -78,7 +86,9 @@ fn lucents_writer_round_trips_raw_and_compressed() {
         (ScalarType::F64, true),
         (ScalarType::U16, true),
     ] {
-        let path = dir.path().join(format!("x_{compress}_{}.vti", scalar.name()));
+        let path = dir
+            .path()
+            .join(format!("x_{compress}_{}.vti", scalar.name()));
         let source = if scalar == ScalarType::U16 {
             grid.map(|v| v.round())
         } else {
@@ -88,8 +98,17 @@ fn lucents_writer_round_trips_raw_and_compressed() {
         let back = io::read_volume(&path).unwrap();
         assert_eq!(back.dims(), source.dims());
         assert!((back.geometry().origin() - g.origin()).abs().max_element() < 1e-12);
-        assert!((back.geometry().spacing() - g.spacing()).abs().max_element() < 1e-12);
-        assert_eq!(back.data(), source.data(), "{scalar:?}, compressed {compress}");
+        assert!(
+            (back.geometry().spacing() - g.spacing())
+                .abs()
+                .max_element()
+                < 1e-12
+        );
+        assert_eq!(
+            back.data(),
+            source.data(),
+            "{scalar:?}, compressed {compress}"
+        );
     }
 }
 
@@ -102,28 +121,44 @@ fn broken_files_are_typed_errors_naming_the_file() {
         ("truncated", good[..good.len() - 60].to_vec()),
         (
             "wrong type",
-            text.replace("type=\"ImageData\"", "type=\"PolyData\"").into_bytes(),
+            text.replace("type=\"ImageData\"", "type=\"PolyData\"")
+                .into_bytes(),
         ),
         (
             "lz4",
             good.windows(21)
                 .position(|w| w == b"vtkZLibDataCompressor")
-                .map(|p| [&good[..p], b"vtkLZ4DataCompressor".as_slice(), &good[p + 21..]].concat())
+                .map(|p| {
+                    [
+                        &good[..p],
+                        b"vtkLZ4DataCompressor".as_slice(),
+                        &good[p + 21..],
+                    ]
+                    .concat()
+                })
                 .unwrap(),
         ),
         ("empty", Vec::new()),
         ("not xml", b"hello".to_vec()),
         (
             "huge extent",
-            text.replace("WholeExtent=\"0 4 0 3 0 2\"", "WholeExtent=\"0 4000000 0 3000000 0 2000000\"")
-                .into_bytes(),
+            text.replace(
+                "WholeExtent=\"0 4 0 3 0 2\"",
+                "WholeExtent=\"0 4000000 0 3000000 0 2000000\"",
+            )
+            .into_bytes(),
         ),
     ];
     for (what, bytes) in cases {
         let path = dir.path().join("broken.vti");
         std::fs::write(&path, &bytes).unwrap();
-        let err = io::read_volume_with(&path, &LoadOptions { memory_budget: 1 << 30 })
-            .expect_err(what);
+        let err = io::read_volume_with(
+            &path,
+            &LoadOptions {
+                memory_budget: 1 << 30,
+            },
+        )
+        .expect_err(what);
         assert!(err.to_string().contains("broken.vti"), "{what}: {err}");
         assert!(
             !matches!(err, GridError::Io { .. }),
@@ -138,7 +173,9 @@ fn an_unknown_extension_lists_the_formats_lucent_reads() {
     let path = dir.path().join("volume.xyz");
     std::fs::write(&path, b"x").unwrap();
     let err = io::read_volume(&path).unwrap_err().to_string();
-    for format in [".nrrd", ".mhd", ".vtk", ".vti", ".vol", ".npy", ".vdb", ".raw"] {
+    for format in [
+        ".nrrd", ".mhd", ".vtk", ".vti", ".vol", ".npy", ".vdb", ".raw",
+    ] {
         assert!(err.contains(format), "{format} missing from: {err}");
     }
 }

@@ -104,6 +104,9 @@ impl Solver for McSolver {
                     residual: None,
                 })
             };
+            // Something to show before the first round of batches ends (dense media: tens
+            // of seconds).
+            report(0, self.config.batches);
             let control = RunControl {
                 progress: Some(&report),
                 time_budget: context.remaining_budget(),

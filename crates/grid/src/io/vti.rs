@@ -105,7 +105,11 @@ fn placement(
             .filter(|&n| n >= 1)
             .ok_or_else(|| malformed(path, format, format!("extent {extent:?}")))?;
         // Cell data: the cells between the points (a flat axis keeps one cell).
-        let n = if cell_data { (points - 1).max(1) } else { points };
+        let n = if cell_data {
+            (points - 1).max(1)
+        } else {
+            points
+        };
         dims[a] = usize::try_from(n).map_err(|_| malformed(path, format, "extent"))?;
         let offset = if cell_data && points > 1 { 0.5 } else { 0.0 };
         first[a] = origin[a] + (lo as f64 + offset) * spacing[a];
@@ -279,7 +283,11 @@ fn tags<'a>(text: &'a str, path: &Path) -> Result<Vec<Tag<'a>>, GridError> {
     while let Some(start) = text[pos..].find('<').map(|s| pos + s) {
         let rest = &text[start..];
         if rest.starts_with("<!--") {
-            pos = start + rest.find("-->").ok_or_else(|| bad("unterminated comment"))? + 3;
+            pos = start
+                + rest
+                    .find("-->")
+                    .ok_or_else(|| bad("unterminated comment"))?
+                + 3;
             continue;
         }
         let close = rest.find('>').ok_or_else(|| bad("unterminated tag"))?;
@@ -299,7 +307,9 @@ fn tags<'a>(text: &'a str, path: &Path) -> Result<Vec<Tag<'a>>, GridError> {
             if a.is_empty() {
                 break;
             }
-            let eq = a.find('=').ok_or_else(|| bad("attribute without a value"))?;
+            let eq = a
+                .find('=')
+                .ok_or_else(|| bad("attribute without a value"))?;
             let key = a[..eq].trim();
             let after = a[eq + 1..].trim_start();
             let quote = after
@@ -424,7 +434,8 @@ fn binary_payload(
     if !framing.zlib {
         let bytes = if base64 {
             let text = base64_text(raw);
-            let chars = base64_chars(h.saturating_add(usize::try_from(expected).unwrap_or(usize::MAX)));
+            let chars =
+                base64_chars(h.saturating_add(usize::try_from(expected).unwrap_or(usize::MAX)));
             base64_decode(&text[..chars.min(text.len())], path)?
         } else {
             raw.to_vec()
@@ -459,7 +470,11 @@ fn binary_payload(
         }
         let header_chars = base64_chars(h * (3 + blocks));
         if text.len() < header_chars {
-            return Err(truncated("compression header", header_chars as u64, text.len()));
+            return Err(truncated(
+                "compression header",
+                header_chars as u64,
+                text.len(),
+            ));
         }
         let header = base64_decode(&text[..header_chars], path)?;
         let compressed: u64 = header
@@ -482,7 +497,10 @@ fn binary_payload(
                 raw.len(),
             ));
         }
-        (raw[..h * (3 + blocks)].to_vec(), raw[h * (3 + blocks)..].to_vec())
+        (
+            raw[..h * (3 + blocks)].to_vec(),
+            raw[h * (3 + blocks)..].to_vec(),
+        )
     };
     let ints: Vec<u64> = header.chunks_exact(h).map(|c| framing.int(c)).collect();
     if ints.len() < 3 {
@@ -490,13 +508,19 @@ fn binary_payload(
     }
     let (blocks, block_size, last) = (ints[0] as usize, ints[1], ints[2]);
     if ints.len() < 3 + blocks {
-        return Err(truncated("compression header", (3 + blocks) as u64, ints.len()));
+        return Err(truncated(
+            "compression header",
+            (3 + blocks) as u64,
+            ints.len(),
+        ));
     }
     let total = match blocks {
         0 => 0,
         n => {
             let last = if last == 0 { block_size } else { last };
-            (n as u64 - 1).saturating_mul(block_size).saturating_add(last)
+            (n as u64 - 1)
+                .saturating_mul(block_size)
+                .saturating_add(last)
         }
     };
     if total != expected {
@@ -510,9 +534,13 @@ fn binary_payload(
     let mut at = 0usize;
     for b in 0..blocks {
         let size = usize::try_from(ints[3 + b]).unwrap_or(usize::MAX);
-        let block = rest
-            .get(at..at.saturating_add(size))
-            .ok_or_else(|| truncated("compressed block", size as u64, rest.len() - at.min(rest.len())))?;
+        let block = rest.get(at..at.saturating_add(size)).ok_or_else(|| {
+            truncated(
+                "compressed block",
+                size as u64,
+                rest.len() - at.min(rest.len()),
+            )
+        })?;
         at += size;
         let want = if b + 1 == blocks {
             total - (blocks as u64 - 1) * block_size
@@ -589,8 +617,7 @@ pub fn parse_xml(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Gri
         .ok_or_else(|| malformed(path, XML, "no <ImageData> element"))?;
     let extent: [i64; 6] = parse_numbers(path, "WholeExtent", image.get("WholeExtent"))?;
     let origin: [f64; 3] = parse_numbers(path, "Origin", image.get("Origin").or(Some("0 0 0")))?;
-    let spacing: [f64; 3] =
-        parse_numbers(path, "Spacing", image.get("Spacing").or(Some("1 1 1")))?;
+    let spacing: [f64; 3] = parse_numbers(path, "Spacing", image.get("Spacing").or(Some("1 1 1")))?;
     if tags.iter().filter(|t| t.name == "Piece").count() > 1 {
         return Err(GridError::Unsupported {
             path: path.to_owned(),
@@ -669,14 +696,22 @@ pub fn parse_xml(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Gri
             values
         }
         "binary" => {
-            let payload = binary_payload(path, &bytes[array.end..xml_end.max(array.end)], true, framing, expected)?;
+            let payload = binary_payload(
+                path,
+                &bytes[array.end..xml_end.max(array.end)],
+                true,
+                framing,
+                expected,
+            )?;
             decode(&payload, scalar, endian)
         }
         "appended" => {
             let appended = tags
                 .last()
                 .filter(|t| t.name == "AppendedData")
-                .ok_or_else(|| malformed(path, XML, "format=\"appended\" without <AppendedData>"))?;
+                .ok_or_else(|| {
+                    malformed(path, XML, "format=\"appended\" without <AppendedData>")
+                })?;
             let offset: usize = array
                 .get("offset")
                 .and_then(|o| o.trim().parse().ok())
@@ -760,7 +795,8 @@ pub fn write(
         let blocks: Vec<Vec<u8>> = payload
             .chunks(BLOCK)
             .map(|chunk| {
-                let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+                let mut z =
+                    flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
                 z.write_all(chunk)
                     .and_then(|()| z.finish())
                     .map_err(|source| GridError::Io {
