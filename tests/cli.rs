@@ -92,6 +92,8 @@ fn no_arguments_renders_the_default_scene_to_lucent_png() {
     assert!(out.status.success(), "{}", stderr(&out));
     let said = String::from_utf8_lossy(&out.stdout);
     assert!(said.contains("lucent.png"), "says where: {said}");
+    // Multiple scattering, not single scattering alone.
+    assert!(said.contains("`diffusion-mg`"), "{said}");
     assert_eq!(
         image::open(dir.path().join("lucent.png")).unwrap().width(),
         640
@@ -952,4 +954,65 @@ fn errors_blame_the_right_thing() {
         d,
     );
     assert_clean_failure(&out, "invalid parameter `omega`: in (0, 2)");
+}
+
+#[test]
+fn monte_carlo_that_took_every_path_is_a_finished_solve() {
+    // A Monte Carlo run that traced every particle asked for is complete (exit 0, stop
+    // reason `sampled` with its standard error), not stopped at an iteration limit.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("box.toml"), SMALL_BOX).unwrap();
+    let out = lucent(
+        &[
+            "solve",
+            "box.toml",
+            "--solver",
+            "mc",
+            "--param",
+            "particles=20000",
+            "-o",
+            "mc.npy",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("mc.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["report"]["stop_reason"]["reason"], "sampled");
+    let error = report["report"]["stop_reason"]["relative_error"]
+        .as_f64()
+        .unwrap();
+    assert!(error > 0.0 && error < 1.0, "{error}");
+}
+
+#[test]
+fn default_courant_number_fits_the_scene_at_hand() {
+    // Zhang & Ma's upwind models under an oblique sun whose bound is below the paper's ½
+    // (|u| + |v| + |w| = 1.59 at (−0.3, −0.4, −0.8), plus h·σ_a for the conservative form):
+    // the default comes from the bound, so the ordinary scene runs.
+    let dir = tempfile::tempdir().unwrap();
+    let sun = SMALL_BOX.replace(
+        "kind = \"point\"\nposition = [0.1, 0.05, -0.1]\nintensity = 1.0",
+        "kind = \"directional\"\ndirection = [-0.3, -0.4, -0.8]\nirradiance = 1.0",
+    );
+    std::fs::write(dir.path().join("sun.toml"), sun).unwrap();
+    for model in ["conservative", "paper"] {
+        let out = lucent(
+            &[
+                "render",
+                "sun.toml",
+                "--solver",
+                "convection-diffusion",
+                "--param",
+                &format!("model={model}"),
+                "-o",
+                "zm.png",
+                "--quiet",
+            ],
+            dir.path(),
+        );
+        assert_eq!(out.status.code(), Some(0), "{model}: {}", stderr(&out));
+    }
 }

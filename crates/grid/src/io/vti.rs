@@ -18,7 +18,7 @@
 //! grids are axis-aligned, so a rotated image is read in its own index frame (as Mitsuba
 //! reads `.vol` files into the unit cube). Multi-component arrays are refused.
 //!
-//! Only the writer of the XML form exists here ([`write`], raw appended data, optionally
+//! Only the writer of the XML form exists here ([`write()`], raw appended data, optionally
 //! zlib-compressed); vtk.js folders are read only.
 
 use std::path::{Path, PathBuf};
