@@ -74,9 +74,10 @@ struct SolverArgs {
     /// a warning).
     #[arg(long)]
     allow_unconverged: bool,
-    /// Stop iterating when the residual has fallen to this fraction of its start.
-    #[arg(long, value_name = "RELATIVE", default_value_t = SolveOptions::default().relative_tolerance)]
-    tolerance: f64,
+    /// Stop iterating when the residual has fallen to this fraction of its start (default:
+    /// the scene's `[solver] tolerance`, else 1e-6).
+    #[arg(long, value_name = "RELATIVE")]
+    tolerance: Option<f64>,
     /// Stop after this many iterations (cycles, sweeps, time steps, batches).
     #[arg(long, value_name = "N", default_value_t = SolveOptions::default().max_iterations)]
     max_iterations: usize,
@@ -86,8 +87,13 @@ struct SolverArgs {
 }
 
 impl SolverArgs {
-    /// The solve options these arguments ask for, with a progress callback and Ctrl-C.
-    fn options(&self, progress: lucent::core::ProgressFn) -> Result<SolveOptions, Error> {
+    /// The solve options these arguments ask for, with the chosen solver's tolerance, a
+    /// progress callback and Ctrl-C.
+    fn options(
+        &self,
+        chosen: &Chosen,
+        progress: lucent::core::ProgressFn,
+    ) -> Result<SolveOptions, Error> {
         let time_budget = match self.time_limit {
             None => None,
             Some(t) if t > 0.0 && t.is_finite() && t < 1e9 => Some(Duration::from_secs_f64(t)),
@@ -98,7 +104,7 @@ impl SolverArgs {
             }
         };
         Ok(SolveOptions {
-            relative_tolerance: self.tolerance,
+            relative_tolerance: chosen.tolerance,
             max_iterations: self.max_iterations,
             time_budget,
             progress: Some(progress),
@@ -290,6 +296,8 @@ struct Chosen {
     note: Option<String>,
     params: Params,
     resolved: serde_json::Value,
+    /// `--tolerance`, else the scene's, else the default.
+    tolerance: f64,
 }
 
 impl Chosen {
@@ -330,6 +338,10 @@ fn choose_solver(scene: &Scene, args: &SolverArgs) -> Result<Chosen, Error> {
     Ok(Chosen {
         solver,
         note,
+        tolerance: args
+            .tolerance
+            .or(scene.solver.tolerance)
+            .unwrap_or(SolveOptions::default().relative_tolerance),
         params,
         resolved,
     })
@@ -423,7 +435,7 @@ fn run_solver(
 ) -> Result<Solution, Error> {
     chosen.say_note();
     let (progress, meter) = bar(quiet, "solve");
-    let options = args.options(meter.solver_callback())?;
+    let options = args.options(chosen, meter.solver_callback())?;
     let solution = chosen.solver.solve(&built.problem, &options);
     progress.finish_and_clear();
     Ok(solution?)
@@ -488,7 +500,7 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
         "images are written as .png or .exr (sRGB or linear)",
     )?;
     chosen.solver.admits(&built.problem)?;
-    args.solver.options(meter_free())?.validate()?;
+    args.solver.options(&chosen, meter_free())?.validate()?;
     // A solver that makes pictures itself (Monte Carlo's camera paths) says so; the rest
     // hand the renderer a fluence.
     let (solve_seconds, image) = if let Some(imager) = chosen.solver.images() {
@@ -607,7 +619,7 @@ fn solve_to_file(
     let report_path = output.with_extension("json");
     check_output(&report_path, &["json"], "the report is written as .json")?;
     chosen.solver.admits(&built.problem)?;
-    args.options(meter_free())?.validate()?;
+    args.options(&chosen, meter_free())?.validate()?;
     let solution = run_solver(&chosen, &built, args, quiet)?;
     let stop = &solution.report.stop_reason;
     let ended = verdict(
@@ -636,7 +648,7 @@ fn solve_to_file(
         "params": chosen.resolved,
         "params_given": chosen.params,
         "options": {
-            "tolerance": args.tolerance,
+            "tolerance": chosen.tolerance,
             "max_iterations": args.max_iterations,
             "time_limit_s": args.time_limit,
         },

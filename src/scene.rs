@@ -367,6 +367,10 @@ pub struct SolverSpec {
     /// Its parameters.
     #[serde(default)]
     pub params: Params,
+    /// The relative residual to stop at (`None`: `SolveOptions`'s 1e-6); the command
+    /// line's `--tolerance` overrides it.
+    #[serde(default)]
+    pub tolerance: Option<f64>,
 }
 
 fn default_solver() -> String {
@@ -378,6 +382,7 @@ impl Default for SolverSpec {
         Self {
             name: default_solver(),
             params: Params::default(),
+            tolerance: None,
         }
     }
 }

@@ -93,7 +93,7 @@ fn no_arguments_renders_the_default_scene_to_lucent_png() {
     let said = String::from_utf8_lossy(&out.stdout);
     assert!(said.contains("lucent.png"), "says where: {said}");
     // Multiple scattering, not single scattering alone.
-    assert!(said.contains("`diffusion-mg`"), "{said}");
+    assert!(said.contains("`dom`"), "{said}");
     assert_eq!(
         image::open(dir.path().join("lucent.png")).unwrap().width(),
         640
@@ -628,8 +628,9 @@ fn exit_status_and_first_words_say_how_the_solve_ended() {
 fn parameters_follow_their_solver_and_the_report_records_what_ran() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let scene =
-        format!("{SMALL_BOX}[solver]\nname = \"diffusion-sor\"\nparams = {{ omega = 1.5 }}\n");
+    let scene = format!(
+        "{SMALL_BOX}[solver]\nname = \"diffusion-sor\"\nparams = {{ omega = 1.5 }}\ntolerance = 1e-4\n"
+    );
     std::fs::write(d.join("sor.toml"), scene).unwrap();
     let report = |args: &[&str]| -> (serde_json::Value, Output) {
         let mut all = vec![
@@ -651,7 +652,11 @@ fn parameters_follow_their_solver_and_the_report_records_what_ran() {
     assert_eq!(r["solver"], "diffusion-sor");
     assert_eq!(r["params"]["omega"], 1.5);
     assert_eq!(r["params"]["discretisation"], "embedded");
+    assert_eq!(r["options"]["tolerance"], 1e-4);
     assert_eq!(stderr(&out), "");
+    // The command line's tolerance over the scene's.
+    let (r, _) = report(&["--tolerance", "1e-5"]);
+    assert_eq!(r["options"]["tolerance"], 1e-5);
     // --param overrides them.
     let (r, _) = report(&["--param", "omega=1.2"]);
     assert_eq!(r["params"]["omega"], 1.2);
