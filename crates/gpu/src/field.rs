@@ -1,0 +1,168 @@
+//! Grids on the device and back: the one place host↔device transfers happen.
+
+use lucent_grid::{Grid, GridGeometry};
+use wgpu::util::DeviceExt;
+
+use crate::context::GpuContext;
+use crate::error::GpuError;
+
+/// One f32 field in a storage buffer (x fastest, as on the host).
+#[derive(Debug)]
+pub struct DeviceField {
+    buffer: wgpu::Buffer,
+    len: usize,
+    what: String,
+}
+
+impl DeviceField {
+    /// Uploads `values` after checking them: no NaN or infinity (and, with `nonnegative`,
+    /// no negative value: σ_t, albedo and sources), and one binding's worth at most —
+    /// both before anything is allocated on the device.
+    pub fn upload(
+        context: &GpuContext,
+        what: &str,
+        values: &[f32],
+        nonnegative: bool,
+    ) -> Result<Self, GpuError> {
+        let bad = |index: usize, problem| GpuError::BadInput {
+            what: what.to_owned(),
+            index,
+            value: values[index],
+            problem,
+        };
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(bad(i, "not finite"));
+        }
+        if nonnegative && let Some(i) = values.iter().position(|&v| v < 0.0) {
+            return Err(bad(i, "negative"));
+        }
+        // An empty field still binds four bytes (wgpu refuses empty storage bindings).
+        let bytes = (values.len().max(1) * 4) as u64;
+        context.check_binding(what, bytes)?;
+        let contents: &[u8] = if values.is_empty() {
+            &[0; 4]
+        } else {
+            bytemuck::cast_slice(values)
+        };
+        let buffer = context.checked(|| {
+            context
+                .device()
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(what),
+                    contents,
+                    usage: wgpu::BufferUsages::STORAGE
+                        | wgpu::BufferUsages::COPY_SRC
+                        | wgpu::BufferUsages::COPY_DST,
+                })
+        })?;
+        Ok(Self {
+            buffer,
+            len: values.len(),
+            what: what.to_owned(),
+        })
+    }
+
+    /// Uploads a grid's values.
+    pub fn from_grid(
+        context: &GpuContext,
+        what: &str,
+        grid: &Grid,
+        nonnegative: bool,
+    ) -> Result<Self, GpuError> {
+        Self::upload(context, what, grid.data(), nonnegative)
+    }
+
+    /// A field of `len` zeros, for results and ping-pong partners.
+    pub fn zeros(context: &GpuContext, what: &str, len: usize) -> Result<Self, GpuError> {
+        let bytes = (len.max(1) * 4) as u64;
+        context.check_binding(what, bytes)?;
+        let buffer = context.checked(|| {
+            context.device().create_buffer(&wgpu::BufferDescriptor {
+                label: Some(what),
+                size: bytes,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        })?;
+        Ok(Self {
+            buffer,
+            len,
+            what: what.to_owned(),
+        })
+    }
+
+    /// The storage buffer.
+    pub fn buffer(&self) -> &wgpu::Buffer {
+        &self.buffer
+    }
+
+    /// Number of values.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether it holds no values.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Copies the values back to the host (one staging buffer, one wait).
+    pub fn download(&self, context: &GpuContext) -> Result<Vec<f32>, GpuError> {
+        download_buffer(context, &self.buffer, self.len, &self.what)
+    }
+
+    /// Copies the values back as a grid of `geometry` (whose cell count must be the
+    /// field's length).
+    pub fn to_grid(&self, context: &GpuContext, geometry: GridGeometry) -> Result<Grid, GpuError> {
+        let values = self.download(context)?;
+        Grid::from_vec(geometry, values).map_err(|e| GpuError::Device(e.to_string()))
+    }
+}
+
+/// Reads `len` f32 values from the start of `buffer` (which must allow `COPY_SRC`).
+pub(crate) fn download_buffer(
+    context: &GpuContext,
+    buffer: &wgpu::Buffer,
+    len: usize,
+    what: &str,
+) -> Result<Vec<f32>, GpuError> {
+    if len == 0 {
+        return Ok(Vec::new());
+    }
+    let bytes = (len * 4) as u64;
+    let device = context.device();
+    let staging = context.checked(|| {
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("lucent staging"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("lucent download"),
+        });
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes);
+        context.queue().submit([encoder.finish()]);
+        staging
+    })?;
+    let slice = staging.slice(..);
+    let (sender, receiver) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |result| {
+        let _ = sender.send(result);
+    });
+    context.wait()?;
+    receiver
+        .recv()
+        .map_err(|e| GpuError::Device(format!("{what}: {e}")))?
+        .map_err(|e| GpuError::Device(format!("{what}: {e}")))?;
+    let values = {
+        let view = slice
+            .get_mapped_range()
+            .map_err(|e| GpuError::Device(format!("{what}: {e}")))?;
+        bytemuck::cast_slice::<u8, f32>(&view).to_vec()
+    };
+    staging.unmap();
+    Ok(values)
+}

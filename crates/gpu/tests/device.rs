@@ -1,0 +1,151 @@
+//! The GPU layer on a real adapter (lavapipe in CI): transfers, reductions against the
+//! CPU's f64, limits and bad input. Without an adapter these skip with the reason, except
+//! under `CI=true`, where they fail.
+
+use lucent_gpu::{DeviceField, GpuContext, GpuError, Reducer, context_or_skip};
+use rand::{Rng, SeedableRng};
+
+#[test]
+fn the_context_reports_its_adapter_and_limits() {
+    let Some(context) = context_or_skip("the_context_reports_its_adapter_and_limits") else {
+        return;
+    };
+    let text = context.describe();
+    eprintln!("{text}");
+    assert!(
+        text.contains(&context.info().name) && text.contains("MiB"),
+        "{text}"
+    );
+    // lucent asked for at least one 256³ f32 grid per binding and 8 storage buffers.
+    assert!(context.limits().max_storage_buffer_binding_size >= 64 << 20);
+    assert!(context.limits().max_storage_buffers_per_shader_stage >= 8);
+}
+
+#[test]
+fn a_field_goes_up_and_comes_back_bit_for_bit() {
+    let Some(context) = context_or_skip("a_field_goes_up_and_comes_back_bit_for_bit") else {
+        return;
+    };
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
+    // Sizes around the workgroup and not multiples of 8.
+    for len in [0usize, 1, 255, 256, 257, 1001, 77_777] {
+        let values: Vec<f32> = (0..len).map(|_| rng.random_range(-1e3f32..1e3)).collect();
+        let field = DeviceField::upload(&context, "values", &values, false).unwrap();
+        assert_eq!(field.download(&context).unwrap(), values, "len {len}");
+    }
+}
+
+#[test]
+fn reductions_match_the_cpus_f64_sums() {
+    // Pairwise within 256, f64 across: relative error ≲ 8·2⁻²⁴ ≈ 5e-7 for sums of
+    // non-negative values (the bound of the crate's *Precision*); 1e-6 is that with a
+    // factor 2 of margin. Mixed signs are compared against Σ|x|, the scale the rounding
+    // acts on. The maximum is exact.
+    let Some(context) = context_or_skip("reductions_match_the_cpus_f64_sums") else {
+        return;
+    };
+    let reducer = Reducer::new(&context).unwrap();
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+    for len in [1usize, 300, 65_536, 1_000_003] {
+        for signed in [false, true] {
+            let values: Vec<f32> = (0..len)
+                .map(|_| {
+                    let v = rng.random_range(0.0f32..2.0) * 10f32.powi(rng.random_range(-3..3));
+                    if signed && rng.random_bool(0.5) {
+                        -v
+                    } else {
+                        v
+                    }
+                })
+                .collect();
+            let field = DeviceField::upload(&context, "values", &values, false).unwrap();
+            let cpu_sum: f64 = values.iter().map(|&v| f64::from(v)).sum();
+            let cpu_abs: f64 = values.iter().map(|&v| f64::from(v).abs()).sum();
+            let cpu_sq: f64 = values.iter().map(|&v| f64::from(v) * f64::from(v)).sum();
+            let cpu_max = values
+                .iter()
+                .fold(0.0f64, |m, &v| m.max(f64::from(v).abs()));
+            let gpu_sum = reducer.sum(&context, &field).unwrap();
+            let gpu_sq = reducer.sum_of_squares(&context, &field).unwrap();
+            let gpu_max = reducer.max_abs(&context, &field).unwrap();
+            assert!(
+                (gpu_sum - cpu_sum).abs() <= 1e-6 * cpu_abs,
+                "len {len}, signed {signed}: {gpu_sum} vs {cpu_sum}"
+            );
+            assert!(
+                (gpu_sq - cpu_sq).abs() <= 1e-6 * cpu_sq,
+                "len {len}: {gpu_sq} vs {cpu_sq}"
+            );
+            assert_eq!(gpu_max, cpu_max, "len {len}");
+        }
+    }
+    // A running f32 sum of the same million values would be off by ~1e-4 relative: the
+    // comparison above can fail.
+}
+
+#[test]
+fn bad_input_and_oversized_grids_are_refused_before_allocating() {
+    let Some(context) =
+        context_or_skip("bad_input_and_oversized_grids_are_refused_before_allocating")
+    else {
+        return;
+    };
+    let err = DeviceField::upload(&context, "sigma_t", &[1.0, f32::NAN], true).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            GpuError::BadInput {
+                index: 1,
+                problem: "not finite",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    let err = DeviceField::upload(&context, "sigma_t", &[1.0, 2.0, -0.5], true).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            GpuError::BadInput {
+                index: 2,
+                problem: "negative",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    // Negative values are fine where the caller allows them (a signed distance).
+    assert!(DeviceField::upload(&context, "sdf", &[-1.0], false).is_ok());
+    // One binding beyond the adapter's limit (lavapipe: 128 MiB) is refused with the
+    // limit's name, without touching the device.
+    let limit = context.limits().max_storage_buffer_binding_size;
+    let err = DeviceField::zeros(&context, "a 1024³ grid", (limit / 4 + 1) as usize).unwrap_err();
+    match err {
+        GpuError::OverBudget {
+            limit: name,
+            needed,
+            available,
+            ..
+        } => {
+            assert_eq!(name, "max_storage_buffer_binding_size");
+            assert_eq!(available, limit);
+            assert!(needed > limit);
+        }
+        other => panic!("{other}"),
+    }
+    // A 256³ grid fits (64 MiB), on lavapipe too.
+    assert!(DeviceField::zeros(&context, "a 256³ grid", 256 * 256 * 256).is_ok());
+}
+
+#[test]
+fn an_adapter_name_that_matches_nothing_is_a_typed_error() {
+    let options = lucent_gpu::GpuOptions {
+        adapter_name: Some("no-such-adapter-0xdead".into()),
+        backends: wgpu::Backends::PRIMARY,
+    };
+    let err = GpuContext::with_options(&options).unwrap_err();
+    assert!(
+        matches!(&err, GpuError::NoAdapter { reason } if reason.contains("no-such-adapter-0xdead")),
+        "{err}"
+    );
+}
