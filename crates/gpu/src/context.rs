@@ -48,7 +48,7 @@ impl GpuContext {
 
     /// The adapter `options` ask for, with lucent's limits requested explicitly: the
     /// adapter's own storage-binding size, buffer size and storage buffers per stage (at
-    /// least [`MIN_BINDING_BYTES`] and [`MIN_STORAGE_BUFFERS`]), and timestamp queries
+    /// least 64 MiB, one 256³ f32 grid, and 8), and timestamp queries
     /// where it has them.
     pub fn with_options(options: &GpuOptions) -> Result<Self, GpuError> {
         let instance = wgpu::Instance::new(
