@@ -128,10 +128,21 @@ pub(crate) fn download_buffer(
     len: usize,
     what: &str,
 ) -> Result<Vec<f32>, GpuError> {
-    if len == 0 {
+    let bytes = download_bytes(context, buffer, (len * 4) as u64, what)?;
+    Ok(bytemuck::pod_collect_to_vec(&bytes))
+}
+
+/// Reads the first `bytes` bytes of `buffer` (which must allow `COPY_SRC`): one staging
+/// buffer, one submit, one wait.
+pub(crate) fn download_bytes(
+    context: &GpuContext,
+    buffer: &wgpu::Buffer,
+    bytes: u64,
+    what: &str,
+) -> Result<Vec<u8>, GpuError> {
+    if bytes == 0 {
         return Ok(Vec::new());
     }
-    let bytes = (len * 4) as u64;
     let device = context.device();
     let staging = context.checked(|| {
         let staging = device.create_buffer(&wgpu::BufferDescriptor {
@@ -157,12 +168,10 @@ pub(crate) fn download_buffer(
         .recv()
         .map_err(|e| GpuError::Device(format!("{what}: {e}")))?
         .map_err(|e| GpuError::Device(format!("{what}: {e}")))?;
-    let values = {
-        let view = slice
-            .get_mapped_range()
-            .map_err(|e| GpuError::Device(format!("{what}: {e}")))?;
-        bytemuck::cast_slice::<u8, f32>(&view).to_vec()
-    };
+    let values = slice
+        .get_mapped_range()
+        .map_err(|e| GpuError::Device(format!("{what}: {e}")))?
+        .to_vec();
     staging.unmap();
     Ok(values)
 }

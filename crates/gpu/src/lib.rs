@@ -16,6 +16,8 @@
 //!   fits, 512³ (512 MiB) is refused with the reason.
 //! - [`Reducer`]: sums, sums of squares and maxima of device fields that match the CPU's f64
 //!   reductions (see *Precision*).
+//! - [`GpuContext::timed_pass`]: one compute pass timed by timestamp queries where the
+//!   adapter has them, by wall time otherwise ([`Timing`]).
 //!
 //! ## Precision
 //!
@@ -46,8 +48,10 @@ mod error;
 mod field;
 mod reduce;
 pub mod shaders;
+mod timing;
 
 pub use context::{GpuContext, GpuOptions, context_or_skip};
 pub use error::GpuError;
 pub use field::DeviceField;
 pub use reduce::Reducer;
+pub use timing::{Timing, TimingSource};

@@ -149,3 +149,82 @@ fn an_adapter_name_that_matches_nothing_is_a_typed_error() {
         "{err}"
     );
 }
+
+#[test]
+fn a_pass_is_timed_by_the_devices_clock_and_scales_with_its_work() {
+    // The reduction kernel over 256 values and over 16 M values: both times positive,
+    // below the host's wall time around the call, and the large pass the longer one.
+    let Some(context) =
+        context_or_skip("a_pass_is_timed_by_the_devices_clock_and_scales_with_its_work")
+    else {
+        return;
+    };
+    let device = context.device();
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("reduce"),
+        source: wgpu::ShaderSource::Wgsl(lucent_gpu::shaders::REDUCE.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("sum"),
+        layout: None,
+        module: &module,
+        entry_point: Some("sum"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let mut times = Vec::new();
+    for len in [256usize, 1 << 24] {
+        let values = DeviceField::zeros(&context, "values", len).unwrap();
+        let groups = len.div_ceil(256);
+        let groups_x = groups.min(65_535);
+        let groups_y = groups.div_ceil(groups_x);
+        let partials = DeviceField::zeros(&context, "partials", groups_x * groups_y).unwrap();
+        let params_uniform = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("params"),
+            size: 16,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        context.queue().write_buffer(
+            &params_uniform,
+            0,
+            bytemuck::cast_slice(&[len as u32, groups_x as u32, 0, 0]),
+        );
+        let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: values.buffer().as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: partials.buffer().as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: params_uniform.as_entire_binding(),
+                },
+            ],
+        });
+        let host = std::time::Instant::now();
+        let timing = context
+            .timed_pass("sum", |pass| {
+                pass.set_pipeline(&pipeline);
+                pass.set_bind_group(0, &bind, &[]);
+                pass.dispatch_workgroups(groups_x as u32, groups_y as u32, 1);
+            })
+            .unwrap();
+        let wall = host.elapsed().as_secs_f64();
+        if context.has_timestamps() {
+            assert_eq!(timing.source, lucent_gpu::TimingSource::Timestamps);
+        }
+        assert!(
+            timing.seconds > 0.0 && timing.seconds <= wall,
+            "{timing:?} vs wall {wall}"
+        );
+        times.push(timing.seconds);
+    }
+    assert!(times[1] > times[0], "{times:?}");
+}

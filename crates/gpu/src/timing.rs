@@ -1,0 +1,92 @@
+//! Timing a kernel: timestamp queries where the adapter has them (the GPU's own clock,
+//! the pass alone), wall time from submit to completion otherwise.
+
+use std::time::Instant;
+
+use crate::context::GpuContext;
+use crate::error::GpuError;
+use crate::field::download_bytes;
+
+/// Where a [`Timing`] came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TimingSource {
+    /// The device's timestamps at the start and the end of the pass.
+    Timestamps,
+    /// The host's clock from submit to completion (includes submission overhead).
+    WallClock,
+}
+
+/// How long one compute pass took.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Timing {
+    /// Seconds.
+    pub seconds: f64,
+    /// How it was measured.
+    pub source: TimingSource,
+}
+
+impl GpuContext {
+    /// Records `record` into one compute pass, submits it alone and waits for it: the
+    /// pass's time by timestamp queries where the adapter offers them, else wall time.
+    pub fn timed_pass(
+        &self,
+        label: &str,
+        record: impl FnOnce(&mut wgpu::ComputePass<'_>),
+    ) -> Result<Timing, GpuError> {
+        let device = self.device();
+        let queries = self.has_timestamps().then(|| {
+            let set = device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("lucent timestamps"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            });
+            let resolve = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("lucent timestamp resolve"),
+                size: 16,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            (set, resolve)
+        });
+        let started = self.checked(|| {
+            let mut encoder = device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some(label),
+                    timestamp_writes: queries.as_ref().map(|(set, _)| {
+                        wgpu::ComputePassTimestampWrites {
+                            query_set: set,
+                            beginning_of_pass_write_index: Some(0),
+                            end_of_pass_write_index: Some(1),
+                        }
+                    }),
+                });
+                record(&mut pass);
+            }
+            if let Some((set, resolve)) = &queries {
+                encoder.resolve_query_set(set, 0..2, resolve, 0);
+            }
+            let started = Instant::now();
+            self.queue().submit([encoder.finish()]);
+            started
+        })?;
+        self.wait()?;
+        let wall = started.elapsed().as_secs_f64();
+        match &queries {
+            Some((_, resolve)) => {
+                let bytes = download_bytes(self, resolve, 16, "timestamps")?;
+                let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
+                let period = f64::from(self.queue().get_timestamp_period());
+                Ok(Timing {
+                    seconds: ticks[1].saturating_sub(ticks[0]) as f64 * period * 1e-9,
+                    source: TimingSource::Timestamps,
+                })
+            }
+            None => Ok(Timing {
+                seconds: wall,
+                source: TimingSource::WallClock,
+            }),
+        }
+    }
+}
