@@ -14,6 +14,8 @@
 //!   beyond the adapter's binding limit with the limit's name
 //!   ([`GpuError::OverBudget`]). lavapipe binds at most 128 MiB: a 256³ f32 grid (64 MiB)
 //!   fits, 512³ (512 MiB) is refused with the reason.
+//! - [`DeviceMedium`]: a problem's σ_t and albedo per channel, uploaded once for every
+//!   backend.
 //! - [`Reducer`]: sums, sums of squares and maxima of device fields that match the CPU's f64
 //!   reductions (see *Precision*).
 //! - [`GpuContext::timed_pass`]: one compute pass timed by timestamp queries where the
@@ -46,6 +48,7 @@
 mod context;
 mod error;
 mod field;
+mod medium;
 mod reduce;
 pub mod shaders;
 mod timing;
@@ -53,5 +56,6 @@ mod timing;
 pub use context::{GpuContext, GpuOptions, context_or_skip};
 pub use error::GpuError;
 pub use field::DeviceField;
+pub use medium::DeviceMedium;
 pub use reduce::Reducer;
 pub use timing::{Timing, TimingSource};

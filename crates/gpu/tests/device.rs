@@ -228,3 +228,58 @@ fn a_pass_is_timed_by_the_devices_clock_and_scales_with_its_work() {
     }
     assert!(times[1] > times[0], "{times:?}");
 }
+
+#[test]
+fn a_problems_medium_goes_up_per_channel_as_the_host_holds_it() {
+    use glam::DVec3;
+    use lucent_core::{Boundary, Field, Light, Medium, Problem, Spectrum};
+    use lucent_grid::{Grid, GridGeometry};
+    let Some(context) =
+        context_or_skip("a_problems_medium_goes_up_per_channel_as_the_host_holds_it")
+    else {
+        return;
+    };
+    // RGB extinction on a 7 × 5 × 3 grid (not a multiple of 8), a per-cell albedo in one
+    // channel and constants in the others.
+    let g = GridGeometry::new([7, 5, 3], DVec3::splat(0.5), DVec3::ZERO).unwrap();
+    let ramp = |scale: f32| {
+        let mut grid = Grid::filled(g, 0.0);
+        for (i, v) in grid.data_mut().iter_mut().enumerate() {
+            *v = scale * i as f32;
+        }
+        grid
+    };
+    let albedo_grid = ramp(1.0 / 105.0);
+    let medium = Medium {
+        sigma_t: vec![ramp(0.5), ramp(1.0), ramp(2.0)],
+        albedo: vec![
+            Field::Grid(albedo_grid.clone()),
+            Field::Constant(0.25),
+            Field::Constant(0.75),
+        ],
+        phase: lucent_optics::Phase::Isotropic,
+    };
+    let sun = Light::Directional {
+        direction: DVec3::NEG_Z,
+        irradiance: Spectrum::Rgb([1.0, 1.0, 1.0]),
+    };
+    let problem = Problem::new(g, medium, vec![sun], Boundary::Vacuum, None).unwrap();
+    let device = lucent_gpu::DeviceMedium::upload(&context, &problem).unwrap();
+    assert_eq!(device.sigma_t.len(), 3);
+    assert_eq!(device.albedo.len(), 3);
+    for c in 0..3 {
+        assert_eq!(
+            device.sigma_t[c].download(&context).unwrap(),
+            problem.medium().sigma_t(c).data()
+        );
+    }
+    assert_eq!(
+        device.albedo[0].download(&context).unwrap(),
+        albedo_grid.data()
+    );
+    assert_eq!(
+        device.albedo[2].download(&context).unwrap(),
+        vec![0.75f32; 105]
+    );
+    assert_eq!(lucent_gpu::DeviceMedium::bytes(&problem), 6 * 105 * 4);
+}
