@@ -531,10 +531,20 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
                 background,
                 ray: &ray,
                 progress: Some(&report),
+                cancel: Some(&cancel_flag()),
             },
         );
         progress.finish_and_clear();
         let estimate = estimate?;
+        if estimate.rows_traced < estimate.height {
+            let _ = writeln!(
+                io::stderr(),
+                "lucent: interrupted: {} of {} rows traced; the others show the background (standard error {} in the .stderr.exr)",
+                estimate.rows_traced,
+                estimate.height,
+                f32::MAX
+            );
+        }
         // The per-pixel standard error, linear, beside the picture.
         lucent::render::Image {
             width: estimate.width,

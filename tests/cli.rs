@@ -1021,3 +1021,29 @@ fn default_courant_number_fits_the_scene_at_hand() {
         assert_eq!(out.status.code(), Some(0), "{model}: {}", stderr(&out));
     }
 }
+
+#[test]
+fn ctrl_c_during_a_path_traced_render_writes_the_rows_traced() {
+    // Path tracing the default cloud at 640×480 takes about a minute; a Ctrl-C after a
+    // second stops starting rows, and the picture and its error image are written with
+    // what was traced (exit 130), instead of the process dying.
+    let dir = tempfile::tempdir().unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_lucent"))
+        .args(["render", "--solver", "mc", "-o", "mc.png", "--quiet"])
+        .current_dir(dir.path())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let out = child.wait_with_output().unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert!(err.contains("rows traced"), "{err}");
+    assert_eq!(image::open(dir.path().join("mc.png")).unwrap().width(), 640);
+    assert!(dir.path().join("mc.stderr.exr").exists());
+}

@@ -31,6 +31,9 @@ pub struct CameraEstimate {
     pub radiance: Vec<[f32; 3]>,
     /// Standard error per pixel, from the spread over samples.
     pub std_error: Vec<[f32; 3]>,
+    /// Rows traced (`height` unless cancelled; the others hold the background radiance and
+    /// a standard error of `f32::MAX`).
+    pub rows_traced: usize,
 }
 
 /// Path-traces a `width`×`height` image with `samples` paths per pixel; `ray(u, v)` gives
@@ -47,11 +50,13 @@ pub fn camera_image(
     ray: impl Fn(f64, f64) -> (DVec3, DVec3) + Sync,
 ) -> Result<CameraEstimate, SolveError> {
     camera_image_with_progress(
-        problem, width, height, samples, background, config, ray, None,
+        problem, width, height, samples, background, config, ray, None, None,
     )
 }
 
-/// [`camera_image`], calling `progress` with the fraction of rows done.
+/// [`camera_image`], calling `progress` with the fraction of rows done and starting no
+/// new row once `cancel` is set (Ctrl-C): rows not reached hold the background radiance
+/// and a standard error of `f32::MAX`, and [`CameraEstimate::rows_traced`] counts the rest.
 #[allow(clippy::too_many_arguments)]
 pub fn camera_image_with_progress(
     problem: &Problem,
@@ -62,6 +67,7 @@ pub fn camera_image_with_progress(
     config: &McConfig,
     ray: impl Fn(f64, f64) -> (DVec3, DVec3) + Sync,
     progress: Option<&(dyn Fn(f64) + Sync)>,
+    cancel: Option<&std::sync::atomic::AtomicBool>,
 ) -> Result<CameraEstimate, SolveError> {
     let rows_done = std::sync::atomic::AtomicUsize::new(0);
     crate::transport::check_optical_reach(problem)?;
@@ -139,6 +145,14 @@ pub fn camera_image_with_progress(
         .zip(std_error.par_chunks_mut(width))
         .enumerate()
         .for_each(|(y, (row, row_err))| {
+            if cancel.is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)) {
+                let unknown = [f32::MAX; 3];
+                for (r, e) in row.iter_mut().zip(row_err.iter_mut()) {
+                    *r = background.map(|b| b as f32);
+                    *e = unknown;
+                }
+                return;
+            }
             for x in 0..width {
                 let pixel = (y * width + x) as u64;
                 let mut sum = [0f64; 3];
@@ -197,6 +211,7 @@ pub fn camera_image_with_progress(
         height,
         radiance,
         std_error,
+        rows_traced: rows_done.into_inner(),
     })
 }
 

@@ -169,12 +169,14 @@ impl ImageSolver for McSolver {
             &self.config,
             request.ray,
             request.progress,
+            request.cancel,
         )?;
         Ok(ImageEstimate {
             width: estimate.width,
             height: estimate.height,
             radiance: estimate.radiance,
             std_error: estimate.std_error,
+            rows_traced: estimate.rows_traced,
         })
     }
 }
