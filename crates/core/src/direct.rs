@@ -163,11 +163,8 @@ impl DirectSolver {
         let problem = context.problem;
         let geometry = *problem.geometry();
         let medium = problem.medium();
-        let channels = problem.channels();
 
-        let (lo, hi) = geometry.bounds();
-        let far = 4.0 * (hi - lo).length() + 1.0;
-        let min_distance = 0.5 * geometry.spacing().min_element();
+        let (far, min_distance) = light_distances(problem);
         let work = (point_lights.len() + usize::from(!sky.is_empty())) as f64;
         let mut done = 0.0;
         let cutoff = self.max_optical_depth;
@@ -245,56 +242,94 @@ impl DirectSolver {
             (per_light, sky_transmittance)
         };
         let (per_light, sky_transmittance) = result;
+        Ok(uncollided_outcome(
+            problem,
+            point_lights,
+            per_light,
+            sky_transmittance,
+            needed,
+        ))
+    }
+}
 
-        // Fluence per channel: point-like lights (irradiance × transmittance) plus the sky.
-        let sky_radiance: Vec<f64> = (0..channels)
-            .map(|c| sky.iter().map(|l| l.spectrum().channel(c)).sum())
-            .collect();
-        let isotropic_fluence: Vec<Grid> = (0..channels)
-            .map(|c| match &sky_transmittance {
-                Some(t) => t[c.min(t.len() - 1)].map(|v| (f64::from(v) * sky_radiance[c]) as f32),
-                None => Grid::filled(geometry, 0.0),
-            })
-            .collect();
-        let fluence: Vec<Grid> = (0..channels)
-            .map(|c| {
-                let mut phi = isotropic_fluence[c].clone();
-                phi.slabs_mut().for_each(|(k, slab)| {
-                    let [nx, ny, _] = geometry.dims();
-                    for j in 0..ny {
-                        for i in 0..nx {
-                            let x = geometry.cell_centre(i, j, k);
-                            let index = i + nx * j + nx * ny * k;
-                            let mut sum = f64::from(slab[i + nx * j]);
-                            for (light, grids) in point_lights.iter().zip(&per_light) {
-                                if let Some((_, irradiance, _)) =
-                                    light.arrival(x, far, min_distance)
-                                {
-                                    let t = grids[c.min(grids.len() - 1)].data()[index];
-                                    sum += light.spectrum().channel(c) * irradiance * f64::from(t);
-                                }
-                            }
-                            slab[i + nx * j] = sum as f32;
-                        }
-                    }
-                });
-                phi
-            })
-            .collect();
+/// The far distance of directional lights and the nearest distance of point lights
+/// (half the smallest cell side) that `direct` — and its GPU twin — use for `problem`.
+pub fn light_distances(problem: &Problem) -> (f64, f64) {
+    let geometry = problem.geometry();
+    let (lo, hi) = geometry.bounds();
+    (
+        4.0 * (hi - lo).length() + 1.0,
+        0.5 * geometry.spacing().min_element(),
+    )
+}
 
-        let angular = LightTransmittance {
-            phase: medium.phase,
-            lights: point_lights.iter().map(|&l| l.clone()).collect(),
-            transmittance: per_light,
-            far,
-            min_distance,
-            isotropic_fluence,
-        };
-        Ok(crate::driver::Outcome {
-            fluence,
-            angular: Some(Angular::Lights(angular)),
-            standard_error: None,
-            record: crate::driver::Record::exact(needed),
+/// `direct`'s outcome from the transmittance grids: per point-like light (one grid per
+/// extinction channel, in `point_lights`' order) and, where the problem has a sky,
+/// Σ_d w_d e^{−τ_d} per extinction channel. Shared with `gpu-direct`, which computes the
+/// same grids on the device, so both hand the renderer the same [`Solution`].
+pub fn uncollided_outcome(
+    problem: &Problem,
+    point_lights: &[&Light],
+    per_light: Vec<Vec<Grid>>,
+    sky_transmittance: Option<Vec<Grid>>,
+    needed: u64,
+) -> crate::driver::Outcome {
+    let geometry = *problem.geometry();
+    let medium = problem.medium();
+    let channels = problem.channels();
+    let (far, min_distance) = light_distances(problem);
+    let sky: Vec<&Light> = problem
+        .lights()
+        .iter()
+        .filter(|l| matches!(l, Light::Sky { .. }))
+        .collect();
+
+    // Fluence per channel: point-like lights (irradiance × transmittance) plus the sky.
+    let sky_radiance: Vec<f64> = (0..channels)
+        .map(|c| sky.iter().map(|l| l.spectrum().channel(c)).sum())
+        .collect();
+    let isotropic_fluence: Vec<Grid> = (0..channels)
+        .map(|c| match &sky_transmittance {
+            Some(t) => t[c.min(t.len() - 1)].map(|v| (f64::from(v) * sky_radiance[c]) as f32),
+            None => Grid::filled(geometry, 0.0),
         })
+        .collect();
+    let fluence: Vec<Grid> = (0..channels)
+        .map(|c| {
+            let mut phi = isotropic_fluence[c].clone();
+            phi.slabs_mut().for_each(|(k, slab)| {
+                let [nx, ny, _] = geometry.dims();
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let x = geometry.cell_centre(i, j, k);
+                        let index = i + nx * j + nx * ny * k;
+                        let mut sum = f64::from(slab[i + nx * j]);
+                        for (light, grids) in point_lights.iter().zip(&per_light) {
+                            if let Some((_, irradiance, _)) = light.arrival(x, far, min_distance) {
+                                let t = grids[c.min(grids.len() - 1)].data()[index];
+                                sum += light.spectrum().channel(c) * irradiance * f64::from(t);
+                            }
+                        }
+                        slab[i + nx * j] = sum as f32;
+                    }
+                }
+            });
+            phi
+        })
+        .collect();
+
+    let angular = LightTransmittance {
+        phase: medium.phase,
+        lights: point_lights.iter().map(|&l| l.clone()).collect(),
+        transmittance: per_light,
+        far,
+        min_distance,
+        isotropic_fluence,
+    };
+    crate::driver::Outcome {
+        fluence,
+        angular: Some(Angular::Lights(angular)),
+        standard_error: None,
+        record: crate::driver::Record::exact(needed),
     }
 }

@@ -96,6 +96,18 @@ pub enum SolveError {
         /// What to do instead.
         advice: String,
     },
+    /// The compute device a backend needs is missing, lacks a limit, or failed (GPU
+    /// backends: no adapter, a binding beyond the adapter's limit, a lost device).
+    #[error("solver `{solver}`: {reason}")]
+    Device {
+        /// The solver's name.
+        solver: String,
+        /// What the device layer said.
+        reason: String,
+        /// Whether no device exists at all (no adapter): harnesses skip such solvers
+        /// outside CI instead of failing.
+        unavailable: bool,
+    },
     /// The problem is invalid.
     #[error(transparent)]
     Problem(#[from] ProblemError),

@@ -73,7 +73,7 @@ mod solver;
 mod spectrum;
 mod uncollided;
 
-pub use direct::DirectSolver;
+pub use direct::{DirectSolver, light_distances, uncollided_outcome};
 pub use error::{ProblemError, SolveError};
 pub use iteration::{History, Stopping};
 pub use problem::{Boundary, BoundaryKind, Field, Light, LightKind, Medium, Problem};

@@ -247,6 +247,7 @@ impl DiffusionSolver {
                 "diffusion-mg" => "V-cycle",
                 "diffusion-mgcg" | "diffusion-cg" => "CG iteration",
                 "diffusion-sor" => "SOR sweep",
+                name if name.contains("ftcs") => "time step",
                 _ => "Jacobi sweep",
             },
             discretisation: self.discretisation,

@@ -77,20 +77,32 @@ impl Lattice {
 /// The growth monitor every explicit march runs: stops a run whose largest value has grown
 /// beyond `factor` times its reference, or that is no longer finite.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct GrowthMonitor {
-    pub(crate) reference: f64,
-    pub(crate) factor: f64,
+pub struct GrowthMonitor {
+    /// The size a stable run cannot exceed by much: the initial field, the sources over
+    /// the run, the boundary values.
+    pub reference: f64,
+    /// How far beyond `reference` counts as diverging (the schemes use 10⁶).
+    pub factor: f64,
 }
 
 impl GrowthMonitor {
     /// `Some(reason)` if the run must stop.
-    pub(crate) fn check(&self, field: &[f64], iteration: usize) -> Option<lucent_core::StopReason> {
+    pub fn check(&self, field: &[f64], iteration: usize) -> Option<lucent_core::StopReason> {
         let mut largest = 0.0f64;
         for v in field {
             if !v.is_finite() {
                 return Some(lucent_core::StopReason::DivergedNonFinite { iteration });
             }
             largest = largest.max(v.abs());
+        }
+        self.check_largest(largest, iteration)
+    }
+
+    /// The same verdict from a field's largest magnitude alone (infinity or NaN for a
+    /// field that is not finite): for fields reduced elsewhere, such as on a GPU.
+    pub fn check_largest(&self, largest: f64, iteration: usize) -> Option<lucent_core::StopReason> {
+        if !largest.is_finite() {
+            return Some(lucent_core::StopReason::DivergedNonFinite { iteration });
         }
         let reference = self.reference.max(f64::MIN_POSITIVE);
         (largest > self.factor * reference).then(|| lucent_core::StopReason::DivergedGrowth {

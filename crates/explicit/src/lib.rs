@@ -51,9 +51,9 @@ pub mod stability;
 pub mod steady;
 
 pub use error::ExplicitError;
-pub use lattice::Lattice;
+pub use lattice::{GrowthMonitor, Lattice};
 pub use params::{
     ConvectionParams, FtcsDiffusionParams, JacobiDiffusionParams, OrdinatesParams, P1Params,
     SweepParam,
 };
-pub use solver::ExplicitSolver;
+pub use solver::{ExplicitSolver, lattice, point_and_emission};

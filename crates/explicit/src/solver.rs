@@ -218,7 +218,7 @@ impl ExplicitSolver {
 }
 
 /// The lattice of a problem's grid (the capabilities ask for cubic cells).
-fn lattice(problem: &Problem) -> Result<Lattice, SolveError> {
+pub fn lattice(problem: &Problem) -> Result<Lattice, SolveError> {
     let g = problem.geometry();
     let mut l = Lattice::new(g.dims(), g.spacing().x).map_err(explicit_error)?;
     l.origin = g.origin();
@@ -227,7 +227,7 @@ fn lattice(problem: &Problem) -> Result<Lattice, SolveError> {
 
 /// Sources of P1 and ordinates in a channel: point lights (4πI into the cell holding them;
 /// the capabilities keep them inside the grid) and emission (4π L_e), as power per volume.
-fn point_and_emission(channel: &Channel<'_>) -> Vec<f64> {
+pub fn point_and_emission(channel: &Channel<'_>) -> Vec<f64> {
     let g = channel.problem.geometry();
     let mut q: Vec<f64> = channel
         .emission()

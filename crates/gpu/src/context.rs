@@ -145,6 +145,18 @@ impl GpuContext {
         })
     }
 
+    /// The process's shared context: the environment's adapter, opened on first use and
+    /// kept (opening a device costs tens of milliseconds; backends share one). A failure
+    /// is kept too, so every later call reports the same reason at once.
+    pub fn shared() -> Result<&'static GpuContext, GpuError> {
+        static SHARED: std::sync::OnceLock<Result<GpuContext, GpuError>> =
+            std::sync::OnceLock::new();
+        SHARED
+            .get_or_init(GpuContext::new)
+            .as_ref()
+            .map_err(Clone::clone)
+    }
+
     /// The device.
     pub fn device(&self) -> &wgpu::Device {
         &self.device

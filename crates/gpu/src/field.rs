@@ -24,18 +24,7 @@ impl DeviceField {
         values: &[f32],
         nonnegative: bool,
     ) -> Result<Self, GpuError> {
-        let bad = |index: usize, problem| GpuError::BadInput {
-            what: what.to_owned(),
-            index,
-            value: values[index],
-            problem,
-        };
-        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-            return Err(bad(i, "not finite"));
-        }
-        if nonnegative && let Some(i) = values.iter().position(|&v| v < 0.0) {
-            return Err(bad(i, "negative"));
-        }
+        check_values(what, values, nonnegative)?;
         // An empty field still binds four bytes (wgpu refuses empty storage bindings).
         let bytes = (values.len().max(1) * 4) as u64;
         context.check_binding(what, bytes)?;
@@ -98,6 +87,52 @@ impl DeviceField {
         &self.buffer
     }
 
+    /// The whole field as a binding.
+    pub fn binding(&self) -> wgpu::BindingResource<'_> {
+        self.buffer.as_entire_binding()
+    }
+
+    /// Replaces the values (same length, same checks as [`DeviceField::upload`]); the
+    /// write lands before the next submit.
+    pub fn write(
+        &self,
+        context: &GpuContext,
+        values: &[f32],
+        nonnegative: bool,
+    ) -> Result<(), GpuError> {
+        if values.len() != self.len {
+            return Err(GpuError::Device(format!(
+                "{}: {} values written to a field of {}",
+                self.what,
+                values.len(),
+                self.len
+            )));
+        }
+        check_values(&self.what, values, nonnegative)?;
+        if !values.is_empty() {
+            context.checked(|| {
+                context
+                    .queue()
+                    .write_buffer(&self.buffer, 0, bytemuck::cast_slice(values))
+            })?;
+        }
+        Ok(())
+    }
+
+    /// Sets every value to zero (before the next submit).
+    pub fn clear(&self, context: &GpuContext) -> Result<(), GpuError> {
+        context.checked(|| {
+            let mut encoder =
+                context
+                    .device()
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                        label: Some("lucent clear"),
+                    });
+            encoder.clear_buffer(&self.buffer, 0, None);
+            context.queue().submit([encoder.finish()]);
+        })
+    }
+
     /// Number of values.
     pub fn len(&self) -> usize {
         self.len
@@ -113,11 +148,81 @@ impl DeviceField {
         download_buffer(context, &self.buffer, self.len, &self.what)
     }
 
+    /// Copies the first `len` values back (at most the field's length).
+    pub fn download_prefix(&self, context: &GpuContext, len: usize) -> Result<Vec<f32>, GpuError> {
+        download_buffer(context, &self.buffer, len.min(self.len), &self.what)
+    }
+
     /// Copies the values back as a grid of `geometry` (whose cell count must be the
     /// field's length).
     pub fn to_grid(&self, context: &GpuContext, geometry: GridGeometry) -> Result<Grid, GpuError> {
         let values = self.download(context)?;
         Grid::from_vec(geometry, values).map_err(|e| GpuError::Device(e.to_string()))
+    }
+}
+
+/// Refuses NaN and infinities (and negative values where `nonnegative`).
+fn check_values(what: &str, values: &[f32], nonnegative: bool) -> Result<(), GpuError> {
+    let bad = |index: usize, problem| GpuError::BadInput {
+        what: what.to_owned(),
+        index,
+        value: values[index],
+        problem,
+    };
+    if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+        return Err(bad(i, "not finite"));
+    }
+    if nonnegative && let Some(i) = values.iter().position(|&v| v < 0.0) {
+        return Err(bad(i, "negative"));
+    }
+    Ok(())
+}
+
+/// u32 indices on the device (a sparse matrix's row pointers and columns).
+#[derive(Debug)]
+pub struct DeviceIndices {
+    buffer: wgpu::Buffer,
+    len: usize,
+}
+
+impl DeviceIndices {
+    /// Uploads `indices` (one binding's worth at most, checked before allocation).
+    pub fn upload(context: &GpuContext, what: &str, indices: &[u32]) -> Result<Self, GpuError> {
+        let bytes = (indices.len().max(1) * 4) as u64;
+        context.check_binding(what, bytes)?;
+        let contents: &[u8] = if indices.is_empty() {
+            &[0; 4]
+        } else {
+            bytemuck::cast_slice(indices)
+        };
+        let buffer = context.checked(|| {
+            context
+                .device()
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(what),
+                    contents,
+                    usage: wgpu::BufferUsages::STORAGE,
+                })
+        })?;
+        Ok(Self {
+            buffer,
+            len: indices.len(),
+        })
+    }
+
+    /// The whole buffer as a binding.
+    pub fn binding(&self) -> wgpu::BindingResource<'_> {
+        self.buffer.as_entire_binding()
+    }
+
+    /// Number of indices.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether it holds none.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
     }
 }
 

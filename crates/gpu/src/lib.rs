@@ -48,6 +48,7 @@
 mod context;
 mod error;
 mod field;
+mod kernel;
 mod medium;
 mod reduce;
 pub mod shaders;
@@ -55,7 +56,8 @@ mod timing;
 
 pub use context::{GpuContext, GpuOptions, context_or_skip};
 pub use error::GpuError;
-pub use field::DeviceField;
+pub use field::{DeviceField, DeviceIndices};
+pub use kernel::{Kernel, UniformSlots, WORKGROUP, groups_2d};
 pub use medium::DeviceMedium;
 pub use reduce::Reducer;
 pub use timing::{Timing, TimingSource};

@@ -1,13 +1,52 @@
 //! The WGSL sources of lucent's kernels, from the repository's top-level `shaders/` folder,
-//! compiled into the crate. `tests/shaders.rs` validates every one with naga, so a shader
-//! error fails `cargo test` rather than a user's run.
+//! compiled into the crate. Every kernel but `reduce.wgsl` is prefixed with
+//! `shaders/common.wgsl` (2-D workgroup numbering, pairwise workgroup sums, finiteness
+//! tests). `tests/shaders.rs` validates every one with naga, so a shader error fails
+//! `cargo test` rather than a user's run.
+
+/// Helpers prepended to the kernels below.
+pub const COMMON: &str = include_str!("../../../shaders/common.wgsl");
 
 /// Pairwise workgroup reductions (sum, sum of squares, maximum of |x|) into per-workgroup
 /// partials that the host adds in f64.
 pub const REDUCE: &str = include_str!("../../../shaders/reduce.wgsl");
 
-/// Every shader with its file name, for validation.
-pub const ALL: &[(&str, &str)] = &[("reduce.wgsl", REDUCE)];
+macro_rules! kernel {
+    ($file:literal) => {
+        concat!(
+            include_str!("../../../shaders/common.wgsl"),
+            include_str!(concat!("../../../shaders/", $file))
+        )
+    };
+}
+
+/// `gpu-direct`: transmittance by exact ray marching of the trilinear σ_t.
+pub const DIRECT: &str = kernel!("direct.wgsl");
+/// `gpu-ftcs-diffusion`: one FTCS step on a CSR system, with residual partials.
+pub const FTCS: &str = kernel!("ftcs.wgsl");
+/// `gpu-ftcs-p1`: the fluence half of a P1 FTCS step.
+pub const P1: &str = kernel!("p1.wgsl");
+/// `gpu-ftcs-p1`: the flux half of a P1 FTCS step.
+pub const P1_FLUX: &str = kernel!("p1_flux.wgsl");
+/// `gpu-convection-diffusion`: one layer of the short-characteristic light march.
+pub const CONVECTION: &str = kernel!("convection.wgsl");
+/// `gpu-convection-diffusion`: red–black Gauss–Seidel of the implicit scattering step.
+pub const SCATTER: &str = kernel!("scatter.wgsl");
+/// The largest change between two fields (stopping rules of passes).
+pub const MAX_CHANGE: &str = kernel!("max_change.wgsl");
+
+/// Every shader with its file name, for validation (`common.wgsl` inside every kernel).
+pub const ALL: &[(&str, &str)] = &[
+    ("common.wgsl", COMMON),
+    ("reduce.wgsl", REDUCE),
+    ("direct.wgsl", DIRECT),
+    ("ftcs.wgsl", FTCS),
+    ("p1.wgsl", P1),
+    ("p1_flux.wgsl", P1_FLUX),
+    ("convection.wgsl", CONVECTION),
+    ("scatter.wgsl", SCATTER),
+    ("max_change.wgsl", MAX_CHANGE),
+];
 
 /// The module of `source` on `context`'s device.
 pub(crate) fn module(

@@ -1,0 +1,239 @@
+//! The registry entries of the GPU backends, each the twin of a CPU solver: the same
+//! parameters (but `gpu-convection-diffusion`'s), the same capabilities (taken from the
+//! CPU twin itself), the same stability checks before anything runs, the same driver.
+//!
+//! | entry | CPU twin | on the device |
+//! |---|---|---|
+//! | `gpu-direct` | `direct` | transmittance per light, cell and extinction channel |
+//! | `gpu-ftcs-diffusion` | `ftcs-diffusion` | FTCS steps on the assembled CSR system, in correction form |
+//! | `gpu-ftcs-p1` | `ftcs-p1` | P1 FTCS steps (φ and E ping-pong) |
+//! | `gpu-convection-diffusion` | `convection-diffusion` (characteristic model) | layer sweeps per light, red–black Gauss–Seidel scattering |
+//!
+//! The device is the process's shared [`GpuContext`]; no adapter is a
+//! [`SolveError::Device`] with `unavailable` set, raised after the capability check (so a
+//! problem a backend cannot handle says so first).
+
+use lucent_core::driver::{self, Channel, ChannelMethod, ChannelSolution, Context, Route};
+use lucent_core::{
+    Capabilities, DirectSolver, Light, ParamValue, Params, Problem, Solution, SolveError,
+    SolveOptions, Solver, SolverEntry, param_docs, resolved_params,
+};
+use lucent_diffusion::DiffusionSolver;
+use lucent_explicit::{ExplicitSolver, FtcsDiffusionParams, Lattice, P1Params};
+use lucent_gpu::{GpuContext, GpuError};
+
+use crate::params::GpuConvectionParams;
+
+/// A GPU backend in the registry.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GpuSolver {
+    name: &'static str,
+    backend: Backend,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Backend {
+    Direct(DirectSolver),
+    FtcsDiffusion(FtcsDiffusionParams),
+    P1(P1Params),
+    Convection(GpuConvectionParams),
+}
+
+/// A device error as a solve error of `solver`.
+pub(crate) fn device_error(solver: &str, e: GpuError) -> SolveError {
+    SolveError::Device {
+        solver: solver.into(),
+        unavailable: matches!(e, GpuError::NoAdapter { .. }),
+        reason: e.to_string(),
+    }
+}
+
+/// The shared device, or why there is none.
+fn device(solver: &str) -> Result<&'static GpuContext, SolveError> {
+    GpuContext::shared().map_err(|e| device_error(solver, e))
+}
+
+impl GpuSolver {
+    /// `gpu-direct` ([`DirectSolver`]'s parameters).
+    pub const GPU_DIRECT: SolverEntry = SolverEntry {
+        name: "gpu-direct",
+        summary: "direct on the GPU: uncollided light by exact ray marching, one invocation per cell and light",
+        build: |p| {
+            Ok(Box::new(GpuSolver {
+                name: "gpu-direct",
+                backend: Backend::Direct(p.parse("gpu-direct")?),
+            }))
+        },
+        params: param_docs::<DirectSolver>,
+        resolved: |p| resolved_params::<DirectSolver>(p, "gpu-direct"),
+    };
+
+    /// `gpu-ftcs-diffusion` ([`FtcsDiffusionParams`]).
+    pub const GPU_FTCS_DIFFUSION: SolverEntry = SolverEntry {
+        name: "gpu-ftcs-diffusion",
+        summary: "ftcs-diffusion on the GPU: FTCS to steady state on diffusion-mg's discrete problem, f64 defect correction",
+        build: |p| {
+            Ok(Box::new(GpuSolver {
+                name: "gpu-ftcs-diffusion",
+                backend: Backend::FtcsDiffusion(p.parse("gpu-ftcs-diffusion")?),
+            }))
+        },
+        params: param_docs::<FtcsDiffusionParams>,
+        resolved: |p| resolved_params::<FtcsDiffusionParams>(p, "gpu-ftcs-diffusion"),
+    };
+
+    /// `gpu-ftcs-p1` ([`P1Params`]).
+    pub const GPU_FTCS_P1: SolverEntry = SolverEntry {
+        name: "gpu-ftcs-p1",
+        summary: "ftcs-p1 on the GPU: Murray's P1 moment system with FTCS, staggered or collocated",
+        build: |p| {
+            Ok(Box::new(GpuSolver {
+                name: "gpu-ftcs-p1",
+                backend: Backend::P1(p.parse("gpu-ftcs-p1")?),
+            }))
+        },
+        params: param_docs::<P1Params>,
+        resolved: |p| resolved_params::<P1Params>(p, "gpu-ftcs-p1"),
+    };
+
+    /// `gpu-convection-diffusion` ([`GpuConvectionParams`]).
+    pub const GPU_CONVECTION_DIFFUSION: SolverEntry = SolverEntry {
+        name: "gpu-convection-diffusion",
+        summary: "Zhang & Ma on the GPU: short-characteristic layer sweeps per light, red-black Gauss-Seidel scattering",
+        build: |p| {
+            Ok(Box::new(GpuSolver {
+                name: "gpu-convection-diffusion",
+                backend: Backend::Convection(p.parse("gpu-convection-diffusion")?),
+            }))
+        },
+        params: param_docs::<GpuConvectionParams>,
+        resolved: |p| resolved_params::<GpuConvectionParams>(p, "gpu-convection-diffusion"),
+    };
+
+    /// Every GPU entry.
+    pub const ENTRIES: [SolverEntry; 4] = [
+        Self::GPU_DIRECT,
+        Self::GPU_FTCS_DIFFUSION,
+        Self::GPU_FTCS_P1,
+        Self::GPU_CONVECTION_DIFFUSION,
+    ];
+
+    /// The CPU twin, for its capabilities and its stability checks.
+    fn twin(&self) -> Box<dyn Solver> {
+        let built = match &self.backend {
+            Backend::Direct(d) => return Box::new(*d),
+            Backend::FtcsDiffusion(_) => return Box::new(DiffusionSolver::custom(self.name)),
+            Backend::P1(_) => (ExplicitSolver::FTCS_P1.build)(&Params::default()),
+            Backend::Convection(p) => {
+                let mut params = Params::default();
+                params
+                    .0
+                    .insert("scattering".into(), ParamValue::Float(p.scattering));
+                (ExplicitSolver::CONVECTION_DIFFUSION.build)(&params)
+            }
+        };
+        built.expect("the CPU twin's defaults are valid")
+    }
+}
+
+impl Solver for GpuSolver {
+    fn name(&self) -> &str {
+        self.name
+    }
+
+    fn capabilities(&self) -> Capabilities {
+        self.twin().capabilities()
+    }
+
+    fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
+        // What the backend cannot handle is said before whether a device exists.
+        self.admits(problem)?;
+        match &self.backend {
+            Backend::Direct(params) => {
+                let gpu = device(self.name)?;
+                let needed = crate::direct::memory_bytes(problem);
+                driver::run(self, problem, options, needed, |context| {
+                    crate::direct::transport(context, gpu, params, needed, self.name)
+                })
+            }
+            Backend::FtcsDiffusion(params) => {
+                if params.step_fraction > 1.0 && !params.allow_unstable {
+                    return Err(SolveError::Unstable {
+                        solver: self.name.into(),
+                        parameter: "step_fraction (of the FTCS bound)".into(),
+                        limit: 1.0,
+                        requested: params.step_fraction,
+                    });
+                }
+                let gpu = device(self.name)?;
+                let volume = problem.geometry().cell_volume();
+                let memory = crate::ftcs::memory_bytes(problem);
+                let params = *params;
+                let name = self.name;
+                DiffusionSolver::custom(self.name).solve_with(
+                    problem,
+                    options,
+                    memory,
+                    &|d, s, stop| crate::ftcs::steady(gpu, d, s, stop, &params, volume, name),
+                )
+            }
+            Backend::P1(_) => {
+                device(self.name)?;
+                driver::solve_per_channel(self, self, problem, options).map(|(s, _)| s)
+            }
+            Backend::Convection(params) => {
+                let gpu = device(self.name)?;
+                let memory = crate::convection::memory_bytes(problem);
+                driver::run(self, problem, options, memory, |context| {
+                    crate::convection::solve(context, gpu, params, self.name)
+                })
+            }
+        }
+    }
+}
+
+/// `gpu-ftcs-p1` marches each channel with the lights it takes itself (point lights in
+/// the grid and emission), as `ftcs-p1` does.
+impl ChannelMethod for GpuSolver {
+    type Setup = (Lattice, &'static GpuContext);
+    type Extra = ();
+
+    fn stage(&self) -> &'static str {
+        "time step"
+    }
+
+    fn memory_bytes(&self, problem: &Problem) -> u64 {
+        crate::p1::memory_bytes(problem)
+    }
+
+    fn setup(&self, context: &Context<'_>) -> Result<Self::Setup, SolveError> {
+        Ok((
+            lucent_explicit::lattice(context.problem)?,
+            device(self.name)?,
+        ))
+    }
+
+    fn route(&self, _: &Self::Setup, _: &Problem, _: &Light) -> Route {
+        Route::Own
+    }
+
+    fn solve_channel(
+        &self,
+        (lattice, gpu): &Self::Setup,
+        channel: Channel<'_>,
+    ) -> Result<ChannelSolution<()>, SolveError> {
+        let Backend::P1(params) = &self.backend else {
+            return Err(SolveError::InvalidParameter {
+                name: "backend".into(),
+                reason: format!("{} is not a per-channel march", self.name),
+            });
+        };
+        let q = lucent_explicit::point_and_emission(&channel);
+        let (fluence, record) = crate::p1::march(gpu, lattice, &channel, &q, params, self.name)?;
+        Ok(ChannelSolution {
+            fluence,
+            record,
+            extra: (),
+        })
+    }
+}
