@@ -48,6 +48,11 @@ pub struct Tolerance {
     /// `DivergedGrowth` (a solver kept to show a method's failure).
     #[serde(default)]
     pub expect: Expect,
+    /// Compare with this solver's solution of the scene (default parameters and options)
+    /// instead of the scene's analytic or Monte Carlo reference: for a GPU backend and
+    /// its CPU twin, where the tolerance is the f32-against-f64 difference.
+    #[serde(default)]
+    pub twin: Option<String>,
 }
 
 /// What a harness entry requires of its run.
@@ -135,7 +140,7 @@ pub struct Reference {
     /// Cells where the reference is valid (`None`: all).
     pub mask: Option<Vec<bool>>,
     /// `analytic` or `monte carlo`.
-    pub kind: &'static str,
+    pub kind: String,
     /// Achieved mean relative standard error (0 for analytic references).
     pub relative_std_error: f64,
 }
@@ -171,7 +176,7 @@ fn analytic(scene: &SuiteScene) -> Option<Reference> {
     Some(Reference {
         fluence: vec![grid],
         mask: Some(mask),
-        kind: "analytic",
+        kind: "analytic".into(),
         relative_std_error: 0.0,
     })
 }
@@ -252,7 +257,7 @@ pub fn reference(
             return Ok(Reference {
                 fluence: vec![grid],
                 mask: Some(mask),
-                kind: "monte carlo (cached)",
+                kind: "monte carlo (cached)".into(),
                 relative_std_error: target,
             });
         }
@@ -280,7 +285,7 @@ pub fn reference(
             return Ok(Reference {
                 fluence: run.fluence,
                 mask: Some(mask),
-                kind: "monte carlo",
+                kind: "monte carlo".into(),
                 relative_std_error: achieved,
             });
         }
@@ -350,7 +355,7 @@ pub enum CheckResult {
         /// Solve time, seconds.
         seconds: f64,
         /// The reference's kind.
-        reference: &'static str,
+        reference: String,
         /// The reference's own relative standard error.
         reference_error: f64,
         /// For stochastic solvers, the run's own expected relative L2 error.
@@ -396,14 +401,33 @@ pub fn run(suite: &Path, cache: Option<&Path>) -> Result<Vec<Outcome>, Error> {
             })?;
         let solver = registry.build(&entry.solver, &entry.params)?;
         let capabilities = solver.capabilities();
-        let result = match solver.admits(&scene.built.problem) {
-            Err(e) => CheckResult::Skipped(e.to_string()),
-            Ok(()) => {
-                let start = Instant::now();
-                let solution = solver.solve(&scene.built.problem, &SolveOptions::default())?;
-                let seconds = start.elapsed().as_secs_f64();
-                let reference =
-                    reference(scene, capabilities.fluence, entry.tolerance / 5.0, cache)?;
+        let start = Instant::now();
+        let solved = match solver.admits(&scene.built.problem) {
+            Err(e) => Err(e),
+            Ok(()) => solver.solve(&scene.built.problem, &SolveOptions::default()),
+        };
+        let seconds = start.elapsed().as_secs_f64();
+        let result = match solved {
+            Err(e) if crate::device_missing(&e) => CheckResult::Skipped(e.to_string()),
+            Err(e @ lucent_core::SolveError::Unsupported { .. }) => {
+                CheckResult::Skipped(e.to_string())
+            }
+            Err(e) => return Err(e.into()),
+            Ok(solution) => {
+                let reference = match &entry.twin {
+                    Some(twin) => {
+                        let solution = registry
+                            .build(twin, &Params::default())?
+                            .solve(&scene.built.problem, &SolveOptions::default())?;
+                        Reference {
+                            fluence: solution.fluence,
+                            mask: None,
+                            kind: format!("twin `{twin}`"),
+                            relative_std_error: 0.0,
+                        }
+                    }
+                    None => reference(scene, capabilities.fluence, entry.tolerance / 5.0, cache)?,
+                };
                 let mask = reference
                     .mask
                     .clone()
@@ -415,7 +439,7 @@ pub fn run(suite: &Path, cache: Option<&Path>) -> Result<Vec<Outcome>, Error> {
                 CheckResult::Compared {
                     comparison: compare(&solution.fluence, &reference),
                     seconds,
-                    reference: reference.kind,
+                    reference: reference.kind.clone(),
                     reference_error: reference.relative_std_error,
                     solution_error,
                     stop_reason: solution.report.stop_reason,
@@ -430,6 +454,17 @@ pub fn run(suite: &Path, cache: Option<&Path>) -> Result<Vec<Outcome>, Error> {
         });
     }
     Ok(outcomes)
+}
+
+/// A fraction as a percentage: two decimals down to 0.01 %, two significant digits below
+/// (the GPU twins' rows compare at 10⁻⁵).
+fn percent(fraction: f64) -> String {
+    let p = 100.0 * fraction;
+    if p == 0.0 || p >= 0.01 {
+        format!("{p:.2}%")
+    } else {
+        format!("{p:.1e}%")
+    }
 }
 
 /// The validation table as Markdown (`docs/validation.md`).
@@ -453,14 +488,18 @@ pub fn validation_markdown(outcomes: &[Outcome], command: &str) -> String {
                 solution_error,
                 stop_reason,
             } => out.push_str(&format!(
-                "| {} | {} | {} (±{:.2}%) | {:.1}% | {:.2}% | {:.1}% | {} | {:.2} s | {} | {} |\n",
+                "| {} | {} | {}{} | {} | {} | {} | {} | {:.2} s | {} | {} |\n",
                 o.solver,
                 o.scene,
                 reference,
-                100.0 * reference_error,
-                100.0 * o.tolerance.tolerance,
-                100.0 * comparison.relative_l2,
-                100.0 * comparison.max_relative,
+                if o.tolerance.twin.is_some() {
+                    String::new()
+                } else {
+                    format!(" (±{:.2}%)", 100.0 * reference_error)
+                },
+                percent(o.tolerance.tolerance),
+                percent(comparison.relative_l2),
+                percent(comparison.max_relative),
                 solution_error.map_or("–".to_owned(), |e| format!("±{:.2}%", 100.0 * e)),
                 seconds,
                 match (o.tolerance.expect, o.passed()) {
@@ -472,10 +511,10 @@ pub fn validation_markdown(outcomes: &[Outcome], command: &str) -> String {
                 why
             )),
             CheckResult::Skipped(reason) => out.push_str(&format!(
-                "| {} | {} | – | {:.1}% | – | – | – | – | skipped: {} | {} |\n",
+                "| {} | {} | – | {} | – | – | – | – | skipped: {} | {} |\n",
                 o.solver,
                 o.scene,
-                100.0 * o.tolerance.tolerance,
+                percent(o.tolerance.tolerance),
                 reason,
                 why
             )),

@@ -41,6 +41,8 @@ pub use lucent_diffusion as diffusion;
 pub use lucent_dom as dom;
 pub use lucent_explicit as explicit;
 pub use lucent_fem as fem;
+pub use lucent_gpu as gpu;
+pub use lucent_gpu_solvers as gpu_solvers;
 pub use lucent_grid as grid;
 pub use lucent_mc as mc;
 pub use lucent_optics as optics;
@@ -59,7 +61,24 @@ pub fn registry() -> lucent_core::Registry {
     registry.register(lucent_fem::FemP1Solver::ENTRY);
     registry.register(lucent_fem::FemDiffusionSolver::ENTRY);
     registry.register(lucent_dom::DomSolver::ENTRY);
+    for entry in lucent_gpu_solvers::GpuSolver::ENTRIES {
+        registry.register(entry);
+    }
     registry
+}
+
+/// Whether `e` says a GPU backend found no adapter and the environment lets harnesses
+/// skip it (with the reason) instead of failing: anywhere but CI (`CI=true`), where a
+/// missing adapter must fail the run.
+pub fn device_missing(e: &lucent_core::SolveError) -> bool {
+    let ci = std::env::var("CI").is_ok_and(|v| v == "true" || v == "1");
+    matches!(
+        e,
+        lucent_core::SolveError::Device {
+            unavailable: true,
+            ..
+        }
+    ) && !ci
 }
 
 /// Everything that can go wrong between a scene file and an image, with a message meant

@@ -1047,3 +1047,68 @@ fn ctrl_c_during_a_path_traced_render_writes_the_rows_traced() {
     assert_eq!(image::open(dir.path().join("mc.png")).unwrap().width(), 640);
     assert!(dir.path().join("mc.stderr.exr").exists());
 }
+
+#[test]
+fn a_gpu_backend_without_an_adapter_is_one_line_saying_so() {
+    // WGPU_ADAPTER_NAME that matches nothing: the same as a machine without a driver.
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_lucent"))
+        .args([
+            "solve",
+            &scene("spot_light.toml"),
+            "--solver",
+            "gpu-direct",
+            "-o",
+            "fluence.npy",
+            "--quiet",
+        ])
+        .current_dir(dir.path())
+        .env("LUCENT_DATA", data_dir())
+        .env("WGPU_ADAPTER_NAME", "no adapter has this name")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("gpu-direct") && err.contains("no GPU adapter"),
+        "{err}"
+    );
+    assert!(!dir.path().join("fluence.npy").exists());
+}
+
+#[test]
+fn gpu_direct_writes_what_direct_writes() {
+    let Some(_) = lucent::gpu::context_or_skip("gpu_direct_writes_what_direct_writes") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for solver in ["direct", "gpu-direct"] {
+        let out = lucent(
+            &[
+                "solve",
+                &scene("spot_light.toml"),
+                "--solver",
+                solver,
+                "-o",
+                &format!("{solver}.npy"),
+                "--quiet",
+            ],
+            dir.path(),
+        );
+        assert!(out.status.success(), "{solver}: {}", stderr(&out));
+    }
+    let read = |name: &str| {
+        lucent::grid::io::npy::read(dir.path().join(name), &Default::default()).unwrap()
+    };
+    let (cpu, gpu) = (read("direct.npy"), read("gpu-direct.npy"));
+    let peak = f64::from(cpu.stats().max);
+    let worst = cpu
+        .data()
+        .iter()
+        .zip(gpu.data())
+        .map(|(a, b)| f64::from((a - b).abs()))
+        .fold(0.0, f64::max);
+    // f32 optical depths on the device against f64 on the host (lucent-gpu-solvers'
+    // `direct` docs): 10⁻⁴ of the peak.
+    assert!(worst < 1e-4 * peak, "{worst} of {peak}");
+}

@@ -22,6 +22,9 @@
 //! - `bench-diffusion [N...]`: lucent-diffusion's multigrid on the marble sphere at N³
 //!   (64, 128, 256): time to 1e-8, one smoothing sweep's GB/s beside the copy bandwidth
 //!   measured in the same run, and pyamg and scipy CG on the same exported matrix.
+//! - `bench-gpu [N...]`: every GPU backend at N³ (default 64, 128): seconds per step,
+//!   cell updates per second and GB/s by byte count, with the adapter's name; on a CPU
+//!   implementation (lavapipe) a correctness run only.
 //! - `bench-explicit [N]`: one step of each explicit scheme at N³ with updates/s and GB/s
 //!   beside the copy bandwidth, and Zhang & Ma's full update for one light.
 //! - `bench-fem [N...]`: Q1 finite elements (matrix-based) against the matrix-free finite
@@ -38,11 +41,12 @@ mod bench_diffusion;
 mod bench_dom;
 mod bench_explicit;
 mod bench_fem;
+mod bench_gpu;
 mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-fem [N...] | bench-dom [N] [ORDER] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-fem [N...] | bench-dom [N] [ORDER] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -74,6 +78,22 @@ fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("xtask: bench-explicit: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
+    if command.as_deref() == Some("bench-gpu") {
+        let mut sizes: Vec<usize> = std::env::args()
+            .skip(2)
+            .filter_map(|s| s.parse().ok())
+            .collect();
+        if sizes.is_empty() {
+            sizes = vec![64, 128];
+        }
+        return match bench_gpu::run(&sizes) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("xtask: bench-gpu: {e}");
                 ExitCode::FAILURE
             }
         };

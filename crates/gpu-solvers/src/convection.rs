@@ -23,6 +23,8 @@
 //! do not grow: the interpolation is convex); the scattering step stops at a relative
 //! residual of `scatter_tolerance` (≥ 10⁻⁶) where the CPU's multigrid reaches 10⁻⁸.
 
+use std::sync::Arc;
+
 use lucent_core::driver::{Context, Outcome, Record};
 use lucent_core::{Light, Problem, Progress, SolveError, StopReason};
 use lucent_explicit::Lattice;
@@ -74,18 +76,20 @@ struct ScatterParams {
     a: [f32; 4],
 }
 
-/// Host bytes: as `convection-diffusion` (its f64 fields per light and channel).
+/// Bytes: on the host as `convection-diffusion` (its f64 fields per light and channel);
+/// on the device σ_t, two march buffers, the scattering step's source and field and the
+/// partials (about 24 bytes per cell).
 pub(crate) fn memory_bytes(problem: &Problem) -> u64 {
     let n = problem.geometry().voxel_count() as u64;
-    n * 8 * (6 + 2 * problem.lights().len() as u64) * problem.channels() as u64
+    n * 8 * (6 + 2 * problem.lights().len() as u64) * problem.channels() as u64 + n * 24
 }
 
 /// The kernels, compiled once per solve.
 struct Kernels {
-    layer: Kernel,
-    change: Kernel,
-    sweep: Kernel,
-    residual: Kernel,
+    layer: Arc<Kernel>,
+    change: Arc<Kernel>,
+    sweep: Arc<Kernel>,
+    residual: Arc<Kernel>,
 }
 
 /// A light as the march sees it.
@@ -107,12 +111,18 @@ pub(crate) fn solve(
     let l = lucent_explicit::lattice(problem)?;
     let geometry = *problem.geometry();
     let kernels = Kernels {
-        layer: Kernel::new(gpu, "convection.wgsl", shaders::CONVECTION, "layer_sweep")
+        layer: gpu
+            .kernel("convection.wgsl", shaders::CONVECTION, "layer_sweep")
             .map_err(err)?,
-        change: Kernel::new(gpu, "max_change.wgsl", shaders::MAX_CHANGE, "max_change")
+        change: gpu
+            .kernel("max_change.wgsl", shaders::MAX_CHANGE, "max_change")
             .map_err(err)?,
-        sweep: Kernel::new(gpu, "scatter.wgsl", shaders::SCATTER, "sweep").map_err(err)?,
-        residual: Kernel::new(gpu, "scatter.wgsl", shaders::SCATTER, "residual").map_err(err)?,
+        sweep: gpu
+            .kernel("scatter.wgsl", shaders::SCATTER, "sweep")
+            .map_err(err)?,
+        residual: gpu
+            .kernel("scatter.wgsl", shaders::SCATTER, "residual")
+            .map_err(err)?,
     };
     let mut record = Record::exact((l.len() * 8 * 4) as u64);
     let mut fluence = Vec::with_capacity(problem.channels());

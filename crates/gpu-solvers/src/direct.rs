@@ -14,7 +14,7 @@
 
 use lucent_core::driver::{Context, Outcome};
 use lucent_core::{DirectSolver, Light, Problem, Progress, SolveError};
-use lucent_gpu::{DeviceField, GpuContext, Kernel, UniformSlots, groups_2d, shaders};
+use lucent_gpu::{DeviceField, GpuContext, UniformSlots, groups_2d, shaders};
 use lucent_grid::Grid;
 use lucent_optics::SphericalQuadrature;
 
@@ -31,16 +31,19 @@ struct DirectParams {
     kind: [u32; 4],
 }
 
-/// Host bytes of the solve: as `direct` (transmittance per point-like light and
-/// extinction channel, fluence and isotropic fluence per channel, the sky's sum).
+/// Bytes of the solve: on the host as `direct` (transmittance per point-like light and
+/// extinction channel, fluence and isotropic fluence per channel, the sky's sum), and on
+/// the device σ_t per extinction channel and one transmittance grid (a software adapter
+/// keeps those in host memory too).
 pub(crate) fn memory_bytes(problem: &Problem) -> u64 {
     let grid = problem.geometry().voxel_count() as u64 * 4;
+    let extinction = problem.medium().sigma_t.len();
     let point_lights = problem
         .lights()
         .iter()
         .filter(|l| !matches!(l, Light::Sky { .. }))
         .count();
-    grid * (point_lights * problem.medium().sigma_t.len() + 2 * problem.channels() + 1) as u64
+    grid * (point_lights * extinction + 2 * problem.channels() + 1 + extinction + 1) as u64
 }
 
 /// The uncollided light of every light of `context`'s problem, marched on `gpu`.
@@ -74,7 +77,9 @@ pub(crate) fn transport(
     // Everything the device holds, checked binding by binding before any allocation.
     gpu.check_binding("σ_t", cells as u64 * 4).map_err(err)?;
 
-    let kernel = Kernel::new(gpu, "direct.wgsl", shaders::DIRECT, "transmit").map_err(err)?;
+    let kernel = gpu
+        .kernel("direct.wgsl", shaders::DIRECT, "transmit")
+        .map_err(err)?;
     let sigma_t: Vec<DeviceField> = medium
         .sigma_t
         .iter()

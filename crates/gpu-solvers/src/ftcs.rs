@@ -36,8 +36,7 @@ use lucent_diffusion::{
 use lucent_explicit::FtcsDiffusionParams;
 use lucent_explicit::steady::ftcs_limit;
 use lucent_gpu::{
-    DeviceField, DeviceIndices, GpuContext, GpuError, Kernel, UniformSlots, WORKGROUP, groups_2d,
-    shaders,
+    DeviceField, DeviceIndices, GpuContext, GpuError, UniformSlots, WORKGROUP, groups_2d, shaders,
 };
 
 /// Most steps recorded into one submit.
@@ -57,10 +56,13 @@ struct StepParams {
     pad: [f32; 3],
 }
 
-/// Host bytes at peak: the assembled system as `ftcs-diffusion` builds it (600 bytes per
-/// cell, see lucent-explicit) plus the f64 solution and residual and their f32 copies.
+/// Bytes at peak: on the host the assembled system as `ftcs-diffusion` builds it (600
+/// bytes per cell, see lucent-explicit) plus the f64 solution and residual and their f32
+/// copies, per channel; on the device one channel's CSR system (7 × 8 + 4 bytes per row),
+/// right-hand side, two corrections and 65 steps of partials (about 88 bytes per cell).
 pub(crate) fn memory_bytes(problem: &Problem) -> u64 {
-    problem.geometry().voxel_count() as u64 * (600 + 24) * problem.channels() as u64
+    let n = problem.geometry().voxel_count() as u64;
+    n * (600 + 24) * problem.channels() as u64 + n * 88
 }
 
 fn gpu(e: GpuError) -> DiffusionError {
@@ -162,7 +164,7 @@ fn march(
     let groups = groups_2d(context, n as u64, WORKGROUP);
     let per_step = (groups[0] * groups[1]) as usize;
     let partials = DeviceField::zeros(context, "residual partials", (MAX_BATCH + 1) * per_step)?;
-    let kernel = Kernel::new(context, "ftcs.wgsl", shaders::FTCS, "step")?;
+    let kernel = context.kernel("ftcs.wgsl", shaders::FTCS, "step")?;
     // Slot j: step j of a batch (write), slot MAX_BATCH + 1 + j: the residual of the
     // state after j steps (no write).
     let slots: Vec<StepParams> = (0..=MAX_BATCH)

@@ -23,7 +23,7 @@ use lucent_core::driver::{Channel, Record};
 use lucent_core::{History, Problem, SolveError};
 use lucent_explicit::p1::Layout;
 use lucent_explicit::{GrowthMonitor, Lattice, P1Params};
-use lucent_gpu::{DeviceField, GpuContext, Kernel, UniformSlots, WORKGROUP, groups_2d, shaders};
+use lucent_gpu::{DeviceField, GpuContext, UniformSlots, WORKGROUP, groups_2d, shaders};
 use lucent_optics::PhaseFunction;
 
 use crate::solver::device_error;
@@ -39,9 +39,12 @@ struct P1Params32 {
     rates: [f32; 4],
 }
 
-/// Host bytes: as `ftcs-p1` (its f64 fields), which bounds the f32 download too.
+/// Bytes: on the host as `ftcs-p1` (its f64 fields), which bounds the f32 download too;
+/// on the device φ and E twice, the source and 64 steps of partials (about 40 bytes per
+/// cell).
 pub(crate) fn memory_bytes(problem: &Problem) -> u64 {
-    problem.geometry().voxel_count() as u64 * 8 * 2 * 4 * 2 * problem.channels() as u64
+    let n = problem.geometry().voxel_count() as u64;
+    n * 8 * 2 * 4 * 2 * problem.channels() as u64 + n * 40
 }
 
 /// The device's fields: φ, E_x, E_y, E_z twice (ping-pong).
@@ -104,9 +107,12 @@ pub(crate) fn march(
     let groups = groups_2d(gpu, n as u64, WORKGROUP);
     let per_step = (groups[0] * groups[1]) as usize;
     let partials = DeviceField::zeros(gpu, "P1 partials", 4 * MAX_BATCH * per_step).map_err(err)?;
-    let fluence_kernel = Kernel::new(gpu, "p1.wgsl", shaders::P1, "fluence_step").map_err(err)?;
-    let flux_kernel =
-        Kernel::new(gpu, "p1_flux.wgsl", shaders::P1_FLUX, "flux_step").map_err(err)?;
+    let fluence_kernel = gpu
+        .kernel("p1.wgsl", shaders::P1, "fluence_step")
+        .map_err(err)?;
+    let flux_kernel = gpu
+        .kernel("p1_flux.wgsl", shaders::P1_FLUX, "flux_step")
+        .map_err(err)?;
     let slots: Vec<P1Params32> = (0..MAX_BATCH)
         .map(|j| P1Params32 {
             dims: [

@@ -146,8 +146,22 @@ impl Solver for GpuSolver {
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
-        // What the backend cannot handle is said before whether a device exists.
+        // What the backend cannot handle, and a budget it would exceed, are said before
+        // whether a device exists.
         self.admits(problem)?;
+        let needed = match &self.backend {
+            Backend::Direct(_) => crate::direct::memory_bytes(problem),
+            Backend::FtcsDiffusion(_) => crate::ftcs::memory_bytes(problem),
+            Backend::P1(_) => crate::p1::memory_bytes(problem),
+            Backend::Convection(_) => crate::convection::memory_bytes(problem),
+        };
+        if needed > options.memory_budget {
+            return Err(SolveError::OverBudget {
+                solver: self.name.into(),
+                needed,
+                budget: options.memory_budget,
+            });
+        }
         match &self.backend {
             Backend::Direct(params) => {
                 let gpu = device(self.name)?;

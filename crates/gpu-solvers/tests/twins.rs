@@ -351,3 +351,49 @@ fn gpu_convection_diffusion_matches_the_characteristic_model() {
         }
     }
 }
+
+#[test]
+fn a_grid_beyond_the_adapters_binding_limit_is_refused_by_name_before_allocating() {
+    let Some(context) = context_or_skip("a_grid_beyond_the_adapters_binding_limit") else {
+        return;
+    };
+    let limit = context.limits().max_storage_buffer_binding_size;
+    if limit > 1 << 30 {
+        eprintln!(
+            "skipping: this adapter binds {limit} bytes; the grid would be too large for a test"
+        );
+        return;
+    }
+    // One f32 field just past the limit (lavapipe: 128 MiB → 512 × 512 × 129).
+    let nz = (limit / (4 * 512 * 512) + 1) as usize;
+    let g = GridGeometry::new([512, 512, nz], DVec3::splat(1.0 / 512.0), DVec3::ZERO).unwrap();
+    let p = problem(
+        g,
+        vec![Grid::filled(g, 1.0)],
+        0.5,
+        vec![Light::Directional {
+            direction: DVec3::Z,
+            irradiance: Spectrum::Grey(1.0),
+        }],
+        Boundary::Vacuum,
+    );
+    let e = registry()
+        .build("gpu-direct", &Params::default())
+        .unwrap()
+        .solve(&p, &SolveOptions::default())
+        .unwrap_err();
+    match e {
+        SolveError::Device {
+            unavailable,
+            reason,
+            ..
+        } => {
+            assert!(!unavailable);
+            assert!(
+                reason.contains("max_storage_buffer_binding_size"),
+                "{reason}"
+            );
+        }
+        other => panic!("expected a device error, got {other}"),
+    }
+}

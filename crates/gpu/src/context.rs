@@ -38,6 +38,10 @@ pub struct GpuContext {
     info: wgpu::AdapterInfo,
     limits: wgpu::Limits,
     timestamps: bool,
+    /// Compiled kernels by (file, entry point): a pipeline is compiled once per device.
+    kernels: std::sync::Mutex<
+        std::collections::HashMap<(String, String), std::sync::Arc<crate::kernel::Kernel>>,
+    >,
 }
 
 impl GpuContext {
@@ -142,7 +146,35 @@ impl GpuContext {
             info,
             limits,
             timestamps,
+            kernels: Default::default(),
         })
+    }
+
+    /// Entry point `entry` of `source` (named `file`), compiled on first use and kept:
+    /// backends ask for their kernels per solve without recompiling them (pipeline
+    /// creation costs milliseconds on a GPU driver, and a software adapter's compiler
+    /// tens of MiB of memory).
+    pub fn kernel(
+        &self,
+        file: &str,
+        source: &str,
+        entry: &str,
+    ) -> Result<std::sync::Arc<crate::kernel::Kernel>, GpuError> {
+        let key = (file.to_owned(), entry.to_owned());
+        if let Some(k) = self
+            .kernels
+            .lock()
+            .map_err(|e| GpuError::Device(e.to_string()))?
+            .get(&key)
+        {
+            return Ok(k.clone());
+        }
+        let kernel = std::sync::Arc::new(crate::kernel::Kernel::new(self, file, source, entry)?);
+        self.kernels
+            .lock()
+            .map_err(|e| GpuError::Device(e.to_string()))?
+            .insert(key, kernel.clone());
+        Ok(kernel)
     }
 
     /// The process's shared context: the environment's adapter, opened on first use and

@@ -1,0 +1,146 @@
+//! `cargo xtask bench-gpu [N...]`: every GPU backend at N³ (default 64 and 128) on the
+//! adapter lucent picks, per kernel: seconds per step, cell updates per second and GB/s
+//! by byte count, with the adapter's name.
+//!
+//! Timing is of whole solves with a fixed amount of work (a fixed number of steps, one
+//! pass, one light), minus nothing: it includes uploading the problem, recording, the
+//! host's reading of the per-step residual partials after every batch (up to 64 steps per
+//! submit) and the download of the result, so it bounds the kernels' own time from above.
+//! Bytes per cell are the compulsory traffic of one step (each field read or written
+//! once, neighbours from cache):
+//!
+//! - `gpu-ftcs-diffusion`, one FTCS step on CSR: row start 4 + 7 × (column 4 + entry 4)
+//!   + φ 4 + b 4 + φ′ 4 = 72 bytes;
+//! - `gpu-ftcs-p1`, one step: φ, E_x, E_y, E_z, q read and φ′ written (24), φ, E read and
+//!   E′ written (28) = 52 bytes;
+//! - `gpu-convection-diffusion`, one light's pass: σ_t 4 + ρ 4 + ρ′ 4 = 12 bytes;
+//! - `gpu-direct`, one light: σ_t 4 + the transmittance 4 = 8 bytes (the march itself
+//!   reads O(N) values per cell from cache: it is bound by arithmetic, not bandwidth).
+//!
+//! On a CPU implementation (lavapipe) the run is a correctness run: it says so and its
+//! numbers are never speed claims.
+
+use std::time::Instant;
+
+use glam::DVec3;
+use lucent::core::{
+    Boundary, Field, Light, Medium, ParamValue, Params, Problem, SolveOptions, Spectrum,
+};
+use lucent::gpu::GpuContext;
+use lucent_grid::{Grid, GridGeometry};
+
+/// Runs the benchmark at each size.
+pub(crate) fn run(sizes: &[usize]) -> Result<(), String> {
+    let context = GpuContext::shared().map_err(|e| e.to_string())?;
+    println!("adapter: {}", context.describe());
+    if context.is_software() {
+        println!("a CPU implementation: this is a correctness run, not a measure of GPU speed");
+    }
+    println!("| backend | N³ | steps | s per step | cell updates/s | bytes/cell | GB/s | stop |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for &n in sizes {
+        let problems = Problems::new(n)?;
+        let steps = 256;
+        let fixed = |tolerance: f64| SolveOptions {
+            relative_tolerance: tolerance,
+            absolute_tolerance: 0.0,
+            max_iterations: steps,
+            ..SolveOptions::default()
+        };
+        let mut scattering = Params::default();
+        scattering
+            .0
+            .insert("scattering".into(), ParamValue::Float(0.0));
+        let cases: [(&str, &Problem, Params, SolveOptions, f64); 4] = [
+            (
+                "gpu-ftcs-diffusion",
+                &problems.point,
+                Params::default(),
+                fixed(0.0),
+                72.0,
+            ),
+            (
+                "gpu-ftcs-p1",
+                &problems.point,
+                Params::default(),
+                fixed(0.0),
+                52.0,
+            ),
+            (
+                "gpu-convection-diffusion",
+                &problems.sun,
+                scattering,
+                SolveOptions::default(),
+                12.0,
+            ),
+            (
+                "gpu-direct",
+                &problems.sun,
+                Params::default(),
+                SolveOptions::default(),
+                8.0,
+            ),
+        ];
+        for (name, problem, params, options, bytes) in cases {
+            let registry = lucent::registry();
+            let solver = registry.build(name, &params).map_err(|e| e.to_string())?;
+            let start = Instant::now();
+            let solution = solver.solve(problem, &options).map_err(|e| e.to_string())?;
+            let seconds = start.elapsed().as_secs_f64();
+            let steps = solution.report.iterations.max(1);
+            let cells = (n * n * n) as f64;
+            let per_step = seconds / steps as f64;
+            println!(
+                "| {name} | {n} | {steps} | {per_step:.3e} | {:.3e} | {bytes} | {:.2} | {} |",
+                cells / per_step,
+                cells * bytes / per_step * 1e-9,
+                solution.report.stop_reason
+            );
+        }
+    }
+    Ok(())
+}
+
+/// A smoke blob at N³ lit by a sun (for the light marches) and by a point light inside
+/// (for the time-stepping schemes, which take point lights).
+struct Problems {
+    sun: Problem,
+    point: Problem,
+}
+
+impl Problems {
+    fn new(n: usize) -> Result<Self, String> {
+        let geometry = GridGeometry::new([n; 3], DVec3::splat(1.0 / n as f64), DVec3::ZERO)
+            .map_err(|e| e.to_string())?;
+        let medium = |sigma: &(dyn Fn(DVec3) -> f64 + Sync)| Medium {
+            sigma_t: vec![Grid::from_fn(geometry, |x| sigma(x) as f32)],
+            albedo: vec![Field::Constant(0.9)],
+            phase: lucent::optics::Phase::Isotropic,
+        };
+        let blob = |x: DVec3| 2.0 + 20.0 * (-12.0 * (x - DVec3::splat(0.5)).length_squared()).exp();
+        let sun = Problem::new(
+            geometry,
+            medium(&blob),
+            vec![Light::Directional {
+                direction: DVec3::new(0.4, -0.3, 0.87).normalize(),
+                irradiance: Spectrum::Grey(1.0),
+            }],
+            Boundary::Vacuum,
+            None,
+        )
+        .map_err(|e| e.to_string())?;
+        // P1 by FTCS needs a homogeneous medium.
+        let point = Problem::new(
+            geometry,
+            medium(&|_| 10.0),
+            vec![Light::Point {
+                position: DVec3::splat(0.5),
+                intensity: Spectrum::Grey(1.0),
+            }],
+            Boundary::Vacuum,
+            None,
+        )
+        .map_err(|e| e.to_string())?;
+        Ok(Self { sun, point })
+    }
+}
