@@ -25,25 +25,12 @@ impl DeviceField {
         nonnegative: bool,
     ) -> Result<Self, GpuError> {
         check_values(what, values, nonnegative)?;
-        // An empty field still binds four bytes (wgpu refuses empty storage bindings).
-        let bytes = (values.len().max(1) * 4) as u64;
-        context.check_binding(what, bytes)?;
-        let contents: &[u8] = if values.is_empty() {
-            &[0; 4]
-        } else {
-            bytemuck::cast_slice(values)
-        };
-        let buffer = context.checked(|| {
-            context
-                .device()
-                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some(what),
-                    contents,
-                    usage: wgpu::BufferUsages::STORAGE
-                        | wgpu::BufferUsages::COPY_SRC
-                        | wgpu::BufferUsages::COPY_DST,
-                })
-        })?;
+        let buffer = storage_init(
+            context,
+            what,
+            bytemuck::cast_slice(values),
+            wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        )?;
         Ok(Self {
             buffer,
             len: values.len(),
@@ -161,6 +148,28 @@ impl DeviceField {
     }
 }
 
+/// A storage buffer holding `bytes` (plus `usage`), checked against the binding limit
+/// before allocation. An empty one still binds four bytes (wgpu refuses empty storage
+/// bindings).
+fn storage_init(
+    context: &GpuContext,
+    what: &str,
+    bytes: &[u8],
+    usage: wgpu::BufferUsages,
+) -> Result<wgpu::Buffer, GpuError> {
+    let contents: &[u8] = if bytes.is_empty() { &[0; 4] } else { bytes };
+    context.check_binding(what, contents.len() as u64)?;
+    context.checked(|| {
+        context
+            .device()
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(what),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE | usage,
+            })
+    })
+}
+
 /// Refuses NaN and infinities (and negative values where `nonnegative`).
 fn check_values(what: &str, values: &[f32], nonnegative: bool) -> Result<(), GpuError> {
     let bad = |index: usize, problem| GpuError::BadInput {
@@ -188,22 +197,12 @@ pub struct DeviceIndices {
 impl DeviceIndices {
     /// Uploads `indices` (one binding's worth at most, checked before allocation).
     pub fn upload(context: &GpuContext, what: &str, indices: &[u32]) -> Result<Self, GpuError> {
-        let bytes = (indices.len().max(1) * 4) as u64;
-        context.check_binding(what, bytes)?;
-        let contents: &[u8] = if indices.is_empty() {
-            &[0; 4]
-        } else {
-            bytemuck::cast_slice(indices)
-        };
-        let buffer = context.checked(|| {
-            context
-                .device()
-                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some(what),
-                    contents,
-                    usage: wgpu::BufferUsages::STORAGE,
-                })
-        })?;
+        let buffer = storage_init(
+            context,
+            what,
+            bytemuck::cast_slice(indices),
+            wgpu::BufferUsages::empty(),
+        )?;
         Ok(Self {
             buffer,
             len: indices.len(),

@@ -145,7 +145,8 @@ impl UniformSlots {
         })
     }
 
-    /// Slot `i` as a binding.
+    /// Slot `i` as a binding. Panics if `i` is not below [`UniformSlots::len`], as
+    /// indexing a slice does: slots are addressed by the backend that made them.
     pub fn slot(&self, i: usize) -> wgpu::BindingResource<'_> {
         assert!(i < self.count.max(1), "uniform slot {i} of {}", self.count);
         wgpu::BindingResource::Buffer(wgpu::BufferBinding {

@@ -1,15 +1,10 @@
 //! The WGSL sources of lucent's kernels, from the repository's top-level `shaders/` folder,
-//! compiled into the crate. Every kernel but `reduce.wgsl` is prefixed with
-//! `shaders/common.wgsl` (2-D workgroup numbering, pairwise workgroup sums, finiteness
+//! compiled into the crate. Every kernel is prefixed with `shaders/common.wgsl` (2-D workgroup numbering, pairwise workgroup sums, finiteness
 //! tests). `tests/shaders.rs` validates every one with naga, so a shader error fails
 //! `cargo test` rather than a user's run.
 
 /// Helpers prepended to the kernels below.
 pub const COMMON: &str = include_str!("../../../shaders/common.wgsl");
-
-/// Pairwise workgroup reductions (sum, sum of squares, maximum of |x|) into per-workgroup
-/// partials that the host adds in f64.
-pub const REDUCE: &str = include_str!("../../../shaders/reduce.wgsl");
 
 macro_rules! kernel {
     ($file:literal) => {
@@ -19,6 +14,10 @@ macro_rules! kernel {
         )
     };
 }
+
+/// Pairwise workgroup reductions (sum, sum of squares, maximum of |x|) into per-workgroup
+/// partials that the host adds in f64.
+pub const REDUCE: &str = kernel!("reduce.wgsl");
 
 /// `gpu-direct`: transmittance by exact ray marching of the trilinear σ_t.
 pub const DIRECT: &str = kernel!("direct.wgsl");
