@@ -126,6 +126,11 @@ struct RenderArgs {
     /// Image size WIDTHxHEIGHT instead of the scene's.
     #[arg(long)]
     size: Option<String>,
+    /// March the camera rays on the GPU (wgpu; `WGPU_ADAPTER_NAME` and `WGPU_BACKEND`
+    /// pick the adapter): the CPU's image within f32 rounding. The adapter is opened
+    /// before solving, so a missing one fails at once.
+    #[arg(long)]
+    gpu: bool,
 }
 
 #[derive(Subcommand)]
@@ -501,6 +506,22 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
     )?;
     chosen.solver.admits(&built.problem)?;
     args.solver.options(&chosen, meter_free())?.validate()?;
+    let device = if args.gpu {
+        if chosen.solver.images().is_some() {
+            return Err(Error::Usage(format!(
+                "--gpu marches camera rays through a solution; `{}` traces its own camera paths on the CPU",
+                chosen.solver.name()
+            )));
+        }
+        Some(lucent::gpu::GpuContext::shared().map_err(|e| {
+            lucent::render::RenderError::Device {
+                unavailable: true,
+                reason: e.to_string(),
+            }
+        })?)
+    } else {
+        None
+    };
     // A solver that makes pictures itself (Monte Carlo's camera paths) says so; the rest
     // hand the renderer a fluence.
     let (solve_seconds, image) = if let Some(imager) = chosen.solver.images() {
@@ -577,24 +598,39 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
             return Ok(ended);
         }
         let (progress, meter) = bar(quiet, "render");
-        let image = lucent::render::render(
-            &built.problem,
-            &solution,
-            &built.camera,
-            &built.settings,
-            Some(&meter.fraction_callback("ray marching")),
-        );
+        let marched = meter.fraction_callback("ray marching");
+        let image = match device {
+            Some(gpu) => lucent::render::render_on_device(
+                gpu,
+                &built.problem,
+                &solution,
+                &built.camera,
+                &built.settings,
+                Some(&marched),
+            ),
+            None => lucent::render::render(
+                &built.problem,
+                &solution,
+                &built.camera,
+                &built.settings,
+                Some(&marched),
+            ),
+        };
         progress.finish_and_clear();
         (report.wall_time_s, image?)
     };
     image.write(output, built.exposure, built.tone)?;
     if !quiet {
         println!(
-            "lucent: rendered {name} with `{}` to {} ({}×{}) in {:.2} s (solve {solve_seconds:.2} s)",
+            "lucent: rendered {name} with `{}` to {} ({}×{}{}) in {:.2} s (solve {solve_seconds:.2} s)",
             chosen.solver.name(),
             output.display(),
             image.width,
             image.height,
+            device.map_or(String::new(), |gpu| format!(
+                ", rays marched on {}",
+                gpu.info().name
+            )),
             start.elapsed().as_secs_f64(),
         );
     }

@@ -1112,3 +1112,108 @@ fn gpu_direct_writes_what_direct_writes() {
     // `direct` docs): 10⁻⁴ of the peak.
     assert!(worst < 1e-4 * peak, "{worst} of {peak}");
 }
+
+/// The linear pixels of an EXR file the renderer wrote, row-major.
+fn read_exr(path: &Path) -> Vec<[f32; 3]> {
+    let image = exr::prelude::read_first_rgba_layer_from_file(
+        path,
+        |size, _| (size.width(), vec![[0f32; 3]; size.width() * size.height()]),
+        |(width, pixels): &mut (usize, Vec<[f32; 3]>), at, (r, g, b, _): (f32, f32, f32, f32)| {
+            pixels[at.y() * *width + at.x()] = [r, g, b];
+        },
+    );
+    image.unwrap().layer_data.channel_data.pixels.1
+}
+
+#[test]
+fn render_gpu_draws_the_cpu_picture() {
+    let Some(_) = lucent::gpu::context_or_skip("render_gpu_draws_the_cpu_picture") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    // A cloud lit by the sun through `direct` (per-light transmittance, double
+    // Henyey–Greenstein) and the default scene through `dom` (discrete ordinates).
+    for (scene_file, name) in [
+        ("backlit_anisotropic.toml", "backlit"),
+        ("default.toml", "default"),
+    ] {
+        let mut images = Vec::new();
+        for gpu in [false, true] {
+            let output = format!("{name}-{gpu}.exr");
+            let mut args = vec![
+                "render",
+                &scene(scene_file) as &str,
+                "--size",
+                "45x31",
+                "-o",
+                &output,
+                "--quiet",
+            ]
+            .into_iter()
+            .map(str::to_owned)
+            .collect::<Vec<_>>();
+            if gpu {
+                args.push("--gpu".into());
+            }
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            let out = lucent(&args, dir.path());
+            assert!(out.status.success(), "{name} gpu={gpu}: {}", stderr(&out));
+            images.push(read_exr(&dir.path().join(&output)));
+        }
+        let peak = images[0].iter().flatten().fold(0f32, |m, v| m.max(*v));
+        let worst = images[0]
+            .iter()
+            .zip(&images[1])
+            .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()))
+            .fold(0f32, f32::max);
+        // The marches are the same but for f32 on the device (lucent-render's `gpu`
+        // docs): about N·2⁻²⁴ relative over the N ≈ 200 steps across these grids, plus
+        // the 10⁻⁴ opacity cut-off landing one step apart in a dense cloud. Measured:
+        // 1.6·10⁻⁵ (backlit) and 1.2·10⁻⁶ (default) of the peak; asserted at 10⁻⁴.
+        assert!(
+            peak > 0.0 && worst <= 1e-4 * peak,
+            "{name}: {worst} of {peak}"
+        );
+    }
+}
+
+#[test]
+fn render_gpu_without_an_adapter_fails_before_solving() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = lucent_env(
+        &[
+            "render",
+            &scene("spot_light.toml"),
+            "--gpu",
+            "-o",
+            "x.png",
+            "--quiet",
+        ],
+        dir.path(),
+        &[
+            ("WGPU_ADAPTER_NAME", "no adapter has this name"),
+            ("LUCENT_COUNTERS", "1"),
+        ],
+    );
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("no GPU adapter"), "{err}");
+    assert!(err.ends_with("solves started 0\n"), "{err}");
+    assert!(!dir.path().join("x.png").exists());
+    // Monte Carlo draws its own picture: --gpu has nothing to march there.
+    let out = lucent(
+        &[
+            "render",
+            &scene("spot_light.toml"),
+            "--solver",
+            "mc",
+            "--gpu",
+            "-o",
+            "y.png",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--gpu"), "{}", stderr(&out));
+}

@@ -33,6 +33,8 @@ pub const CONVECTION: &str = kernel!("convection.wgsl");
 pub const SCATTER: &str = kernel!("scatter.wgsl");
 /// The largest change between two fields (stopping rules of passes).
 pub const MAX_CHANGE: &str = kernel!("max_change.wgsl");
+/// lucent-render's ray march on the device: one invocation per pixel.
+pub const RENDER: &str = kernel!("render.wgsl");
 
 /// Every shader with its file name, for validation (`common.wgsl` inside every kernel).
 pub const ALL: &[(&str, &str)] = &[
@@ -45,6 +47,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("convection.wgsl", CONVECTION),
     ("scatter.wgsl", SCATTER),
     ("max_change.wgsl", MAX_CHANGE),
+    ("render.wgsl", RENDER),
 ];
 
 /// The module of `source` on `context`'s device.

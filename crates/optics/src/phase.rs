@@ -183,6 +183,11 @@ impl DoubleHenyeyGreenstein {
             weight: in_range("weight", weight, "[0, 1]", |w| (0.0..=1.0).contains(&w))?,
         })
     }
+
+    /// (g₁, g₂, w): the lobes' mean cosines and the first lobe's share.
+    pub fn lobes(&self) -> (f64, f64, f64) {
+        (self.first.g, self.second.g, self.weight)
+    }
 }
 
 impl PhaseFunction for DoubleHenyeyGreenstein {

@@ -45,11 +45,11 @@ fn default_fov() -> f64 {
 }
 
 /// The camera's orthonormal frame: right, up, forward.
-struct Frame {
-    origin: DVec3,
-    right: DVec3,
-    up: DVec3,
-    forward: DVec3,
+pub(crate) struct Frame {
+    pub(crate) origin: DVec3,
+    pub(crate) right: DVec3,
+    pub(crate) up: DVec3,
+    pub(crate) forward: DVec3,
 }
 
 impl std::fmt::Display for Camera {
@@ -89,7 +89,7 @@ impl std::fmt::Display for Camera {
 }
 
 impl Camera {
-    fn frame(&self) -> Result<Frame, RenderError> {
+    pub(crate) fn frame(&self) -> Result<Frame, RenderError> {
         let (position, look_at, up) = match *self {
             Camera::Pinhole {
                 position,

@@ -78,14 +78,76 @@ impl RenderSettings {
     }
 }
 
-/// A per-pixel jitter in [0, 1) from a hash of the pixel (deterministic).
-fn jitter(x: usize, y: usize) -> f64 {
-    let mut h = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-        ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
-    h = (h ^ (h >> 31)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    h ^= h >> 29;
-    (h >> 11) as f64 / (1u64 << 53) as f64
+/// A per-pixel jitter in [0, 1) from a 32-bit hash of the pixel (deterministic; Wellons's
+/// `lowbias32` finaliser). 32-bit so that `shaders/render.wgsl` computes the very same
+/// offsets (WGSL has no 64-bit integers), and 24 bits of it so that the value is exact in
+/// f32 as in f64.
+pub(crate) fn jitter(x: usize, y: usize) -> f64 {
+    fn lowbias32(mut h: u32) -> u32 {
+        h ^= h >> 16;
+        h = h.wrapping_mul(0x7feb_352d);
+        h ^= h >> 15;
+        h = h.wrapping_mul(0x846c_a68b);
+        h ^ (h >> 16)
+    }
+    let h = lowbias32(x as u32 ^ lowbias32(y as u32));
+    f64::from(h >> 8) / f64::from(1u32 << 24)
 }
+
+/// What the CPU and the device march share: the box, the step, the channels and what
+/// escaping rays see.
+pub(crate) struct MarchSetup {
+    /// Lower corner of the medium's box (world).
+    pub(crate) lo: glam::DVec3,
+    /// Upper corner of the medium's box (world).
+    pub(crate) hi: glam::DVec3,
+    /// Step length (world units).
+    pub(crate) step: f64,
+    /// Channels marched: the problem's or the solution's, whichever has more.
+    pub(crate) channels: usize,
+    /// Radiance behind the medium per output colour.
+    pub(crate) background: [f64; 3],
+    /// Width / height.
+    pub(crate) aspect: f64,
+    /// Pixels in the image.
+    pub(crate) pixels: usize,
+}
+
+impl MarchSetup {
+    /// Checks the camera and the settings, and sets the march up.
+    pub(crate) fn new(
+        problem: &Problem,
+        solution: &Solution,
+        camera: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<Self, RenderError> {
+        camera.validate()?;
+        let pixels = settings.validate()?;
+        let geometry = problem.geometry();
+        let (lo, hi) = geometry.bounds();
+        let sky: [f64; 3] = std::array::from_fn(|c| {
+            problem
+                .lights()
+                .iter()
+                .filter(|l| matches!(l, Light::Sky { .. }))
+                .map(|l| l.spectrum().channel(c))
+                .sum()
+        });
+        Ok(Self {
+            lo,
+            hi,
+            step: settings.step * geometry.spacing().min_element(),
+            channels: problem.channels().max(solution.fluence.len()),
+            background: settings.background.unwrap_or(sky),
+            aspect: settings.width as f64 / settings.height as f64,
+            pixels,
+        })
+    }
+}
+
+/// A channel's march ends where its transmittance has fallen below this: what lies
+/// behind adds at most 10⁻⁴ of its own radiance.
+pub(crate) const OPAQUE: f64 = 1e-4;
 
 /// Renders `solution` of `problem` through `camera`. `progress` is called with the fraction
 /// of rows done.
@@ -96,31 +158,17 @@ pub fn render(
     settings: &RenderSettings,
     progress: Option<&(dyn Fn(f64) + Sync)>,
 ) -> Result<Image, RenderError> {
-    camera.validate()?;
-    let pixel_count = settings.validate()?;
-    let geometry = problem.geometry();
-    let (lo, hi) = geometry.bounds();
-    let step = settings.step * geometry.spacing().min_element();
+    let setup = MarchSetup::new(problem, solution, camera, settings)?;
+    let (lo, hi, step, channels) = (setup.lo, setup.hi, setup.step, setup.channels);
     let medium = problem.medium();
-    let channels = problem.channels().max(solution.fluence.len());
-    let sky: [f64; 3] = std::array::from_fn(|c| {
-        problem
-            .lights()
-            .iter()
-            .filter(|l| matches!(l, Light::Sky { .. }))
-            .map(|l| l.spectrum().channel(c))
-            .sum()
-    });
-    let background = settings.background.unwrap_or(sky);
     let emission: Vec<&Light> = problem
         .lights()
         .iter()
         .filter(|l| matches!(l, Light::Emission { .. }))
         .collect();
-    let aspect = settings.width as f64 / settings.height as f64;
     let rows_done = std::sync::atomic::AtomicUsize::new(0);
 
-    let mut pixels = vec![[0f32; 3]; pixel_count];
+    let mut pixels = vec![[0f32; 3]; setup.pixels];
     pixels
         .par_chunks_mut(settings.width)
         .enumerate()
@@ -128,18 +176,23 @@ pub fn render(
             for (x, pixel) in row.iter_mut().enumerate() {
                 let u = (x as f64 + 0.5) / settings.width as f64;
                 let v = (y as f64 + 0.5) / settings.height as f64;
-                let (origin, dir) = camera.ray(u, v, aspect)?;
+                let (origin, dir) = camera.ray(u, v, setup.aspect)?;
                 let mut radiance = [0f64; 3];
                 let mut transmittance = [1f64; 3];
                 if let Some((t0, t1)) = lucent_grid::ray_box(origin, dir, lo, hi) {
-                    let mut t = t0 + step * jitter(x, y);
-                    // March; the first (jittered) partial step starts at t0.
+                    // Step ends at t0 + step·(jitter + k), k = 0, 1, …: the first step is a
+                    // jittered partial one. Each channel stops where it has become opaque.
+                    let start = t0 + step * jitter(x, y);
                     let mut previous = t0;
-                    while previous < t1 && transmittance.iter().take(channels).any(|&t| t > 1e-4) {
-                        let end = t.min(t1);
+                    let mut k = 0.0;
+                    while previous < t1 && transmittance[..channels].iter().any(|&t| t > OPAQUE) {
+                        let end = (start + k * step).min(t1);
                         let ds = end - previous;
                         let p = origin + dir * (0.5 * (previous + end));
                         for c in 0..channels {
+                            if transmittance[c] <= OPAQUE {
+                                continue;
+                            }
                             let sigma_t = f64::from(medium.sigma_t(c).sample_trilinear(p));
                             let sigma_s = f64::from(medium.albedo(c).sample(p)) * sigma_t;
                             let mut source = if sigma_s > 0.0 {
@@ -163,12 +216,12 @@ pub fn render(
                             transmittance[c] *= attenuation;
                         }
                         previous = end;
-                        t += step;
+                        k += 1.0;
                     }
                 }
                 let rgb: [f64; 3] = std::array::from_fn(|c| {
                     let c_in = c.min(channels - 1);
-                    radiance[c_in] + transmittance[c_in] * background[c]
+                    radiance[c_in] + transmittance[c_in] * setup.background[c]
                 });
                 *pixel = rgb.map(|v| v as f32);
             }
