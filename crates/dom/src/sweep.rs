@@ -15,52 +15,43 @@
 //! radiance); each cell's contribution to the in-scattered radiance is summed in f64 over
 //! an octant's directions before it is added to storage.
 
+use lucent_grid::BrickLayout;
 use rayon::prelude::*;
 
 use crate::angular::Ordinates;
 use crate::closure::{CellClosure, CellDirection, OctantDirections};
 
-/// How cells are grouped into blocks, and their order in memory.
+/// How cells are grouped into blocks — the bricks of lucent-grid's [`BrickLayout`], the
+/// layout the pager and the bricked grid share — and their order in memory: block by block
+/// in brick order, each block's cells x fastest in its own extent.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Layout {
-    dims: [usize; 3],
-    block: usize,
-    blocks: [usize; 3],
+    bricks: BrickLayout,
     starts: Vec<usize>,
 }
 
 impl Layout {
-    /// Blocks of `block`³ cells (smaller at the high edges) over `dims` cells.
+    /// Blocks of `block`³ cells (smaller at the high edges) over `dims` cells; `block` is
+    /// taken between 1 and [`BrickLayout::MAX_BRICK`], and empty dimensions as 1.
     pub fn new(dims: [usize; 3], block: usize) -> Self {
-        let block = block.max(1);
-        let blocks = dims.map(|n| n.div_ceil(block));
-        let mut starts = Vec::with_capacity(blocks[0] * blocks[1] * blocks[2] + 1);
+        let bricks = BrickLayout::new(
+            dims.map(|n| n.max(1)),
+            block.clamp(1, BrickLayout::MAX_BRICK),
+        )
+        .expect("dimensions and block size are clamped to valid ones");
+        let mut starts = Vec::with_capacity(bricks.count() + 1);
         let mut offset = 0;
-        for bk in 0..blocks[2] {
-            for bj in 0..blocks[1] {
-                for bi in 0..blocks[0] {
-                    starts.push(offset);
-                    let e = [
-                        block.min(dims[0] - bi * block),
-                        block.min(dims[1] - bj * block),
-                        block.min(dims[2] - bk * block),
-                    ];
-                    offset += e[0] * e[1] * e[2];
-                }
-            }
+        for b in 0..bricks.count() {
+            starts.push(offset);
+            offset += bricks.extent(b).iter().product::<usize>();
         }
         starts.push(offset);
-        Self {
-            dims,
-            block,
-            blocks,
-            starts,
-        }
+        Self { bricks, starts }
     }
 
     /// Cells per axis.
     pub fn dims(&self) -> [usize; 3] {
-        self.dims
+        self.bricks.dims()
     }
 
     /// Number of blocks.
@@ -73,22 +64,16 @@ impl Layout {
         self.starts[self.block_count()]
     }
 
-    fn block_coords(&self, b: usize) -> [usize; 3] {
-        let [bx, by, _] = self.blocks;
-        [b % bx, (b / bx) % by, b / (bx * by)]
-    }
-
     fn block_index(&self, c: [usize; 3]) -> usize {
-        c[0] + self.blocks[0] * (c[1] + self.blocks[1] * c[2])
+        self.bricks.id(c)
     }
 
     fn origin(&self, b: usize) -> [usize; 3] {
-        self.block_coords(b).map(|c| c * self.block)
+        self.bricks.origin(b)
     }
 
     fn extent(&self, b: usize) -> [usize; 3] {
-        let o = self.origin(b);
-        [0, 1, 2].map(|a| self.block.min(self.dims[a] - o[a]))
+        self.bricks.extent(b)
     }
 
     /// Grid-order data (`per_cell` values per cell, x fastest) to block order.
@@ -98,7 +83,7 @@ impl Layout {
         per_cell: usize,
     ) -> Vec<T> {
         let mut out = vec![T::default(); self.cells() * per_cell];
-        let [nx, ny, _] = self.dims;
+        let [nx, ny, _] = self.dims();
         // Block by block in parallel: each block's chunk is contiguous.
         let mut chunks = split(&mut out, &self.starts, per_cell);
         chunks.par_iter_mut().enumerate().for_each(|(b, chunk)| {
@@ -125,7 +110,7 @@ impl Layout {
         per_cell: usize,
     ) -> Vec<T> {
         let mut out = vec![T::default(); self.cells() * per_cell];
-        let [nx, ny, _] = self.dims;
+        let [nx, ny, _] = self.dims();
         for b in 0..self.block_count() {
             let o = self.origin(b);
             let e = self.extent(b);
@@ -205,7 +190,7 @@ struct BlockResult {
 /// octant's sweep streams through its own contiguous eighth.
 pub(crate) fn sweep<C: CellClosure>(input: &SweepInput<'_>, work: &mut [f64]) -> SweepOutput {
     let layout = input.layout;
-    let dims = layout.dims;
+    let dims = layout.dims();
     let mut fluence = vec![0.0f64; layout.cells()];
     let mut outflow: [Vec<f64>; 6] = std::array::from_fn(|f| {
         let a = f / 2;
@@ -217,7 +202,6 @@ pub(crate) fn sweep<C: CellClosure>(input: &SweepInput<'_>, work: &mut [f64]) ->
     let directions = input.ordinates.propagation().directions();
     let h = input.spacing;
     let volume = h[0] * h[1] * h[2];
-    let nb = layout.blocks;
     for octant in 0..8 {
         let dirs = input.ordinates.octant(octant);
         if dirs.is_empty() {
@@ -237,27 +221,14 @@ pub(crate) fn sweep<C: CellClosure>(input: &SweepInput<'_>, work: &mut [f64]) ->
             .map(Some)
             .collect();
         let mut planes: Vec<Option<[Vec<f64>; 3]>> = vec![None; layout.block_count()];
-        for w in 0..(nb[0] + nb[1] + nb[2] - 2) {
-            // The blocks of hyperplane w, counted from the octant's upwind corner.
+        let nb = layout.bricks.bricks();
+        for plane in layout.bricks.wavefronts(negative) {
+            // The blocks of one hyperplane, counted from the octant's upwind corner.
             let mut tasks = Vec::new();
-            for bk in 0..nb[2].min(w + 1) {
-                for bj in 0..nb[1].min(w + 1 - bk) {
-                    let bi = w - bk - bj;
-                    if bi >= nb[0] {
-                        continue;
-                    }
-                    let oriented = [bi, bj, bk];
-                    let coords: [usize; 3] = std::array::from_fn(|a| {
-                        if negative[a] {
-                            nb[a] - 1 - oriented[a]
-                        } else {
-                            oriented[a]
-                        }
-                    });
-                    let b = layout.block_index(coords);
-                    if let (Some(j), Some(p)) = (work_chunks[b].take(), phi_chunks[b].take()) {
-                        tasks.push((b, coords, j, p));
-                    }
+            for b in plane {
+                let coords = layout.bricks.coords(b);
+                if let (Some(j), Some(p)) = (work_chunks[b].take(), phi_chunks[b].take()) {
+                    tasks.push((b, coords, j, p));
                 }
             }
             let results: Vec<BlockResult> = tasks
@@ -352,7 +323,7 @@ fn block_sweep<C: CellClosure>(
     fluence: &mut [f64],
 ) -> BlockResult {
     let layout = input.layout;
-    let dims = layout.dims;
+    let dims = layout.dims();
     let o = layout.origin(b);
     let e = layout.extent(b);
     let nd = dirs.len();

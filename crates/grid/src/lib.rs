@@ -20,8 +20,12 @@
 //! - [`Grid`]: dense f32 grid; trilinear sampling with clamping (exact for linear fields);
 //!   statistics. [`resample`]: 2× restriction (volume-weighted) and constant / trilinear
 //!   prolongation (the multigrid transfer operators), and resampling to any resolution.
+//! - [`BrickLayout`]: the one brick layout (B³ bricks, stored with a one-cell apron so
+//!   stencils and trilinear samples read one brick; z-slab and per-octant wavefront
+//!   streaming orders) shared by the bricked grid, the pager and the ordinates' sweeps.
 //! - [`BrickedGrid`]: 8³ bricks by default; only non-constant bricks are stored; per-brick
-//!   min/max gives the majorant grid for delta tracking and empty-space skipping; memory
+//!   min/max (apron included: a bound of the trilinear interpolant) gives the majorant
+//!   grid and `max_over` a box for delta tracking and empty-space skipping; memory
 //!   accounted in bytes.
 //! - [`transfer`]: piecewise-linear transfer functions (serde) from scalar values to
 //!   extinction, albedo and colour.
@@ -50,6 +54,7 @@
 //! ```
 
 mod bricked;
+mod bricks;
 mod dense;
 mod error;
 mod geometry;
@@ -60,6 +65,7 @@ pub mod resample;
 pub mod transfer;
 
 pub use bricked::BrickedGrid;
+pub use bricks::BrickLayout;
 pub use dense::{Grid, GridStats};
 pub use error::GridError;
 pub use geometry::{GridGeometry, MAX_VOXELS, ray_box};

@@ -127,6 +127,32 @@ proptest! {
             prop_assert!(majorant.get(i / b, j / b, k / b).unwrap() >= v);
         }
     }
+
+    #[test]
+    fn max_over_a_box_bounds_the_trilinear_interpolant_in_it(
+        geometry in geometry_strategy(30),
+        brick_log2 in 0u32..5,
+        seed in any::<u64>(),
+        corners in proptest::array::uniform6(-0.2f64..1.2),
+        along in proptest::array::uniform3(0.0f64..1.0),
+    ) {
+        // A box anywhere (partly or wholly outside the grid too) and a point in it: the
+        // interpolant there never exceeds the bound, which is the sharpest brick-level one:
+        // the maximum over the bricks the box touches, aprons included. Near a brick's face
+        // the interpolant blends in the neighbour brick, which only the apron covers.
+        let (lo, hi) = geometry.bounds();
+        let cloud = NoiseCloud::new(seed, 0.5 * (lo + hi), 0.3 * (hi - lo).max_element());
+        let dense = cloud.rasterize(geometry).unwrap();
+        let bricks = BrickedGrid::from_dense(&dense, 1 << brick_log2).unwrap();
+        let size = hi - lo;
+        let a = lo + size * DVec3::new(corners[0], corners[1], corners[2]);
+        let c = lo + size * DVec3::new(corners[3], corners[4], corners[5]);
+        let p = a.min(c) + (a.max(c) - a.min(c)) * DVec3::from_array(along);
+        let bound = bricks.max_over(a, c);
+        prop_assert!(dense.sample_trilinear(p) <= bound, "{} > {bound}", dense.sample_trilinear(p));
+        // The whole grid's box bounds everything, and equals the largest value.
+        prop_assert_eq!(bricks.max_over(lo, hi), dense.stats().max);
+    }
 }
 
 #[test]
