@@ -1,0 +1,330 @@
+//! A grid stored as bricks of [`BrickLayout`] (with their one-cell aprons), constant bricks
+//! as one number, the rest paged through a shared [`Pager`].
+//!
+//! Writes go through [`PagedGrid::write_slabs`], which updates every stored copy of the
+//! cells it writes — the bricks that own them and the aprons of their neighbours — so a
+//! reader of one stored brick always sees its neighbours' current values, and the
+//! per-brick ranges (over brick and apron: bounds of the trilinear interpolant) stay exact.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+
+use lucent_grid::{BrickLayout, Grid, GridGeometry};
+use rayon::prelude::*;
+
+use crate::error::PagingError;
+use crate::pager::{Pager, ReadPin};
+
+/// One brick as it is stored: a constant, or pinned values (brick and apron).
+#[derive(Debug)]
+pub enum BrickView {
+    /// Every value of the brick and its apron.
+    Constant(f32),
+    /// The (B + 2)³ stored values ([`BrickLayout::stored_index`]).
+    Paged(ReadPin),
+}
+
+impl BrickView {
+    /// The value at local cell `local` (−1 to B on each axis: the apron included).
+    #[inline]
+    pub fn get(&self, layout: &BrickLayout, local: [isize; 3]) -> f32 {
+        match self {
+            BrickView::Constant(v) => *v,
+            BrickView::Paged(pin) => pin[layout.stored_index(local)],
+        }
+    }
+}
+
+/// A field of f32 values on cells, stored brick by brick through a pager.
+#[derive(Debug)]
+pub struct PagedGrid {
+    geometry: GridGeometry,
+    layout: BrickLayout,
+    pager: Arc<Pager>,
+    /// The pager's number of this field's brick 0.
+    first: usize,
+    /// Per brick: whether it is in the pager (else constant).
+    paged: Vec<AtomicBool>,
+    /// Per brick: the constant's bits.
+    constant: Vec<AtomicU32>,
+    /// Per brick: min and max over the stored brick (apron included), as bits.
+    min: Vec<AtomicU32>,
+    max: Vec<AtomicU32>,
+}
+
+impl PagedGrid {
+    /// A field on `geometry` with bricks of `brick`³ cells whose cell values are `value`,
+    /// its non-constant bricks written to `pager` (which must page bricks of
+    /// (brick + 2)³ values). Bricks are built in parallel, each from its own cells.
+    pub fn from_fn(
+        pager: Arc<Pager>,
+        geometry: GridGeometry,
+        brick: usize,
+        value: impl Fn([usize; 3]) -> f32 + Sync,
+    ) -> Result<Self, PagingError> {
+        let layout = BrickLayout::new(geometry.dims(), brick)?;
+        if pager.brick_len() != layout.stored_len() {
+            return Err(PagingError::Grid(lucent_grid::GridError::Mismatch(
+                format!(
+                    "the pager pages bricks of {} values; bricks of {brick}³ cells are stored as {}",
+                    pager.brick_len(),
+                    layout.stored_len()
+                ),
+            )));
+        }
+        let count = layout.count();
+        let first = pager.add_bricks(count);
+        let this = Self {
+            geometry,
+            layout,
+            pager,
+            first,
+            paged: (0..count).map(|_| AtomicBool::new(false)).collect(),
+            constant: (0..count).map(|_| AtomicU32::new(0)).collect(),
+            min: (0..count).map(|_| AtomicU32::new(0)).collect(),
+            max: (0..count).map(|_| AtomicU32::new(0)).collect(),
+        };
+        (0..count).into_par_iter().try_for_each(|id| {
+            let stored = this.layout.gather(id, &value);
+            this.set_range(id, &stored);
+            let v0 = stored[0];
+            if stored.iter().all(|v| v.to_bits() == v0.to_bits()) {
+                this.constant[id].store(v0.to_bits(), Ordering::Relaxed);
+            } else {
+                this.pager.store_brick(first + id, &stored)?;
+                this.paged[id].store(true, Ordering::Release);
+            }
+            Ok::<_, PagingError>(())
+        })?;
+        Ok(this)
+    }
+
+    /// The field of a dense grid.
+    pub fn from_grid(pager: Arc<Pager>, grid: &Grid, brick: usize) -> Result<Self, PagingError> {
+        let geometry = *grid.geometry();
+        let data = grid.data();
+        Self::from_fn(pager, geometry, brick, |c| {
+            data[geometry.index(c[0], c[1], c[2])]
+        })
+    }
+
+    /// A field of one value everywhere (no brick stored).
+    pub fn filled(
+        pager: Arc<Pager>,
+        geometry: GridGeometry,
+        brick: usize,
+        value: f32,
+    ) -> Result<Self, PagingError> {
+        Self::from_fn(pager, geometry, brick, |_| value)
+    }
+
+    /// The geometry.
+    pub fn geometry(&self) -> &GridGeometry {
+        &self.geometry
+    }
+
+    /// The brick layout.
+    pub fn layout(&self) -> &BrickLayout {
+        &self.layout
+    }
+
+    /// The pager.
+    pub fn pager(&self) -> &Arc<Pager> {
+        &self.pager
+    }
+
+    /// The pager's number of brick `id` of this field (for prefetch orders).
+    pub fn pager_brick(&self, id: usize) -> usize {
+        self.first + id
+    }
+
+    /// Bricks stored in the pager (the others are constants).
+    pub fn stored_bricks(&self) -> usize {
+        self.paged
+            .iter()
+            .filter(|p| p.load(Ordering::Relaxed))
+            .count()
+    }
+
+    /// Bytes the field keeps in memory besides the pool: per brick a flag, a constant and
+    /// a range.
+    pub fn resident_overhead_bytes(&self) -> u64 {
+        self.layout.count() as u64 * 13
+    }
+
+    /// Brick `id` as stored (pinned while the view lives, if paged).
+    pub fn brick(&self, id: usize) -> Result<BrickView, PagingError> {
+        if self.paged[id].load(Ordering::Acquire) {
+            Ok(BrickView::Paged(self.pager.read(self.first + id)?))
+        } else {
+            Ok(BrickView::Constant(f32::from_bits(
+                self.constant[id].load(Ordering::Relaxed),
+            )))
+        }
+    }
+
+    /// The value of cell `cell` (pins its brick for the call: for tests and sparse
+    /// lookups; solvers read whole bricks or slabs).
+    pub fn get(&self, cell: [usize; 3]) -> Result<f32, PagingError> {
+        let (id, local) = self.layout.locate(cell);
+        Ok(self.brick(id)?.get(&self.layout, local.map(|c| c as isize)))
+    }
+
+    /// (min, max) over brick `id` and its apron: bounds of the trilinear interpolant in
+    /// the brick's cells.
+    pub fn brick_range(&self, id: usize) -> (f32, f32) {
+        (
+            f32::from_bits(self.min[id].load(Ordering::Relaxed)),
+            f32::from_bits(self.max[id].load(Ordering::Relaxed)),
+        )
+    }
+
+    /// The largest brick maximum over the bricks holding cells `lo..=hi` (clamped): a
+    /// majorant of the trilinear interpolant there, from the ranges alone (no brick is
+    /// read).
+    pub fn max_over_cells(&self, lo: [usize; 3], hi: [usize; 3]) -> f32 {
+        self.layout
+            .bricks_in_box(lo, hi)
+            .map(|id| self.brick_range(id).1)
+            .fold(f32::NEG_INFINITY, f32::max)
+    }
+
+    fn set_range(&self, id: usize, stored: &[f32]) {
+        let lo = stored.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = stored.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        self.min[id].store(lo.to_bits(), Ordering::Relaxed);
+        self.max[id].store(hi.to_bits(), Ordering::Relaxed);
+    }
+
+    /// Slabs z ∈ [z0, z1) into `out` (x fastest, n_x n_y (z1 − z0) values), each value
+    /// from the brick that owns it.
+    pub fn read_slabs(&self, z0: usize, z1: usize, out: &mut [f32]) -> Result<(), PagingError> {
+        let [nx, ny, nz] = self.geometry.dims();
+        let z1 = z1.min(nz);
+        assert_eq!(out.len(), nx * ny * (z1 - z0), "read_slabs: output size");
+        let plane = nx * ny;
+        for id in self.layout.bricks_of_slabs(z0, z1) {
+            let view = self.brick(id)?;
+            let o = self.layout.origin(id);
+            let e = self.layout.extent(id);
+            for k in o[2].max(z0)..(o[2] + e[2]).min(z1) {
+                for j in 0..e[1] {
+                    let row = (k - z0) * plane + (o[1] + j) * nx + o[0];
+                    let local = |i: usize| [i as isize, j as isize, (k - o[2]) as isize];
+                    match &view {
+                        BrickView::Constant(v) => out[row..row + e[0]].fill(*v),
+                        BrickView::Paged(pin) => {
+                            let start = self.layout.stored_index(local(0));
+                            out[row..row + e[0]].copy_from_slice(&pin[start..start + e[0]]);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The window a 7-point stencil on brick layer `layer` (the slabs its bricks own)
+    /// reads: slabs max(z₀ − 1, 0) .. min(z₀ + B + 1, n_z), taken from that layer's stored
+    /// bricks alone (the slabs above and below are their aprons). Returns the first slab's
+    /// z and the values (x fastest).
+    pub fn read_layer_window(&self, layer: usize) -> Result<(usize, Vec<f32>), PagingError> {
+        let [nx, ny, nz] = self.geometry.dims();
+        let b = self.layout.brick();
+        let z_lo = (layer * b).saturating_sub(1);
+        let z_hi = (layer * b + b + 1).min(nz);
+        let mut out = vec![0.0; nx * ny * (z_hi - z_lo)];
+        let plane = nx * ny;
+        let [bx, by, _] = self.layout.bricks();
+        for bj in 0..by {
+            for bi in 0..bx {
+                let id = self.layout.id([bi, bj, layer]);
+                let view = self.brick(id)?;
+                let o = self.layout.origin(id);
+                let e = self.layout.extent(id);
+                for z in z_lo..z_hi {
+                    let lk = z as isize - o[2] as isize;
+                    for j in 0..e[1] {
+                        let row = (z - z_lo) * plane + (o[1] + j) * nx + o[0];
+                        match &view {
+                            BrickView::Constant(v) => out[row..row + e[0]].fill(*v),
+                            BrickView::Paged(pin) => {
+                                let start = self.layout.stored_index([0, j as isize, lk]);
+                                out[row..row + e[0]].copy_from_slice(&pin[start..start + e[0]]);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        Ok((z_lo, out))
+    }
+
+    /// Writes slabs z ∈ [z0, z0 + n) from `data` (x fastest) into every stored copy of
+    /// their cells: the owning bricks and the neighbours' aprons (clamped copies at the
+    /// grid's faces included). Constant bricks that change become paged; bricks whose
+    /// stored values all become one value stay paged (a later rebuild may fold them).
+    pub fn write_slabs(&self, z0: usize, data: &[f32]) -> Result<(), PagingError> {
+        let [nx, ny, nz] = self.geometry.dims();
+        let plane = nx * ny;
+        assert!(
+            data.len().is_multiple_of(plane) && z0 + data.len() / plane <= nz,
+            "write_slabs: data must be whole slabs inside the grid"
+        );
+        let z1 = z0 + data.len() / plane;
+        if z1 == z0 {
+            return Ok(());
+        }
+        let b = self.layout.brick();
+        let edge = self.layout.stored_edge();
+        // Layers whose stored z range [o − 1, o + B] meets [z0, z1); and, at the top face,
+        // the layer whose clamped apron repeats slab n_z − 1.
+        let first_layer = z0.saturating_sub(1) / b;
+        let last_layer = (z1 / b).min(self.layout.bricks()[2] - 1);
+        let [bx, by, _] = self.layout.bricks();
+        let ids: Vec<usize> = (first_layer..=last_layer)
+            .flat_map(|bk| (0..by).flat_map(move |bj| (0..bx).map(move |bi| [bi, bj, bk])))
+            .map(|c| self.layout.id(c))
+            .collect();
+        ids.par_iter().try_for_each(|&id| {
+            let o = self.layout.origin(id);
+            // Stored positions s (0..edge) map to clamped cells (o + s − 1).
+            let cell = |a: usize, s: usize, n: usize| (o[a] + s).saturating_sub(1).min(n - 1);
+            let touched: Vec<usize> = (0..edge)
+                .filter(|&s| (z0..z1).contains(&cell(2, s, nz)))
+                .collect();
+            if touched.is_empty() {
+                return Ok(());
+            }
+            let mut pin = if self.paged[id].load(Ordering::Acquire) {
+                self.pager.write(self.first + id)?
+            } else {
+                let mut pin = self.pager.overwrite(self.first + id)?;
+                pin.fill(f32::from_bits(self.constant[id].load(Ordering::Relaxed)));
+                self.paged[id].store(true, Ordering::Release);
+                pin
+            };
+            for &sk in &touched {
+                let z = cell(2, sk, nz);
+                for sj in 0..edge {
+                    let y = cell(1, sj, ny);
+                    let at = sk * edge * edge + sj * edge;
+                    let row = (z - z0) * plane + y * nx;
+                    for si in 0..edge {
+                        pin[at + si] = data[row + cell(0, si, nx)];
+                    }
+                }
+            }
+            self.set_range(id, &pin);
+            Ok::<_, PagingError>(())
+        })
+    }
+
+    /// The whole field as a dense grid (for tests and fields that fit).
+    pub fn to_grid(&self) -> Result<Grid, PagingError> {
+        let [nx, ny, nz] = self.geometry.dims();
+        let mut data = vec![0.0; nx * ny * nz];
+        self.read_slabs(0, nz, &mut data)?;
+        Ok(Grid::from_vec(self.geometry, data)?)
+    }
+}

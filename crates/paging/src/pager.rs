@@ -1,0 +1,521 @@
+//! The pager: a fixed pool of brick slots under a byte budget, a page table, and the
+//! resident / dirty / referenced bits of Bernabei's chapter 5.
+//!
+//! A brick is *pinned* while a [`ReadPin`] or [`WritePin`] of it lives: the pin owns a
+//! reference to the slot and holds its lock, so the slot cannot be chosen for eviction (a
+//! slot is evictable exactly when the pool holds the only reference to it) and its data
+//! cannot change under a reader. All bookkeeping — the table, the bits, the choice of a
+//! victim and the I/O of a miss — happens under one mutex: a miss is serialised, a hit
+//! costs one short critical section, and no reader can observe a brick half loaded or a
+//! victim half written back. A write-back that fails leaves the victim resident and dirty
+//! (the error is returned; nothing is lost).
+//!
+//! Eviction ([`Eviction`]): `Lru` evicts the unpinned slot used longest ago (a counter
+//! stamped at every pin); `Nru` is the clock algorithm (a hand sweeps the slots, clearing
+//! referenced bits, and takes the first unpinned slot whose bit is already clear), which
+//! needs no per-pin timestamp ordering and is what Bernabei uses.
+//!
+//! **Deadlock rule.** A thread that holds a [`WritePin`] of a brick must not pin that
+//! brick again before dropping it (the slot's lock is not re-entrant for writers).
+
+use std::sync::Arc;
+
+use parking_lot::{ArcRwLockReadGuard, ArcRwLockWriteGuard, Mutex, RawRwLock, RwLock};
+use serde::Serialize;
+
+use crate::error::PagingError;
+use crate::store::BrickStore;
+
+/// Which resident brick leaves the pool when a slot is needed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Eviction {
+    /// Least recently used.
+    #[default]
+    Lru,
+    /// Not recently used: the clock algorithm over referenced bits.
+    Nru,
+}
+
+/// What the pager did, for the solve report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct PagerStats {
+    /// Pins of resident bricks.
+    pub hits: u64,
+    /// Pins that had to load (or create) the brick.
+    pub misses: u64,
+    /// Bricks loaded ahead of use by [`Pager::prefetch`].
+    pub prefetched: u64,
+    /// Bricks that left the pool.
+    pub evictions: u64,
+    /// Evicted or flushed bricks that were dirty and written back.
+    pub write_backs: u64,
+    /// Bytes read from the backing store.
+    pub bytes_read: u64,
+    /// Bytes written to the backing store.
+    pub bytes_written: u64,
+    /// Slots in the pool.
+    pub slots: u64,
+}
+
+impl PagerStats {
+    /// Hits over pins (1 when nothing was pinned).
+    pub fn hit_rate(&self) -> f64 {
+        let pins = self.hits + self.misses;
+        if pins == 0 {
+            1.0
+        } else {
+            self.hits as f64 / pins as f64
+        }
+    }
+}
+
+/// Options of a [`Pager`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PagerOptions {
+    /// Bytes the pool's slots may take.
+    pub budget_bytes: u64,
+    /// The eviction policy.
+    pub eviction: Eviction,
+    /// The value of a brick that was never written.
+    pub fill: f32,
+}
+
+type Slot = Arc<RwLock<Vec<f32>>>;
+
+/// Where a brick is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Entry {
+    /// Never written: every value is the fill.
+    Fresh,
+    /// In the backing store.
+    Stored,
+    /// In this slot of the pool.
+    Resident(u32),
+}
+
+#[derive(Debug, Clone, Copy)]
+struct SlotMeta {
+    brick: usize,
+    /// The brick has a copy in the store (so a clean eviction leaves it `Stored`).
+    stored: bool,
+    dirty: bool,
+    referenced: bool,
+    last_use: u64,
+}
+
+#[derive(Debug)]
+struct State {
+    table: Vec<Entry>,
+    slots: Vec<Slot>,
+    meta: Vec<Option<SlotMeta>>,
+    free: Vec<u32>,
+    hand: usize,
+    tick: u64,
+    stats: PagerStats,
+}
+
+/// A fixed pool of brick slots over a [`BrickStore`].
+#[derive(Debug)]
+pub struct Pager {
+    store: Box<dyn BrickStore>,
+    brick_len: usize,
+    capacity: usize,
+    options: PagerOptions,
+    state: Mutex<State>,
+}
+
+/// A brick pinned for reading: its values, which stay resident and unchanged while the
+/// pin lives.
+pub struct ReadPin(ArcRwLockReadGuard<RawRwLock, Vec<f32>>);
+
+/// A brick pinned for writing (marked dirty): written back when it leaves the pool.
+pub struct WritePin(ArcRwLockWriteGuard<RawRwLock, Vec<f32>>);
+
+impl std::ops::Deref for ReadPin {
+    type Target = [f32];
+    fn deref(&self) -> &[f32] {
+        &self.0
+    }
+}
+
+impl std::ops::Deref for WritePin {
+    type Target = [f32];
+    fn deref(&self) -> &[f32] {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for WritePin {
+    fn deref_mut(&mut self) -> &mut [f32] {
+        &mut self.0
+    }
+}
+
+impl std::fmt::Debug for ReadPin {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "ReadPin({} values)", self.0.len())
+    }
+}
+
+impl std::fmt::Debug for WritePin {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "WritePin({} values)", self.0.len())
+    }
+}
+
+/// How a brick is pinned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Access {
+    Read,
+    Write,
+    /// Written whole: its old values are not loaded.
+    Overwrite,
+}
+
+impl Pager {
+    /// Bytes of bookkeeping per brick of the table (besides the pool).
+    pub const TABLE_BYTES_PER_BRICK: u64 = std::mem::size_of::<Entry>() as u64;
+
+    /// A pager of `bricks` bricks of `brick_len` values over `store`, whose pool holds
+    /// `options.budget_bytes / (4 · brick_len)` slots. Fails with
+    /// [`PagingError::BudgetTooSmall`] unless the pool holds `min_slots` bricks (the working
+    /// set of one step of its user), before anything is allocated.
+    pub fn new(
+        store: Box<dyn BrickStore>,
+        bricks: usize,
+        brick_len: usize,
+        min_slots: usize,
+        options: PagerOptions,
+    ) -> Result<Self, PagingError> {
+        let brick_bytes = brick_len.max(1) as u64 * 4;
+        let capacity = (options.budget_bytes / brick_bytes).min(u32::MAX as u64 - 1) as usize;
+        if capacity < min_slots.max(1) {
+            return Err(PagingError::BudgetTooSmall {
+                budget: options.budget_bytes,
+                needed: min_slots.max(1) as u64 * brick_bytes,
+                what: format!(
+                    "a working set of {} bricks of {brick_bytes} bytes",
+                    min_slots.max(1)
+                ),
+            });
+        }
+        Ok(Self {
+            store,
+            brick_len,
+            capacity,
+            options,
+            state: Mutex::new(State {
+                table: vec![Entry::Fresh; bricks],
+                slots: Vec::new(),
+                meta: Vec::new(),
+                free: Vec::new(),
+                hand: 0,
+                tick: 0,
+                stats: PagerStats {
+                    slots: capacity as u64,
+                    ..PagerStats::default()
+                },
+            }),
+        })
+    }
+
+    /// Values per brick.
+    pub fn brick_len(&self) -> usize {
+        self.brick_len
+    }
+
+    /// Slots in the pool.
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// Bricks the table covers.
+    pub fn brick_count(&self) -> usize {
+        self.state.lock().table.len()
+    }
+
+    /// Adds `count` bricks (all fresh) to the table and returns the number of the first:
+    /// several fields share one pool and one budget.
+    pub fn add_bricks(&self, count: usize) -> usize {
+        let mut state = self.state.lock();
+        let first = state.table.len();
+        state.table.resize(first + count, Entry::Fresh);
+        first
+    }
+
+    /// The options.
+    pub fn options(&self) -> &PagerOptions {
+        &self.options
+    }
+
+    /// The counters so far.
+    pub fn stats(&self) -> PagerStats {
+        self.state.lock().stats
+    }
+
+    /// Whether `brick` is in the pool now.
+    pub fn is_resident(&self, brick: usize) -> bool {
+        matches!(self.state.lock().table.get(brick), Some(Entry::Resident(_)))
+    }
+
+    /// Pins `brick` for reading.
+    pub fn read(&self, brick: usize) -> Result<ReadPin, PagingError> {
+        let slot = self.pin(brick, Access::Read)?;
+        Ok(ReadPin(slot.read_arc()))
+    }
+
+    /// Pins `brick` for writing (it is marked dirty).
+    pub fn write(&self, brick: usize) -> Result<WritePin, PagingError> {
+        let slot = self.pin(brick, Access::Write)?;
+        Ok(WritePin(slot.write_arc()))
+    }
+
+    /// Pins `brick` for writing without loading it: the caller writes every value (the
+    /// pin's values are unspecified until then).
+    pub fn overwrite(&self, brick: usize) -> Result<WritePin, PagingError> {
+        let slot = self.pin(brick, Access::Overwrite)?;
+        Ok(WritePin(slot.write_arc()))
+    }
+
+    /// Writes `values` as brick `brick` straight to the store, without a slot (building a
+    /// field larger than the pool). A resident copy is replaced in place.
+    pub fn store_brick(&self, brick: usize, values: &[f32]) -> Result<(), PagingError> {
+        if let Ok(mut pin) = self.resident_write(brick) {
+            pin.copy_from_slice(values);
+            return Ok(());
+        }
+        let mut state = self.state.lock();
+        self.check(&state, brick)?;
+        self.store_write(&mut state.stats, brick, values)?;
+        state.table[brick] = Entry::Stored;
+        Ok(())
+    }
+
+    /// A write pin of `brick` if it is resident (no load), else an error.
+    fn resident_write(&self, brick: usize) -> Result<WritePin, ()> {
+        let slot = {
+            let mut state = self.state.lock();
+            match state.table.get(brick) {
+                Some(Entry::Resident(s)) => {
+                    let s = *s as usize;
+                    state.tick += 1;
+                    let tick = state.tick;
+                    if let Some(m) = state.meta[s].as_mut() {
+                        m.dirty = true;
+                        m.referenced = true;
+                        m.last_use = tick;
+                    }
+                    state.slots[s].clone()
+                }
+                _ => return Err(()),
+            }
+        };
+        Ok(WritePin(slot.write_arc()))
+    }
+
+    /// Loads the bricks of `bricks` that are not resident, in order, while free or
+    /// evictable slots remain, stopping at the first that would need a pinned slot. Loads
+    /// count as `prefetched`, not as misses. Call it with the next bricks of the streaming
+    /// order (from another thread, to overlap the reads with work).
+    pub fn prefetch(&self, bricks: impl IntoIterator<Item = usize>) -> Result<(), PagingError> {
+        for brick in bricks {
+            let mut state = self.state.lock();
+            self.check(&state, brick)?;
+            if matches!(state.table[brick], Entry::Resident(_)) {
+                continue;
+            }
+            match self.load(&mut state, brick, Access::Read) {
+                Ok(_) => {
+                    state.stats.prefetched += 1;
+                    // A prefetched brick has not been used: first in line for the clock.
+                    if let Entry::Resident(s) = state.table[brick]
+                        && let Some(m) = state.meta[s as usize].as_mut()
+                    {
+                        m.referenced = false;
+                    }
+                }
+                Err(PagingError::PoolExhausted { .. }) => return Ok(()),
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes every dirty resident brick back (they stay resident, now clean).
+    pub fn flush(&self) -> Result<(), PagingError> {
+        let mut state = self.state.lock();
+        for s in 0..state.slots.len() {
+            let Some(meta) = state.meta[s] else { continue };
+            if !meta.dirty {
+                continue;
+            }
+            let slot = state.slots[s].clone();
+            // A brick being written now is skipped: its pin is still making it dirty.
+            let Some(data) = slot.try_read() else {
+                continue;
+            };
+            self.store_write(&mut state.stats, meta.brick, &data)?;
+            drop(data);
+            if let Some(m) = state.meta[s].as_mut() {
+                m.dirty = false;
+                m.stored = true;
+            }
+            state.stats.write_backs += 1;
+        }
+        Ok(())
+    }
+
+    fn check(&self, state: &State, brick: usize) -> Result<(), PagingError> {
+        if brick < state.table.len() {
+            Ok(())
+        } else {
+            Err(PagingError::NoSuchBrick {
+                brick,
+                count: state.table.len(),
+            })
+        }
+    }
+
+    /// The slot of `brick`, resident after this call and referenced by the returned Arc
+    /// (so not evictable until the caller's pin is dropped).
+    fn pin(&self, brick: usize, access: Access) -> Result<Slot, PagingError> {
+        let mut state = self.state.lock();
+        self.check(&state, brick)?;
+        state.tick += 1;
+        let tick = state.tick;
+        let s = match state.table[brick] {
+            Entry::Resident(s) => {
+                state.stats.hits += 1;
+                s as usize
+            }
+            _ => {
+                state.stats.misses += 1;
+                self.load(&mut state, brick, access)?
+            }
+        };
+        if let Some(m) = state.meta[s].as_mut() {
+            m.referenced = true;
+            m.last_use = tick;
+            if access != Access::Read {
+                m.dirty = true;
+            }
+        }
+        Ok(state.slots[s].clone())
+    }
+
+    /// Puts `brick` (not resident) into a slot: a free one, a new one while the pool is
+    /// below its capacity, or the victim of the eviction policy (written back first if
+    /// dirty). Under the state lock.
+    fn load(&self, state: &mut State, brick: usize, access: Access) -> Result<usize, PagingError> {
+        let s = if let Some(s) = state.free.pop() {
+            s as usize
+        } else if state.slots.len() < self.capacity {
+            state
+                .slots
+                .push(Arc::new(RwLock::new(vec![0.0; self.brick_len])));
+            state.meta.push(None);
+            state.slots.len() - 1
+        } else {
+            self.evict(state)?
+        };
+        let entry = state.table[brick];
+        {
+            // The slot is unpinned (free or just evicted): its lock is free.
+            let slot = state.slots[s].clone();
+            let mut data = slot.write();
+            match (access, entry) {
+                (Access::Overwrite, _) => {}
+                (_, Entry::Stored) => {
+                    if let Err(source) = self.store.read(brick, &mut data) {
+                        drop(data);
+                        state.free.push(s as u32);
+                        return Err(PagingError::Io {
+                            action: "reading",
+                            brick,
+                            store: self.store.describe(),
+                            source,
+                        });
+                    }
+                    state.stats.bytes_read += self.brick_len as u64 * 4;
+                }
+                _ => data.fill(self.options.fill),
+            }
+        }
+        state.meta[s] = Some(SlotMeta {
+            brick,
+            stored: entry == Entry::Stored,
+            dirty: false,
+            referenced: true,
+            last_use: state.tick,
+        });
+        state.table[brick] = Entry::Resident(s as u32);
+        Ok(s)
+    }
+
+    /// Frees a slot by the eviction policy; its brick is written back first if dirty.
+    fn evict(&self, state: &mut State) -> Result<usize, PagingError> {
+        let n = state.slots.len();
+        let unpinned = |state: &State, s: usize| Arc::strong_count(&state.slots[s]) == 1;
+        let victim = match self.options.eviction {
+            Eviction::Lru => (0..n)
+                .filter(|&s| unpinned(state, s) && state.meta[s].is_some())
+                .min_by_key(|&s| state.meta[s].map_or(u64::MAX, |m| m.last_use)),
+            Eviction::Nru => {
+                // Two turns of the hand: the first clears referenced bits, the second
+                // finds one clear unless every slot is pinned.
+                let mut found = None;
+                for _ in 0..2 * n {
+                    let s = state.hand;
+                    state.hand = (state.hand + 1) % n;
+                    if !unpinned(state, s) {
+                        continue;
+                    }
+                    if let Some(m) = state.meta[s].as_mut() {
+                        if m.referenced {
+                            m.referenced = false;
+                        } else {
+                            found = Some(s);
+                            break;
+                        }
+                    }
+                }
+                found
+            }
+        };
+        let s = victim.ok_or(PagingError::PoolExhausted { slots: n })?;
+        let meta = state.meta[s].expect("a victim holds a brick");
+        if meta.dirty {
+            let slot = state.slots[s].clone();
+            let data = slot.read();
+            self.store_write(&mut state.stats, meta.brick, &data)?;
+            state.stats.write_backs += 1;
+        }
+        state.table[meta.brick] = if meta.dirty || meta.stored {
+            Entry::Stored
+        } else {
+            Entry::Fresh
+        };
+        state.meta[s] = None;
+        state.stats.evictions += 1;
+        Ok(s)
+    }
+
+    fn store_write(
+        &self,
+        stats: &mut PagerStats,
+        brick: usize,
+        data: &[f32],
+    ) -> Result<(), PagingError> {
+        self.store
+            .write(brick, data)
+            .map_err(|source| PagingError::Io {
+                action: "writing",
+                brick,
+                store: self.store.describe(),
+                source,
+            })?;
+        stats.bytes_written += data.len() as u64 * 4;
+        Ok(())
+    }
+}
