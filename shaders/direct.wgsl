@@ -9,6 +9,12 @@
 // `light.xyz` (the segment starts where the ray backwards leaves the box); kind 1: a
 // point or spot light at `light.xyz` (world); kind 2: the sky, Σ_d w_d e^{-τ_d} over the
 // directions of `sky` (xyz: direction of travel, w: weight).
+//
+// σ_t is read through `sigma_at(i, j, k)` (clamped to the grid), defined by the snippet
+// prepended to this file: `sigma_dense.wgsl` (one array, binding 0) or `sigma_atlas.wgsl`
+// (a brick atlas with a software page table, bindings 0 and 4). Cells are written in
+// chunks: invocation c handles cell `first + c` and writes `transmittance[c]`, so a grid
+// larger than one binding is computed chunk by chunk.
 
 struct DirectParams {
     // nx, ny, nz, groups_x
@@ -19,23 +25,18 @@ struct DirectParams {
     spacing: vec4<f32>,
     // direction (kind 0) or position (kind 1)
     light: vec4<f32>,
-    // x: kind, y: sky directions
+    // x: kind, y: sky directions, z: brick edge (atlas), w: unused
     kind: vec4<u32>,
+    // x: first cell of this chunk, y: cells in the chunk
+    chunk: vec4<u32>,
 }
 
-@group(0) @binding(0) var<storage, read> sigma_t: array<f32>;
 @group(0) @binding(1) var<storage, read> sky: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> transmittance: array<f32>;
 @group(0) @binding(3) var<uniform> params: DirectParams;
 
 const GAUSS: f32 = 0.5773502691896258;
 const FAR: f32 = 1.0e30;
-
-fn sigma_at(i: i32, j: i32, k: i32) -> f32 {
-    let n = vec3<i32>(params.dims.xyz);
-    let c = vec3<u32>(clamp(vec3<i32>(i, j, k), vec3<i32>(0), n - vec3<i32>(1)));
-    return sigma_t[index_of(c, params.dims.xyz)];
-}
 
 // ∫ σ_t ds from voxel point `va` to `vb`, the segment being `len` long in world units.
 fn optical_depth(va: vec3<f32>, vb: vec3<f32>, len: f32) -> f32 {
@@ -155,11 +156,12 @@ fn depth_along(v: vec3<f32>, d: vec3<f32>) -> f32 {
 
 @compute @workgroup_size(64)
 fn transmit(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) local: u32) {
-    let c = flat_group(wg, params.dims.w) * 64u + local;
-    let dims = params.dims.xyz;
-    if (c >= dims.x * dims.y * dims.z) {
+    let offset = flat_group(wg, params.dims.w) * 64u + local;
+    if (offset >= params.chunk.y) {
         return;
     }
+    let c = params.chunk.x + offset;
+    let dims = params.dims.xyz;
     let v = vec3<f32>(cell_of(c, dims));
     let h = params.spacing.xyz;
     var result = 0.0;
@@ -181,5 +183,5 @@ fn transmit(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_inde
             result = sum;
         }
     }
-    transmittance[c] = result;
+    transmittance[offset] = result;
 }

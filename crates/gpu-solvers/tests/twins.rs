@@ -364,12 +364,16 @@ fn a_grid_beyond_the_adapters_binding_limit_is_refused_by_name_before_allocating
         );
         return;
     }
-    // One f32 field just past the limit (lavapipe: 128 MiB → 512 × 512 × 129).
+    // One f32 field just past the limit (lavapipe: 128 MiB → 512 × 512 × 129), varying
+    // everywhere: the brick atlas gpu-direct falls back to for grids beyond one binding
+    // stores every brick with its apron, larger still, and is refused by the limit's name
+    // too. (A sparse medium of that size runs through the atlas: lucent-gpu-solvers'
+    // `an_atlas_and_chunks_give_the_dense_result_bit_for_bit` checks that path.)
     let nz = (limit / (4 * 512 * 512) + 1) as usize;
     let g = GridGeometry::new([512, 512, nz], DVec3::splat(1.0 / 512.0), DVec3::ZERO).unwrap();
     let p = problem(
         g,
-        vec![Grid::filled(g, 1.0)],
+        vec![Grid::from_fn(g, |x| (1.0 + x.x + 2.0 * x.y) as f32)],
         0.5,
         vec![Light::Directional {
             direction: DVec3::Z,

@@ -50,6 +50,14 @@ pub enum GpuError {
         /// `not finite` or `negative`.
         problem: &'static str,
     },
+    /// The host could not provide what was to be uploaded (a paged field's bricks).
+    #[error("reading {what} for the device: {reason}")]
+    Source {
+        /// What was being uploaded.
+        what: String,
+        /// Why it could not be read.
+        reason: String,
+    },
     /// The device refused a request or was lost.
     #[error("GPU device: {0}")]
     Device(String),

@@ -16,6 +16,10 @@
 //!   fits, 512³ (512 MiB) is refused with the reason.
 //! - [`DeviceMedium`]: a problem's σ_t and albedo per channel, uploaded once for every
 //!   backend.
+//! - [`BrickAtlas`]: a paged field (`lucent-paging`) on the device: its stored bricks
+//!   (with their aprons) in one storage buffer and a software page table (WebGPU has no
+//!   sparse resources); constant bricks cost a table entry. `gpu-direct` reads σ_t from
+//!   it when the dense grid does not fit one binding.
 //! - [`Reducer`]: sums, sums of squares and maxima of device fields that match the CPU's f64
 //!   reductions (see *Precision*).
 //! - [`GpuContext::timed_pass`]: one compute pass timed by timestamp queries where the
@@ -45,6 +49,7 @@
 //! # Ok::<(), lucent_gpu::GpuError>(())
 //! ```
 
+mod atlas;
 mod context;
 mod error;
 mod field;
@@ -54,6 +59,7 @@ mod reduce;
 pub mod shaders;
 mod timing;
 
+pub use atlas::{BrickAtlas, CONSTANT_BRICK};
 pub use context::{GpuContext, GpuOptions, context_or_skip};
 pub use error::GpuError;
 pub use field::{DeviceField, DeviceIndices};

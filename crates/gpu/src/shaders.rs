@@ -19,8 +19,19 @@ macro_rules! kernel {
 /// partials that the host adds in f64.
 pub const REDUCE: &str = kernel!("reduce.wgsl");
 
-/// `gpu-direct`: transmittance by exact ray marching of the trilinear σ_t.
-pub const DIRECT: &str = kernel!("direct.wgsl");
+/// `gpu-direct`: transmittance by exact ray marching of the trilinear σ_t, read from a
+/// dense grid (`sigma_dense.wgsl`).
+pub const DIRECT: &str = concat!(
+    include_str!("../../../shaders/common.wgsl"),
+    include_str!("../../../shaders/sigma_dense.wgsl"),
+    include_str!("../../../shaders/direct.wgsl")
+);
+/// `gpu-direct` reading σ_t from a [`crate::BrickAtlas`] (`sigma_atlas.wgsl`).
+pub const DIRECT_ATLAS: &str = concat!(
+    include_str!("../../../shaders/common.wgsl"),
+    include_str!("../../../shaders/sigma_atlas.wgsl"),
+    include_str!("../../../shaders/direct.wgsl")
+);
 /// `gpu-ftcs-diffusion`: one FTCS step on a CSR system, with residual partials.
 pub const FTCS: &str = kernel!("ftcs.wgsl");
 /// `gpu-ftcs-p1`: the fluence half of a P1 FTCS step.
@@ -36,11 +47,13 @@ pub const MAX_CHANGE: &str = kernel!("max_change.wgsl");
 /// lucent-render's ray march on the device: one invocation per pixel.
 pub const RENDER: &str = kernel!("render.wgsl");
 
-/// Every shader with its file name, for validation (`common.wgsl` inside every kernel).
+/// Every shader with its file names (`a + b` where a kernel joins several files), for
+/// validation (`common.wgsl` inside every kernel).
 pub const ALL: &[(&str, &str)] = &[
     ("common.wgsl", COMMON),
     ("reduce.wgsl", REDUCE),
-    ("direct.wgsl", DIRECT),
+    ("sigma_dense.wgsl + direct.wgsl", DIRECT),
+    ("sigma_atlas.wgsl + direct.wgsl", DIRECT_ATLAS),
     ("ftcs.wgsl", FTCS),
     ("p1.wgsl", P1),
     ("p1_flux.wgsl", P1_FLUX),
