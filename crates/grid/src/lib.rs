@@ -69,3 +69,4 @@ pub use bricks::BrickLayout;
 pub use dense::{Grid, GridStats};
 pub use error::GridError;
 pub use geometry::{GridGeometry, MAX_VOXELS, ray_box};
+pub use line::{DualCorners, line_integral_with};

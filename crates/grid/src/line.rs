@@ -4,6 +4,44 @@
 use glam::DVec3;
 
 use crate::dense::Grid;
+use crate::geometry::GridGeometry;
+
+/// Where [`line_integral_with`] reads the field: the eight values at the corners of a dual
+/// cell, cells `lo` to `hi` (each index of `hi` is that of `lo` or one more, both clamped
+/// to the grid), in the order `c[dx + 2 dy + 4 dz]`. A dense grid reads its array; a
+/// bricked or paged field reads the stored brick of `lo`, whose one-cell apron holds all
+/// eight.
+pub trait DualCorners {
+    /// Why a read can fail (`Infallible` for memory).
+    type Error;
+    /// The eight corner values.
+    fn corners(&mut self, lo: [usize; 3], hi: [usize; 3]) -> Result<[f64; 8], Self::Error>;
+}
+
+/// A dense grid's corners.
+struct DenseCorners<'a> {
+    data: &'a [f32],
+    geometry: &'a GridGeometry,
+}
+
+impl DualCorners for DenseCorners<'_> {
+    type Error = std::convert::Infallible;
+
+    #[inline]
+    fn corners(&mut self, lo: [usize; 3], hi: [usize; 3]) -> Result<[f64; 8], Self::Error> {
+        let at = |i, j, k| f64::from(self.data[self.geometry.index(i, j, k)]);
+        Ok([
+            at(lo[0], lo[1], lo[2]),
+            at(hi[0], lo[1], lo[2]),
+            at(lo[0], hi[1], lo[2]),
+            at(hi[0], hi[1], lo[2]),
+            at(lo[0], lo[1], hi[2]),
+            at(hi[0], lo[1], hi[2]),
+            at(lo[0], hi[1], hi[2]),
+            at(hi[0], hi[1], hi[2]),
+        ])
+    }
+}
 
 /// Gauss–Legendre abscissa ±1/√3 on [−1, 1] (the 2-point rule is exact for cubics).
 const GAUSS: f64 = 0.577_350_269_189_625_8;
@@ -20,7 +58,28 @@ impl Grid {
     /// `f64::INFINITY` for none); for transmittance e^{−τ}, τ = 50 is already below f32's
     /// smallest normal number.
     pub fn line_integral(&self, a: DVec3, b: DVec3, cutoff: f64) -> f64 {
-        let g = self.geometry();
+        let mut corners = DenseCorners {
+            data: self.data(),
+            geometry: self.geometry(),
+        };
+        match line_integral_with(self.geometry(), a, b, cutoff, &mut corners) {
+            Ok(total) => total,
+            Err(never) => match never {},
+        }
+    }
+}
+
+/// [`Grid::line_integral`] of the field on `g` whose values `corners` reads: the same walk
+/// and the same arithmetic whatever the storage, so a dense and a paged field give the same
+/// bits.
+pub fn line_integral_with<C: DualCorners>(
+    g: &GridGeometry,
+    a: DVec3,
+    b: DVec3,
+    cutoff: f64,
+    corners: &mut C,
+) -> Result<f64, C::Error> {
+    {
         let dims = g.dims();
         // Work in voxel coordinates, where cell centres are integers: v = (p − o)/h − ½.
         let va = g.world_to_voxel(a);
@@ -28,7 +87,7 @@ impl Grid {
         let dv = vb - va;
         let length = (b - a).length();
         if length == 0.0 || !length.is_finite() {
-            return 0.0;
+            return Ok(0.0);
         }
         // Clip t ∈ [0, 1] to the box −½ ≤ v ≤ n − ½.
         let (mut t0, mut t1) = (0.0f64, 1.0f64);
@@ -36,7 +95,7 @@ impl Grid {
             let (lo, hi) = (-0.5, dims[axis] as f64 - 0.5);
             if dv[axis] == 0.0 {
                 if va[axis] < lo || va[axis] > hi {
-                    return 0.0;
+                    return Ok(0.0);
                 }
             } else {
                 let (ta, tb) = ((lo - va[axis]) / dv[axis], (hi - va[axis]) / dv[axis]);
@@ -45,7 +104,7 @@ impl Grid {
             }
         }
         if t0 >= t1 {
-            return 0.0;
+            return Ok(0.0);
         }
         // DDA over dual cells: index c ∈ [−1, n − 1] spans v ∈ [c, c + 1].
         let start = va + dv * t0;
@@ -66,7 +125,6 @@ impl Grid {
                 t_next[axis] = t0 + (cell[axis] as f64 - start[axis]) / dv[axis];
             }
         }
-        let data = self.data();
         let clamp = |c: i64, n: usize| c.clamp(0, n as i64 - 1) as usize;
         let mut t = t0;
         let mut total = 0.0;
@@ -81,20 +139,9 @@ impl Grid {
             let t_end = t_next[axis].min(t1);
             if t_end > t {
                 // The eight cell values at the corners of this dual cell.
-                let (i0, i1) = (clamp(cell[0], dims[0]), clamp(cell[0] + 1, dims[0]));
-                let (j0, j1) = (clamp(cell[1], dims[1]), clamp(cell[1] + 1, dims[1]));
-                let (k0, k1) = (clamp(cell[2], dims[2]), clamp(cell[2] + 1, dims[2]));
-                let at = |i, j, k| f64::from(data[g.index(i, j, k)]);
-                let c = [
-                    at(i0, j0, k0),
-                    at(i1, j0, k0),
-                    at(i0, j1, k0),
-                    at(i1, j1, k0),
-                    at(i0, j0, k1),
-                    at(i1, j0, k1),
-                    at(i0, j1, k1),
-                    at(i1, j1, k1),
-                ];
+                let lo = [0, 1, 2].map(|a| clamp(cell[a], dims[a]));
+                let hi = [0, 1, 2].map(|a| clamp(cell[a] + 1, dims[a]));
+                let c = corners.corners(lo, hi)?;
                 let origin = DVec3::new(cell[0] as f64, cell[1] as f64, cell[2] as f64);
                 let value = |tt: f64| {
                     let u = (va + dv * tt - origin).clamp(DVec3::ZERO, DVec3::ONE);
@@ -109,17 +156,17 @@ impl Grid {
                 let (mid, half) = (0.5 * (t + t_end), 0.5 * (t_end - t));
                 total += half * length * (value(mid - GAUSS * half) + value(mid + GAUSS * half));
                 if total > cutoff {
-                    return total;
+                    return Ok(total);
                 }
             }
             if t_end >= t1 {
-                return total;
+                return Ok(total);
             }
             t = t_end;
             cell[axis] += step[axis];
             t_next[axis] += t_step[axis];
             if cell[axis] < -1 || cell[axis] > dims[axis] as i64 - 1 {
-                return total;
+                return Ok(total);
             }
         }
     }

@@ -9,7 +9,8 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
-use lucent_grid::{BrickLayout, Grid, GridGeometry};
+use glam::DVec3;
+use lucent_grid::{BrickLayout, DualCorners, Grid, GridGeometry};
 use rayon::prelude::*;
 
 use crate::error::PagingError;
@@ -320,11 +321,66 @@ impl PagedGrid {
         })
     }
 
+    /// ∫ f ds from `a` to `b` for the field's trilinear interpolant:
+    /// [`Grid::line_integral`] on the paged storage, bit for bit the dense result (the same
+    /// walk and arithmetic; each dual cell's corners come from one stored brick, the last
+    /// one staying pinned while the walk is inside it).
+    pub fn line_integral(&self, a: DVec3, b: DVec3, cutoff: f64) -> Result<f64, PagingError> {
+        lucent_grid::line_integral_with(&self.geometry, a, b, cutoff, &mut self.corners())
+    }
+
+    /// A reader of dual-cell corners for [`lucent_grid::line_integral_with`].
+    pub fn corners(&self) -> PagedCorners<'_> {
+        PagedCorners {
+            field: self,
+            current: None,
+        }
+    }
+
     /// The whole field as a dense grid (for tests and fields that fit).
     pub fn to_grid(&self) -> Result<Grid, PagingError> {
         let [nx, ny, nz] = self.geometry.dims();
         let mut data = vec![0.0; nx * ny * nz];
         self.read_slabs(0, nz, &mut data)?;
         Ok(Grid::from_vec(self.geometry, data)?)
+    }
+}
+
+/// Dual-cell corners of a [`PagedGrid`], read from the stored brick of the lower corner
+/// (its apron holds the upper ones); the brick last read stays pinned.
+#[derive(Debug)]
+pub struct PagedCorners<'a> {
+    field: &'a PagedGrid,
+    current: Option<(usize, BrickView)>,
+}
+
+impl DualCorners for PagedCorners<'_> {
+    type Error = PagingError;
+
+    #[inline]
+    fn corners(&mut self, lo: [usize; 3], hi: [usize; 3]) -> Result<[f64; 8], PagingError> {
+        let layout = &self.field.layout;
+        let (id, _) = layout.locate(lo);
+        let view = match &self.current {
+            Some((current, view)) if *current == id => view,
+            _ => {
+                // Unpin the old brick before pinning the next (a pool of one suffices).
+                self.current = None;
+                &self.current.insert((id, self.field.brick(id)?)).1
+            }
+        };
+        let o = layout.origin(id);
+        let local = |c: [usize; 3]| [0, 1, 2].map(|a| c[a] as isize - o[a] as isize);
+        let at = |c: [usize; 3]| f64::from(view.get(layout, local(c)));
+        Ok([
+            at(lo),
+            at([hi[0], lo[1], lo[2]]),
+            at([lo[0], hi[1], lo[2]]),
+            at([hi[0], hi[1], lo[2]]),
+            at([lo[0], lo[1], hi[2]]),
+            at([hi[0], lo[1], hi[2]]),
+            at([lo[0], hi[1], hi[2]]),
+            at(hi),
+        ])
     }
 }

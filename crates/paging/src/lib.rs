@@ -62,6 +62,6 @@ mod pager;
 pub mod store;
 
 pub use error::PagingError;
-pub use field::{BrickView, PagedGrid};
+pub use field::{BrickView, PagedCorners, PagedGrid};
 pub use pager::{Eviction, Pager, PagerOptions, PagerStats, ReadPin, WritePin};
 pub use store::{BrickStore, FileStore, MemoryStore};
