@@ -46,6 +46,7 @@ pub use lucent_gpu_solvers as gpu_solvers;
 pub use lucent_grid as grid;
 pub use lucent_mc as mc;
 pub use lucent_optics as optics;
+pub use lucent_paging as paging;
 pub use lucent_render as render;
 
 /// Every solver lucent has, by name.
@@ -130,4 +131,58 @@ pub enum Error {
     /// From the optics.
     #[error(transparent)]
     Optics(#[from] lucent_optics::OpticsError),
+}
+
+/// A byte count from the command line: a number of bytes (`4096`, `1e9`) or a number with
+/// a unit, binary (`KiB`, `MiB`, `GiB`, `TiB`) or decimal (`kB`/`KB`, `MB`, `GB`, `TB`),
+/// case-insensitive, spaces allowed before the unit (`512MiB`, `1.5 GB`).
+pub fn parse_bytes(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let split = t
+        .find(|c: char| c.is_ascii_alphabetic() && c != 'e' && c != 'E')
+        .unwrap_or(t.len());
+    let (number, unit) = t.split_at(split);
+    let value: f64 = number
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{text}` is not a size (examples: 512MiB, 2GiB, 1e9)"))?;
+    let scale = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1.0,
+        "kib" => 1024.0,
+        "mib" => 1024f64.powi(2),
+        "gib" => 1024f64.powi(3),
+        "tib" => 1024f64.powi(4),
+        "kb" => 1e3,
+        "mb" => 1e6,
+        "gb" => 1e9,
+        "tb" => 1e12,
+        other => {
+            return Err(format!(
+                "`{text}`: unknown unit `{other}` (B, KiB, MiB, GiB, TiB, kB, MB, GB, TB)"
+            ));
+        }
+    };
+    let bytes = value * scale;
+    if !(bytes >= 1.0 && bytes < 1.8e19) {
+        return Err(format!("`{text}` must be at least one byte"));
+    }
+    Ok(bytes.round() as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_bytes;
+
+    #[test]
+    fn sizes_parse_with_binary_and_decimal_units() {
+        assert_eq!(parse_bytes("512MiB"), Ok(512 << 20));
+        assert_eq!(parse_bytes("2 GiB"), Ok(2 << 30));
+        assert_eq!(parse_bytes("1.5GB"), Ok(1_500_000_000));
+        assert_eq!(parse_bytes("1e9"), Ok(1_000_000_000));
+        assert_eq!(parse_bytes("4096"), Ok(4096));
+        assert_eq!(parse_bytes("64kib"), Ok(65_536));
+        for bad in ["", "MiB", "-1GiB", "0", "12 parsecs", "NaN", "1e30"] {
+            assert!(parse_bytes(bad).is_err(), "{bad}");
+        }
+    }
 }

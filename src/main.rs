@@ -84,9 +84,20 @@ struct SolverArgs {
     /// Stop after this many seconds of solving.
     #[arg(long, value_name = "SECONDS")]
     time_limit: Option<f64>,
+    /// The most memory the job may take: building the scene and the solve (bytes, or
+    /// with a unit: 512MiB, 2GiB, 1.5GB). A scene or a solver that would need more is
+    /// refused before it allocates, naming the bytes it needs. Default 8GiB.
+    #[arg(long, value_name = "SIZE", value_parser = lucent::parse_bytes)]
+    memory_budget: Option<u64>,
 }
 
 impl SolverArgs {
+    /// The job's memory budget (bytes).
+    fn budget(&self) -> u64 {
+        self.memory_budget
+            .unwrap_or(lucent::scene::SCENE_MEMORY_BUDGET)
+    }
+
     /// The solve options these arguments ask for, with the chosen solver's tolerance, a
     /// progress callback and Ctrl-C.
     fn options(
@@ -107,6 +118,7 @@ impl SolverArgs {
             relative_tolerance: chosen.tolerance,
             max_iterations: self.max_iterations,
             time_budget,
+            memory_budget: self.budget(),
             progress: Some(progress),
             cancel: Some(cancel_flag()),
             ..SolveOptions::default()
@@ -251,7 +263,7 @@ fn interrupted() -> bool {
 }
 
 /// Loads a scene (or the default one) and builds it; relative paths start at its folder.
-fn load(scene: Option<&Path>) -> Result<(Scene, BuiltScene, String), Error> {
+fn load(scene: Option<&Path>, budget: u64) -> Result<(Scene, BuiltScene, String), Error> {
     let (parsed, base, name) = match scene {
         Some(path) => (
             Scene::load(path)?,
@@ -264,7 +276,7 @@ fn load(scene: Option<&Path>) -> Result<(Scene, BuiltScene, String), Error> {
             "built-in default scene".to_owned(),
         ),
     };
-    let built = parsed.build(&base)?;
+    let built = parsed.build_within(&base, budget)?;
     Ok((parsed, built, name))
 }
 
@@ -480,7 +492,7 @@ fn verdict(
 
 fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
     let start = Instant::now();
-    let (parsed, mut built, name) = load(args.scene.as_deref())?;
+    let (parsed, mut built, name) = load(args.scene.as_deref(), args.solver.budget())?;
     let chosen = choose_solver(&parsed, &args.solver)?;
     // Everything about the output is checked before any solving.
     if let Some(size) = &args.size {
@@ -655,7 +667,7 @@ fn solve_to_file(
     output: &Path,
     quiet: bool,
 ) -> Result<Ended, Error> {
-    let (parsed, built, name) = load(Some(scene))?;
+    let (parsed, built, name) = load(Some(scene), args.budget())?;
     let chosen = choose_solver(&parsed, args)?;
     check_output(
         output,
@@ -781,7 +793,7 @@ fn kebab<T: serde::Serialize>(value: &T) -> String {
 }
 
 fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
-    let (parsed, built, name) = load(scene)?;
+    let (parsed, built, name) = load(scene, args.budget())?;
     let p = &built.problem;
     let g = p.geometry();
     let s = built.volume.stats();

@@ -591,23 +591,23 @@ impl Scene {
     fn load_volume(&self, base: &Path, budget: u64) -> Result<Grid, Error> {
         // A scene builds a handful of grids of this size (volume, σ_t and albedo per channel,
         // per-light transmittance): refuse resolutions that could not fit before allocating.
-        let geometry =
-            |resolution: [usize; 3], bounds: [[f64; 3]; 2]| -> Result<GridGeometry, Error> {
-                let g = GridGeometry::from_bounds(
-                    resolution,
-                    DVec3::from_array(bounds[0]),
-                    DVec3::from_array(bounds[1]),
-                )?;
-                let bytes = g.voxel_count() as u64 * 4;
-                if bytes > max_grid_bytes(budget) {
-                    return Err(Error::Invalid(format!(
-                        "a {resolution:?} grid needs {:.2} GiB per field; the limit is {:.2} GiB",
-                        bytes as f64 / (1u64 << 30) as f64,
-                        max_grid_bytes(budget) as f64 / (1u64 << 30) as f64
-                    )));
-                }
-                Ok(g)
-            };
+        let geometry = |resolution: [usize; 3],
+                        bounds: [[f64; 3]; 2]|
+         -> Result<GridGeometry, Error> {
+            let g = GridGeometry::from_bounds(
+                resolution,
+                DVec3::from_array(bounds[0]),
+                DVec3::from_array(bounds[1]),
+            )?;
+            let bytes = g.voxel_count() as u64 * 4;
+            if bytes > max_grid_bytes(budget) {
+                return Err(Error::Invalid(format!(
+                    "a {resolution:?} grid needs {bytes} bytes per field; a scene holds up to 8 fields, so a memory budget of {budget} bytes allows {} per field (--memory-budget sets it)",
+                    max_grid_bytes(budget)
+                )));
+            }
+            Ok(g)
+        };
         Ok(match &self.volume {
             VolumeSpec::Cloud {
                 resolution,

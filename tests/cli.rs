@@ -1217,3 +1217,76 @@ fn render_gpu_without_an_adapter_fails_before_solving() {
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(stderr(&out).contains("--gpu"), "{}", stderr(&out));
 }
+
+#[test]
+fn a_memory_budget_refuses_before_allocating_naming_the_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    // The solver's estimate is over 1 MiB; the scene's 32³ fields fit.
+    let out = lucent_env(
+        &[
+            "solve",
+            &scene("marble_robin.toml"),
+            "--solver",
+            "diffusion-mg",
+            "--memory-budget",
+            "1MiB",
+            "-o",
+            "x.npy",
+            "--quiet",
+        ],
+        dir.path(),
+        &[("LUCENT_COUNTERS", "1")],
+    );
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("diffusion-mg") && err.contains("over the memory budget of 1048576 bytes"),
+        "{err}"
+    );
+    assert!(err.ends_with("solves started 0\n"), "{err}");
+    // The scene's own fields over the budget: refused while building it.
+    let out = lucent(
+        &[
+            "solve",
+            &scene("marble_robin.toml"),
+            "--memory-budget",
+            "64KiB",
+            "-o",
+            "x.npy",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert_clean_failure(&out, "131072 bytes per field");
+    assert!(!dir.path().join("x.npy").exists());
+    // A budget that is not a size is a usage error.
+    let out = lucent(
+        &[
+            "solve",
+            &scene("marble_robin.toml"),
+            "--memory-budget",
+            "12parsecs",
+            "-o",
+            "x.npy",
+        ],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("unknown unit"), "{}", stderr(&out));
+    // Within the budget it runs.
+    let out = lucent(
+        &[
+            "solve",
+            &scene("marble_robin.toml"),
+            "--solver",
+            "diffusion-mg",
+            "--memory-budget",
+            "64MiB",
+            "-o",
+            "x.npy",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+}

@@ -31,6 +31,10 @@
 //!   volumes on the same box: assembly, bytes per unknown, solve time.
 //! - `bench-dom [N] [ORDER]`: a converged discrete-ordinates solve at N³ (128) with S_ORDER
 //!   (6: 48 directions), g = 0.6: wall time, sweeps, time per cell-direction and GB/s.
+//! - `bench-paging [N] [BRICK]`: an FTCS stencil swept in core and out of core (two paged
+//!   fields, 1/16 of their bricks resident, a backing file) at N³ (256) with B³ bricks
+//!   (16): time per sweep against in core, hit rates, bytes moved, LRU against NRU, with
+//!   and without prefetch, and whether the results are bit for bit equal.
 //! - `stability`: each explicit scheme's measured blow-up boundary against its theoretical
 //!   curves, as `docs/stability/*.svg` and `.csv` (see `docs/stability.md`).
 
@@ -42,11 +46,12 @@ mod bench_dom;
 mod bench_explicit;
 mod bench_fem;
 mod bench_gpu;
+mod bench_paging;
 mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-fem [N...] | bench-dom [N] [ORDER] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -94,6 +99,21 @@ fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("xtask: bench-gpu: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
+    if command.as_deref() == Some("bench-paging") {
+        let args: Vec<usize> = std::env::args()
+            .skip(2)
+            .filter_map(|s| s.parse().ok())
+            .collect();
+        let n = args.first().copied().unwrap_or(256);
+        let brick = args.get(1).copied().unwrap_or(16);
+        return match bench_paging::run(n, brick) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("xtask: bench-paging: {e}");
                 ExitCode::FAILURE
             }
         };

@@ -22,6 +22,8 @@
 //!   majorants come from the field. Writes update every stored copy of a cell (the owner
 //!   and the neighbours' aprons), so a stencil or a trilinear sample on one stored brick
 //!   never sees a stale neighbour.
+//! - [`for_each_layer`]: a field streamed through a stencil brick layer by brick layer (the
+//!   z-slab order), the next layer prefetched on a helper thread.
 //!
 //! ## Units and limits
 //!
@@ -60,8 +62,10 @@ mod error;
 mod field;
 mod pager;
 pub mod store;
+mod stream;
 
 pub use error::PagingError;
 pub use field::{BrickView, PagedCorners, PagedGrid};
 pub use pager::{Eviction, Pager, PagerOptions, PagerStats, ReadPin, WritePin};
 pub use store::{BrickStore, FileStore, MemoryStore};
+pub use stream::for_each_layer;

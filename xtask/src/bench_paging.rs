@@ -1,0 +1,155 @@
+//! `cargo xtask bench-paging [N] [BRICK]`: the pager under a stencil, in core and out of
+//! core, in one run.
+//!
+//! The stencil is an FTCS diffusion step on f32 (φ′ = φ + r Σ_nb (φ_nb − φ) − κ φ, the
+//! neighbours clamped at the faces: a Neumann box), swept over an N³ smooth cloud (default
+//! 256) with φ and φ′ ping-ponged. In core: two dense arrays, rayon over z-slabs. Out of
+//! core: two `PagedGrid`s of B³ bricks (default 16) sharing one pager whose pool holds
+//! 1/16 of their bricks, backed by an unnamed temporary file (positioned I/O), the input
+//! streamed layer by layer (`for_each_layer`) with the next layer prefetched, each layer's
+//! output written back with its aprons (`write_slabs`). Reported per configuration (LRU
+//! and NRU, with and without prefetch): seconds per sweep, cell updates per second, the
+//! ratio to the in-core sweep, hit rate, bytes read and written per sweep; and whether
+//! the paged result is bit for bit the in-core one.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::DVec3;
+use lucent::paging::{
+    Eviction, FileStore, PagedGrid, Pager, PagerOptions, PagingError, for_each_layer,
+};
+use lucent_grid::{BrickLayout, Grid, GridGeometry};
+use rayon::prelude::*;
+
+const R: f32 = 0.1;
+const KAPPA: f32 = 0.01;
+const SWEEPS: usize = 3;
+
+/// One FTCS step of the slabs `z0..z1` of a grid of `dims` into `out`, reading `window`,
+/// which holds slabs `w0..` (at least z0 − 1 .. z1 + 1 within the grid).
+fn step_slabs(dims: [usize; 3], window: &[f32], w0: usize, z0: usize, z1: usize, out: &mut [f32]) {
+    let [nx, ny, nz] = dims;
+    let plane = nx * ny;
+    out.par_chunks_mut(plane)
+        .enumerate()
+        .for_each(|(dz, slab)| {
+            let z = z0 + dz;
+            let at = |x: usize, y: usize, z: usize| window[(z - w0) * plane + y * nx + x];
+            let (zm, zp) = (z.saturating_sub(1), (z + 1).min(nz - 1));
+            for y in 0..ny {
+                let (ym, yp) = (y.saturating_sub(1), (y + 1).min(ny - 1));
+                for x in 0..nx {
+                    let (xm, xp) = (x.saturating_sub(1), (x + 1).min(nx - 1));
+                    let c = at(x, y, z);
+                    let sum = (at(xm, y, z) - c)
+                        + (at(xp, y, z) - c)
+                        + (at(x, ym, z) - c)
+                        + (at(x, yp, z) - c)
+                        + (at(x, y, zm) - c)
+                        + (at(x, y, zp) - c);
+                    slab[y * nx + x] = c + R * sum - KAPPA * c;
+                }
+            }
+        });
+    debug_assert_eq!(out.len(), plane * (z1 - z0));
+}
+
+/// Runs the benchmark.
+pub(crate) fn run(n: usize, brick: usize) -> Result<(), String> {
+    let err = |e: PagingError| e.to_string();
+    let geometry = GridGeometry::new([n; 3], DVec3::splat(1.0 / n as f64), DVec3::ZERO)
+        .map_err(|e| e.to_string())?;
+    let dims = geometry.dims();
+    let initial = Grid::from_fn(geometry, |p| {
+        (1.0 + (7.0 * p.x).sin() * (5.0 * p.y).cos() * (3.0 * p.z).sin()) as f32
+    });
+    let cells = (n * n * n) as f64;
+
+    // In core: the reference result and time.
+    let mut a = initial.data().to_vec();
+    let mut b = vec![0f32; a.len()];
+    let start = Instant::now();
+    for _ in 0..SWEEPS {
+        step_slabs(dims, &a, 0, 0, n, &mut b);
+        std::mem::swap(&mut a, &mut b);
+    }
+    let in_core = start.elapsed().as_secs_f64() / SWEEPS as f64;
+    let reference = a;
+    println!(
+        "N = {n}, bricks of {brick}³ stored as {}³ (apron), {} sweeps; in core: {:.3} s per sweep, {:.3e} cell updates/s",
+        brick + 2,
+        SWEEPS,
+        in_core,
+        cells / in_core
+    );
+    println!(
+        "| eviction | prefetch | resident | s per sweep | cell updates/s | vs in core | hit rate | MB read per sweep | MB written per sweep | bit-identical |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    let layout = BrickLayout::new(dims, brick).map_err(|e| e.to_string())?;
+    let brick_bytes = layout.stored_len() as u64 * 4;
+    for eviction in [Eviction::Lru, Eviction::Nru] {
+        for prefetch in [false, true] {
+            // 1/16 of both fields' bricks resident.
+            let slots = (2 * layout.count() / 16).max(8);
+            let pager = Arc::new(
+                Pager::new(
+                    Box::new(FileStore::create(layout.stored_len()).map_err(err)?),
+                    0,
+                    layout.stored_len(),
+                    1,
+                    PagerOptions {
+                        budget_bytes: slots as u64 * brick_bytes,
+                        eviction,
+                        fill: 0.0,
+                    },
+                )
+                .map_err(err)?,
+            );
+            let mut fields = [
+                PagedGrid::from_grid(pager.clone(), &initial, brick).map_err(err)?,
+                PagedGrid::filled(pager.clone(), geometry, brick, 0.0).map_err(err)?,
+            ];
+            let before = pager.stats();
+            let start = Instant::now();
+            for _ in 0..SWEEPS {
+                let [input, output] = &fields;
+                let mut layer_out = Vec::new();
+                for_each_layer(input, &[output], prefetch, |layer, z_lo, window| {
+                    let z0 = layer * brick;
+                    let z1 = (z0 + brick).min(n);
+                    layer_out.resize(n * n * (z1 - z0), 0.0);
+                    step_slabs(dims, window, z_lo, z0, z1, &mut layer_out);
+                    output.write_slabs(z0, &layer_out)
+                })
+                .map_err(err)?;
+                fields.swap(0, 1);
+            }
+            let seconds = start.elapsed().as_secs_f64() / SWEEPS as f64;
+            let after = pager.stats();
+            let result = fields[0].to_grid().map_err(err)?;
+            let identical = result
+                .data()
+                .iter()
+                .zip(&reference)
+                .all(|(x, y)| x.to_bits() == y.to_bits());
+            let pins = (after.hits - before.hits) + (after.misses - before.misses);
+            println!(
+                "| {eviction:?} | {prefetch} | {:.1} % ({slots} of {} bricks) | {seconds:.3} | {:.3e} | {:.0} % | {:.3} | {:.0} | {:.0} | {} |",
+                100.0 * slots as f64 / (2 * layout.count()) as f64,
+                2 * layout.count(),
+                cells / seconds,
+                100.0 * in_core / seconds,
+                (after.hits - before.hits) as f64 / pins.max(1) as f64,
+                (after.bytes_read - before.bytes_read) as f64 / SWEEPS as f64 / 1e6,
+                (after.bytes_written - before.bytes_written) as f64 / SWEEPS as f64 / 1e6,
+                if identical { "yes" } else { "NO" }
+            );
+            if !identical {
+                return Err("the paged sweep differs from the in-core one".into());
+            }
+        }
+    }
+    Ok(())
+}
