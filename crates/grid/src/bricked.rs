@@ -168,6 +168,12 @@ impl BrickedGrid {
         })
     }
 
+    /// Per brick, the maximum over the brick and its apron (a bound of the trilinear
+    /// interpolant in the brick), in brick order.
+    pub fn brick_maxima(&self) -> &[f32] {
+        &self.max
+    }
+
     /// The coarse majorant grid: one cell per brick holding the brick's maximum, on the
     /// geometry coarsened by the brick size (covering the bricks that stick out too).
     pub fn majorant_grid(&self) -> Grid {

@@ -9,7 +9,8 @@
 //! tracer, camera paths, shadow rays — can see medium outside it.
 
 use glam::DVec3;
-use lucent_grid::{Grid, GridGeometry, ray_box};
+use lucent_grid::{BrickLayout, Grid, GridGeometry, ray_box};
+use rayon::prelude::*;
 
 use crate::transport::McConfig;
 
@@ -28,35 +29,37 @@ pub struct MajorantGrid {
 
 impl MajorantGrid {
     /// Majorants over blocks of `factor`³ fine cells (`factor` ≥ 1; the last block of an
-    /// axis may stick out of the domain).
+    /// axis may stick out of the domain): the blocks are the bricks of lucent-grid's
+    /// [`BrickLayout`], and a block's bound is the maximum over its stored brick — its cells
+    /// and their one-cell apron, the cells whose values the interpolant inside the block
+    /// blends ([`BrickLayout::gather`], clamped at the faces).
     pub fn new(sigma_t: &Grid, factor: usize) -> Self {
         let fine = *sigma_t.geometry();
-        let factor = factor.max(1);
-        let geometry = fine.coarsened(factor).unwrap_or(fine);
-        let [fx, fy, fz] = fine.dims();
-        let [cx, cy, cz] = geometry.dims();
-        let range = |c: usize, n: usize| {
-            c.saturating_mul(factor).saturating_sub(1)..((c + 1) * factor + 1).min(n)
+        let factor = factor.clamp(1, BrickLayout::MAX_BRICK);
+        let layout = match BrickLayout::new(fine.dims(), factor) {
+            Ok(layout) => layout,
+            // A valid grid always has a layout; fall back to the global bound regardless.
+            Err(_) => return Self::global(sigma_t),
         };
-        let mut values = vec![0.0; cx * cy * cz];
-        for k in 0..cz {
-            for j in 0..cy {
-                for i in 0..cx {
-                    let mut max = 0.0f32;
-                    for kk in range(k, fz) {
-                        for jj in range(j, fy) {
-                            for ii in range(i, fx) {
-                                max = max.max(sigma_t.data()[fine.index(ii, jj, kk)]);
-                            }
-                        }
-                    }
-                    values[geometry.index(i, j, k)] = f64::from(max);
-                }
-            }
-        }
+        let data = sigma_t.data();
+        let value = |c: [usize; 3]| data[fine.index(c[0], c[1], c[2])];
+        let maxima: Vec<f32> = (0..layout.count())
+            .into_par_iter()
+            .map(|id| layout.gather(id, value).into_iter().fold(0.0f32, f32::max))
+            .collect();
+        Self::from_brick_maxima(fine, &layout, &maxima)
+    }
+
+    /// Majorants from per-brick maxima a field already holds — a `BrickedGrid`'s or a paged
+    /// field's ranges (`lucent_grid::BrickedGrid::brick_maxima`, the pager's
+    /// `PagedGrid::brick_range`), taken over brick and apron — so a bricked or paged medium
+    /// needs no pass of its own. `maxima[id]` bounds brick `id` of `layout` on `fine`.
+    pub fn from_brick_maxima(fine: GridGeometry, layout: &BrickLayout, maxima: &[f32]) -> Self {
+        let geometry = fine.coarsened(layout.brick()).unwrap_or(fine);
+        debug_assert_eq!(geometry.dims(), layout.bricks());
         Self {
             geometry,
-            values,
+            values: maxima.iter().map(|&m| f64::from(m.max(0.0))).collect(),
             domain: fine.bounds(),
         }
     }
@@ -163,5 +166,73 @@ impl MajorantGrid {
                 }
             }
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lucent_grid::BrickedGrid;
+
+    /// A sparse, rough medium on a grid that is no multiple of the blocks.
+    fn medium() -> Grid {
+        let g = GridGeometry::new([21, 14, 17], DVec3::new(0.1, 0.07, 0.12), DVec3::ZERO).unwrap();
+        Grid::from_fn(g, |p| {
+            let r = (p - DVec3::new(1.0, 0.5, 1.0)).length();
+            if r > 0.6 {
+                0.0
+            } else {
+                (5.0 * (13.0 * p.x).sin().abs() + 1.0 / (0.1 + r)) as f32
+            }
+        })
+    }
+
+    #[test]
+    fn block_bounds_are_the_maxima_over_each_block_and_its_neighbour_cells() {
+        // The definition, by brute force: the maximum over fine cells within one cell of
+        // the block (clamped to the grid), floored at zero.
+        let sigma = medium();
+        let fine = *sigma.geometry();
+        let [fx, fy, fz] = fine.dims();
+        for factor in [1, 3, 4, 8, 40] {
+            let m = MajorantGrid::new(&sigma, factor);
+            let [cx, cy, cz] = m.geometry().dims();
+            let range = |c: usize, n: usize| {
+                c.saturating_mul(factor).saturating_sub(1)..((c + 1) * factor + 1).min(n)
+            };
+            for k in 0..cz {
+                for j in 0..cy {
+                    for i in 0..cx {
+                        let mut want = 0.0f32;
+                        for kk in range(k, fz) {
+                            for jj in range(j, fy) {
+                                for ii in range(i, fx) {
+                                    want = want.max(sigma.data()[fine.index(ii, jj, kk)]);
+                                }
+                            }
+                        }
+                        assert_eq!(
+                            m.values[m.geometry().index(i, j, k)],
+                            f64::from(want),
+                            "factor {factor}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_bricked_fields_ranges_give_the_same_majorants_without_a_pass() {
+        let sigma = medium();
+        for factor in [2, 4, 8] {
+            let bricked = BrickedGrid::from_dense(&sigma, factor).unwrap();
+            let from_field = MajorantGrid::from_brick_maxima(
+                *sigma.geometry(),
+                bricked.layout(),
+                bricked.brick_maxima(),
+            );
+            assert_eq!(from_field, MajorantGrid::new(&sigma, factor));
+        }
     }
 }
