@@ -23,10 +23,12 @@ use lucent_optics::SphericalQuadrature;
 use rayon::prelude::*;
 
 use crate::error::SolveError;
+use crate::paged::{PagedProblem, PagedSolution, paging_error};
 use crate::problem::{BoundaryKind, Light, LightKind, Problem};
 use crate::registry::{Params, SolverEntry, SolverParams, param_docs, resolved_params};
 use crate::solution::{Angular, LightTransmittance, Solution};
 use crate::solver::{Capabilities, FluenceKind, OutputKind, Progress, SolveOptions, Solver};
+use lucent_paging::PagingError;
 
 /// The exact uncollided-light solver; its fields are its registry parameters.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -93,6 +95,46 @@ impl DirectSolver {
     }
 }
 
+/// Σ_d w_d e^{−τ_d} at cell centre `x` over the sky's directions (of travel) `d` with
+/// weights `w`, τ_d = `tau(x − d·far, x)`: the one definition both storages use.
+fn sky_sum<E>(
+    directions: &[(DVec3, f64)],
+    far: f64,
+    x: DVec3,
+    mut tau: impl FnMut(DVec3, DVec3) -> Result<f64, E>,
+) -> Result<f32, E> {
+    // `Result`'s sum stops at the first error and otherwise adds as `f64`'s sum does.
+    let total: f64 = directions
+        .iter()
+        .map(|&(d, w)| tau(x - d * far, x).map(|t| w * (-t).exp()))
+        .sum::<Result<f64, E>>()?;
+    Ok(total as f32)
+}
+
+/// The sky's isotropic fluence from its transmittance sum `t` and radiance.
+fn isotropic_value(t: f32, sky_radiance: f64) -> f32 {
+    (f64::from(t) * sky_radiance) as f32
+}
+
+/// The uncollided fluence at cell centre `x` in channel `c`: the isotropic part `iso`
+/// plus Σ_l s_l(c) E_l(x) T_l(x), `transmittance(l)` giving T_l at the cell.
+fn fluence_value(
+    iso: f32,
+    x: DVec3,
+    point_lights: &[&Light],
+    c: usize,
+    (far, min_distance): (f64, f64),
+    transmittance: impl Fn(usize) -> f32,
+) -> f32 {
+    let mut sum = f64::from(iso);
+    for (l, light) in point_lights.iter().enumerate() {
+        if let Some((_, irradiance, _)) = light.arrival(x, far, min_distance) {
+            sum += light.spectrum().channel(c) * irradiance * f64::from(transmittance(l));
+        }
+    }
+    sum as f32
+}
+
 /// Transmittance from `source(x)` to every cell centre x through `sigma_t`.
 fn transmittance(sigma_t: &Grid, cutoff: f64, source: impl Fn(DVec3) -> DVec3 + Sync) -> Grid {
     let geometry = *sigma_t.geometry();
@@ -124,6 +166,26 @@ impl Solver for DirectSolver {
         }
     }
 
+    fn pages(&self) -> bool {
+        true
+    }
+
+    fn solve_paged(
+        &self,
+        problem: &PagedProblem,
+        options: &SolveOptions,
+    ) -> Result<PagedSolution, SolveError> {
+        self.validate()?;
+        options.validate()?;
+        if !matches!(problem.boundary(), crate::Boundary::Vacuum) {
+            return Err(SolveError::Unsupported {
+                solver: Self::NAME.into(),
+                feature: format!("a {} boundary", problem.boundary()),
+            });
+        }
+        options.install(|| self.transport_paged(problem, options))?
+    }
+
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
         let geometry = *problem.geometry();
         let medium = problem.medium();
@@ -152,6 +214,263 @@ impl Solver for DirectSolver {
 }
 
 impl DirectSolver {
+    /// `direct` on a paged medium: per light and extinction channel a paged transmittance
+    /// field, computed brick layer by brick layer (each cell's τ read through the paged σ_t
+    /// with the same walk and arithmetic as in memory), then the isotropic fluence and the
+    /// fluence layer by layer from those fields with the same per-cell formulas: the bits
+    /// of [`Solver::solve`] on the same medium.
+    fn transport_paged(
+        &self,
+        problem: &PagedProblem,
+        options: &SolveOptions,
+    ) -> Result<PagedSolution, SolveError> {
+        let started = std::time::Instant::now();
+        let meter = crate::memory::PeakMeter::start();
+        let before = problem.pager().stats();
+        let err = |e| paging_error(Self::NAME, e);
+        let geometry = *problem.geometry();
+        let [nx, ny, nz] = geometry.dims();
+        let layout = *problem.layout();
+        let b = layout.brick();
+        let medium = problem.medium();
+        let channels = problem.channels();
+        let point_lights: Vec<&Light> = problem
+            .lights()
+            .iter()
+            .filter(|l| !matches!(l, Light::Sky { .. }))
+            .collect();
+        let sky: Vec<&Light> = problem
+            .lights()
+            .iter()
+            .filter(|l| matches!(l, Light::Sky { .. }))
+            .collect();
+        let (lo, hi) = geometry.bounds();
+        let (far, min_distance) = (
+            4.0 * (hi - lo).length() + 1.0,
+            0.5 * geometry.spacing().min_element(),
+        );
+        let cutoff = self.max_optical_depth;
+        let quadrature = SphericalQuadrature::octahedral(self.sky_level).map_err(|e| {
+            SolveError::InvalidParameter {
+                name: "sky_level".into(),
+                reason: e.to_string(),
+            }
+        })?;
+        let directions: Vec<(DVec3, f64)> = quadrature
+            .directions()
+            .iter()
+            .copied()
+            .zip(quadrature.weights().iter().copied())
+            .collect();
+
+        // Memory: the pool, the bookkeeping of every field (the medium's and the results:
+        // transmittance per light and extinction channel, isotropic fluence and fluence per
+        // channel), and one layer of slabs per field read or written at once.
+        let extinction = medium.sigma_t.len();
+        let outputs = point_lights.len() * extinction
+            + usize::from(!sky.is_empty()) * extinction
+            + 2 * channels;
+        let fields = medium.sigma_t.len() + medium.albedo.len() + outputs;
+        let layer_bytes = (nx * ny * b) as u64 * 4;
+        let pool = problem.pager().capacity() as u64 * layout.stored_len() as u64 * 4;
+        let needed =
+            pool + problem.overhead_bytes(fields) + layer_bytes * (point_lights.len() + 2) as u64;
+        if needed > options.memory_budget {
+            return Err(SolveError::OverBudget {
+                solver: Self::NAME.into(),
+                needed,
+                budget: options.memory_budget,
+            });
+        }
+
+        let layers = layout.bricks()[2];
+        let total_layers = (layers * (outputs.max(1))) as f64;
+        let mut layers_done = 0.0;
+        let mut report = |stage: &'static str| {
+            layers_done += 1.0;
+            options.report(Progress {
+                stage,
+                fraction: (layers_done / total_layers).min(0.999),
+                iteration: 0,
+                residual: None,
+            });
+        };
+        // Fills `out` layer by layer with `value(corners, centre)` per cell, τ read from
+        // `sigma_t`.
+        let march =
+            |sigma_t: &lucent_paging::PagedGrid,
+             out: &lucent_paging::PagedGrid,
+             value: &(
+                  dyn Fn(&mut lucent_paging::PagedCorners<'_>, DVec3) -> Result<f32, PagingError>
+                      + Sync
+              ),
+             report: &mut dyn FnMut()|
+             -> Result<(), SolveError> {
+                let mut buffer = Vec::new();
+                for layer in 0..layers {
+                    let z0 = layer * b;
+                    let z1 = (z0 + b).min(nz);
+                    buffer.resize(nx * ny * (z1 - z0), 0.0);
+                    buffer
+                        .par_chunks_mut(nx)
+                        .enumerate()
+                        .try_for_each(|(row, cells)| {
+                            let (j, k) = (row % ny, z0 + row / ny);
+                            let mut corners = sigma_t.corners();
+                            for (i, cell) in cells.iter_mut().enumerate() {
+                                *cell = value(&mut corners, geometry.cell_centre(i, j, k))?;
+                            }
+                            Ok::<_, PagingError>(())
+                        })
+                        .map_err(err)?;
+                    out.write_slabs(z0, &buffer).map_err(err)?;
+                    report();
+                }
+                Ok(())
+            };
+
+        let mut transmittance = Vec::with_capacity(point_lights.len());
+        for light in &point_lights {
+            let mut grids = Vec::with_capacity(extinction);
+            for sigma_t in &medium.sigma_t {
+                let out = problem.new_field().map_err(err)?;
+                march(
+                    sigma_t,
+                    &out,
+                    &|corners, x| {
+                        let from = light
+                            .arrival(x, far, min_distance)
+                            .map_or(x, |(_, _, from)| from);
+                        let tau =
+                            lucent_grid::line_integral_with(&geometry, from, x, cutoff, corners)?;
+                        Ok((-tau).exp() as f32)
+                    },
+                    &mut || report("light transmittance"),
+                )?;
+                grids.push(out);
+            }
+            transmittance.push(grids);
+        }
+        let sky_transmittance = if sky.is_empty() {
+            None
+        } else {
+            let mut sums = Vec::with_capacity(extinction);
+            for sigma_t in &medium.sigma_t {
+                let out = problem.new_field().map_err(err)?;
+                march(
+                    sigma_t,
+                    &out,
+                    &|corners, x| {
+                        sky_sum(&directions, far, x, |a, b| {
+                            lucent_grid::line_integral_with(&geometry, a, b, cutoff, corners)
+                        })
+                    },
+                    &mut || report("sky transmittance"),
+                )?;
+                sums.push(out);
+            }
+            Some(sums)
+        };
+
+        // The isotropic fluence and the fluence, layer by layer from the fields above.
+        let sky_radiance: Vec<f64> = (0..channels)
+            .map(|c| sky.iter().map(|l| l.spectrum().channel(c)).sum())
+            .collect();
+        let mut isotropic = Vec::with_capacity(channels);
+        let mut fluence = Vec::with_capacity(channels);
+        for c in 0..channels {
+            let iso = problem.new_field().map_err(err)?;
+            let phi = problem.new_field().map_err(err)?;
+            let mut iso_slabs = Vec::new();
+            let mut t_slabs: Vec<Vec<f32>> = vec![Vec::new(); point_lights.len()];
+            for layer in 0..layers {
+                let z0 = layer * b;
+                let z1 = (z0 + b).min(nz);
+                let n = nx * ny * (z1 - z0);
+                iso_slabs.resize(n, 0.0);
+                match &sky_transmittance {
+                    Some(t) => {
+                        t[c.min(t.len() - 1)]
+                            .read_slabs(z0, z1, &mut iso_slabs)
+                            .map_err(err)?;
+                        iso_slabs
+                            .par_iter_mut()
+                            .for_each(|v| *v = isotropic_value(*v, sky_radiance[c]));
+                        iso.write_slabs(z0, &iso_slabs).map_err(err)?;
+                    }
+                    None => iso_slabs.fill(0.0),
+                }
+                for (l, slabs) in t_slabs.iter_mut().enumerate() {
+                    slabs.resize(n, 0.0);
+                    let grids = &transmittance[l];
+                    grids[c.min(grids.len() - 1)]
+                        .read_slabs(z0, z1, slabs)
+                        .map_err(err)?;
+                }
+                let mut out = vec![0.0f32; n];
+                out.par_chunks_mut(nx).enumerate().for_each(|(row, cells)| {
+                    let (j, k) = (row % ny, z0 + row / ny);
+                    for (i, cell) in cells.iter_mut().enumerate() {
+                        let index = row * nx + i;
+                        *cell = fluence_value(
+                            iso_slabs[index],
+                            geometry.cell_centre(i, j, k),
+                            &point_lights,
+                            c,
+                            (far, min_distance),
+                            |l| t_slabs[l][index],
+                        );
+                    }
+                });
+                if let Some(index) = out.iter().position(|v| !v.is_finite()) {
+                    let [i, j, k] = [index % nx, (index / nx) % ny, z0 + index / (nx * ny)];
+                    return Err(SolveError::NonFiniteOutput {
+                        solver: Self::NAME.into(),
+                        what: "fluence",
+                        channel: c,
+                        cell: [i, j, k],
+                        value: out[index],
+                    });
+                }
+                phi.write_slabs(z0, &out).map_err(err)?;
+                report("fluence");
+            }
+            isotropic.push(iso);
+            fluence.push(phi);
+        }
+        let after = problem.pager().stats();
+        options.report(Progress {
+            stage: Progress::DONE,
+            fraction: 1.0,
+            iteration: 0,
+            residual: None,
+        });
+        Ok(PagedSolution {
+            fluence,
+            transmittance,
+            isotropic_fluence: isotropic,
+            report: crate::solver::SolveReport {
+                solver: Self::NAME.into(),
+                iterations: 0,
+                residual_history: Vec::new(),
+                wall_time_s: started.elapsed().as_secs_f64(),
+                peak_memory_bytes: needed,
+                measured_peak_bytes: meter.and_then(|m| m.peak_bytes()),
+                stop_reason: crate::solver::StopReason::Exact,
+            },
+            paging: lucent_paging::PagerStats {
+                hits: after.hits - before.hits,
+                misses: after.misses - before.misses,
+                prefetched: after.prefetched - before.prefetched,
+                evictions: after.evictions - before.evictions,
+                write_backs: after.write_backs - before.write_backs,
+                bytes_read: after.bytes_read - before.bytes_read,
+                bytes_written: after.bytes_written - before.bytes_written,
+                slots: after.slots,
+            },
+        })
+    }
+
     /// The uncollided light of `point_lights` (point-like) and `sky`.
     fn transport(
         &self,
@@ -217,14 +536,15 @@ impl DirectSolver {
                             for j in 0..ny {
                                 for i in 0..nx {
                                     let x = geometry.cell_centre(i, j, k);
-                                    let s: f64 = directions
-                                        .iter()
-                                        .map(|&(d, w)| {
-                                            w * (-sigma_t.line_integral(x - d * far, x, cutoff))
-                                                .exp()
-                                        })
-                                        .sum();
-                                    slab[i + nx * j] = s as f32;
+                                    let tau = |a, b| {
+                                        Ok::<_, std::convert::Infallible>(
+                                            sigma_t.line_integral(a, b, cutoff),
+                                        )
+                                    };
+                                    slab[i + nx * j] = match sky_sum(&directions, far, x, tau) {
+                                        Ok(v) => v,
+                                        Err(never) => match never {},
+                                    };
                                 }
                             }
                         });
@@ -290,7 +610,7 @@ pub fn uncollided_outcome(
         .collect();
     let isotropic_fluence: Vec<Grid> = (0..channels)
         .map(|c| match &sky_transmittance {
-            Some(t) => t[c.min(t.len() - 1)].map(|v| (f64::from(v) * sky_radiance[c]) as f32),
+            Some(t) => t[c.min(t.len() - 1)].map(|v| isotropic_value(v, sky_radiance[c])),
             None => Grid::filled(geometry, 0.0),
         })
         .collect();
@@ -303,14 +623,17 @@ pub fn uncollided_outcome(
                     for i in 0..nx {
                         let x = geometry.cell_centre(i, j, k);
                         let index = i + nx * j + nx * ny * k;
-                        let mut sum = f64::from(slab[i + nx * j]);
-                        for (light, grids) in point_lights.iter().zip(&per_light) {
-                            if let Some((_, irradiance, _)) = light.arrival(x, far, min_distance) {
-                                let t = grids[c.min(grids.len() - 1)].data()[index];
-                                sum += light.spectrum().channel(c) * irradiance * f64::from(t);
-                            }
-                        }
-                        slab[i + nx * j] = sum as f32;
+                        slab[i + nx * j] = fluence_value(
+                            slab[i + nx * j],
+                            x,
+                            point_lights,
+                            c,
+                            (far, min_distance),
+                            |l| {
+                                let grids = &per_light[l];
+                                grids[c.min(grids.len() - 1)].data()[index]
+                            },
+                        );
                     }
                 }
             });

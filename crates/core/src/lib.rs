@@ -65,6 +65,7 @@ pub mod driver;
 mod error;
 mod iteration;
 pub mod memory;
+mod paged;
 mod problem;
 mod registry;
 mod singular;
@@ -76,6 +77,7 @@ mod uncollided;
 pub use direct::{DirectSolver, light_distances, uncollided_outcome};
 pub use error::{ProblemError, SolveError};
 pub use iteration::{History, Stopping};
+pub use paged::{CellMedium, PagedMedium, PagedProblem, PagedSolution, Storage, paging_error};
 pub use problem::{Boundary, BoundaryKind, Field, Light, LightKind, Medium, Problem};
 pub use registry::{
     ParamDoc, ParamValue, Params, Registry, SolverEntry, SolverParams, param_docs, resolved_params,

@@ -500,6 +500,26 @@ pub trait Solver: Send + Sync {
     fn images(&self) -> Option<&dyn ImageSolver> {
         None
     }
+
+    /// Whether [`Solver::solve_paged`] runs (out of core), rather than refusing.
+    fn pages(&self) -> bool {
+        false
+    }
+
+    /// Solves a problem whose medium is paged ([`crate::PagedProblem`]), giving the bits
+    /// [`Solver::solve`] gives on the same medium in memory. Solvers that need their
+    /// fields in memory refuse with [`SolveError::Unsupported`] (the default).
+    fn solve_paged(
+        &self,
+        problem: &crate::PagedProblem,
+        options: &SolveOptions,
+    ) -> Result<crate::PagedSolution, SolveError> {
+        let _ = (problem, options);
+        Err(SolveError::Unsupported {
+            solver: self.name().into(),
+            feature: "a paged (out-of-core) medium: it needs its fields in memory".into(),
+        })
+    }
 }
 
 /// What a picture asks of an [`ImageSolver`]: its size and the camera's rays. The camera
