@@ -1,0 +1,151 @@
+//! `cargo xtask paged-direct [N] [BUDGET_MIB] [BRICK]`: `direct` on a sparse N³ cloud
+//! (default 256; a seeded noise cloud of radius 0.3 in the unit box, mostly empty) lit by
+//! a low sun, out of core under a budget of BUDGET_MIB MiB (default 32; half of it the
+//! brick pool, bricks of BRICK³ cells, default 16, backed by an unnamed temporary file),
+//! and — where the dense problem fits this machine — in memory: wall time, the peak
+//! resident memory the operating system measured for each (`VmHWM`, reset before each),
+//! the pager's counters, and whether the two fluence and transmittance grids are equal bit
+//! for bit. The paged run goes first, so the in-memory run cannot lower its peak.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::DVec3;
+use lucent::core::memory::PeakMeter;
+use lucent::core::{
+    Angular, Boundary, CellMedium, DirectSolver, Field, Light, Medium, PagedProblem, Problem,
+    SolveOptions, Solver, Spectrum,
+};
+use lucent::paging::{Eviction, FileStore, Pager, PagerOptions};
+use lucent_grid::procedural::NoiseCloud;
+use lucent_grid::{BrickLayout, GridGeometry};
+
+const DENSITY: f64 = 40.0;
+
+/// Runs it.
+pub(crate) fn run(n: usize, budget_mib: u64, brick: usize) -> Result<(), String> {
+    let geometry = GridGeometry::new([n; 3], DVec3::splat(1.0 / n as f64), DVec3::ZERO)
+        .map_err(|e| e.to_string())?;
+    let cloud = NoiseCloud::new(11, DVec3::splat(0.5), 0.3);
+    let sigma = |p: DVec3| (DENSITY * cloud.density(p)) as f32;
+    let albedo = |_: DVec3| 0.9f32;
+    let lights = vec![Light::Directional {
+        direction: DVec3::new(0.35, 0.2, -0.9).normalize(),
+        irradiance: Spectrum::Grey(1.0),
+    }];
+    let budget = budget_mib << 20;
+    let layout = BrickLayout::new(geometry.dims(), brick).map_err(|e| e.to_string())?;
+    let dense_bytes = geometry.voxel_count() as u64 * 4;
+    println!(
+        "direct, {n}³ sparse cloud, one sun; dense fields {} MiB each (σ_t, transmittance, isotropic fluence, fluence); budget {budget_mib} MiB, pool {} MiB of {brick}³ bricks (stored {}³)",
+        dense_bytes >> 20,
+        budget_mib / 2,
+        brick + 2
+    );
+
+    // Out of core.
+    let meter = PeakMeter::start();
+    let start = Instant::now();
+    let pager = Arc::new(
+        Pager::new(
+            Box::new(FileStore::create(layout.stored_len()).map_err(|e| e.to_string())?),
+            0,
+            layout.stored_len(),
+            1,
+            PagerOptions {
+                budget_bytes: budget / 2,
+                eviction: Eviction::Nru,
+                fill: 0.0,
+            },
+        )
+        .map_err(|e| e.to_string())?,
+    );
+    let paged = PagedProblem::from_fn(
+        pager.clone(),
+        geometry,
+        brick,
+        CellMedium {
+            sigma_t: vec![&sigma],
+            albedo: vec![&albedo],
+            phase: lucent::optics::Phase::Isotropic,
+        },
+        lights.clone(),
+        Boundary::Vacuum,
+    )
+    .map_err(|e| e.to_string())?;
+    let built = start.elapsed().as_secs_f64();
+    let stored = paged.medium().sigma_t[0].stored_bricks();
+    let options = SolveOptions {
+        memory_budget: budget,
+        ..SolveOptions::default()
+    };
+    let solution = DirectSolver::default()
+        .solve_paged(&paged, &options)
+        .map_err(|e| e.to_string())?;
+    let paged_seconds = start.elapsed().as_secs_f64();
+    let paged_peak = meter.and_then(|m| m.peak_bytes());
+    let s = solution.paging;
+    println!("| run | wall s | peak RSS MiB | notes |");
+    println!("|---|---|---|---|");
+    println!(
+        "| paged | {paged_seconds:.1} (build {built:.1}) | {} | σ_t: {stored} of {} bricks stored; pins {} (hit rate {:.3}), evictions {}, {:.0} MiB read, {:.0} MiB written |",
+        paged_peak.map_or("?".into(), |b| format!(
+            "{:.0}",
+            b as f64 / (1 << 20) as f64
+        )),
+        layout.count(),
+        s.hits + s.misses,
+        s.hit_rate(),
+        s.evictions,
+        s.bytes_read as f64 / (1 << 20) as f64,
+        s.bytes_written as f64 / (1 << 20) as f64,
+    );
+
+    // In memory, where it fits comfortably.
+    if dense_bytes * 6 > 8 << 30 {
+        println!(
+            "| in memory | — | — | not run: the dense problem needs more than this machine should give a test |"
+        );
+        return Ok(());
+    }
+    let meter = PeakMeter::start();
+    let start = Instant::now();
+    let medium = Medium {
+        sigma_t: vec![lucent_grid::Grid::from_fn(geometry, sigma)],
+        albedo: vec![Field::Constant(0.9)],
+        phase: lucent::optics::Phase::Isotropic,
+    };
+    let problem = Problem::new(geometry, medium, lights, Boundary::Vacuum, None)
+        .map_err(|e| e.to_string())?;
+    let memory = DirectSolver::default()
+        .solve(&problem, &SolveOptions::default())
+        .map_err(|e| e.to_string())?;
+    let memory_seconds = start.elapsed().as_secs_f64();
+    let memory_peak = meter.and_then(|m| m.peak_bytes());
+    let bits = |g: &lucent_grid::Grid| g.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    let same_fluence = bits(&solution.fluence[0].to_grid().map_err(|e| e.to_string())?)
+        == bits(&memory.fluence[0]);
+    let same_transmittance = match &memory.angular {
+        Some(Angular::Lights(l)) => {
+            bits(
+                &solution.transmittance[0][0]
+                    .to_grid()
+                    .map_err(|e| e.to_string())?,
+            ) == bits(&l.transmittance[0][0])
+        }
+        _ => false,
+    };
+    println!(
+        "| in memory | {memory_seconds:.1} | {} | fluence bit for bit equal: {}; transmittance: {} |",
+        memory_peak.map_or("?".into(), |b| format!(
+            "{:.0}",
+            b as f64 / (1 << 20) as f64
+        )),
+        if same_fluence { "yes" } else { "NO" },
+        if same_transmittance { "yes" } else { "NO" },
+    );
+    if !(same_fluence && same_transmittance) {
+        return Err("the paged solve differs from the in-memory one".into());
+    }
+    Ok(())
+}
