@@ -1,7 +1,8 @@
 //! `cargo xtask paged-direct [N] [BUDGET_MIB] [BRICK]`: `direct` on a sparse N³ cloud
 //! (default 256; a seeded noise cloud of radius 0.3 in the unit box, mostly empty) lit by
-//! a low sun, out of core under a budget of BUDGET_MIB MiB (default 32; half of it the
-//! brick pool, bricks of BRICK³ cells, default 16, backed by an unnamed temporary file),
+//! a low sun, out of core under a budget of BUDGET_MIB MiB (default 32; the brick pool is
+//! what `direct`'s slab buffers and bookkeeping leave of it, bricks of BRICK³ cells,
+//! default 16, backed by an unnamed temporary file),
 //! and — where the dense problem fits this machine — in memory: wall time, the peak
 //! resident memory the operating system measured for each (`VmHWM`, reset before each),
 //! the pager's counters, and whether the two fluence and transmittance grids are equal bit
@@ -36,10 +37,22 @@ pub(crate) fn run(n: usize, budget_mib: u64, brick: usize) -> Result<(), String>
     let budget = budget_mib << 20;
     let layout = BrickLayout::new(geometry.dims(), brick).map_err(|e| e.to_string())?;
     let dense_bytes = geometry.voxel_count() as u64 * 4;
+    // What `direct` holds besides the pool: three layers of slabs (a light's
+    // transmittance, the isotropic fluence and the fluence of one brick layer) and the
+    // bookkeeping of its six fields; the pool gets the rest.
+    let layer_bytes = (n * n * brick) as u64 * 4;
+    let overhead = 3 * layer_bytes + 6 * layout.count() as u64 * 21;
+    let pool = budget.saturating_sub(overhead + (budget >> 4));
+    if pool < 4 * layout.stored_len() as u64 * 4 {
+        return Err(format!(
+            "a budget of {budget_mib} MiB leaves no pool beside {} MiB of slab buffers: smaller bricks or a larger budget",
+            overhead >> 20
+        ));
+    }
     println!(
         "direct, {n}³ sparse cloud, one sun; dense fields {} MiB each (σ_t, transmittance, isotropic fluence, fluence); budget {budget_mib} MiB, pool {} MiB of {brick}³ bricks (stored {}³)",
         dense_bytes >> 20,
-        budget_mib / 2,
+        pool >> 20,
         brick + 2
     );
 
@@ -53,7 +66,7 @@ pub(crate) fn run(n: usize, budget_mib: u64, brick: usize) -> Result<(), String>
             layout.stored_len(),
             1,
             PagerOptions {
-                budget_bytes: budget / 2,
+                budget_bytes: pool,
                 eviction: Eviction::Nru,
                 fill: 0.0,
             },

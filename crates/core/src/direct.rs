@@ -458,16 +458,7 @@ impl DirectSolver {
                 measured_peak_bytes: meter.and_then(|m| m.peak_bytes()),
                 stop_reason: crate::solver::StopReason::Exact,
             },
-            paging: lucent_paging::PagerStats {
-                hits: after.hits - before.hits,
-                misses: after.misses - before.misses,
-                prefetched: after.prefetched - before.prefetched,
-                evictions: after.evictions - before.evictions,
-                write_backs: after.write_backs - before.write_backs,
-                bytes_read: after.bytes_read - before.bytes_read,
-                bytes_written: after.bytes_written - before.bytes_written,
-                slots: after.slots,
-            },
+            paging: after.since(&before),
         })
     }
 

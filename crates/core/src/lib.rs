@@ -77,6 +77,7 @@ mod uncollided;
 pub use direct::{DirectSolver, light_distances, uncollided_outcome};
 pub use error::{ProblemError, SolveError};
 pub use iteration::{History, Stopping};
+pub use lucent_paging::PagerStats;
 pub use paged::{CellMedium, PagedMedium, PagedProblem, PagedSolution, Storage, paging_error};
 pub use problem::{Boundary, BoundaryKind, Field, Light, LightKind, Medium, Problem};
 pub use registry::{

@@ -44,6 +44,7 @@ pub mod ftcs;
 mod lattice;
 pub mod ordinates;
 pub mod p1;
+mod paged;
 mod params;
 pub mod scatter;
 mod solver;

@@ -30,8 +30,9 @@ use lucent_core::driver::{
     self, Channel, ChannelMethod, ChannelSolution, Context, Outcome, Record, Route,
 };
 use lucent_core::{
-    BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OutputKind, Problem, Solution,
-    SolveError, SolveOptions, Solver, SolverEntry, param_docs, resolved_params,
+    BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OutputKind, PagedProblem,
+    PagedSolution, Problem, Solution, SolveError, SolveOptions, Solver, SolverEntry, param_docs,
+    resolved_params,
 };
 use lucent_diffusion::{Convergence, DiffusionSolution, DiffusionSolver};
 use lucent_grid::Grid;
@@ -246,6 +247,20 @@ pub fn point_and_emission(channel: &Channel<'_>) -> Vec<f64> {
 impl Solver for ExplicitSolver {
     fn name(&self) -> &str {
         self.name
+    }
+
+    fn pages(&self) -> bool {
+        self.paged_convection().is_ok()
+    }
+
+    fn solve_paged(
+        &self,
+        problem: &PagedProblem,
+        options: &SolveOptions,
+    ) -> Result<PagedSolution, SolveError> {
+        self.paged_convection()?;
+        options.validate()?;
+        crate::paged::convection(self.name, problem, options)
     }
 
     fn capabilities(&self) -> Capabilities {
@@ -472,7 +487,10 @@ impl ExplicitSolver {
                 let mut march = Record::from_residuals(Vec::new(), out.stop_reason.clone(), 0);
                 march.iterations = out.iterations;
                 record = record.worse(march);
-                fields.push((out.density, vec![colour]));
+                // Each light's field is stored in f32, as every field in lucent (and as the
+                // out-of-core march stores it), before the lights are composed in f64.
+                let stored: Vec<f64> = out.density.iter().map(|&v| f64::from(v as f32)).collect();
+                fields.push((stored, vec![colour]));
             }
             let mut total = compose(&fields)
                 .map_err(explicit_error)?
@@ -501,6 +519,43 @@ impl ExplicitSolver {
             standard_error: None,
             record,
         })
+    }
+}
+
+impl ExplicitSolver {
+    /// `Ok` where this entry runs out of core: `convection-diffusion` with the
+    /// characteristic model, ordered sweeps and no scattering step (the one-pass
+    /// absorption march, plane by plane); else why not.
+    fn paged_convection(&self) -> Result<(), SolveError> {
+        let unsupported = |feature: &str| SolveError::Unsupported {
+            solver: self.name.into(),
+            feature: feature.into(),
+        };
+        match &self.scheme {
+            Scheme::Convection {
+                settings,
+                scattering,
+            } => {
+                if settings.model != Model::Characteristic {
+                    Err(unsupported(
+                        "a paged medium with the upwind models (only `model = \"characteristic\"` marches plane by plane)",
+                    ))
+                } else if settings.sweep != crate::convection::Sweep::Ordered {
+                    Err(unsupported(
+                        "a paged medium with layer or Jacobi sweeps (only ordered sweeps march plane by plane)",
+                    ))
+                } else if *scattering > 0.0 {
+                    Err(unsupported(
+                        "a paged medium with a scattering step (its implicit solve needs the field in memory)",
+                    ))
+                } else {
+                    Ok(())
+                }
+            }
+            _ => Err(unsupported(
+                "a paged (out-of-core) medium: it needs its fields in memory",
+            )),
+        }
     }
 }
 

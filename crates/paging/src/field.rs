@@ -337,6 +337,101 @@ impl PagedGrid {
         }
     }
 
+    /// Plane `index` across `axis` (the cells whose coordinate along `axis` is `index`)
+    /// into `out`, the cell with coordinates (c_b, c_d) along the other two axes
+    /// (b = axis + 1, d = axis + 2, mod 3) at `c_b + n_b c_d`: for axis z the slab, x
+    /// fastest.
+    pub fn read_plane(
+        &self,
+        axis: usize,
+        index: usize,
+        out: &mut [f32],
+    ) -> Result<(), PagingError> {
+        let dims = self.geometry.dims();
+        let (b, d) = ((axis + 1) % 3, (axis + 2) % 3);
+        assert!(axis < 3 && index < dims[axis], "read_plane: no such plane");
+        assert_eq!(out.len(), dims[b] * dims[d], "read_plane: output size");
+        let brick = self.layout.brick();
+        let bricks = self.layout.bricks();
+        for kd in 0..bricks[d] {
+            for kb in 0..bricks[b] {
+                let mut coords = [0; 3];
+                coords[axis] = index / brick;
+                coords[b] = kb;
+                coords[d] = kd;
+                let id = self.layout.id(coords);
+                let view = self.brick(id)?;
+                let (o, e) = (self.layout.origin(id), self.layout.extent(id));
+                for jd in 0..e[d] {
+                    for jb in 0..e[b] {
+                        let mut local = [0isize; 3];
+                        local[axis] = (index - o[axis]) as isize;
+                        local[b] = jb as isize;
+                        local[d] = jd as isize;
+                        out[(o[b] + jb) + dims[b] * (o[d] + jd)] = view.get(&self.layout, local);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes plane `index` across `axis` from `data` (positions as in
+    /// [`PagedGrid::read_plane`]) into every stored copy of its cells, as
+    /// [`PagedGrid::write_slabs`] does for slabs.
+    pub fn write_plane(&self, axis: usize, index: usize, data: &[f32]) -> Result<(), PagingError> {
+        let dims = self.geometry.dims();
+        let (b, d) = ((axis + 1) % 3, (axis + 2) % 3);
+        assert!(axis < 3 && index < dims[axis], "write_plane: no such plane");
+        assert_eq!(data.len(), dims[b] * dims[d], "write_plane: data size");
+        let brick = self.layout.brick();
+        let edge = self.layout.stored_edge();
+        let bricks = self.layout.bricks();
+        // Brick layers along `axis` whose stored range [o − 1, o + B] (clamped) holds it.
+        let first = index.saturating_sub(1) / brick;
+        let last = ((index + 1) / brick).min(bricks[axis] - 1);
+        let mut ids = Vec::new();
+        for ka in first..=last {
+            for kd in 0..bricks[d] {
+                for kb in 0..bricks[b] {
+                    let mut coords = [0; 3];
+                    coords[axis] = ka;
+                    coords[b] = kb;
+                    coords[d] = kd;
+                    ids.push(self.layout.id(coords));
+                }
+            }
+        }
+        ids.par_iter().try_for_each(|&id| {
+            let o = self.layout.origin(id);
+            let cell = |a: usize, s: usize| (o[a] + s).saturating_sub(1).min(dims[a] - 1);
+            let touched: Vec<usize> = (0..edge).filter(|&s| cell(axis, s) == index).collect();
+            if touched.is_empty() {
+                return Ok(());
+            }
+            let mut pin = if self.paged[id].load(Ordering::Acquire) {
+                self.pager.write(self.first + id)?
+            } else {
+                let mut pin = self.pager.overwrite(self.first + id)?;
+                pin.fill(f32::from_bits(self.constant[id].load(Ordering::Relaxed)));
+                self.paged[id].store(true, Ordering::Release);
+                pin
+            };
+            let stride = [1, edge, edge * edge];
+            for &sa in &touched {
+                for sd in 0..edge {
+                    let row = cell(d, sd) * dims[b];
+                    for sb in 0..edge {
+                        let at = sa * stride[axis] + sb * stride[b] + sd * stride[d];
+                        pin[at] = data[row + cell(b, sb)];
+                    }
+                }
+            }
+            self.set_range(id, &pin);
+            Ok::<_, PagingError>(())
+        })
+    }
+
     /// The whole field as a dense grid (for tests and fields that fit).
     pub fn to_grid(&self) -> Result<Grid, PagingError> {
         let [nx, ny, nz] = self.geometry.dims();

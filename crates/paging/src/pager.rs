@@ -59,6 +59,21 @@ pub struct PagerStats {
 }
 
 impl PagerStats {
+    /// What happened between `before` (an earlier reading of the same pager) and these
+    /// counters; the slot count is this reading's.
+    pub fn since(&self, before: &PagerStats) -> PagerStats {
+        PagerStats {
+            hits: self.hits - before.hits,
+            misses: self.misses - before.misses,
+            prefetched: self.prefetched - before.prefetched,
+            evictions: self.evictions - before.evictions,
+            write_backs: self.write_backs - before.write_backs,
+            bytes_read: self.bytes_read - before.bytes_read,
+            bytes_written: self.bytes_written - before.bytes_written,
+            slots: self.slots,
+        }
+    }
+
     /// Hits over pins (1 when nothing was pinned).
     pub fn hit_rate(&self) -> f64 {
         let pins = self.hits + self.misses;

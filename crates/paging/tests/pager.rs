@@ -163,6 +163,42 @@ proptest! {
             let max = stored.iter().copied().fold(f32::NEG_INFINITY, f32::max);
             prop_assert_eq!((lo, hi), (min, max));
         }
+        // Planes across every axis read back as the dense grid's, and a plane written
+        // across x or y keeps every apron current too.
+        for axis in 0..3 {
+            let (b, d) = ((axis + 1) % 3, (axis + 2) % 3);
+            let at = |index: usize, local: usize| {
+                let mut c = [0; 3];
+                c[axis] = index;
+                c[b] = local % dims[b];
+                c[d] = local / dims[b];
+                c
+            };
+            let index = dims[axis] / 2;
+            let mut plane = vec![0.0; dims[b] * dims[d]];
+            field.read_plane(axis, index, &mut plane).unwrap();
+            for (local, v) in plane.iter().enumerate() {
+                let c = at(index, local);
+                prop_assert_eq!(*v, dense.get(c[0], c[1], c[2]).unwrap());
+            }
+            let fresh: Vec<f32> = (0..plane.len()).map(|i| 100.0 * axis as f32 + i as f32).collect();
+            field.write_plane(axis, index, &fresh).unwrap();
+            for (local, v) in fresh.iter().enumerate() {
+                let c = at(index, local);
+                dense.data_mut()[geometry.index(c[0], c[1], c[2])] = *v;
+            }
+        }
+        prop_assert_eq!(field.to_grid().unwrap(), dense.clone());
+        let value = |c: [usize; 3]| dense.get(c[0], c[1], c[2]).unwrap();
+        for id in 0..layout.count() {
+            let stored = layout.gather(id, value);
+            let view = field.brick(id).unwrap();
+            let e = layout.stored_edge() as isize;
+            for (s, want) in stored.iter().enumerate() {
+                let local = [s as isize % e - 1, (s as isize / e) % e - 1, s as isize / (e * e) - 1];
+                prop_assert_eq!(view.get(&layout, local), *want, "after planes: brick {} stored {}", id, s);
+            }
+        }
         // Each layer's window is the dense slabs around it.
         for layer in 0..layout.bricks()[2] {
             let (z_lo, window) = field.read_layer_window(layer).unwrap();
