@@ -35,9 +35,10 @@
 //!   fields, 1/16 of their bricks resident, a backing file) at N³ (256) with B³ bricks
 //!   (16): time per sweep against in core, hit rates, bytes moved, LRU against NRU, with
 //!   and without prefetch, and whether the results are bit for bit equal.
-//! - `paged-direct [N] [BUDGET_MIB] [BRICK]`: `direct` on a sparse N³ cloud (256) out of
-//!   core under a budget (32 MiB) and in memory: wall time, measured peak resident memory,
-//!   pager counters, and whether the results are bit for bit equal.
+//! - `paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK]`: `direct` (or `convection-diffusion`)
+//!   on a sparse N³ cloud (256) out of core under a budget (32 MiB) and in memory: wall
+//!   time, measured peak resident memory, pager counters, and whether the results are bit
+//!   for bit equal.
 //! - `stability`: each explicit scheme's measured blow-up boundary against its theoretical
 //!   curves, as `docs/stability/*.svg` and `.csv` (see `docs/stability.md`).
 
@@ -50,12 +51,12 @@ mod bench_explicit;
 mod bench_fem;
 mod bench_gpu;
 mod bench_paging;
-mod paged_direct;
+mod paged_solve;
 mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] | paged-direct [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -122,18 +123,21 @@ fn main() -> ExitCode {
             }
         };
     }
-    if command.as_deref() == Some("paged-direct") {
-        let args: Vec<u64> = std::env::args()
-            .skip(2)
-            .filter_map(|s| s.parse().ok())
-            .collect();
+    if command.as_deref() == Some("paged-solve") {
+        let rest: Vec<String> = std::env::args().skip(2).collect();
+        let solver = rest
+            .iter()
+            .find(|s| s.parse::<u64>().is_err())
+            .cloned()
+            .unwrap_or_else(|| "direct".into());
+        let args: Vec<u64> = rest.iter().filter_map(|s| s.parse().ok()).collect();
         let n = args.first().copied().unwrap_or(256) as usize;
         let budget = args.get(1).copied().unwrap_or(32);
         let brick = args.get(2).copied().unwrap_or(16) as usize;
-        return match paged_direct::run(n, budget, brick) {
+        return match paged_solve::run(&solver, n, budget, brick) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
-                eprintln!("xtask: paged-direct: {e}");
+                eprintln!("xtask: paged-solve: {e}");
                 ExitCode::FAILURE
             }
         };

@@ -1,12 +1,15 @@
-//! `cargo xtask paged-direct [N] [BUDGET_MIB] [BRICK]`: `direct` on a sparse N³ cloud
-//! (default 256; a seeded noise cloud of radius 0.3 in the unit box, mostly empty) lit by
-//! a low sun, out of core under a budget of BUDGET_MIB MiB (default 32; the brick pool is
+//! `cargo xtask paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK]`: SOLVER (`direct`, the
+//! default, or `convection-diffusion`) on a sparse N³ cloud (default 256; a seeded noise
+//! cloud of radius 0.3 in the unit box, mostly empty) lit by a low sun, out of core under a
+//! budget of BUDGET_MIB MiB (default 32; the brick pool is
 //! what `direct`'s slab buffers and bookkeeping leave of it, bricks of BRICK³ cells,
-//! default 16, backed by an unnamed temporary file),
+//! default 16, backed by an unnamed temporary file; the unit box is cut into cubes so
+//! `convection-diffusion` takes it),
 //! and — where the dense problem fits this machine — in memory: wall time, the peak
 //! resident memory the operating system measured for each (`VmHWM`, reset before each),
-//! the pager's counters, and whether the two fluence and transmittance grids are equal bit
-//! for bit. The paged run goes first, so the in-memory run cannot lower its peak.
+//! the pager's counters, and whether the fluence (and for `direct` the transmittance) is
+//! equal bit for bit. The paged run goes first, so the in-memory run cannot lower its
+//! peak. The in-memory run is skipped where its dense fields would not fit this machine.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -14,8 +17,8 @@ use std::time::Instant;
 use glam::DVec3;
 use lucent::core::memory::PeakMeter;
 use lucent::core::{
-    Angular, Boundary, CellMedium, DirectSolver, Field, Light, Medium, PagedProblem, Problem,
-    SolveOptions, Solver, Spectrum,
+    Angular, Boundary, CellMedium, Field, Light, Medium, PagedProblem, Problem, SolveOptions,
+    Spectrum,
 };
 use lucent::paging::{Eviction, FileStore, Pager, PagerOptions};
 use lucent_grid::procedural::NoiseCloud;
@@ -24,7 +27,19 @@ use lucent_grid::{BrickLayout, GridGeometry};
 const DENSITY: f64 = 40.0;
 
 /// Runs it.
-pub(crate) fn run(n: usize, budget_mib: u64, brick: usize) -> Result<(), String> {
+pub(crate) fn run(
+    solver_name: &str,
+    n: usize,
+    budget_mib: u64,
+    brick: usize,
+) -> Result<(), String> {
+    let registry = lucent::registry();
+    let solver = registry
+        .build(solver_name, &lucent::core::Params::default())
+        .map_err(|e| e.to_string())?;
+    if !solver.pages() {
+        return Err(format!("`{solver_name}` does not run out of core"));
+    }
     let geometry = GridGeometry::new([n; 3], DVec3::splat(1.0 / n as f64), DVec3::ZERO)
         .map_err(|e| e.to_string())?;
     let cloud = NoiseCloud::new(11, DVec3::splat(0.5), 0.3);
@@ -41,7 +56,7 @@ pub(crate) fn run(n: usize, budget_mib: u64, brick: usize) -> Result<(), String>
     // transmittance, the isotropic fluence and the fluence of one brick layer) and the
     // bookkeeping of its six fields; the pool gets the rest.
     let layer_bytes = (n * n * brick) as u64 * 4;
-    let overhead = 3 * layer_bytes + 6 * layout.count() as u64 * 21;
+    let overhead = 3 * layer_bytes + 6 * layout.count() as u64 * 21 + (n * n) as u64 * 36;
     let pool = budget.saturating_sub(overhead + (budget >> 4));
     if pool < 4 * layout.stored_len() as u64 * 4 {
         return Err(format!(
@@ -50,7 +65,7 @@ pub(crate) fn run(n: usize, budget_mib: u64, brick: usize) -> Result<(), String>
         ));
     }
     println!(
-        "direct, {n}³ sparse cloud, one sun; dense fields {} MiB each (σ_t, transmittance, isotropic fluence, fluence); budget {budget_mib} MiB, pool {} MiB of {brick}³ bricks (stored {}³)",
+        "{solver_name}, {n}³ sparse cloud, one sun; dense f32 fields {} MiB each; budget {budget_mib} MiB, pool {} MiB of {brick}³ bricks (stored {}³)",
         dense_bytes >> 20,
         pool >> 20,
         brick + 2
@@ -92,7 +107,7 @@ pub(crate) fn run(n: usize, budget_mib: u64, brick: usize) -> Result<(), String>
         memory_budget: budget,
         ..SolveOptions::default()
     };
-    let solution = DirectSolver::default()
+    let solution = solver
         .solve_paged(&paged, &options)
         .map_err(|e| e.to_string())?;
     let paged_seconds = start.elapsed().as_secs_f64();
@@ -114,8 +129,8 @@ pub(crate) fn run(n: usize, budget_mib: u64, brick: usize) -> Result<(), String>
         s.bytes_written as f64 / (1 << 20) as f64,
     );
 
-    // In memory, where it fits comfortably.
-    if dense_bytes * 6 > 8 << 30 {
+    // In memory, where it fits comfortably (the explicit march holds f64 fields).
+    if dense_bytes * 12 > 16 << 30 {
         println!(
             "| in memory | — | — | not run: the dense problem needs more than this machine should give a test |"
         );
@@ -130,7 +145,7 @@ pub(crate) fn run(n: usize, budget_mib: u64, brick: usize) -> Result<(), String>
     };
     let problem = Problem::new(geometry, medium, lights, Boundary::Vacuum, None)
         .map_err(|e| e.to_string())?;
-    let memory = DirectSolver::default()
+    let memory = solver
         .solve(&problem, &SolveOptions::default())
         .map_err(|e| e.to_string())?;
     let memory_seconds = start.elapsed().as_secs_f64();
