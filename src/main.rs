@@ -264,7 +264,15 @@ fn interrupted() -> bool {
 
 /// Loads a scene (or the default one) and builds it; relative paths start at its folder.
 fn load(scene: Option<&Path>, budget: u64) -> Result<(Scene, BuiltScene, String), Error> {
-    let (parsed, base, name) = match scene {
+    let (parsed, base, name) = parse(scene)?;
+    let built = parsed.build_within(&base, budget)?;
+    Ok((parsed, built, name))
+}
+
+/// The scene (the built-in default without a path), the folder its paths are relative to,
+/// and its name for messages.
+fn parse(scene: Option<&Path>) -> Result<(Scene, PathBuf, String), Error> {
+    Ok(match scene {
         Some(path) => (
             Scene::load(path)?,
             path.parent().unwrap_or(Path::new(".")).to_owned(),
@@ -275,9 +283,7 @@ fn load(scene: Option<&Path>, budget: u64) -> Result<(Scene, BuiltScene, String)
             PathBuf::from("."),
             "built-in default scene".to_owned(),
         ),
-    };
-    let built = parsed.build_within(&base, budget)?;
-    Ok((parsed, built, name))
+    })
 }
 
 /// A progress bar for one job (hidden with `--quiet` or when stderr is not a terminal):
@@ -649,6 +655,93 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
     Ok(Ended::Done)
 }
 
+/// `solve` on a paged medium ([`Scene::build_paged`]): the fluence streamed slab by slab
+/// into a `.npy` file (f32, channels first), and the report with the pager's counters.
+fn solve_paged_to_file(
+    parsed: &Scene,
+    name: &str,
+    chosen: &Chosen,
+    args: &SolverArgs,
+    output: &Path,
+    quiet: bool,
+) -> Result<Ended, Error> {
+    let is_npy = output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    if !is_npy {
+        return Err(Error::Output {
+            path: output.to_owned(),
+            reason: "a fluence solved out of core is written as .npy (streamed slab by slab)"
+                .into(),
+        });
+    }
+    let options = args.options(chosen, meter_free())?;
+    options.validate()?;
+    let problem = parsed.build_paged(args.budget())?;
+    chosen.say_note();
+    let (progress, meter) = bar(quiet, "solve");
+    let options = args.options(chosen, meter.solver_callback())?;
+    let solution = chosen.solver.solve_paged(&problem, &options);
+    progress.finish_and_clear();
+    let solution = solution?;
+    let g = problem.geometry();
+    let channels = solution.fluence.len();
+    lucent::grid::io::npy::write_f32_slabs(output, g.dims(), channels, |c, z, out| {
+        solution.fluence[c].read_slabs(z, z + 1, out)
+    })?;
+    let report_path = output.with_extension("json");
+    let report = serde_json::json!({
+        "scene": name,
+        "solver": chosen.solver.name(),
+        "params": chosen.resolved,
+        "params_given": chosen.params,
+        "options": {
+            "tolerance": chosen.tolerance,
+            "max_iterations": args.max_iterations,
+            "time_limit_s": args.time_limit,
+            "memory_budget": args.budget(),
+        },
+        "capabilities": chosen.solver.capabilities(),
+        "storage": "paged",
+        "brick": problem.layout().brick(),
+        "channels": channels,
+        "dims": g.dims(),
+        "spacing": g.spacing().to_array(),
+        "origin": g.origin().to_array(),
+        "fluence": output.file_name().map(|n| n.to_string_lossy().into_owned()),
+        "converged": solution.report.stop_reason.is_converged(),
+        "report": solution.report,
+        "paging": solution.paging,
+    });
+    let text = serde_json::to_string_pretty(&report).map_err(|e| Error::Io {
+        path: report_path.clone(),
+        reason: e.to_string(),
+    })?;
+    std::fs::write(&report_path, text + "\n").map_err(|e| Error::Io {
+        path: report_path.clone(),
+        reason: e.to_string(),
+    })?;
+    if !quiet {
+        let p = &solution.paging;
+        println!(
+            "lucent: solved {name} with `{}` out of core ({} MiB budget, a pool of {} bricks of {}³ cells): {}, {:.2} s, {} pins at a hit rate of {:.3}, {} MiB read and {} MiB written; fluence {} and report {}",
+            chosen.solver.name(),
+            args.budget() >> 20,
+            p.slots,
+            problem.layout().brick(),
+            solution.report.stop_reason,
+            solution.report.wall_time_s,
+            p.hits + p.misses,
+            p.hit_rate(),
+            p.bytes_read >> 20,
+            p.bytes_written >> 20,
+            output.display(),
+            report_path.display()
+        );
+    }
+    Ok(Ended::Done)
+}
+
 /// The sky's radiance per channel (what escaping camera rays see by default).
 fn sky_radiance(problem: &lucent::core::Problem) -> [f64; 3] {
     std::array::from_fn(|c| {
@@ -667,7 +760,7 @@ fn solve_to_file(
     output: &Path,
     quiet: bool,
 ) -> Result<Ended, Error> {
-    let (parsed, built, name) = load(Some(scene), args.budget())?;
+    let (parsed, base, name) = parse(Some(scene))?;
     let chosen = choose_solver(&parsed, args)?;
     check_output(
         output,
@@ -676,6 +769,11 @@ fn solve_to_file(
     )?;
     let report_path = output.with_extension("json");
     check_output(&report_path, &["json"], "the report is written as .json")?;
+    // Dense fields beyond the budget: out of core, where the solver can run so.
+    if !parsed.fits_in_memory(args.budget()) && chosen.solver.pages() {
+        return solve_paged_to_file(&parsed, &name, &chosen, args, output, quiet);
+    }
+    let built = parsed.build_within(&base, args.budget())?;
     chosen.solver.admits(&built.problem)?;
     args.options(&chosen, meter_free())?.validate()?;
     let solution = run_solver(&chosen, &built, args, quiet)?;

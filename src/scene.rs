@@ -8,10 +8,12 @@
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use lucent_core::{Boundary, Field, Light, Medium, Params, Problem, Spectrum};
+use lucent_core::{
+    Boundary, CellMedium, Field, Light, Medium, PagedProblem, Params, Problem, Spectrum,
+};
 use lucent_grid::io::raw::RawLayout;
 use lucent_grid::io::{self, Endian, LoadOptions, ScalarType};
-use lucent_grid::procedural::{NoiseCloud, Shape, gaussian_blob};
+use lucent_grid::procedural::{NoiseCloud, Shape, gaussian_blob, gaussian_blob_at};
 use lucent_grid::transfer::TransferFunction;
 use lucent_grid::{Grid, GridGeometry, resample};
 use lucent_optics::Phase;
@@ -493,7 +495,48 @@ impl Scene {
                 .collect(),
             None => vec![sigma_t_base],
         };
-        let phase = match m.phase {
+        let phase = self.phase()?;
+        let medium = Medium {
+            sigma_t,
+            albedo,
+            phase,
+        };
+        let lights = self.lights(Some(&volume))?;
+        let boundary = self.boundary;
+        let embedded = match self.embedded {
+            Some(spec) => Some(to_shape(spec).sdf_grid(geometry)?),
+            None => None,
+        };
+        let problem = Problem::new(geometry, medium, lights, boundary, embedded)?;
+        self.camera.validate()?;
+        let i = self.image;
+        let settings = RenderSettings {
+            width: i.width,
+            height: i.height,
+            step: i.step,
+            background: i.background,
+        };
+        settings.validate()?;
+        if !i.exposure.is_finite() || i.exposure.abs() > 64.0 {
+            return Err(Error::Invalid(format!(
+                "exposure {} stops (finite, within ±64)",
+                i.exposure
+            )));
+        }
+        Ok(BuiltScene {
+            problem,
+            camera: self.camera,
+            settings,
+            exposure: i.exposure,
+            tone: i.tone,
+            volume,
+        })
+    }
+
+    /// The phase function the scene names.
+    fn phase(&self) -> Result<Phase, Error> {
+        let invalid = |reason: String| Error::Invalid(reason);
+        Ok(match self.medium.phase {
             PhaseSpec::Isotropic => Phase::Isotropic,
             PhaseSpec::HenyeyGreenstein { g } => {
                 Phase::henyey_greenstein(g).map_err(|e| invalid(e.to_string()))?
@@ -503,12 +546,12 @@ impl Scene {
                     .map_err(|e| invalid(e.to_string()))?
             }
             PhaseSpec::Rayleigh => Phase::Rayleigh,
-        };
-        let medium = Medium {
-            sigma_t,
-            albedo,
-            phase,
-        };
+        })
+    }
+
+    /// The scene's lights; emission takes its grid from `volume` (none: emission refused).
+    fn lights(&self, volume: Option<&Grid>) -> Result<Vec<Light>, Error> {
+        let invalid = |reason: String| Error::Invalid(reason);
         let unit = |v: [f64; 3], what: &str| -> Result<DVec3, Error> {
             let d = DVec3::from_array(v);
             let n = d.normalize_or_zero();
@@ -551,41 +594,211 @@ impl Scene {
                 LightSpec::Sky { radiance } => Light::Sky {
                     radiance: *radiance,
                 },
-                LightSpec::Emission { scale } => Light::Emission {
-                    grid: volume.map(|v| v.max(0.0)),
-                    scale: *scale,
+                LightSpec::Emission { scale } => match volume {
+                    Some(volume) => Light::Emission {
+                        grid: volume.map(|v| v.max(0.0)),
+                        scale: *scale,
+                    },
+                    None => {
+                        return Err(invalid(
+                            "emission lights need the volume in memory (a paged scene has none)"
+                                .into(),
+                        ));
+                    }
                 },
             });
         }
-        let boundary = self.boundary;
-        let embedded = match self.embedded {
-            Some(spec) => Some(to_shape(spec).sdf_grid(geometry)?),
-            None => None,
+        Ok(lights)
+    }
+
+    /// Bytes of one dense f32 field on the scene's grid, where the scene states its
+    /// resolution (procedural volumes, or a file resampled to a resolution); `None` where
+    /// only reading the file tells.
+    pub fn field_bytes(&self) -> Option<u64> {
+        let resolution = match &self.volume {
+            VolumeSpec::Cloud { resolution, .. }
+            | VolumeSpec::Shape { resolution, .. }
+            | VolumeSpec::Blob { resolution, .. } => *resolution,
+            VolumeSpec::File { resolution, .. } => (*resolution)?,
         };
-        let problem = Problem::new(geometry, medium, lights, boundary, embedded)?;
-        self.camera.validate()?;
-        let i = self.image;
-        let settings = RenderSettings {
-            width: i.width,
-            height: i.height,
-            step: i.step,
-            background: i.background,
-        };
-        settings.validate()?;
-        if !i.exposure.is_finite() || i.exposure.abs() > 64.0 {
-            return Err(Error::Invalid(format!(
-                "exposure {} stops (finite, within ±64)",
-                i.exposure
+        resolution
+            .iter()
+            .try_fold(4u64, |bytes, &n| bytes.checked_mul(n as u64))
+    }
+
+    /// Whether the scene's dense fields fit `budget` ([`Scene::build_within`]'s check).
+    pub fn fits_in_memory(&self, budget: u64) -> bool {
+        self.field_bytes()
+            .is_none_or(|bytes| bytes <= max_grid_bytes(budget))
+    }
+
+    /// The scene as a problem whose medium is paged ([`PagedProblem`]), for a job whose
+    /// dense fields exceed `budget`: σ_t and the albedo are evaluated cell by cell, brick
+    /// by brick (never as a dense grid), with the same arithmetic [`Scene::build_within`]
+    /// uses, into a pager backed by an unnamed temporary file in the system's temporary
+    /// folder (`TMPDIR`). Bricks of 16³ cells, or 8³ (4³) where the brick layers a paged
+    /// solver keeps in memory would take more than a quarter of the budget; the pool is
+    /// the budget less those layers and the bookkeeping. Procedural volumes only (cloud,
+    /// shape, blob) with a density (no transfer function), no emission, no embedded shape.
+    pub fn build_paged(&self, budget: u64) -> Result<PagedProblem, Error> {
+        let invalid = |reason: String| Error::Invalid(reason);
+        if self.medium.transfer.is_some() {
+            return Err(invalid(
+                "a paged scene maps density by `medium.density`, not a transfer function".into(),
+            ));
+        }
+        if self.embedded.is_some() {
+            return Err(invalid("a paged scene has no embedded shape".into()));
+        }
+        let m = &self.medium;
+        if !(m.density.is_finite() && m.density >= 0.0) {
+            return Err(invalid(format!(
+                "medium.density {} must be finite and ≥ 0",
+                m.density
             )));
         }
-        Ok(BuiltScene {
-            problem,
-            camera: self.camera,
-            settings,
-            exposure: i.exposure,
-            tone: i.tone,
-            volume,
-        })
+        let tiny = |bounds: [[f64; 3]; 2]| {
+            GridGeometry::from_bounds(
+                [1, 1, 1],
+                DVec3::from_array(bounds[0]),
+                DVec3::from_array(bounds[1]),
+            )
+        };
+        // The volume's value at a cell centre, validated as the dense build validates it.
+        let (resolution, bounds, value): (
+            [usize; 3],
+            [[f64; 3]; 2],
+            Box<dyn Fn(DVec3) -> f32 + Sync>,
+        ) = match &self.volume {
+            VolumeSpec::Cloud {
+                resolution,
+                bounds,
+                seed,
+                threshold,
+            } => {
+                let g = GridGeometry::from_bounds(
+                    *resolution,
+                    DVec3::from_array(bounds[0]),
+                    DVec3::from_array(bounds[1]),
+                )?;
+                let (lo, hi) = g.bounds();
+                let mut cloud =
+                    NoiseCloud::new(*seed, 0.5 * (lo + hi), 0.48 * (hi - lo).min_element());
+                if let Some(t) = threshold {
+                    cloud.threshold = *t;
+                }
+                cloud.rasterize(tiny(*bounds)?)?;
+                (
+                    *resolution,
+                    *bounds,
+                    Box::new(move |p| cloud.density(p) as f32),
+                )
+            }
+            VolumeSpec::Shape {
+                resolution,
+                bounds,
+                shape,
+                edge,
+            } => {
+                let shape = to_shape(*shape);
+                shape.density_grid(tiny(*bounds)?, *edge)?;
+                let edge = *edge;
+                (
+                    *resolution,
+                    *bounds,
+                    Box::new(move |p| shape.density_at(p, edge)),
+                )
+            }
+            VolumeSpec::Blob {
+                resolution,
+                bounds,
+                centre,
+                sigma,
+            } => {
+                let centre = DVec3::from_array(*centre);
+                gaussian_blob(tiny(*bounds)?, centre, *sigma)?;
+                let sigma = *sigma;
+                (
+                    *resolution,
+                    *bounds,
+                    Box::new(move |p| gaussian_blob_at(p, centre, sigma)),
+                )
+            }
+            VolumeSpec::File { .. } => {
+                return Err(invalid(
+                    "a paged scene needs a procedural volume (cloud, shape, blob): volume files are read whole"
+                        .into(),
+                ));
+            }
+        };
+        let geometry = GridGeometry::from_bounds(
+            resolution,
+            DVec3::from_array(bounds[0]),
+            DVec3::from_array(bounds[1]),
+        )?;
+        let lights = self.lights(None)?;
+        let base = move |p: DVec3| (f64::from(value(p).max(0.0)) * m.density) as f32;
+        let scales: Vec<f64> = match m.extinction_color {
+            Some(rgb) => rgb.to_vec(),
+            None => vec![],
+        };
+        let sigma_fns: Vec<Box<dyn Fn(DVec3) -> f32 + Sync + '_>> = if scales.is_empty() {
+            vec![Box::new(&base)]
+        } else {
+            scales
+                .iter()
+                .map(|&s| {
+                    let base = &base;
+                    Box::new(move |p: DVec3| (f64::from(base(p)) * s) as f32)
+                        as Box<dyn Fn(DVec3) -> f32 + Sync>
+                })
+                .collect()
+        };
+        let albedos: Vec<f32> = (0..m.albedo.channels())
+            .map(|c| m.albedo.channel(c) as f32)
+            .collect();
+        let albedo_fns: Vec<Box<dyn Fn(DVec3) -> f32 + Sync>> = albedos
+            .iter()
+            .map(|&a| Box::new(move |_: DVec3| a) as Box<dyn Fn(DVec3) -> f32 + Sync>)
+            .collect();
+
+        // Bricks and pool: the solvers keep a few brick layers of slabs in memory.
+        let [nx, ny, _] = geometry.dims();
+        let layer = |b: usize| (nx * ny * b) as u64 * 4;
+        let brick = [16, 8, 4]
+            .into_iter()
+            .find(|&b| 4 * layer(b) <= budget / 4)
+            .unwrap_or(4);
+        let layout = lucent_grid::BrickLayout::new(geometry.dims(), brick)?;
+        let bookkeeping = 8 * layout.count() as u64 * 21 + (nx * ny).max(1) as u64 * 40;
+        let pool = budget.saturating_sub(4 * layer(brick) + bookkeeping + budget / 16);
+        let brick_bytes = layout.stored_len() as u64 * 4;
+        let store = lucent_paging::FileStore::create(layout.stored_len())
+            .map_err(|e| invalid(e.to_string()))?;
+        let pager = lucent_paging::Pager::new(
+            Box::new(store),
+            0,
+            layout.stored_len(),
+            4,
+            lucent_paging::PagerOptions {
+                budget_bytes: pool.max(4 * brick_bytes),
+                eviction: lucent_paging::Eviction::Nru,
+                fill: 0.0,
+            },
+        )
+        .map_err(|e| invalid(e.to_string()))?;
+        Ok(PagedProblem::from_fn(
+            std::sync::Arc::new(pager),
+            geometry,
+            brick,
+            CellMedium {
+                sigma_t: sigma_fns.iter().map(|f| f.as_ref()).collect(),
+                albedo: albedo_fns.iter().map(|f| f.as_ref()).collect(),
+                phase: self.phase()?,
+            },
+            lights,
+            self.boundary,
+        )?)
     }
 
     fn load_volume(&self, base: &Path, budget: u64) -> Result<Grid, Error> {

@@ -131,14 +131,17 @@ impl Shape {
                 reason: format!("{edge} must be finite and ≥ 0"),
             });
         }
-        Ok(Grid::from_fn(geometry, |p| {
-            let d = self.signed_distance(p);
-            if edge == 0.0 {
-                f32::from(u8::from(d < 0.0))
-            } else {
-                (0.5 - d / edge).clamp(0.0, 1.0) as f32
-            }
-        }))
+        Ok(Grid::from_fn(geometry, |p| self.density_at(p, edge)))
+    }
+
+    /// The density [`Shape::density_grid`] gives a cell centred at `p` (`edge` ≥ 0).
+    pub fn density_at(&self, p: DVec3, edge: f64) -> f32 {
+        let d = self.signed_distance(p);
+        if edge == 0.0 {
+            f32::from(u8::from(d < 0.0))
+        } else {
+            (0.5 - d / edge).clamp(0.0, 1.0) as f32
+        }
     }
 }
 
@@ -150,10 +153,15 @@ pub fn gaussian_blob(geometry: GridGeometry, centre: DVec3, sigma: f64) -> Resul
             reason: "needs a finite centre and σ > 0".into(),
         });
     }
-    let inv = 1.0 / (2.0 * sigma * sigma);
     Ok(Grid::from_fn(geometry, |p| {
-        (-(p - centre).length_squared() * inv).exp() as f32
+        gaussian_blob_at(p, centre, sigma)
     }))
+}
+
+/// The value [`gaussian_blob`] gives a cell centred at `p`.
+pub fn gaussian_blob_at(p: DVec3, centre: DVec3, sigma: f64) -> f32 {
+    let inv = 1.0 / (2.0 * sigma * sigma);
+    (-(p - centre).length_squared() * inv).exp() as f32
 }
 
 /// A seeded fractal (fBm) gradient-noise cloud inside a ball, thinning toward its edge:

@@ -381,3 +381,39 @@ fn bad_files_get_typed_errors_naming_the_file() {
         other => panic!("expected an I/O error naming the data file, got {other:?}"),
     }
 }
+
+#[test]
+fn npy_written_slab_by_slab_is_the_same_file() {
+    let g = GridGeometry::new([5, 4, 3], DVec3::splat(0.5), DVec3::ZERO).unwrap();
+    let grids: Vec<Grid> = (0..3)
+        .map(|c| {
+            Grid::from_fn(g, move |p| {
+                (p.x + 10.0 * p.y + 100.0 * p.z + c as f64) as f32
+            })
+        })
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    for channels in [1, 3] {
+        let whole = dir.path().join(format!("whole{channels}.npy"));
+        let slabs = dir.path().join(format!("slabs{channels}.npy"));
+        let refs: Vec<&Grid> = grids.iter().take(channels).collect();
+        lucent_grid::io::npy::write_channels(&whole, &refs, ScalarType::F32).unwrap();
+        lucent_grid::io::npy::write_f32_slabs(&slabs, g.dims(), channels, |c, z, out| {
+            out.copy_from_slice(&grids[c].data()[z * 20..(z + 1) * 20]);
+            Ok::<_, String>(())
+        })
+        .unwrap();
+        assert_eq!(
+            std::fs::read(&whole).unwrap(),
+            std::fs::read(&slabs).unwrap()
+        );
+    }
+    // A failing source is an error naming the file, not a panic.
+    let bad = dir.path().join("bad.npy");
+    let e = lucent_grid::io::npy::write_f32_slabs(&bad, g.dims(), 1, |_, _, _| Err("disk gone"))
+        .unwrap_err();
+    assert!(
+        e.to_string().contains("bad.npy") && e.to_string().contains("disk gone"),
+        "{e}"
+    );
+}

@@ -168,6 +168,67 @@ pub fn write(path: impl AsRef<Path>, grid: &Grid, scalar: ScalarType) -> Result<
     write_channels(path, &[grid], scalar)
 }
 
+/// The magic, version, length and header of a C-order array of `channels` grids of `dims`
+/// (a 3D array for one channel), padded to a multiple of 64 bytes.
+fn header_bytes(dims: [usize; 3], channels: usize, scalar: ScalarType) -> Vec<u8> {
+    let [nx, ny, nz] = dims;
+    let shape = if channels == 1 {
+        format!("({nz}, {ny}, {nx})")
+    } else {
+        format!("({channels}, {nz}, {ny}, {nx})")
+    };
+    let mut header = format!(
+        "{{'descr': '{}', 'fortran_order': False, 'shape': {shape}, }}",
+        descr(scalar)
+    );
+    // magic (6) + version (2) + length (2) + header + '\n' must be a multiple of 64.
+    let unpadded = 10 + header.len() + 1;
+    header.push_str(&" ".repeat(unpadded.next_multiple_of(64) - unpadded));
+    header.push('\n');
+    let mut out = Vec::with_capacity(10 + header.len());
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&[1, 0]);
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    out
+}
+
+/// Writes `channels` f32 grids of `dims` (as [`write_channels`] lays them out) without
+/// holding more than one slab: `slab(channel, z, out)` fills slab `z` of a channel, x
+/// fastest. For fields that live out of core (a paged fluence). An error of `slab` ends
+/// the write and is returned as an I/O error naming the file.
+pub fn write_f32_slabs<E: std::fmt::Display>(
+    path: impl AsRef<Path>,
+    dims: [usize; 3],
+    channels: usize,
+    mut slab: impl FnMut(usize, usize, &mut [f32]) -> Result<(), E>,
+) -> Result<(), GridError> {
+    use std::io::Write;
+    let path = path.as_ref();
+    let io = |source: std::io::Error| GridError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let file = std::fs::File::create(path).map_err(io)?;
+    let mut out = std::io::BufWriter::new(file);
+    out.write_all(&header_bytes(dims, channels.max(1), ScalarType::F32))
+        .map_err(io)?;
+    let [nx, ny, nz] = dims;
+    let mut values = vec![0f32; nx * ny];
+    let mut bytes = Vec::with_capacity(nx * ny * 4);
+    for channel in 0..channels.max(1) {
+        for z in 0..nz {
+            slab(channel, z, &mut values).map_err(|e| io(std::io::Error::other(e.to_string())))?;
+            bytes.clear();
+            for v in &values {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+            out.write_all(&bytes).map_err(io)?;
+        }
+    }
+    out.flush().map_err(io)
+}
+
 /// Writes one grid as a 3D array, or several grids on one geometry (RGB fluence) as a
 /// C-order (channels, n_z, n_y, n_x) array.
 pub fn write_channels(
@@ -185,26 +246,10 @@ pub fn write_channels(
             "all channels of an .npy array share one geometry".into(),
         ));
     }
-    let [nx, ny, nz] = grid.dims();
-    let shape = if grids.len() == 1 {
-        format!("({nz}, {ny}, {nx})")
-    } else {
-        format!("({}, {nz}, {ny}, {nx})", grids.len())
-    };
-    let mut header = format!(
-        "{{'descr': '{}', 'fortran_order': False, 'shape': {shape}, }}",
-        descr(scalar)
-    );
-    // magic (6) + version (2) + length (2) + header + '\n' must be a multiple of 64.
-    let unpadded = 10 + header.len() + 1;
-    header.push_str(&" ".repeat(unpadded.next_multiple_of(64) - unpadded));
-    header.push('\n');
+    let header = header_bytes(grid.dims(), grids.len(), scalar);
     let mut out =
-        Vec::with_capacity(10 + header.len() + grids.len() * grid.data().len() * scalar.size());
-    out.extend_from_slice(MAGIC);
-    out.extend_from_slice(&[1, 0]);
-    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
+        Vec::with_capacity(header.len() + grids.len() * grid.data().len() * scalar.size());
+    out.extend_from_slice(&header);
     for g in grids {
         out.extend_from_slice(&encode(path, g.data(), scalar, Endian::Little)?);
     }
