@@ -389,6 +389,9 @@ impl Default for SolverSpec {
     }
 }
 
+/// A value per cell centre (a procedural volume, brick by brick).
+type CellFn = Box<dyn Fn(DVec3) -> f32 + Sync>;
+
 /// A scene ready to solve and render.
 #[derive(Debug, Clone)]
 pub struct BuiltScene {
@@ -665,11 +668,7 @@ impl Scene {
             )
         };
         // The volume's value at a cell centre, validated as the dense build validates it.
-        let (resolution, bounds, value): (
-            [usize; 3],
-            [[f64; 3]; 2],
-            Box<dyn Fn(DVec3) -> f32 + Sync>,
-        ) = match &self.volume {
+        let (resolution, bounds, value): ([usize; 3], [[f64; 3]; 2], CellFn) = match &self.volume {
             VolumeSpec::Cloud {
                 resolution,
                 bounds,

@@ -923,7 +923,7 @@ impl<'a> PlaneMarch<'a> {
 }
 
 /// The characteristic model's exact march of a distant light of unit density travelling
-/// along `direction`, plane by plane ([`PlaneMarch`]), for a storage that holds only
+/// along `direction`, plane by plane (two planes held at a time), for a storage that holds only
 /// planes (a paged medium): `absorption(axis, p, out)` fills σ_a (1/length) of plane `p`
 /// across `axis`, `emit(axis, p, values)` takes ρ there; a plane's cells are ordered with
 /// the next axis (axis + 1 mod 3) fastest, then the one after. Inflow edges. The same
