@@ -770,7 +770,7 @@ fn solve_to_file(
     let report_path = output.with_extension("json");
     check_output(&report_path, &["json"], "the report is written as .json")?;
     // Dense fields beyond the budget: out of core, where the solver can run so.
-    if !parsed.fits_in_memory(args.budget()) && chosen.solver.pages() {
+    if !parsed.fits_in_memory(args.budget()) && parsed.pageable() && chosen.solver.pages() {
         return solve_paged_to_file(&parsed, &name, &chosen, args, output, quiet);
     }
     let built = parsed.build_within(&base, args.budget())?;

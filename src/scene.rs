@@ -629,6 +629,18 @@ impl Scene {
             .try_fold(4u64, |bytes, &n| bytes.checked_mul(n as u64))
     }
 
+    /// Whether [`Scene::build_paged`] takes the scene: a procedural volume mapped by a
+    /// density, no embedded shape, no emission light.
+    pub fn pageable(&self) -> bool {
+        !matches!(self.volume, VolumeSpec::File { .. })
+            && self.medium.transfer.is_none()
+            && self.embedded.is_none()
+            && !self
+                .lights
+                .iter()
+                .any(|l| matches!(l, LightSpec::Emission { .. }))
+    }
+
     /// Whether the scene's dense fields fit `budget` ([`Scene::build_within`]'s check).
     pub fn fits_in_memory(&self, budget: u64) -> bool {
         self.field_bytes()
@@ -814,7 +826,7 @@ impl Scene {
             let bytes = g.voxel_count() as u64 * 4;
             if bytes > max_grid_bytes(budget) {
                 return Err(Error::Invalid(format!(
-                    "a {resolution:?} grid needs {bytes} bytes per field; a scene holds up to 8 fields, so a memory budget of {budget} bytes allows {} per field (--memory-budget sets it)",
+                    "a {resolution:?} grid needs {bytes} bytes per field; a scene holds up to 8 fields, so a memory budget of {budget} bytes allows {} per field (--memory-budget sets it; `direct` and `convection-diffusion` solve procedural scenes beyond it out of core)",
                     max_grid_bytes(budget)
                 )));
             }

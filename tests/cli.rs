@@ -436,7 +436,7 @@ fn an_absurd_resolution_is_refused_before_allocating() {
         .replace("densty", "density");
     std::fs::write(dir.path().join("huge.toml"), huge).unwrap();
     let out = lucent(&["info", "huge.toml"], dir.path());
-    assert_clean_failure(&out, "GiB");
+    assert_clean_failure(&out, "bytes per field");
 }
 
 const DEFAULT_WITH_TYPO: &str = "[volume]\nkind = \"blob\"\nresolution = [8, 8, 8]\nbounds = [[0, 0, 0], [1, 1, 1]]\ncentre = [0.5, 0.5, 0.5]\nsigma = 0.2\n[medium]\ndensty = 3.0\n[camera]\nkind = \"pinhole\"\nposition = [3, 0, 0]\nlook_at = [0, 0, 0]\n";
@@ -1244,11 +1244,14 @@ fn a_memory_budget_refuses_before_allocating_naming_the_bytes() {
         "{err}"
     );
     assert!(err.ends_with("solves started 0\n"), "{err}");
-    // The scene's own fields over the budget: refused while building it.
+    // The scene's own fields over the budget: refused while building it (diffusion-mg
+    // needs its fields in memory).
     let out = lucent(
         &[
             "solve",
             &scene("marble_robin.toml"),
+            "--solver",
+            "diffusion-mg",
             "--memory-budget",
             "64KiB",
             "-o",
