@@ -153,15 +153,18 @@ pub(crate) fn run(
     let bits = |g: &lucent_grid::Grid| g.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
     let same_fluence = bits(&solution.fluence[0].to_grid().map_err(|e| e.to_string())?)
         == bits(&memory.fluence[0]);
+    // `direct` keeps its lights' transmittance (compared too); the explicit march keeps
+    // none, on both paths.
     let same_transmittance = match &memory.angular {
-        Some(Angular::Lights(l)) => {
+        Some(Angular::Lights(l)) => Some(
             bits(
                 &solution.transmittance[0][0]
                     .to_grid()
                     .map_err(|e| e.to_string())?,
-            ) == bits(&l.transmittance[0][0])
-        }
-        _ => false,
+            ) == bits(&l.transmittance[0][0]),
+        ),
+        _ if solution.transmittance.is_empty() => None,
+        _ => Some(false),
     };
     println!(
         "| in memory | {memory_seconds:.1} | {} | fluence bit for bit equal: {}; transmittance: {} |",
@@ -170,9 +173,13 @@ pub(crate) fn run(
             b as f64 / (1 << 20) as f64
         )),
         if same_fluence { "yes" } else { "NO" },
-        if same_transmittance { "yes" } else { "NO" },
+        match same_transmittance {
+            Some(true) => "yes",
+            Some(false) => "NO",
+            None => "none kept",
+        },
     );
-    if !(same_fluence && same_transmittance) {
+    if !same_fluence || same_transmittance == Some(false) {
         return Err("the paged solve differs from the in-memory one".into());
     }
     Ok(())
