@@ -4,6 +4,9 @@
 //! `cargo run --profile examples -p lucent-paging --example page_a_cloud [N] [POOL_KIB]`
 //! (defaults 192 and 512: a 192³ field of 27 MiB dense, through a pool of 512 KiB).
 
+// An example reports to the terminal.
+#![allow(clippy::print_stdout)]
+
 use std::sync::Arc;
 
 use glam::DVec3;
@@ -40,7 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     })?;
     println!(
         "{n}³ cells ({} MiB dense), {} of {} bricks stored (the rest are empty space), pool of {} slots",
-        geometry.voxel_count() * 4 >> 20,
+        (geometry.voxel_count() * 4) >> 20,
         sigma_t.stored_bricks(),
         layout.count(),
         pager.capacity()
