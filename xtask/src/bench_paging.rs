@@ -11,6 +11,12 @@
 //! and NRU, with and without prefetch): seconds per sweep, cell updates per second, the
 //! ratio to the in-core sweep, hit rate, bytes read and written per sweep; and whether
 //! the paged result is bit for bit the in-core one.
+//!
+//! Then the discrete ordinates' access pattern: the eight octant sweeps over one field in
+//! their wavefront orders (`BrickLayout::wavefronts`), each brick pinned for writing once
+//! per octant, at 1/16, 1/4 and 1/2 of the bricks resident: the hit rate of LRU and of the
+//! NRU clock, which is what decides between them on the sweeps (the stencil's z-slab stream
+//! misses on every brick at 1/16 under either).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -150,6 +156,52 @@ pub(crate) fn run(n: usize, brick: usize) -> Result<(), String> {
                 return Err("the paged sweep differs from the in-core one".into());
             }
         }
+    }
+    println!();
+    println!(
+        "Octant sweeps (8 wavefront orders, each brick written once per octant), one field of {} bricks:",
+        layout.count()
+    );
+    println!("| resident | LRU hit rate | NRU hit rate | LRU evictions | NRU evictions |");
+    println!("|---|---|---|---|---|");
+    for fraction in [16, 4, 2] {
+        let slots = (layout.count() / fraction).max(4);
+        let mut row = Vec::new();
+        for eviction in [Eviction::Lru, Eviction::Nru] {
+            let pager = Arc::new(
+                Pager::new(
+                    Box::new(FileStore::create(layout.stored_len()).map_err(err)?),
+                    0,
+                    layout.stored_len(),
+                    1,
+                    PagerOptions {
+                        budget_bytes: slots as u64 * brick_bytes,
+                        eviction,
+                        fill: 0.0,
+                    },
+                )
+                .map_err(err)?,
+            );
+            let field = PagedGrid::from_grid(pager.clone(), &initial, brick).map_err(err)?;
+            let before = pager.stats();
+            for octant in 0..8 {
+                let negative = [octant & 1 != 0, octant & 2 != 0, octant & 4 != 0];
+                for plane in layout.wavefronts(negative) {
+                    for id in plane {
+                        let mut pin = pager.write(field.pager_brick(id)).map_err(err)?;
+                        pin[0] += 1.0;
+                    }
+                }
+            }
+            row.push(pager.stats().since(&before));
+        }
+        println!(
+            "| 1/{fraction} ({slots} bricks) | {:.3} | {:.3} | {} | {} |",
+            row[0].hit_rate(),
+            row[1].hit_rate(),
+            row[0].evictions,
+            row[1].evictions
+        );
     }
     Ok(())
 }
