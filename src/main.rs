@@ -686,9 +686,19 @@ fn solve_paged_to_file(
     let solution = solution?;
     let g = problem.geometry();
     let channels = solution.fluence.len();
-    lucent::grid::io::npy::write_f32_slabs(output, g.dims(), channels, |c, z, out| {
-        solution.fluence[c].read_slabs(z, z + 1, out)
-    })?;
+    let stop = &solution.report.stop_reason;
+    let ended = verdict(
+        chosen.solver.name(),
+        stop,
+        solution.report.iterations,
+        args.allow_unconverged,
+        "fluence",
+    );
+    if ended.is_none() {
+        lucent::grid::io::npy::write_f32_slabs(output, g.dims(), channels, |c, z, out| {
+            solution.fluence[c].read_slabs(z, z + 1, out)
+        })?;
+    }
     let report_path = output.with_extension("json");
     let report = serde_json::json!({
         "scene": name,
@@ -708,8 +718,8 @@ fn solve_paged_to_file(
         "dims": g.dims(),
         "spacing": g.spacing().to_array(),
         "origin": g.origin().to_array(),
-        "fluence": output.file_name().map(|n| n.to_string_lossy().into_owned()),
-        "converged": solution.report.stop_reason.is_converged(),
+        "fluence": ended.is_none().then(|| output.file_name().map(|n| n.to_string_lossy().into_owned())).flatten(),
+        "converged": stop.is_converged(),
         "report": solution.report,
         "paging": solution.paging,
     });
@@ -721,6 +731,9 @@ fn solve_paged_to_file(
         path: report_path.clone(),
         reason: e.to_string(),
     })?;
+    if let Some(ended) = ended {
+        return Ok(ended);
+    }
     if !quiet {
         let p = &solution.paging;
         println!(

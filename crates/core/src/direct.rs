@@ -111,6 +111,13 @@ fn sky_sum<E>(
     Ok(total as f32)
 }
 
+/// The sky's radiance per channel (all sky lights added).
+fn sky_radiance(sky: &[&Light], channels: usize) -> Vec<f64> {
+    (0..channels)
+        .map(|c| sky.iter().map(|l| l.spectrum().channel(c)).sum())
+        .collect()
+}
+
 /// The sky's isotropic fluence from its transmittance sum `t` and radiance.
 fn isotropic_value(t: f32, sky_radiance: f64) -> f32 {
     (f64::from(t) * sky_radiance) as f32
@@ -191,16 +198,7 @@ impl Solver for DirectSolver {
         let medium = problem.medium();
         let channels = problem.channels();
         let extinction_channels = medium.sigma_t.len();
-        let point_lights: Vec<&Light> = problem
-            .lights()
-            .iter()
-            .filter(|l| !matches!(l, Light::Sky { .. }))
-            .collect();
-        let sky: Vec<&Light> = problem
-            .lights()
-            .iter()
-            .filter(|l| matches!(l, Light::Sky { .. }))
-            .collect();
+        let (point_lights, sky) = split_lights(problem.lights());
 
         // Memory: transmittance per point-like light and extinction channel, fluence and
         // isotropic fluence per channel.
@@ -234,34 +232,10 @@ impl DirectSolver {
         let b = layout.brick();
         let medium = problem.medium();
         let channels = problem.channels();
-        let point_lights: Vec<&Light> = problem
-            .lights()
-            .iter()
-            .filter(|l| !matches!(l, Light::Sky { .. }))
-            .collect();
-        let sky: Vec<&Light> = problem
-            .lights()
-            .iter()
-            .filter(|l| matches!(l, Light::Sky { .. }))
-            .collect();
-        let (lo, hi) = geometry.bounds();
-        let (far, min_distance) = (
-            4.0 * (hi - lo).length() + 1.0,
-            0.5 * geometry.spacing().min_element(),
-        );
+        let (point_lights, sky) = split_lights(problem.lights());
+        let (far, min_distance) = distances(&geometry);
         let cutoff = self.max_optical_depth;
-        let quadrature = SphericalQuadrature::octahedral(self.sky_level).map_err(|e| {
-            SolveError::InvalidParameter {
-                name: "sky_level".into(),
-                reason: e.to_string(),
-            }
-        })?;
-        let directions: Vec<(DVec3, f64)> = quadrature
-            .directions()
-            .iter()
-            .copied()
-            .zip(quadrature.weights().iter().copied())
-            .collect();
+        let directions = sky_directions(self.sky_level)?;
 
         // Memory: the pool, the bookkeeping of every field (the medium's and the results:
         // transmittance per light and extinction channel, isotropic fluence and fluence per
@@ -373,9 +347,7 @@ impl DirectSolver {
         };
 
         // The isotropic fluence and the fluence, layer by layer from the fields above.
-        let sky_radiance: Vec<f64> = (0..channels)
-            .map(|c| sky.iter().map(|l| l.spectrum().channel(c)).sum())
-            .collect();
+        let sky_radiance = sky_radiance(&sky, channels);
         let mut isotropic = Vec::with_capacity(channels);
         let mut fluence = Vec::with_capacity(channels);
         for c in 0..channels {
@@ -478,12 +450,7 @@ impl DirectSolver {
         let work = (point_lights.len() + usize::from(!sky.is_empty())) as f64;
         let mut done = 0.0;
         let cutoff = self.max_optical_depth;
-        let quadrature = SphericalQuadrature::octahedral(self.sky_level).map_err(|e| {
-            SolveError::InvalidParameter {
-                name: "sky_level".into(),
-                reason: e.to_string(),
-            }
-        })?;
+        let directions = sky_directions(self.sky_level)?;
 
         let result = {
             // Per-light transmittance, one grid per extinction channel.
@@ -516,12 +483,6 @@ impl DirectSolver {
                     .iter()
                     .map(|sigma_t| {
                         let mut total = Grid::filled(geometry, 0.0);
-                        let directions: Vec<(DVec3, f64)> = quadrature
-                            .directions()
-                            .iter()
-                            .copied()
-                            .zip(quadrature.weights().iter().copied())
-                            .collect();
                         total.slabs_mut().for_each(|(k, slab)| {
                             let [nx, ny, _] = geometry.dims();
                             for j in 0..ny {
@@ -566,12 +527,37 @@ impl DirectSolver {
 /// The far distance of directional lights and the nearest distance of point lights
 /// (half the smallest cell side) that `direct` — and its GPU twin — use for `problem`.
 pub fn light_distances(problem: &Problem) -> (f64, f64) {
-    let geometry = problem.geometry();
+    distances(problem.geometry())
+}
+
+/// [`light_distances`] of a grid: the one definition both storages use.
+fn distances(geometry: &lucent_grid::GridGeometry) -> (f64, f64) {
     let (lo, hi) = geometry.bounds();
     (
         4.0 * (hi - lo).length() + 1.0,
         0.5 * geometry.spacing().min_element(),
     )
+}
+
+/// The sky's directions of travel with their quadrature weights (`sky_level`).
+fn sky_directions(sky_level: usize) -> Result<Vec<(DVec3, f64)>, SolveError> {
+    let quadrature =
+        SphericalQuadrature::octahedral(sky_level).map_err(|e| SolveError::InvalidParameter {
+            name: "sky_level".into(),
+            reason: e.to_string(),
+        })?;
+    Ok(quadrature
+        .directions()
+        .iter()
+        .copied()
+        .zip(quadrature.weights().iter().copied())
+        .collect())
+}
+
+/// A problem's lights split into point-like ones (directional, point, spot: everything but
+/// the sky) and the sky.
+fn split_lights(lights: &[Light]) -> (Vec<&Light>, Vec<&Light>) {
+    lights.iter().partition(|l| !matches!(l, Light::Sky { .. }))
 }
 
 /// `direct`'s outcome from the transmittance grids: per point-like light (one grid per
@@ -589,16 +575,10 @@ pub fn uncollided_outcome(
     let medium = problem.medium();
     let channels = problem.channels();
     let (far, min_distance) = light_distances(problem);
-    let sky: Vec<&Light> = problem
-        .lights()
-        .iter()
-        .filter(|l| matches!(l, Light::Sky { .. }))
-        .collect();
+    let (_, sky) = split_lights(problem.lights());
 
     // Fluence per channel: point-like lights (irradiance × transmittance) plus the sky.
-    let sky_radiance: Vec<f64> = (0..channels)
-        .map(|c| sky.iter().map(|l| l.spectrum().channel(c)).sum())
-        .collect();
+    let sky_radiance = sky_radiance(&sky, channels);
     let isotropic_fluence: Vec<Grid> = (0..channels)
         .map(|c| match &sky_transmittance {
             Some(t) => t[c.min(t.len() - 1)].map(|v| isotropic_value(v, sky_radiance[c])),

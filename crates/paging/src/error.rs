@@ -32,6 +32,10 @@ pub enum PagingError {
         /// Bricks the pager holds.
         count: usize,
     },
+    /// A read or write that does not fit the field: a cell, slab, plane or layer outside
+    /// it, or a buffer of the wrong size.
+    #[error("{0}")]
+    Shape(String),
     /// The backing store could not be read or written. Nothing is lost: a brick whose
     /// write-back failed stays resident and dirty.
     #[error("{action} brick {brick} of {store}: {source}")]

@@ -150,11 +150,38 @@ impl PagedGrid {
     /// Bytes the field keeps in memory besides the pool: per brick a flag, a constant and
     /// a range.
     pub fn resident_overhead_bytes(&self) -> u64 {
-        self.layout.count() as u64 * 13
+        self.layout.count() as u64 * Self::BYTES_PER_BRICK
+    }
+
+    /// Bytes of per-brick bookkeeping a field keeps in memory: the paged flag (1), the
+    /// constant (4) and the range (8).
+    pub const BYTES_PER_BRICK: u64 = 13;
+
+    fn check_brick(&self, id: usize) -> Result<(), PagingError> {
+        if id < self.layout.count() {
+            Ok(())
+        } else {
+            Err(PagingError::NoSuchBrick {
+                brick: id,
+                count: self.layout.count(),
+            })
+        }
+    }
+
+    /// Brick `id` pinned for writing, a constant brick turned into a stored one first.
+    fn write_pin(&self, id: usize) -> Result<crate::pager::WritePin, PagingError> {
+        if self.paged[id].load(Ordering::Acquire) {
+            return self.pager.write(self.first + id);
+        }
+        let mut pin = self.pager.overwrite(self.first + id)?;
+        pin.fill(f32::from_bits(self.constant[id].load(Ordering::Relaxed)));
+        self.paged[id].store(true, Ordering::Release);
+        Ok(pin)
     }
 
     /// Brick `id` as stored (pinned while the view lives, if paged).
     pub fn brick(&self, id: usize) -> Result<BrickView, PagingError> {
+        self.check_brick(id)?;
         if self.paged[id].load(Ordering::Acquire) {
             Ok(BrickView::Paged(self.pager.read(self.first + id)?))
         } else {
@@ -167,17 +194,25 @@ impl PagedGrid {
     /// The value of cell `cell` (pins its brick for the call: for tests and sparse
     /// lookups; solvers read whole bricks or slabs).
     pub fn get(&self, cell: [usize; 3]) -> Result<f32, PagingError> {
+        let dims = self.geometry.dims();
+        if (0..3).any(|a| cell[a] >= dims[a]) {
+            return Err(PagingError::Shape(format!(
+                "cell {cell:?} is outside the {dims:?} grid"
+            )));
+        }
         let (id, local) = self.layout.locate(cell);
         Ok(self.brick(id)?.get(&self.layout, local.map(|c| c as isize)))
     }
 
-    /// (min, max) over brick `id` and its apron: bounds of the trilinear interpolant in
-    /// the brick's cells.
-    pub fn brick_range(&self, id: usize) -> (f32, f32) {
-        (
-            f32::from_bits(self.min[id].load(Ordering::Relaxed)),
-            f32::from_bits(self.max[id].load(Ordering::Relaxed)),
-        )
+    /// (min, max) over brick `id` and its apron — bounds of the trilinear interpolant in
+    /// the brick's cells — or `None` for a brick the field does not have.
+    pub fn brick_range(&self, id: usize) -> Option<(f32, f32)> {
+        (id < self.layout.count()).then(|| {
+            (
+                f32::from_bits(self.min[id].load(Ordering::Relaxed)),
+                f32::from_bits(self.max[id].load(Ordering::Relaxed)),
+            )
+        })
     }
 
     /// The largest brick maximum over the bricks holding cells `lo..=hi` (clamped): a
@@ -186,7 +221,7 @@ impl PagedGrid {
     pub fn max_over_cells(&self, lo: [usize; 3], hi: [usize; 3]) -> f32 {
         self.layout
             .bricks_in_box(lo, hi)
-            .map(|id| self.brick_range(id).1)
+            .map(|id| f32::from_bits(self.max[id].load(Ordering::Relaxed)))
             .fold(f32::NEG_INFINITY, f32::max)
     }
 
@@ -201,8 +236,12 @@ impl PagedGrid {
     /// from the brick that owns it.
     pub fn read_slabs(&self, z0: usize, z1: usize, out: &mut [f32]) -> Result<(), PagingError> {
         let [nx, ny, nz] = self.geometry.dims();
-        let z1 = z1.min(nz);
-        assert_eq!(out.len(), nx * ny * (z1 - z0), "read_slabs: output size");
+        if !(z0 <= z1 && z1 <= nz && out.len() == nx * ny * (z1 - z0)) {
+            return Err(PagingError::Shape(format!(
+                "read_slabs: slabs {z0}..{z1} of a grid of {nz} into {} values",
+                out.len()
+            )));
+        }
         let plane = nx * ny;
         for id in self.layout.bricks_of_slabs(z0, z1) {
             let view = self.brick(id)?;
@@ -231,6 +270,12 @@ impl PagedGrid {
     /// z and the values (x fastest).
     pub fn read_layer_window(&self, layer: usize) -> Result<(usize, Vec<f32>), PagingError> {
         let [nx, ny, nz] = self.geometry.dims();
+        if layer >= self.layout.bricks()[2] {
+            return Err(PagingError::Shape(format!(
+                "brick layer {layer} of {}",
+                self.layout.bricks()[2]
+            )));
+        }
         let b = self.layout.brick();
         let z_lo = (layer * b).saturating_sub(1);
         let z_hi = (layer * b + b + 1).min(nz);
@@ -268,10 +313,12 @@ impl PagedGrid {
     pub fn write_slabs(&self, z0: usize, data: &[f32]) -> Result<(), PagingError> {
         let [nx, ny, nz] = self.geometry.dims();
         let plane = nx * ny;
-        assert!(
-            data.len().is_multiple_of(plane) && z0 + data.len() / plane <= nz,
-            "write_slabs: data must be whole slabs inside the grid"
-        );
+        if !(data.len().is_multiple_of(plane) && z0 + data.len() / plane <= nz) {
+            return Err(PagingError::Shape(format!(
+                "write_slabs: {} values from slab {z0} are not whole slabs inside a grid of {nz}",
+                data.len()
+            )));
+        }
         let z1 = z0 + data.len() / plane;
         if z1 == z0 {
             return Ok(());
@@ -297,14 +344,7 @@ impl PagedGrid {
             if touched.is_empty() {
                 return Ok(());
             }
-            let mut pin = if self.paged[id].load(Ordering::Acquire) {
-                self.pager.write(self.first + id)?
-            } else {
-                let mut pin = self.pager.overwrite(self.first + id)?;
-                pin.fill(f32::from_bits(self.constant[id].load(Ordering::Relaxed)));
-                self.paged[id].store(true, Ordering::Release);
-                pin
-            };
+            let mut pin = self.write_pin(id)?;
             for &sk in &touched {
                 let z = cell(2, sk, nz);
                 for sj in 0..edge {
@@ -349,8 +389,12 @@ impl PagedGrid {
     ) -> Result<(), PagingError> {
         let dims = self.geometry.dims();
         let (b, d) = ((axis + 1) % 3, (axis + 2) % 3);
-        assert!(axis < 3 && index < dims[axis], "read_plane: no such plane");
-        assert_eq!(out.len(), dims[b] * dims[d], "read_plane: output size");
+        if !(axis < 3 && index < dims[axis] && out.len() == dims[b] * dims[d]) {
+            return Err(PagingError::Shape(format!(
+                "read_plane: plane {index} across axis {axis} of {dims:?} into {} values",
+                out.len()
+            )));
+        }
         let brick = self.layout.brick();
         let bricks = self.layout.bricks();
         for kd in 0..bricks[d] {
@@ -382,8 +426,12 @@ impl PagedGrid {
     pub fn write_plane(&self, axis: usize, index: usize, data: &[f32]) -> Result<(), PagingError> {
         let dims = self.geometry.dims();
         let (b, d) = ((axis + 1) % 3, (axis + 2) % 3);
-        assert!(axis < 3 && index < dims[axis], "write_plane: no such plane");
-        assert_eq!(data.len(), dims[b] * dims[d], "write_plane: data size");
+        if !(axis < 3 && index < dims[axis] && data.len() == dims[b] * dims[d]) {
+            return Err(PagingError::Shape(format!(
+                "write_plane: {} values as plane {index} across axis {axis} of {dims:?}",
+                data.len()
+            )));
+        }
         let brick = self.layout.brick();
         let edge = self.layout.stored_edge();
         let bricks = self.layout.bricks();
@@ -409,14 +457,7 @@ impl PagedGrid {
             if touched.is_empty() {
                 return Ok(());
             }
-            let mut pin = if self.paged[id].load(Ordering::Acquire) {
-                self.pager.write(self.first + id)?
-            } else {
-                let mut pin = self.pager.overwrite(self.first + id)?;
-                pin.fill(f32::from_bits(self.constant[id].load(Ordering::Relaxed)));
-                self.paged[id].store(true, Ordering::Release);
-                pin
-            };
+            let mut pin = self.write_pin(id)?;
             let stride = [1, edge, edge * edge];
             for &sa in &touched {
                 for sd in 0..edge {

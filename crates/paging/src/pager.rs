@@ -296,6 +296,13 @@ impl Pager {
     /// Writes `values` as brick `brick` straight to the store, without a slot (building a
     /// field larger than the pool). A resident copy is replaced in place.
     pub fn store_brick(&self, brick: usize, values: &[f32]) -> Result<(), PagingError> {
+        if values.len() != self.brick_len {
+            return Err(PagingError::Shape(format!(
+                "store_brick: {} values for bricks of {}",
+                values.len(),
+                self.brick_len
+            )));
+        }
         if let Ok(mut pin) = self.resident_write(brick) {
             pin.copy_from_slice(values);
             return Ok(());

@@ -158,7 +158,7 @@ proptest! {
                 prop_assert_eq!(view.get(&layout, local), *want, "brick {} stored {}", id, s);
             }
             drop(view);
-            let (lo, hi) = field.brick_range(id);
+            let (lo, hi) = field.brick_range(id).unwrap();
             let min = stored.iter().copied().fold(f32::INFINITY, f32::min);
             let max = stored.iter().copied().fold(f32::NEG_INFINITY, f32::max);
             prop_assert_eq!((lo, hi), (min, max));
@@ -457,6 +457,38 @@ fn sparse_fields_store_only_their_dense_bricks() {
     // An empty brick far from the ball reads as its constant without touching the pager.
     assert!(matches!(field.brick(0).unwrap(), BrickView::Constant(0.0)));
     // Its range is zero, the ball's bricks bound the ball.
-    assert_eq!(field.brick_range(0), (0.0, 0.0));
+    assert_eq!(field.brick_range(0), Some((0.0, 0.0)));
+    assert_eq!(field.brick_range(layout.count()), None);
     assert!(field.max_over_cells([0; 3], [63; 3]) >= 1.5);
+}
+
+#[test]
+fn reads_and_writes_that_do_not_fit_the_field_are_errors() {
+    let geometry = GridGeometry::new([9, 7, 5], DVec3::splat(0.1), DVec3::ZERO).unwrap();
+    let layout = BrickLayout::new(geometry.dims(), 4).unwrap();
+    let pager = Arc::new(pager(
+        Box::new(MemoryStore::default()),
+        0,
+        layout.stored_len(),
+        4,
+        Eviction::Lru,
+    ));
+    let field = PagedGrid::filled(pager, geometry, 4, 1.0).unwrap();
+    let shape = |r: Result<(), PagingError>| matches!(r, Err(PagingError::Shape(_)));
+    assert!(shape(field.get([9, 0, 0]).map(|_| ())));
+    assert!(shape(field.read_slabs(3, 2, &mut [])));
+    assert!(shape(field.read_slabs(0, 6, &mut vec![0.0; 9 * 7 * 6])));
+    assert!(shape(field.read_slabs(0, 1, &mut [0.0; 5])));
+    assert!(shape(field.read_layer_window(2).map(|_| ())));
+    assert!(shape(field.write_slabs(4, &vec![0.0; 2 * 9 * 7])));
+    assert!(shape(field.write_slabs(0, &[0.0; 10])));
+    assert!(shape(field.read_plane(3, 0, &mut [])));
+    assert!(shape(field.read_plane(0, 9, &mut [0.0; 35])));
+    assert!(shape(field.write_plane(1, 0, &[0.0; 3])));
+    assert!(matches!(
+        field.brick(layout.count()),
+        Err(PagingError::NoSuchBrick { .. })
+    ));
+    // The field is untouched.
+    assert!(field.to_grid().unwrap().data().iter().all(|&v| v == 1.0));
 }
