@@ -52,11 +52,17 @@ pub(crate) fn run(
     let budget = budget_mib << 20;
     let layout = BrickLayout::new(geometry.dims(), brick).map_err(|e| e.to_string())?;
     let dense_bytes = geometry.voxel_count() as u64 * 4;
-    // What `direct` holds besides the pool: three layers of slabs (a light's
+    // What the solver holds besides the pool: three layers of slabs (`direct`: a light's
     // transmittance, the isotropic fluence and the fluence of one brick layer) and the
-    // bookkeeping of its six fields; the pool gets the rest.
+    // bookkeeping of six fields; the absorption march also holds its planes (two of ρ and
+    // σ_a in f64, one in f32). The pool gets the rest.
     let layer_bytes = (n * n * brick) as u64 * 4;
-    let overhead = 3 * layer_bytes + 6 * layout.count() as u64 * 21 + (n * n) as u64 * 36;
+    let planes = if solver_name == "direct" {
+        0
+    } else {
+        (n * n) as u64 * 36
+    };
+    let overhead = 3 * layer_bytes + 6 * layout.count() as u64 * 21 + planes;
     let pool = budget.saturating_sub(overhead + (budget >> 4));
     if pool < 4 * layout.stored_len() as u64 * 4 {
         return Err(format!(
