@@ -218,3 +218,47 @@ proptest! {
         }
     }
 }
+
+/// Point lights at every distance a finite `f64` allows, on each side of the box and at
+/// every power: the light is valid (finite position), so each solver answers with a finite
+/// fluence or a typed refusal. Far lights once overflowed the device march's integer shell
+/// index; the proptest above draws them only by chance, this walks them all.
+#[test]
+fn point_lights_far_from_the_box() {
+    let geometry = GridGeometry::new([5, 4, 3], DVec3::splat(0.25), DVec3::ZERO).unwrap();
+    let medium = Medium {
+        sigma_t: vec![Grid::filled(geometry, 2.0)],
+        albedo: vec![Field::Constant(0.5)],
+        phase: Phase::Isotropic,
+    };
+    for far in [1e6, 1e12, 1e30, 3.5e38, 1e300, f64::MAX] {
+        for position in [
+            DVec3::new(-1.0, far, -1.0),
+            DVec3::new(far, 0.5, 0.4),
+            DVec3::new(0.6, 0.5, -far),
+            DVec3::splat(-far),
+        ] {
+            for power in [1.0, 1e30, 1e300] {
+                let light = Light::Point {
+                    position,
+                    intensity: Spectrum::Grey(power),
+                };
+                if let Ok(problem) = Problem::new(
+                    geometry,
+                    medium.clone(),
+                    vec![light],
+                    Boundary::Vacuum,
+                    None,
+                ) {
+                    every_solver_survives(
+                        &problem,
+                        &SolveOptions {
+                            max_iterations: 50,
+                            ..Default::default()
+                        },
+                    );
+                }
+            }
+        }
+    }
+}

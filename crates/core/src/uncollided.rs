@@ -440,8 +440,9 @@ pub fn uncollided_cells(sigma_t: &Grid, light: &Light, cutoff: f64) -> Option<Un
         }
         Source::Directional(_) => None,
     };
-    let near =
-        |c: [i64; 3]| light_cell.is_some_and(|l| (0..3).all(|a| (c[a] - l[a]).abs() <= NEAR_CELLS));
+    let near = |c: [i64; 3]| {
+        light_cell.is_some_and(|l| (0..3).all(|a| c[a].abs_diff(l[a]) <= NEAR_CELLS.unsigned_abs()))
+    };
     let volume = g.cell_volume();
     let slab = g.slab_len();
     let n = g.voxel_count();

@@ -36,6 +36,11 @@ use lucent_grid::Grid;
 use crate::params::GpuConvectionParams;
 use crate::solver::device_error;
 
+/// How far (in cells, per axis) from the grid a point light's position may lie. The
+/// device holds the light's position in f32 and the shells' cell indices in i32: 2²² cells
+/// keeps two bits below a cell in the position and the shell arithmetic far from overflow.
+/// Farther lights are refused (a directional light models them).
+const POINT_LIGHT_REACH: f64 = (1u32 << 22) as f64;
 /// Most passes of a point light's march.
 const MAX_PASSES: usize = 200;
 /// Red–black sweeps between residual checks of the scattering step.
@@ -110,6 +115,20 @@ pub(crate) fn solve(
     let problem = context.problem;
     let l = lucent_explicit::lattice(problem)?;
     let geometry = *problem.geometry();
+    let lights = problem.lights();
+    for light in lights {
+        if let Light::Point { position, .. } = light
+            && !within_reach(&l, *position)
+        {
+            return Err(SolveError::Unsupported {
+                solver: name.into(),
+                feature: format!(
+                    "a point light more than 2^22 cells from the grid (at {position}); \
+                     the device holds positions in f32: model it as a directional light"
+                ),
+            });
+        }
+    }
     let kernels = Kernels {
         layer: gpu
             .kernel("convection.wgsl", shaders::CONVECTION, "layer_sweep")
@@ -126,7 +145,6 @@ pub(crate) fn solve(
     };
     let mut record = Record::exact((l.len() * 8 * 4) as u64);
     let mut fluence = Vec::with_capacity(problem.channels());
-    let lights = problem.lights();
     let marches = (problem.channels() * lights.len()).max(1);
     for c in 0..problem.channels() {
         let sigma = DeviceField::from_grid(gpu, "sigma_t", problem.medium().sigma_t(c), true)
@@ -190,6 +208,13 @@ pub(crate) fn solve(
         standard_error: None,
         record,
     })
+}
+
+/// Whether a point light at `p` lies within [`POINT_LIGHT_REACH`] cells of the lattice on
+/// every axis.
+fn within_reach(l: &Lattice, p: glam::DVec3) -> bool {
+    let v = (p - l.origin) / l.spacing;
+    (0..3).all(|a| (-POINT_LIGHT_REACH..=l.dims[a] as f64 + POINT_LIGHT_REACH).contains(&v[a]))
 }
 
 /// One light's steady density (per unit of its colour) over `sigma`.
