@@ -12,6 +12,11 @@
 //! ratio to the in-core sweep, hit rate, bytes read and written per sweep; and whether
 //! the paged result is bit for bit the in-core one.
 //!
+//! Then time skewing (`skewed_steps`): 1, 2, 4, 8 and 16 steps per pass, in memory and
+//! out of core at 1/16 resident, each against the in-memory pass with the same number of
+//! steps and against plain in-memory sweeps of the same slab kernel, the results checked
+//! bit for bit against 16 plain sweeps.
+//!
 //! Then the discrete ordinates' access pattern: the eight octant sweeps over one field in
 //! their wavefront orders (`BrickLayout::wavefronts`), each brick pinned for writing once
 //! per octant, at 1/16, 1/4 and 1/2 of the bricks resident: the hit rate of LRU and of the
@@ -31,6 +36,9 @@ use rayon::prelude::*;
 const R: f32 = 0.1;
 const KAPPA: f32 = 0.01;
 const SWEEPS: usize = 3;
+/// Steps per measurement of the time-skewed passes (a multiple of every steps-per-pass
+/// measured).
+const SKEWED: usize = 16;
 
 /// One FTCS step of the slabs `z0..z1` of a grid of `dims` into `out`, reading `window`,
 /// which holds slabs `w0..` (at least z0 − 1 .. z1 + 1 within the grid).
@@ -59,6 +67,27 @@ fn step_slabs(dims: [usize; 3], window: &[f32], w0: usize, z0: usize, z1: usize,
             }
         });
     debug_assert_eq!(out.len(), plane * (z1 - z0));
+}
+
+/// The same FTCS step on one slab z from the slabs below, at and above it (clamped at the
+/// faces by the caller): the arithmetic of [`step_slabs`] cell for cell, rows in parallel.
+fn step_one_slab(dims: [usize; 3], slabs: [&[f32]; 3], out: &mut [f32]) {
+    let [nx, ny, _] = dims;
+    let [below, at, above] = slabs;
+    out.par_chunks_mut(nx).enumerate().for_each(|(y, row)| {
+        let (ym, yp) = (y.saturating_sub(1), (y + 1).min(ny - 1));
+        for (x, o) in row.iter_mut().enumerate() {
+            let (xm, xp) = (x.saturating_sub(1), (x + 1).min(nx - 1));
+            let c = at[y * nx + x];
+            let sum = (at[y * nx + xm] - c)
+                + (at[y * nx + xp] - c)
+                + (at[ym * nx + x] - c)
+                + (at[yp * nx + x] - c)
+                + (below[y * nx + x] - c)
+                + (above[y * nx + x] - c);
+            *o = c + R * sum - KAPPA * c;
+        }
+    });
 }
 
 /// Runs the benchmark.
@@ -155,6 +184,123 @@ pub(crate) fn run(n: usize, brick: usize) -> Result<(), String> {
             if !identical {
                 return Err("the paged sweep differs from the in-core one".into());
             }
+        }
+    }
+    println!();
+    println!(
+        "Time skewing (`skewed_steps`, {SKEWED} steps per measurement, the slab kernel `step_one_slab`):"
+    );
+    println!(
+        "| storage | steps per pass | resident | s per step | cell updates/s | vs in core, same steps per pass | vs in core, plain sweeps | hit rate | MB read per step | MB written per step | bit-identical |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    // The plain sweeps' result for SKEWED steps.
+    let mut a = initial.data().to_vec();
+    let mut b = vec![0f32; a.len()];
+    for _ in 0..SKEWED {
+        step_slabs(dims, &a, 0, 0, n, &mut b);
+        std::mem::swap(&mut a, &mut b);
+    }
+    let reference = a;
+    let identical = |x: &[f32]| {
+        x.iter()
+            .zip(&reference)
+            .all(|(p, q)| p.to_bits() == q.to_bits())
+    };
+    let plane = n * n;
+    let skews = [1, 2, 4, 8, SKEWED];
+    // In core: the same pipeline over dense arrays (one step per pass is a plain sweep
+    // slab by slab).
+    let mut in_core_skewed = Vec::new();
+    for steps in skews {
+        let mut a = initial.data().to_vec();
+        let mut b = vec![0f32; a.len()];
+        let start = Instant::now();
+        for _ in 0..SKEWED / steps {
+            lucent::paging::skewed_steps(
+                dims,
+                steps,
+                |z, slab| {
+                    slab.copy_from_slice(&a[z * plane..(z + 1) * plane]);
+                    Ok(())
+                },
+                |z, slab| {
+                    b[z * plane..(z + 1) * plane].copy_from_slice(slab);
+                    Ok(())
+                },
+                |_, _, slabs, out| step_one_slab(dims, slabs, out),
+            )
+            .map_err(err)?;
+            std::mem::swap(&mut a, &mut b);
+        }
+        let seconds = start.elapsed().as_secs_f64() / SKEWED as f64;
+        if !identical(&a) {
+            return Err("the skewed in-core pass differs from the plain sweeps".into());
+        }
+        in_core_skewed.push(seconds);
+    }
+    let plain = in_core_skewed[0];
+    for (&steps, &core) in skews.iter().zip(&in_core_skewed) {
+        println!(
+            "| in core | {steps} | all | {core:.4} | {:.3e} | 100 % | {:.0} % | – | – | – | yes |",
+            cells / core,
+            100.0 * plain / core,
+        );
+    }
+    for (&steps, &core) in skews.iter().zip(&in_core_skewed) {
+        // Out of core: 1/16 of both fields' bricks resident, LRU, prefetch where the pool
+        // has room for it (three brick layers; at 1/16 of 16 layers it has two, and
+        // `skewed_steps_paged` leaves prefetch off).
+        let slots = (2 * layout.count() / 16).max(8);
+        let pager = Arc::new(
+            Pager::new(
+                Box::new(FileStore::create(layout.stored_len()).map_err(err)?),
+                0,
+                layout.stored_len(),
+                1,
+                PagerOptions {
+                    budget_bytes: slots as u64 * brick_bytes,
+                    eviction: Eviction::Lru,
+                    fill: 0.0,
+                },
+            )
+            .map_err(err)?,
+        );
+        let mut fields = [
+            PagedGrid::from_grid(pager.clone(), &initial, brick).map_err(err)?,
+            PagedGrid::filled(pager.clone(), geometry, brick, 0.0).map_err(err)?,
+        ];
+        let before = pager.stats();
+        let start = Instant::now();
+        for _ in 0..SKEWED / steps {
+            let [input, output] = &fields;
+            lucent::paging::skewed_steps_paged(input, output, steps, true, |_, _, slabs, out| {
+                step_one_slab(dims, slabs, out)
+            })
+            .map_err(err)?;
+            fields.swap(0, 1);
+        }
+        let seconds = start.elapsed().as_secs_f64() / SKEWED as f64;
+        let moved = pager.stats().since(&before);
+        let result = fields[0].to_grid().map_err(err)?;
+        println!(
+            "| paged | {steps} | {:.1} % ({slots} of {} bricks) | {seconds:.4} | {:.3e} | {:.0} % | {:.0} % | {:.3} | {:.0} | {:.0} | {} |",
+            100.0 * slots as f64 / (2 * layout.count()) as f64,
+            2 * layout.count(),
+            cells / seconds,
+            100.0 * core / seconds,
+            100.0 * plain / seconds,
+            moved.hit_rate(),
+            moved.bytes_read as f64 / SKEWED as f64 / 1e6,
+            moved.bytes_written as f64 / SKEWED as f64 / 1e6,
+            if identical(result.data()) {
+                "yes"
+            } else {
+                "NO"
+            }
+        );
+        if !identical(result.data()) {
+            return Err("the skewed paged pass differs from the plain sweeps".into());
         }
     }
     println!();

@@ -306,6 +306,62 @@ impl PagedGrid {
         Ok((z_lo, out))
     }
 
+    /// Writes brick layer `layer` whole from `window`, the slabs a stencil on it reads
+    /// (z_lo = max(z₀ − 1, 0) .. min(z₀ + B + 1, n_z), as [`PagedGrid::read_layer_window`]
+    /// returns them): every stored value of the layer's bricks — cells and aprons — comes
+    /// from the window, so the bricks are overwritten without being read first. The cells'
+    /// other copies (the aprons of the layers below and above) are written when those
+    /// layers are, from their own windows: a field written layer by layer this way is
+    /// consistent, and each brick moves once.
+    pub fn write_layer_window(
+        &self,
+        layer: usize,
+        z_lo: usize,
+        window: &[f32],
+    ) -> Result<(), PagingError> {
+        let [nx, ny, nz] = self.geometry.dims();
+        let b = self.layout.brick();
+        let plane = nx * ny;
+        let expected_lo = (layer * b).saturating_sub(1);
+        let z_hi = (layer * b + b + 1).min(nz);
+        if layer >= self.layout.bricks()[2]
+            || z_lo != expected_lo
+            || window.len() != plane * (z_hi - z_lo)
+        {
+            return Err(PagingError::Shape(format!(
+                "write_layer_window: layer {layer} of {} from slab {z_lo} with {} values \
+                 (expects slabs {expected_lo}..{z_hi})",
+                self.layout.bricks()[2],
+                window.len()
+            )));
+        }
+        let edge = self.layout.stored_edge();
+        let [bx, by, _] = self.layout.bricks();
+        let ids: Vec<usize> = (0..by)
+            .flat_map(|bj| (0..bx).map(move |bi| [bi, bj, layer]))
+            .map(|c| self.layout.id(c))
+            .collect();
+        ids.par_iter().try_for_each(|&id| {
+            let o = self.layout.origin(id);
+            let cell = |a: usize, s: usize, n: usize| (o[a] + s).saturating_sub(1).min(n - 1);
+            let mut pin = self.pager.overwrite(self.first + id)?;
+            self.paged[id].store(true, Ordering::Release);
+            for sk in 0..edge {
+                let z = cell(2, sk, nz);
+                for sj in 0..edge {
+                    let y = cell(1, sj, ny);
+                    let at = sk * edge * edge + sj * edge;
+                    let row = (z - z_lo) * plane + y * nx;
+                    for si in 0..edge {
+                        pin[at + si] = window[row + cell(0, si, nx)];
+                    }
+                }
+            }
+            self.set_range(id, &pin);
+            Ok::<_, PagingError>(())
+        })
+    }
+
     /// Writes slabs z ∈ [z0, z0 + n) from `data` (x fastest) into every stored copy of
     /// their cells: the owning bricks and the neighbours' aprons (clamped copies at the
     /// grid's faces included). Constant bricks that change become paged; bricks whose

@@ -24,6 +24,9 @@
 //!   never sees a stale neighbour.
 //! - [`for_each_layer`]: a field streamed through a stencil brick layer by brick layer (the
 //!   z-slab order), the next layer prefetched on a helper thread.
+//! - [`skewed_steps`] and [`skewed_steps_paged`]: time skewing — T steps of a stencil one
+//!   slab deep in one pass over the field, each brick moved once per T steps, the result
+//!   bit for bit T plain sweeps: out of core at about in-memory speed.
 //!
 //! ## Units and limits
 //!
@@ -68,4 +71,4 @@ pub use error::PagingError;
 pub use field::{BrickView, PagedCorners, PagedGrid};
 pub use pager::{Eviction, Pager, PagerOptions, PagerStats, ReadPin, WritePin};
 pub use store::{BrickStore, FileStore, MemoryStore};
-pub use stream::for_each_layer;
+pub use stream::{for_each_layer, skewed_steps, skewed_steps_paged};

@@ -2,6 +2,7 @@
 //! layer prefetched while the current one is worked on (Bernabei's precomputed streaming
 //! order, for stencils the z-slab order).
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
 
 use crate::error::PagingError;
@@ -62,6 +63,194 @@ pub fn for_each_layer(
                 Ok(Err(e)) if result.is_ok() => result = Err(e),
                 Ok(_) => {}
                 // A panic in the helper is a bug: it goes on unwinding here.
+                Err(panic) => std::panic::resume_unwind(panic),
+            }
+        }
+        result
+    })
+}
+
+/// `steps` steps of a stencil one slab deep (a 7-point stencil, FTCS), in **one** pass
+/// over a field in z order: time skewing (temporal blocking along z).
+///
+/// Slab z of step t needs slabs z − 1, z, z + 1 of step t − 1. So as slab z_in of the
+/// input arrives, slab z_in − 1 of step 1, slab z_in − 2 of step 2, …, slab z_in − t of
+/// step t can be computed, each from a ring of three slabs of the step before; slab
+/// z_in − `steps` of the last step is final and leaves through `write`. Every slab is read
+/// once and written once per `steps` steps, and the working set is 3 · `steps` slabs (plus
+/// the caller's buffers), which fits in cache for moderate slabs — so the pass is faster
+/// per step than `steps` plain sweeps even in memory, and out of core it divides the
+/// traffic to the backing store by `steps`.
+///
+/// - `read(z, slab)` fills slab z of the input (called for z = 0, 1, …, n_z − 1 in order);
+/// - `write(z, slab)` takes slab z of step `steps` (in order);
+/// - `step(t, z, [below, at, above], out)` computes slab z of step t (1 ≤ t ≤ `steps`)
+///   from step t − 1, whose slabs are clamped at the grid's faces (`below` is slab 0 at
+///   z = 0 and `above` is slab n_z − 1 at the top; a scheme with other boundaries reads z).
+///
+/// The result is bit for bit `steps` plain sweeps of `step`, in any order of cells: each
+/// cell's arithmetic is the caller's and sees the same inputs. With `steps` = 0 the input
+/// is copied.
+pub fn skewed_steps(
+    dims: [usize; 3],
+    steps: usize,
+    mut read: impl FnMut(usize, &mut [f32]) -> Result<(), PagingError>,
+    mut write: impl FnMut(usize, &[f32]) -> Result<(), PagingError>,
+    step: impl Fn(usize, usize, [&[f32]; 3], &mut [f32]),
+) -> Result<(), PagingError> {
+    let [nx, ny, nz] = dims;
+    let plane = nx * ny;
+    if nz == 0 || plane == 0 {
+        return Ok(());
+    }
+    // rings[t]: slabs of step t (0 = the input) at ring positions z mod 3.
+    let mut rings: Vec<Vec<f32>> = vec![vec![0.0; 3 * plane]; steps.max(1)];
+    let mut last = vec![0.0f32; plane];
+    let slot = |z: usize| (z % 3) * plane..(z % 3 + 1) * plane;
+    for z_in in 0..nz + steps {
+        if z_in < nz {
+            read(z_in, &mut rings[0][slot(z_in)])?;
+            if steps == 0 {
+                write(z_in, &rings[0][slot(z_in)])?;
+                continue;
+            }
+        }
+        for t in 1..=steps.min(z_in) {
+            let z = z_in - t;
+            if z >= nz {
+                continue;
+            }
+            let (before, after) = rings.split_at_mut(t);
+            let previous = &before[t - 1];
+            let inputs = [
+                &previous[slot(z.saturating_sub(1))],
+                &previous[slot(z)],
+                &previous[slot((z + 1).min(nz - 1))],
+            ];
+            if t == steps {
+                step(t, z, inputs, &mut last);
+                write(z, &last)?;
+            } else {
+                step(t, z, inputs, &mut after[0][slot(z)]);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// [`skewed_steps`] from one paged field into another: the input is read brick layer by
+/// brick layer ([`PagedGrid::read_slabs`]) with its next layer prefetched on a helper
+/// thread (with `prefetch`), and the output written a whole brick layer at a time, aprons
+/// included, once the slabs its bricks store are done ([`PagedGrid::write_layer_window`]:
+/// the output's bricks are overwritten, never read). Each brick of each field moves once
+/// per call, whatever `steps` is.
+///
+/// Prefetch needs room: the layer being read, the layer being prefetched and the output
+/// layer being written must fit in the pool together, or the prefetched bricks are
+/// evicted before they are used and read twice (measured: twice the reads at 1/16
+/// resident on 16 layers, `cargo xtask bench-paging`). Below that, `prefetch` is ignored.
+pub fn skewed_steps_paged(
+    input: &PagedGrid,
+    output: &PagedGrid,
+    steps: usize,
+    prefetch: bool,
+    step: impl Fn(usize, usize, [&[f32]; 3], &mut [f32]),
+) -> Result<(), PagingError> {
+    let dims = input.geometry().dims();
+    if output.geometry().dims() != dims {
+        return Err(PagingError::Shape(format!(
+            "skewed_steps_paged: an input of {dims:?} cells into an output of {:?}",
+            output.geometry().dims()
+        )));
+    }
+    let [nx, ny, nz] = dims;
+    let plane = nx * ny;
+    let b_in = input.layout().brick();
+    let b_out = output.layout().brick();
+    let layers_out = output.layout().bricks()[2];
+    let per_layer = |field: &PagedGrid| {
+        let [bx, by, _] = field.layout().bricks();
+        bx * by
+    };
+    let shared = std::sync::Arc::ptr_eq(input.pager(), output.pager());
+    let room = 2 * per_layer(input) + if shared { per_layer(output) } else { 0 };
+    let prefetch = prefetch && input.pager().capacity() >= room;
+    let layer_bricks = |z: usize| -> Vec<usize> {
+        input
+            .layout()
+            .bricks_of_slabs(z, z + 1)
+            .map(|id| input.pager_brick(id))
+            .collect()
+    };
+    // The first input slab not yet read: a prefetch that arrives after its layer was read
+    // (the helper fell behind) is skipped instead of loading the layer a second time.
+    let read_up_to = AtomicUsize::new(0);
+    std::thread::scope(|scope| {
+        let (sender, receiver) = mpsc::channel::<usize>();
+        let read_up_to = &read_up_to;
+        let helper = prefetch.then(|| {
+            scope.spawn(move || -> Result<(), PagingError> {
+                for z in receiver {
+                    if z >= read_up_to.load(Ordering::Acquire) {
+                        input.pager().prefetch(layer_bricks(z))?;
+                    }
+                }
+                Ok(())
+            })
+        });
+        // The input's current brick layer.
+        let mut layer_in: (usize, Vec<f32>) = (usize::MAX, Vec::new());
+        // The output's slabs from `out_lo` on, and the next output layer to write.
+        let mut out_lo = 0;
+        let mut out: Vec<f32> = Vec::with_capacity(plane * (b_out + 2));
+        let mut next_layer = 0;
+        let result = skewed_steps(
+            dims,
+            steps,
+            |z, slab| {
+                let layer = z / b_in;
+                if layer_in.0 != layer {
+                    let (z0, z1) = (layer * b_in, ((layer + 1) * b_in).min(nz));
+                    if prefetch && z1 < nz {
+                        let _ = sender.send(z1);
+                    }
+                    layer_in.1.resize(plane * (z1 - z0), 0.0);
+                    read_up_to.store(z1, Ordering::Release);
+                    input.read_slabs(z0, z1, &mut layer_in.1)?;
+                    layer_in.0 = layer;
+                }
+                let at = (z - layer * b_in) * plane;
+                slab.copy_from_slice(&layer_in.1[at..at + plane]);
+                Ok(())
+            },
+            |z, slab| {
+                debug_assert_eq!(z, out_lo + out.len() / plane);
+                out.extend_from_slice(slab);
+                // Write every layer whose window is complete, then keep only the slabs the
+                // next layer's window starts with.
+                while next_layer < layers_out {
+                    let z_lo = (next_layer * b_out).saturating_sub(1);
+                    let z_hi = (next_layer * b_out + b_out + 1).min(nz);
+                    if z + 1 < z_hi {
+                        break;
+                    }
+                    let window = &out[(z_lo - out_lo) * plane..(z_hi - out_lo) * plane];
+                    output.write_layer_window(next_layer, z_lo, window)?;
+                    next_layer += 1;
+                    let keep = (next_layer * b_out).saturating_sub(1).clamp(out_lo, z + 1);
+                    out.drain(..(keep - out_lo) * plane);
+                    out_lo = keep;
+                }
+                Ok(())
+            },
+            step,
+        );
+        drop(sender);
+        let mut result = result;
+        if let Some(helper) = helper {
+            match helper.join() {
+                Ok(Err(e)) if result.is_ok() => result = Err(e),
+                Ok(_) => {}
                 Err(panic) => std::panic::resume_unwind(panic),
             }
         }
