@@ -784,8 +784,7 @@ impl Scene {
         let bookkeeping = 8 * layout.count() as u64 * 21 + (nx * ny).max(1) as u64 * 40;
         let pool = budget.saturating_sub(4 * layer(brick) + bookkeeping + budget / 16);
         let brick_bytes = layout.stored_len() as u64 * 4;
-        let store = lucent_paging::FileStore::create(layout.stored_len())
-            .map_err(|e| invalid(e.to_string()))?;
+        let store = lucent_paging::FileStore::create().map_err(|e| invalid(e.to_string()))?;
         let pager = lucent_paging::Pager::new(
             Box::new(store),
             0,

@@ -130,7 +130,7 @@ pub(crate) fn run(n: usize, brick: usize) -> Result<(), String> {
             let slots = (2 * layout.count() / 16).max(8);
             let pager = Arc::new(
                 Pager::new(
-                    Box::new(FileStore::create(layout.stored_len()).map_err(err)?),
+                    Box::new(FileStore::create().map_err(err)?),
                     0,
                     layout.stored_len(),
                     1,
@@ -254,7 +254,7 @@ pub(crate) fn run(n: usize, brick: usize) -> Result<(), String> {
         let slots = (2 * layout.count() / 16).max(8);
         let pager = Arc::new(
             Pager::new(
-                Box::new(FileStore::create(layout.stored_len()).map_err(err)?),
+                Box::new(FileStore::create().map_err(err)?),
                 0,
                 layout.stored_len(),
                 1,
@@ -316,7 +316,7 @@ pub(crate) fn run(n: usize, brick: usize) -> Result<(), String> {
         for eviction in [Eviction::Lru, Eviction::Nru] {
             let pager = Arc::new(
                 Pager::new(
-                    Box::new(FileStore::create(layout.stored_len()).map_err(err)?),
+                    Box::new(FileStore::create().map_err(err)?),
                     0,
                     layout.stored_len(),
                     1,

@@ -82,7 +82,7 @@ pub(crate) fn run(
     let start = Instant::now();
     let pager = Arc::new(
         Pager::new(
-            Box::new(FileStore::create(layout.stored_len()).map_err(|e| e.to_string())?),
+            Box::new(FileStore::create().map_err(|e| e.to_string())?),
             0,
             layout.stored_len(),
             1,

@@ -217,7 +217,7 @@ impl PagedProblem {
     /// metadata of `fields` fields.
     pub fn overhead_bytes(&self, fields: usize) -> u64 {
         let count = self.layout().count() as u64;
-        count * fields as u64 * (Pager::TABLE_BYTES_PER_BRICK + PagedGrid::BYTES_PER_BRICK)
+        count * fields as u64 * (Pager::<f32>::TABLE_BYTES_PER_BRICK + PagedGrid::BYTES_PER_BRICK)
     }
 }
 

@@ -73,7 +73,7 @@ fn pager(brick: usize, fraction: f64, bricks_per_field: usize, fields: usize) ->
         .max(4.0) as u64;
     Arc::new(
         Pager::new(
-            Box::new(FileStore::create(len).unwrap()),
+            Box::new(FileStore::create().unwrap()),
             0,
             len,
             1,

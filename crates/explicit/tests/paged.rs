@@ -37,7 +37,7 @@ fn pager(brick: usize, fraction: f64, fields: usize) -> Arc<Pager> {
         .max(4.0) as u64;
     Arc::new(
         Pager::new(
-            Box::new(FileStore::create(len).unwrap()),
+            Box::new(FileStore::create().unwrap()),
             0,
             len,
             1,

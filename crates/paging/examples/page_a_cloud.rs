@@ -26,7 +26,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let brick = 16;
     let layout = BrickLayout::new(geometry.dims(), brick)?;
     let pager = Arc::new(Pager::new(
-        Box::new(FileStore::create(layout.stored_len())?),
+        Box::new(FileStore::create()?),
         0,
         layout.stored_len(),
         1,

@@ -49,7 +49,7 @@
 //! // Bricks of 8³ cells, stored with their apron as 10³ values: a pool of 16 of them.
 //! let brick_len = BrickLayout::new(geometry.dims(), 8)?.stored_len();
 //! let pager = Arc::new(Pager::new(
-//!     Box::new(FileStore::create(brick_len)?),
+//!     Box::new(FileStore::create()?),
 //!     0,
 //!     brick_len,
 //!     4,
@@ -69,6 +69,6 @@ mod stream;
 
 pub use error::PagingError;
 pub use field::{BrickView, PagedCorners, PagedGrid};
-pub use pager::{Eviction, Pager, PagerOptions, PagerStats, ReadPin, WritePin};
+pub use pager::{Element, Eviction, Pager, PagerOptions, PagerStats, ReadPin, WritePin};
 pub use store::{BrickStore, FileStore, MemoryStore};
 pub use stream::{for_each_layer, skewed_steps, skewed_steps_paged};

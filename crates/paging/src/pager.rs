@@ -85,18 +85,24 @@ impl PagerStats {
     }
 }
 
+/// What a brick holds: plain numbers that are their bytes (f32 fields; f64 where a
+/// solver's state needs it, e.g. iterates whose stopping test sits below f32 rounding).
+pub trait Element: bytemuck::Pod + Send + Sync + std::fmt::Debug {}
+impl Element for f32 {}
+impl Element for f64 {}
+
 /// Options of a [`Pager`].
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PagerOptions {
+pub struct PagerOptions<T = f32> {
     /// Bytes the pool's slots may take.
     pub budget_bytes: u64,
     /// The eviction policy.
     pub eviction: Eviction,
     /// The value of a brick that was never written.
-    pub fill: f32,
+    pub fill: T,
 }
 
-type Slot = Arc<RwLock<Vec<f32>>>;
+type Slot<T> = Arc<RwLock<Vec<T>>>;
 
 /// Where a brick is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -120,9 +126,9 @@ struct SlotMeta {
 }
 
 #[derive(Debug)]
-struct State {
+struct State<T> {
     table: Vec<Entry>,
-    slots: Vec<Slot>,
+    slots: Vec<Slot<T>>,
     meta: Vec<Option<SlotMeta>>,
     free: Vec<u32>,
     hand: usize,
@@ -130,50 +136,52 @@ struct State {
     stats: PagerStats,
 }
 
-/// A fixed pool of brick slots over a [`BrickStore`].
+/// A fixed pool of brick slots of `T` values (f32 unless said) over a [`BrickStore`]. The
+/// element type follows [`PagerOptions::fill`] where nothing else fixes it: write
+/// `fill: 0.0f32` for a pager used on its own (a bare `0.0` is an f64).
 #[derive(Debug)]
-pub struct Pager {
+pub struct Pager<T: Element = f32> {
     store: Box<dyn BrickStore>,
     brick_len: usize,
     capacity: usize,
-    options: PagerOptions,
-    state: Mutex<State>,
+    options: PagerOptions<T>,
+    state: Mutex<State<T>>,
 }
 
 /// A brick pinned for reading: its values, which stay resident and unchanged while the
 /// pin lives.
-pub struct ReadPin(ArcRwLockReadGuard<RawRwLock, Vec<f32>>);
+pub struct ReadPin<T = f32>(ArcRwLockReadGuard<RawRwLock, Vec<T>>);
 
 /// A brick pinned for writing (marked dirty): written back when it leaves the pool.
-pub struct WritePin(ArcRwLockWriteGuard<RawRwLock, Vec<f32>>);
+pub struct WritePin<T = f32>(ArcRwLockWriteGuard<RawRwLock, Vec<T>>);
 
-impl std::ops::Deref for ReadPin {
-    type Target = [f32];
-    fn deref(&self) -> &[f32] {
+impl<T> std::ops::Deref for ReadPin<T> {
+    type Target = [T];
+    fn deref(&self) -> &[T] {
         &self.0
     }
 }
 
-impl std::ops::Deref for WritePin {
-    type Target = [f32];
-    fn deref(&self) -> &[f32] {
+impl<T> std::ops::Deref for WritePin<T> {
+    type Target = [T];
+    fn deref(&self) -> &[T] {
         &self.0
     }
 }
 
-impl std::ops::DerefMut for WritePin {
-    fn deref_mut(&mut self) -> &mut [f32] {
+impl<T> std::ops::DerefMut for WritePin<T> {
+    fn deref_mut(&mut self) -> &mut [T] {
         &mut self.0
     }
 }
 
-impl std::fmt::Debug for ReadPin {
+impl<T> std::fmt::Debug for ReadPin<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "ReadPin({} values)", self.0.len())
     }
 }
 
-impl std::fmt::Debug for WritePin {
+impl<T> std::fmt::Debug for WritePin<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "WritePin({} values)", self.0.len())
     }
@@ -188,12 +196,18 @@ enum Access {
     Overwrite,
 }
 
-impl Pager {
+/// Bytes of bookkeeping per brick of a pager's table (besides the pool).
+const TABLE_BYTES_PER_BRICK: u64 = std::mem::size_of::<Entry>() as u64;
+
+impl<T: Element> Pager<T> {
     /// Bytes of bookkeeping per brick of the table (besides the pool).
-    pub const TABLE_BYTES_PER_BRICK: u64 = std::mem::size_of::<Entry>() as u64;
+    pub const TABLE_BYTES_PER_BRICK: u64 = TABLE_BYTES_PER_BRICK;
+
+    /// Bytes per value.
+    const VALUE_BYTES: u64 = std::mem::size_of::<T>() as u64;
 
     /// A pager of `bricks` bricks of `brick_len` values over `store`, whose pool holds
-    /// `options.budget_bytes / (4 · brick_len)` slots. Fails with
+    /// `options.budget_bytes / (brick_len · size of T)` slots. Fails with
     /// [`PagingError::BudgetTooSmall`] unless the pool holds `min_slots` bricks (the working
     /// set of one step of its user), before anything is allocated.
     pub fn new(
@@ -201,9 +215,9 @@ impl Pager {
         bricks: usize,
         brick_len: usize,
         min_slots: usize,
-        options: PagerOptions,
+        options: PagerOptions<T>,
     ) -> Result<Self, PagingError> {
-        let brick_bytes = brick_len.max(1) as u64 * 4;
+        let brick_bytes = brick_len.max(1) as u64 * Self::VALUE_BYTES;
         let capacity = (options.budget_bytes / brick_bytes).min(u32::MAX as u64 - 1) as usize;
         if capacity < min_slots.max(1) {
             return Err(PagingError::BudgetTooSmall {
@@ -260,7 +274,7 @@ impl Pager {
     }
 
     /// The options.
-    pub fn options(&self) -> &PagerOptions {
+    pub fn options(&self) -> &PagerOptions<T> {
         &self.options
     }
 
@@ -275,27 +289,27 @@ impl Pager {
     }
 
     /// Pins `brick` for reading.
-    pub fn read(&self, brick: usize) -> Result<ReadPin, PagingError> {
+    pub fn read(&self, brick: usize) -> Result<ReadPin<T>, PagingError> {
         let slot = self.pin(brick, Access::Read)?;
         Ok(ReadPin(slot.read_arc()))
     }
 
     /// Pins `brick` for writing (it is marked dirty).
-    pub fn write(&self, brick: usize) -> Result<WritePin, PagingError> {
+    pub fn write(&self, brick: usize) -> Result<WritePin<T>, PagingError> {
         let slot = self.pin(brick, Access::Write)?;
         Ok(WritePin(slot.write_arc()))
     }
 
     /// Pins `brick` for writing without loading it: the caller writes every value (the
     /// pin's values are unspecified until then).
-    pub fn overwrite(&self, brick: usize) -> Result<WritePin, PagingError> {
+    pub fn overwrite(&self, brick: usize) -> Result<WritePin<T>, PagingError> {
         let slot = self.pin(brick, Access::Overwrite)?;
         Ok(WritePin(slot.write_arc()))
     }
 
     /// Writes `values` as brick `brick` straight to the store, without a slot (building a
     /// field larger than the pool). A resident copy is replaced in place.
-    pub fn store_brick(&self, brick: usize, values: &[f32]) -> Result<(), PagingError> {
+    pub fn store_brick(&self, brick: usize, values: &[T]) -> Result<(), PagingError> {
         if values.len() != self.brick_len {
             return Err(PagingError::Shape(format!(
                 "store_brick: {} values for bricks of {}",
@@ -315,7 +329,7 @@ impl Pager {
     }
 
     /// A write pin of `brick` if it is resident (no load), else an error.
-    fn resident_write(&self, brick: usize) -> Result<WritePin, ()> {
+    fn resident_write(&self, brick: usize) -> Result<WritePin<T>, ()> {
         let slot = {
             let mut state = self.state.lock();
             match state.table.get(brick) {
@@ -388,7 +402,7 @@ impl Pager {
         Ok(())
     }
 
-    fn check(&self, state: &State, brick: usize) -> Result<(), PagingError> {
+    fn check(&self, state: &State<T>, brick: usize) -> Result<(), PagingError> {
         if brick < state.table.len() {
             Ok(())
         } else {
@@ -401,7 +415,7 @@ impl Pager {
 
     /// The slot of `brick`, resident after this call and referenced by the returned Arc
     /// (so not evictable until the caller's pin is dropped).
-    fn pin(&self, brick: usize, access: Access) -> Result<Slot, PagingError> {
+    fn pin(&self, brick: usize, access: Access) -> Result<Slot<T>, PagingError> {
         let mut state = self.state.lock();
         self.check(&state, brick)?;
         state.tick += 1;
@@ -429,13 +443,19 @@ impl Pager {
     /// Puts `brick` (not resident) into a slot: a free one, a new one while the pool is
     /// below its capacity, or the victim of the eviction policy (written back first if
     /// dirty). Under the state lock.
-    fn load(&self, state: &mut State, brick: usize, access: Access) -> Result<usize, PagingError> {
+    fn load(
+        &self,
+        state: &mut State<T>,
+        brick: usize,
+        access: Access,
+    ) -> Result<usize, PagingError> {
         let s = if let Some(s) = state.free.pop() {
             s as usize
         } else if state.slots.len() < self.capacity {
-            state
-                .slots
-                .push(Arc::new(RwLock::new(vec![0.0; self.brick_len])));
+            state.slots.push(Arc::new(RwLock::new(vec![
+                self.options.fill;
+                self.brick_len
+            ])));
             state.meta.push(None);
             state.slots.len() - 1
         } else {
@@ -449,7 +469,8 @@ impl Pager {
             match (access, entry) {
                 (Access::Overwrite, _) => {}
                 (_, Entry::Stored) => {
-                    if let Err(source) = self.store.read(brick, &mut data) {
+                    if let Err(source) = self.store.read(brick, bytemuck::cast_slice_mut(&mut data))
+                    {
                         drop(data);
                         state.free.push(s as u32);
                         return Err(PagingError::Io {
@@ -459,7 +480,7 @@ impl Pager {
                             source,
                         });
                     }
-                    state.stats.bytes_read += self.brick_len as u64 * 4;
+                    state.stats.bytes_read += self.brick_len as u64 * Self::VALUE_BYTES;
                 }
                 _ => data.fill(self.options.fill),
             }
@@ -476,9 +497,9 @@ impl Pager {
     }
 
     /// Frees a slot by the eviction policy; its brick is written back first if dirty.
-    fn evict(&self, state: &mut State) -> Result<usize, PagingError> {
+    fn evict(&self, state: &mut State<T>) -> Result<usize, PagingError> {
         let n = state.slots.len();
-        let unpinned = |state: &State, s: usize| Arc::strong_count(&state.slots[s]) == 1;
+        let unpinned = |state: &State<T>, s: usize| Arc::strong_count(&state.slots[s]) == 1;
         let victim = match self.options.eviction {
             Eviction::Lru => (0..n)
                 .filter(|&s| unpinned(state, s) && state.meta[s].is_some())
@@ -527,17 +548,17 @@ impl Pager {
         &self,
         stats: &mut PagerStats,
         brick: usize,
-        data: &[f32],
+        data: &[T],
     ) -> Result<(), PagingError> {
         self.store
-            .write(brick, data)
+            .write(brick, bytemuck::cast_slice(data))
             .map_err(|source| PagingError::Io {
                 action: "writing",
                 brick,
                 store: self.store.describe(),
                 source,
             })?;
-        stats.bytes_written += data.len() as u64 * 4;
+        stats.bytes_written += data.len() as u64 * Self::VALUE_BYTES;
         Ok(())
     }
 }

@@ -16,29 +16,31 @@ use std::path::{Path, PathBuf};
 
 use crate::error::PagingError;
 
-/// A place bricks of `brick_len` f32 values are written to and read back from, by number.
+/// A place bricks are written to and read back from, by number, as bytes. Every brick of
+/// one store has the same size (the pager's brick length times its element's size), so
+/// brick `b` of a file lives at byte `b` times that size.
 pub trait BrickStore: Send + Sync + Debug {
-    /// Reads brick `brick` into `out` (`brick_len` values). Only bricks written before are
+    /// Reads brick `brick` into `out` (the brick's bytes). Only bricks written before are
     /// read.
-    fn read(&self, brick: usize, out: &mut [f32]) -> io::Result<()>;
-    /// Writes brick `brick` (`brick_len` values).
-    fn write(&self, brick: usize, data: &[f32]) -> io::Result<()>;
+    fn read(&self, brick: usize, out: &mut [u8]) -> io::Result<()>;
+    /// Writes brick `brick` (its bytes).
+    fn write(&self, brick: usize, data: &[u8]) -> io::Result<()>;
     /// What the store is, for messages (a file's path).
     fn describe(&self) -> String;
 }
 
 /// Bricks in an unnamed temporary file (removed by the operating system when the store
-/// is dropped, or the process ends, however it ends), brick `b` at byte `b · 4 · brick_len`.
+/// is dropped, or the process ends, however it ends), brick `b` at byte `b` times the
+/// brick's size.
 #[derive(Debug)]
 pub struct FileStore {
     file: File,
     dir: PathBuf,
-    brick_bytes: u64,
 }
 
 impl FileStore {
-    /// A new backing file in `dir` for bricks of `brick_len` values.
-    pub fn create_in(dir: &Path, brick_len: usize) -> Result<Self, PagingError> {
+    /// A new backing file in `dir`.
+    pub fn create_in(dir: &Path) -> Result<Self, PagingError> {
         let file = tempfile::tempfile_in(dir).map_err(|source| PagingError::Create {
             dir: dir.to_owned(),
             source,
@@ -46,31 +48,22 @@ impl FileStore {
         Ok(Self {
             file,
             dir: dir.to_owned(),
-            brick_bytes: brick_len as u64 * 4,
         })
     }
 
     /// A new backing file in the system's temporary folder (`TMPDIR`).
-    pub fn create(brick_len: usize) -> Result<Self, PagingError> {
-        Self::create_in(&std::env::temp_dir(), brick_len)
-    }
-
-    fn offset(&self, brick: usize) -> u64 {
-        brick as u64 * self.brick_bytes
+    pub fn create() -> Result<Self, PagingError> {
+        Self::create_in(&std::env::temp_dir())
     }
 }
 
 impl BrickStore for FileStore {
-    fn read(&self, brick: usize, out: &mut [f32]) -> io::Result<()> {
-        read_at(
-            &self.file,
-            bytemuck::cast_slice_mut(out),
-            self.offset(brick),
-        )
+    fn read(&self, brick: usize, out: &mut [u8]) -> io::Result<()> {
+        read_at(&self.file, out, brick as u64 * out.len() as u64)
     }
 
-    fn write(&self, brick: usize, data: &[f32]) -> io::Result<()> {
-        write_at(&self.file, bytemuck::cast_slice(data), self.offset(brick))
+    fn write(&self, brick: usize, data: &[u8]) -> io::Result<()> {
+        write_at(&self.file, data, brick as u64 * data.len() as u64)
     }
 
     fn describe(&self) -> String {
@@ -121,11 +114,11 @@ fn write_at(file: &File, mut buf: &[u8], mut offset: u64) -> io::Result<()> {
 /// Bricks kept in memory: for tests, and for fields whose budget holds them anyway.
 #[derive(Debug, Default)]
 pub struct MemoryStore {
-    bricks: parking_lot::Mutex<std::collections::HashMap<usize, Vec<f32>>>,
+    bricks: parking_lot::Mutex<std::collections::HashMap<usize, Vec<u8>>>,
 }
 
 impl BrickStore for MemoryStore {
-    fn read(&self, brick: usize, out: &mut [f32]) -> io::Result<()> {
+    fn read(&self, brick: usize, out: &mut [u8]) -> io::Result<()> {
         let bricks = self.bricks.lock();
         let data = bricks
             .get(&brick)
@@ -134,7 +127,7 @@ impl BrickStore for MemoryStore {
         Ok(())
     }
 
-    fn write(&self, brick: usize, data: &[f32]) -> io::Result<()> {
+    fn write(&self, brick: usize, data: &[u8]) -> io::Result<()> {
         self.bricks.lock().insert(brick, data.to_vec());
         Ok(())
     }

@@ -56,6 +56,83 @@ fn op(bricks: usize) -> impl Strategy<Value = Op> {
     ]
 }
 
+/// Runs `ops` on a pager of `bricks` bricks of `T` values under a pool of `slots`, against
+/// a reference: each brick written with tag t holds `value(t, i)` at index i; never written
+/// ones hold `fill`. Every read must see the last write, and nothing may be lost.
+fn run_ops<T: lucent_paging::Element + PartialEq>(
+    bricks: usize,
+    slots: u64,
+    nru: bool,
+    ops: &[Op],
+    value: impl Fn(f32, usize) -> T,
+    fill: T,
+) -> Result<(), TestCaseError> {
+    const LEN: usize = 27;
+    let eviction = if nru { Eviction::Nru } else { Eviction::Lru };
+    let size = std::mem::size_of::<T>() as u64;
+    let pager = Pager::new(
+        Box::new(FileStore::create().unwrap()),
+        bricks,
+        LEN,
+        1,
+        PagerOptions {
+            budget_bytes: slots * size * LEN as u64,
+            eviction,
+            fill,
+        },
+    )
+    .unwrap();
+    let mut reference: Vec<Option<f32>> = vec![None; bricks];
+    let expect = |tag: Option<f32>, i: usize| tag.map_or(fill, |t| value(t, i));
+    for op in ops {
+        match *op {
+            Op::Read(b) => {
+                let b = b % bricks;
+                let pin = pager.read(b).unwrap();
+                for (i, v) in pin.iter().enumerate() {
+                    prop_assert!(*v == expect(reference[b], i), "brick {} value {}", b, i);
+                }
+            }
+            Op::Write(b, tag) => {
+                let b = b % bricks;
+                let mut pin = pager.write(b).unwrap();
+                // A partial update after reading: the old values must be there.
+                for (i, v) in pin.iter_mut().enumerate() {
+                    prop_assert!(*v == expect(reference[b], i));
+                    *v = value(tag, i);
+                }
+                reference[b] = Some(tag);
+            }
+            Op::Overwrite(b, tag) => {
+                let b = b % bricks;
+                let mut pin = pager.overwrite(b).unwrap();
+                for (i, v) in pin.iter_mut().enumerate() {
+                    *v = value(tag, i);
+                }
+                reference[b] = Some(tag);
+            }
+            Op::Prefetch(b, n) => {
+                let b = b % bricks;
+                pager
+                    .prefetch((b..(b + n).min(bricks)).collect::<Vec<_>>())
+                    .unwrap();
+            }
+            Op::Flush => pager.flush().unwrap(),
+        }
+    }
+    // Nothing lost: every brick, resident or not, holds its last write.
+    for (b, tag) in reference.iter().enumerate() {
+        let pin = pager.read(b).unwrap();
+        for (i, v) in pin.iter().enumerate() {
+            prop_assert!(*v == expect(*tag, i));
+        }
+    }
+    let stats = pager.stats();
+    prop_assert!(stats.evictions <= stats.misses + stats.prefetched);
+    prop_assert!(stats.bytes_written.is_multiple_of(size * LEN as u64));
+    Ok(())
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
 
@@ -66,58 +143,20 @@ proptest! {
         nru in any::<bool>(),
         ops in proptest::collection::vec(op(40), 1..300),
     ) {
-        const LEN: usize = 27;
-        let eviction = if nru { Eviction::Nru } else { Eviction::Lru };
-        let store = Box::new(FileStore::create(LEN).unwrap());
-        let pager = pager(store, bricks, LEN, slots, eviction);
-        // The reference: each value of a brick is its tag plus its index, so a brick
-        // swapped with another, or a value moved inside a brick, shows.
-        let mut reference: Vec<Option<f32>> = vec![None; bricks];
-        let expect = |tag: Option<f32>, i: usize| tag.map_or(-1.0, |t| t + i as f32);
-        for op in ops {
-            match op {
-                Op::Read(b) => {
-                    let b = b % bricks;
-                    let pin = pager.read(b).unwrap();
-                    for (i, v) in pin.iter().enumerate() {
-                        prop_assert_eq!(*v, expect(reference[b], i), "brick {} value {}", b, i);
-                    }
-                }
-                Op::Write(b, tag) => {
-                    let b = b % bricks;
-                    let mut pin = pager.write(b).unwrap();
-                    // A partial update after reading: the old values must be there.
-                    for (i, v) in pin.iter_mut().enumerate() {
-                        prop_assert_eq!(*v, expect(reference[b], i));
-                        *v = tag + i as f32;
-                    }
-                    reference[b] = Some(tag);
-                }
-                Op::Overwrite(b, tag) => {
-                    let b = b % bricks;
-                    let mut pin = pager.overwrite(b).unwrap();
-                    for (i, v) in pin.iter_mut().enumerate() {
-                        *v = tag + i as f32;
-                    }
-                    reference[b] = Some(tag);
-                }
-                Op::Prefetch(b, n) => {
-                    let b = b % bricks;
-                    pager.prefetch((b..(b + n).min(bricks)).collect::<Vec<_>>()).unwrap();
-                }
-                Op::Flush => pager.flush().unwrap(),
-            }
-        }
-        // Nothing lost: every brick, resident or not, holds its last write.
-        for (b, tag) in reference.iter().enumerate() {
-            let pin = pager.read(b).unwrap();
-            for (i, v) in pin.iter().enumerate() {
-                prop_assert_eq!(*v, expect(*tag, i));
-            }
-        }
-        let stats = pager.stats();
-        prop_assert!(stats.evictions <= stats.misses + stats.prefetched);
-        prop_assert!(stats.bytes_written.is_multiple_of(4 * LEN as u64));
+        // f32 bricks: each value is its brick's tag plus its index.
+        run_ops(bricks, slots, nru, &ops, |tag: f32, i| tag + i as f32, -1.0)?;
+    }
+
+    #[test]
+    fn f64_bricks_keep_every_bit(
+        bricks in 3usize..40,
+        slots in 1u64..5,
+        nru in any::<bool>(),
+        ops in proptest::collection::vec(op(40), 1..300),
+    ) {
+        // f64 bricks with values no f32 holds (a 10⁻¹² step): a store or a pool that went
+        // through f32, or mixed up a brick's byte size, shows.
+        run_ops(bricks, slots, nru, &ops, |tag: f32, i| f64::from(tag) + 1e-12 * (i + 1) as f64, -1.0)?;
     }
 
     #[test]
@@ -133,7 +172,7 @@ proptest! {
         let layout = BrickLayout::new(dims, brick).unwrap();
         let len = layout.stored_len();
         let eviction = if nru { Eviction::Nru } else { Eviction::Lru };
-        let pager = Arc::new(pager(Box::new(FileStore::create(len).unwrap()), 0, len, slots, eviction));
+        let pager = Arc::new(pager(Box::new(FileStore::create().unwrap()), 0, len, slots, eviction));
         // Half empty space (constant bricks), half a ramp (stored bricks).
         let mut dense = Grid::from_fn(geometry, |p| if p.x < 0.5 * dims[0] as f64 * 0.1 { 0.0 } else { (p.x + 2.0 * p.y - p.z) as f32 });
         let field = PagedGrid::from_grid(pager.clone(), &dense, brick).unwrap();
@@ -247,7 +286,7 @@ fn threads_writing_their_own_bricks_lose_nothing() {
     const LEN: usize = 64;
     let bricks = 48;
     let pager = pager(
-        Box::new(FileStore::create(LEN).unwrap()),
+        Box::new(FileStore::create().unwrap()),
         bricks,
         LEN,
         6,
@@ -315,7 +354,7 @@ fn a_budget_below_the_working_set_is_refused_before_anything_is_allocated() {
         PagerOptions {
             budget_bytes: 7 * 4000,
             eviction: Eviction::Lru,
-            fill: 0.0,
+            fill: 0.0f32,
         },
     )
     .unwrap_err();
@@ -346,7 +385,7 @@ fn pinning_more_bricks_than_the_pool_holds_is_an_error_not_a_hang() {
 #[test]
 fn a_backing_file_that_cannot_be_created_is_an_error() {
     let missing = std::env::temp_dir().join("lucent-no-such-folder/deeper");
-    match FileStore::create_in(&missing, 10) {
+    match FileStore::create_in(&missing) {
         Err(e @ PagingError::Create { .. }) => {
             assert!(e.to_string().contains("lucent-no-such-folder"), "{e}")
         }
@@ -362,10 +401,10 @@ struct FlakyStore {
 }
 
 impl BrickStore for FlakyStore {
-    fn read(&self, brick: usize, out: &mut [f32]) -> io::Result<()> {
+    fn read(&self, brick: usize, out: &mut [u8]) -> io::Result<()> {
         self.inner.read(brick, out)
     }
-    fn write(&self, brick: usize, data: &[f32]) -> io::Result<()> {
+    fn write(&self, brick: usize, data: &[u8]) -> io::Result<()> {
         if self.full.load(Ordering::Relaxed) {
             return Err(io::Error::new(
                 io::ErrorKind::StorageFull,
@@ -385,10 +424,10 @@ fn a_failing_write_back_is_an_error_and_loses_nothing() {
     #[derive(Debug)]
     struct Shared(Arc<FlakyStore>);
     impl BrickStore for Shared {
-        fn read(&self, b: usize, out: &mut [f32]) -> io::Result<()> {
+        fn read(&self, b: usize, out: &mut [u8]) -> io::Result<()> {
             self.0.read(b, out)
         }
-        fn write(&self, b: usize, data: &[f32]) -> io::Result<()> {
+        fn write(&self, b: usize, data: &[u8]) -> io::Result<()> {
             self.0.write(b, data)
         }
         fn describe(&self) -> String {

@@ -128,7 +128,7 @@ proptest! {
         let slots = (3 * bx * by + 4) as u64;
         let pager = Arc::new(
             Pager::new(
-                Box::new(FileStore::create(layout.stored_len()).unwrap()),
+                Box::new(FileStore::create().unwrap()),
                 0,
                 layout.stored_len(),
                 1,
@@ -177,9 +177,7 @@ fn mismatched_fields_are_refused() {
     let b = initial([4, 4, 5]);
     let pager = Arc::new(
         Pager::new(
-            Box::new(
-                FileStore::create(BrickLayout::new([4, 4, 5], 2).unwrap().stored_len()).unwrap(),
-            ),
+            Box::new(FileStore::create().unwrap()),
             0,
             BrickLayout::new([4, 4, 5], 2).unwrap().stored_len(),
             1,
