@@ -91,7 +91,7 @@ fn step_one_slab(dims: [usize; 3], slabs: [&[f32]; 3], out: &mut [f32]) {
 }
 
 /// Runs the benchmark.
-pub(crate) fn run(n: usize, brick: usize) -> Result<(), String> {
+pub(crate) fn run(n: usize, brick: usize, dom_n: usize) -> Result<(), String> {
     let err = |e: PagingError| e.to_string();
     let geometry = GridGeometry::new([n; 3], DVec3::splat(1.0 / n as f64), DVec3::ZERO)
         .map_err(|e| e.to_string())?;
@@ -348,6 +348,118 @@ pub(crate) fn run(n: usize, brick: usize) -> Result<(), String> {
             row[0].evictions,
             row[1].evictions
         );
+    }
+    dom_sweep(dom_n)
+}
+
+/// One discrete-ordinates sweep (S6, 48 directions, HG g = 0.6, albedo 0.95, 16³ blocks)
+/// of a noise cloud at N³ with its per-direction work in memory, then paged with 1/16 of
+/// its pages resident under LRU and NRU (a backing file): seconds per sweep, the ratio,
+/// hit rate, bytes moved, and whether fluence and outflow are bit for bit equal.
+fn dom_sweep(n: usize) -> Result<(), String> {
+    use lucent::dom::angular::Ordinates;
+    use lucent::dom::{DomBoundary, DomProblem, DomSettings, SourceIteration};
+    let err = |e: &dyn std::fmt::Display| e.to_string();
+    let geometry =
+        GridGeometry::from_bounds([n; 3], DVec3::ZERO, DVec3::ONE).map_err(|e| err(&e))?;
+    let cloud = lucent_grid::procedural::NoiseCloud::new(7, DVec3::splat(0.5), 0.45);
+    let density = cloud.rasterize(geometry).map_err(|e| err(&e))?;
+    let peak = density.stats().max.max(f32::MIN_POSITIVE);
+    let sigma_t: Vec<f32> = density.data().iter().map(|v| v * 64.0 / peak).collect();
+    let ordinates = Ordinates::new(
+        lucent::optics::SphericalQuadrature::level_symmetric(6).map_err(|e| err(&e))?,
+        None,
+        lucent::optics::Phase::henyey_greenstein(0.6).map_err(|e| err(&e))?,
+    )
+    .map_err(|e| err(&e))?;
+    let m = ordinates.storage().len();
+    let problem = DomProblem {
+        geometry,
+        sigma_s: sigma_t.iter().map(|s| 0.95 * s).collect(),
+        fixed: sigma_t
+            .iter()
+            .flat_map(|s| std::iter::repeat_n(0.1 * s, m))
+            .collect(),
+        sigma_t,
+        boundary: DomBoundary {
+            radiance: 0.2,
+            reflectance: 0.0,
+        },
+    };
+    let settings = DomSettings::default();
+    let mut iteration =
+        SourceIteration::new(&problem, &ordinates, &settings).map_err(|e| err(&e))?;
+    let cell_directions = (n * n * n * ordinates.propagation().len()) as f64;
+    println!();
+    println!(
+        "Discrete-ordinates sweep at {n}³, S6 ({} directions), 16³ blocks, work {:.0} MB (f64):",
+        ordinates.propagation().len(),
+        iteration.work_bytes() as f64 / 1e6
+    );
+    println!(
+        "| work | resident | s per sweep (best of 3) | ns per cell-direction | vs in memory | hit rate | MB read / written per sweep | bit-identical |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    let mut best = f64::INFINITY;
+    let mut reference = None;
+    for _ in 0..3 {
+        let r = iteration.sweep_only(None).map_err(|e| err(&e))?;
+        best = best.min(r.seconds);
+        reference = Some(r);
+    }
+    let reference = reference.expect("three sweeps ran");
+    println!(
+        "| in memory | all | {best:.3} | {:.2} | 100 % | – | – | – |",
+        best / cell_directions * 1e9
+    );
+    let len = iteration.work_page_len();
+    for eviction in [Eviction::Lru, Eviction::Nru] {
+        let pages_total = iteration.work_bytes() / (8 * len as u64);
+        let slots = (pages_total / 16).max(1);
+        let pager = Arc::new(
+            Pager::new(
+                Box::new(FileStore::create().map_err(|e| err(&e))?),
+                0,
+                len,
+                1,
+                PagerOptions {
+                    budget_bytes: slots * 8 * len as u64,
+                    eviction,
+                    fill: 0.0f64,
+                },
+            )
+            .map_err(|e| err(&e))?,
+        );
+        let pages = iteration.work_pages(pager.clone()).map_err(|e| err(&e))?;
+        let mut seconds = f64::INFINITY;
+        let mut last = None;
+        for _ in 0..3 {
+            let r = iteration.sweep_only(Some(&pages)).map_err(|e| err(&e))?;
+            seconds = seconds.min(r.seconds);
+            last = Some(r);
+        }
+        let last = last.expect("three sweeps ran");
+        let stats = last.pager.unwrap_or_default();
+        let identical = last.outflow_power.to_bits() == reference.outflow_power.to_bits()
+            && last
+                .fluence
+                .iter()
+                .zip(&reference.fluence)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+        println!(
+            "| paged, {eviction:?} | {:.1} % ({slots} of {} pages) | {seconds:.3} | {:.2} | {:.0} % | {:.3} | {:.0} / {:.0} | {} |",
+            100.0 * slots as f64 / pages.pager().brick_count() as f64,
+            pages.pager().brick_count(),
+            seconds / cell_directions * 1e9,
+            100.0 * best / seconds,
+            stats.hit_rate(),
+            stats.bytes_read as f64 / 1e6,
+            stats.bytes_written as f64 / 1e6,
+            if identical { "yes" } else { "NO" }
+        );
+        if !identical {
+            return Err("the paged sweep differs from the in-memory one".into());
+        }
     }
     Ok(())
 }

@@ -31,10 +31,12 @@
 //!   volumes on the same box: assembly, bytes per unknown, solve time.
 //! - `bench-dom [N] [ORDER]`: a converged discrete-ordinates solve at N³ (128) with S_ORDER
 //!   (6: 48 directions), g = 0.6: wall time, sweeps, time per cell-direction and GB/s.
-//! - `bench-paging [N] [BRICK]`: an FTCS stencil swept in core and out of core (two paged
-//!   fields, 1/16 of their bricks resident, a backing file) at N³ (256) with B³ bricks
-//!   (16): time per sweep against in core, hit rates, bytes moved, LRU against NRU, with
-//!   and without prefetch, and whether the results are bit for bit equal.
+//! - `bench-paging [N] [BRICK] [DOM_N]`: an FTCS stencil swept in core and out of core (two
+//!   paged fields, 1/16 of their bricks resident, a backing file) at N³ (256) with B³
+//!   bricks (16): time per sweep against in core, hit rates, bytes moved, LRU against NRU,
+//!   with and without prefetch, time skewing (1–16 steps per pass); then a discrete-
+//!   ordinates sweep at DOM_N³ (128, S6) with its per-direction work in memory and paged at
+//!   1/16 resident; and whether the results are bit for bit equal.
 //! - `paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK]`: `direct` (or `convection-diffusion`)
 //!   on a sparse N³ cloud (256) out of core under a budget (32 MiB) and in memory: wall
 //!   time, measured peak resident memory, pager counters, and whether the results are bit
@@ -56,7 +58,7 @@ mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -115,7 +117,8 @@ fn main() -> ExitCode {
             .collect();
         let n = args.first().copied().unwrap_or(256);
         let brick = args.get(1).copied().unwrap_or(16);
-        return match bench_paging::run(n, brick) {
+        let dom_n = args.get(2).copied().unwrap_or(128);
+        return match bench_paging::run(n, brick, dom_n) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("xtask: bench-paging: {e}");

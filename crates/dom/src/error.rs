@@ -12,4 +12,14 @@ pub enum DomError {
     /// The DSA diffusion problem could not be set up.
     #[error("diffusion synthetic acceleration: {0}")]
     Diffusion(#[from] lucent_diffusion::DiffusionError),
+    /// The pager holding the sweeps' work failed (its message: a pool too small, a
+    /// backing file that could not be read or written).
+    #[error("paging the sweeps' work: {0}")]
+    Paging(String),
+}
+
+impl From<lucent_paging::PagingError> for DomError {
+    fn from(e: lucent_paging::PagingError) -> Self {
+        DomError::Paging(e.to_string())
+    }
 }

@@ -22,7 +22,9 @@
 //!   interpolation (Bernabei's is off by ±15%: docs/reference-cases.md), and a discrete phase
 //!   matrix normalised to conserve energy exactly and corrected to the phase function's g.
 //! - [`sweep`]: the eight octant sweeps, wavefronts of blocks (I + J + K = const), in
-//!   parallel over the blocks of a hyperplane and cell by cell inside each block.
+//!   parallel over the blocks of a hyperplane and cell by cell inside each block, each
+//!   block filling its own source; the per-direction work in memory or in f64 pages of a
+//!   pager ([`WorkPages`], [`SourceIteration::sweep_only`]), bit for bit the same.
 //! - [`closure`]: step, diamond difference with the set-to-zero fix-up, and Bernabei's
 //!   exponential face-to-face short characteristic (exact as σ_t → 0 and along axes; its
 //!   error at σ_t h ≥ 1 is measured in the tests).
@@ -89,6 +91,7 @@ pub use error::DomError;
 pub use params::{DomParams, Family};
 pub use solve::{
     Acceleration, DomBalance, DomBoundary, DomConvergence, DomProblem, DomSettings, DomSolution,
-    SourceIteration, solve,
+    SourceIteration, SweepOnly, solve,
 };
 pub use solver::{DomChannel, DomSolver};
+pub use sweep::WorkPages;

@@ -15,7 +15,7 @@ use crate::angular::Ordinates;
 use crate::closure::{CellDirection, Closure, DiamondClosure, ExponentialClosure, StepClosure};
 use crate::dsa::Dsa;
 use crate::error::DomError;
-use crate::sweep::{Layout, SweepInput, SweepOutput, sweep};
+use crate::sweep::{CellSource, Layout, SweepInput, SweepOutput, WorkPages, sweep, sweep_paged};
 
 /// Relative source changes below this are near the resolution of f32 storage (32 ε):
 /// there the ratio of successive changes is rounding noise, so the contraction measured
@@ -196,6 +196,19 @@ pub fn solve(
     SourceIteration::new(problem, ordinates, settings)?.run(stopping)
 }
 
+/// What [`SourceIteration::sweep_only`] measured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SweepOnly {
+    /// Scalar flux Σ w ψ̄ of the sweep per cell (grid order).
+    pub fluence: Vec<f64>,
+    /// Power leaving through the boundary.
+    pub outflow_power: f64,
+    /// Wall time of the sweep alone (s).
+    pub seconds: f64,
+    /// What the pager did during the sweep (paged work only).
+    pub pager: Option<lucent_paging::PagerStats>,
+}
+
 /// Wall time per step of the iteration (s).
 #[derive(Debug, Clone, Copy, Default)]
 struct Timings {
@@ -372,6 +385,92 @@ impl<'a> SourceIteration<'a> {
         self.ordinates.storage().len()
     }
 
+    /// Bytes of the per-direction work the sweeps hold in memory (cells × propagation
+    /// directions, f64): what paging it saves.
+    pub fn work_bytes(&self) -> u64 {
+        self.work.len() as u64 * 8
+    }
+
+    /// Pages for the sweeps' work in `pager`, whose bricks must be
+    /// [`SourceIteration::work_page_len`] values long.
+    pub fn work_pages(
+        &self,
+        pager: std::sync::Arc<lucent_paging::Pager<f64>>,
+    ) -> Result<WorkPages, DomError> {
+        Ok(WorkPages::new(&self.layout, self.ordinates, pager)?)
+    }
+
+    /// Values per page of the sweeps' work: one block's cells times one octant's
+    /// directions.
+    pub fn work_page_len(&self) -> usize {
+        WorkPages::page_len(&self.layout, self.ordinates)
+    }
+
+    /// One transport sweep of the current source (the fixed source plus σ_s times the
+    /// in-scattered radiance of the last transport step; none before the first), for
+    /// studies of its cost: the per-direction work in memory, or with `pages` in a pager —
+    /// each block's page of an octant pinned while the block is swept — by the same
+    /// arithmetic in the same order, so with the same bits. The source is filled in memory
+    /// and stored into the pages before the clock starts, and the iteration does not
+    /// advance: this measures the sweep out of core, not the solver's memory.
+    pub fn sweep_only(&mut self, pages: Option<&WorkPages>) -> Result<SweepOnly, DomError> {
+        // As in `transport`: the source is filled inside the sweep unless interpolated.
+        if let Some(transposed) = &self.interpolation {
+            interpolate(
+                &self.fixed,
+                &self.previous,
+                &self.sigma_s,
+                &self.octants,
+                transposed,
+                &mut self.work,
+            );
+            if let Some(pages) = pages {
+                pages.store(&self.layout, &self.work)?;
+            }
+        }
+        let input = SweepInput {
+            layout: &self.layout,
+            ordinates: self.ordinates,
+            geometry: &self.geometry,
+            sigma_t: &self.sigma_t,
+            inflow: &self.inflow,
+            spacing: self.spacing,
+            max_pinned: pages.map_or(usize::MAX, |p| p.pager().capacity()),
+            // The sweep fills the source itself when storage and propagation agree.
+            source: self.interpolation.is_none().then(|| CellSource {
+                fixed: &self.fixed,
+                previous: &self.previous,
+                sigma_s: &self.sigma_s,
+                storage: self.ordinates.storage().len(),
+            }),
+        };
+        let before = pages.map(|p| p.pager().stats());
+        let start = Instant::now();
+        let closure = self.settings.closure;
+        let out = match pages {
+            None => match closure {
+                Closure::Step => sweep::<StepClosure>(&input, &mut self.work),
+                Closure::Diamond => sweep::<DiamondClosure>(&input, &mut self.work),
+                Closure::Exponential => sweep::<ExponentialClosure>(&input, &mut self.work),
+            },
+            Some(pages) => match closure {
+                Closure::Step => sweep_paged::<StepClosure>(&input, pages)?,
+                Closure::Diamond => sweep_paged::<DiamondClosure>(&input, pages)?,
+                Closure::Exponential => sweep_paged::<ExponentialClosure>(&input, pages)?,
+            },
+        };
+        let seconds = start.elapsed().as_secs_f64();
+        let pager = pages
+            .zip(before)
+            .map(|(p, before)| p.pager().stats().since(&before));
+        Ok(SweepOnly {
+            fluence: self.layout.to_grid(&out.fluence, 1),
+            outflow_power: out.outflow_power,
+            seconds,
+            pager,
+        })
+    }
+
     /// One transport step: the source at the propagation directions,
     /// S_n = W (Q + σ_s J) (W = 1 when storage is propagation), swept once with the
     /// boundary's inflow, and the in-scattered radiance toward each storage direction
@@ -379,22 +478,17 @@ impl<'a> SourceIteration<'a> {
     /// matrix.
     fn transport(&mut self) -> SweepOutput {
         let t = Instant::now();
-        match &self.interpolation {
-            None => fill(
-                &self.fixed,
-                &self.previous,
-                &self.sigma_s,
-                &self.octants,
-                &mut self.work,
-            ),
-            Some(transposed) => interpolate(
+        // With storage = propagation the source is filled block by block inside the sweep
+        // (one pass less over the work); with interpolation, here.
+        if let Some(transposed) = &self.interpolation {
+            interpolate(
                 &self.fixed,
                 &self.previous,
                 &self.sigma_s,
                 &self.octants,
                 transposed,
                 &mut self.work,
-            ),
+            );
         }
         self.timings.scatter += t.elapsed().as_secs_f64();
         let input = SweepInput {
@@ -404,6 +498,14 @@ impl<'a> SourceIteration<'a> {
             sigma_t: &self.sigma_t,
             inflow: &self.inflow,
             spacing: self.spacing,
+            max_pinned: usize::MAX,
+            // The sweep fills the source itself when storage and propagation agree.
+            source: self.interpolation.is_none().then(|| CellSource {
+                fixed: &self.fixed,
+                previous: &self.previous,
+                sigma_s: &self.sigma_s,
+                storage: self.ordinates.storage().len(),
+            }),
         };
         let t = Instant::now();
         let out = match self.settings.closure {
@@ -714,30 +816,6 @@ const ROWS: usize = 1024;
 /// The octant-major block of `work` for octant (first, count): cells × count.
 fn octant_rows(cells: usize, (first, count): (usize, usize)) -> std::ops::Range<usize> {
     cells * first..cells * (first + count)
-}
-
-/// S_n = Q_n + σ_s J_n when storage is propagation (octant-major `work`).
-fn fill(
-    fixed: &[f32],
-    previous: &[f32],
-    sigma_s: &[f32],
-    octants: &[(usize, usize)],
-    work: &mut [f64],
-) {
-    let cells = sigma_s.len();
-    let m = fixed.len() / cells.max(1);
-    for &(first, count) in octants {
-        work[octant_rows(cells, (first, count))]
-            .par_chunks_mut(count)
-            .enumerate()
-            .for_each(|(cell, w)| {
-                let s = f64::from(sigma_s[cell]);
-                let at = cell * m + first;
-                for (d, w) in w.iter_mut().enumerate() {
-                    *w = f64::from(fixed[at + d]) + s * f64::from(previous[at + d]);
-                }
-            });
-    }
 }
 
 /// J = Ψ̄ B, B the (N × M) scattering matrix: per block of cells the octant-major radiance

@@ -14,8 +14,17 @@
 //! Radiance is carried in f64 through a block and stored in f32 (sources, in-scattered
 //! radiance); each cell's contribution to the in-scattered radiance is summed in f64 over
 //! an octant's directions before it is added to storage.
+//!
+//! With storage = propagation directions a block fills its own source S_n = Q_n + σ_s J_n
+//! just before it is swept (the sweep input's `source`): no separate pass over the work. The
+//! per-direction work can live in f64 pages of a pager ([`WorkPages`], one per octant and
+//! block): the same block code in the same order, so the same bits, with the pages of each
+//! finished wavefront written back by a helper thread while the next is swept.
+
+use std::sync::Arc;
 
 use lucent_grid::BrickLayout;
+use lucent_paging::{Pager, PagingError, WritePin};
 use rayon::prelude::*;
 
 use crate::angular::Ordinates;
@@ -152,6 +161,7 @@ fn face_cell(dims: [usize; 3], axis: usize, at: [usize; 3]) -> usize {
 }
 
 /// Everything a sweep reads.
+#[derive(Clone, Copy)]
 pub(crate) struct SweepInput<'a> {
     pub layout: &'a Layout,
     pub ordinates: &'a Ordinates,
@@ -164,6 +174,23 @@ pub(crate) struct SweepInput<'a> {
     pub inflow: &'a [Vec<f64>; 6],
     /// Cell widths (length).
     pub spacing: [f64; 3],
+    /// The most blocks whose work is held at once (a pager's pool; unbounded in memory).
+    pub max_pinned: usize,
+    /// With a source, each block's work is filled with S_n = Q_n + σ_s J_n just before the
+    /// block is swept (storage directions = propagation directions), so the work is only
+    /// written, never read before the sweep; without, the work holds S_n on entry.
+    pub source: Option<CellSource<'a>>,
+}
+
+/// What the fused source fill reads, all in block order: the fixed source and the
+/// in-scattered radiance per cell and storage direction, and σ_s per cell.
+#[derive(Clone, Copy)]
+pub(crate) struct CellSource<'a> {
+    pub fixed: &'a [f32],
+    pub previous: &'a [f32],
+    pub sigma_s: &'a [f32],
+    /// Storage directions per cell.
+    pub storage: usize,
 }
 
 /// What a sweep produces besides the cell-average radiance.
@@ -190,6 +217,148 @@ struct BlockResult {
 /// octant's sweep streams through its own contiguous eighth.
 pub(crate) fn sweep<C: CellClosure>(input: &SweepInput<'_>, work: &mut [f64]) -> SweepOutput {
     let layout = input.layout;
+    let cells = layout.cells();
+    // Each octant's eighth of `work`, cut into one chunk per block.
+    let mut chunks: Vec<Vec<Option<&mut [f64]>>> = Vec::new();
+    let mut rest = work;
+    for octant in 0..8 {
+        let nd = input.ordinates.octant(octant).len();
+        if nd == 0 {
+            continue;
+        }
+        let (head, tail) = rest.split_at_mut(cells * nd);
+        chunks.push(
+            split(head, &layout.starts, nd)
+                .into_iter()
+                .map(Some)
+                .collect(),
+        );
+        rest = tail;
+    }
+    let out = sweep_with::<C, _, std::convert::Infallible>(
+        input,
+        |slot, block, _| {
+            Ok(chunks[slot][block]
+                .take()
+                .expect("each block's chunk is swept once per octant"))
+        },
+        |_, _, _| {},
+    );
+    match out {
+        Ok(out) => out,
+        Err(never) => match never {},
+    }
+}
+
+/// [`sweep`] with the per-direction work in pages of a pager ([`WorkPages`]): each block's
+/// page of an octant is pinned while the block is swept, the blocks of a wavefront at most
+/// as many at a time as the pool holds. A helper thread writes each wavefront's pages
+/// back while the next one is swept (so evicting them later costs no I/O) and, when the
+/// sweep reads its source from the pages and the pool holds two wavefronts, prefetches
+/// the next wavefront's pages. The same arithmetic in the same order as in memory, so the
+/// same bits.
+pub(crate) fn sweep_paged<C: CellClosure>(
+    input: &SweepInput<'_>,
+    pages: &WorkPages,
+) -> Result<SweepOutput, PagingError> {
+    let widest = (0..8)
+        .map(|o| {
+            let negative = [o & 1 != 0, o & 2 != 0, o & 4 != 0];
+            let planes = input.layout.bricks.wavefronts(negative);
+            planes.iter().map(Vec::len).max().unwrap_or(0)
+        })
+        .max()
+        .unwrap_or(0);
+    // Prefetch reads pages the sweep will read; a fused fill reads none.
+    let capacity = pages.pager.capacity();
+    let prefetch = input.source.is_none() && capacity > 2 * widest;
+    // Writing behind holds one slot at a time: the sweep pins one page fewer at once,
+    // and with a single slot nothing is written behind.
+    let write_behind = capacity >= 2;
+    let input = &SweepInput {
+        max_pinned: input.max_pinned.min(capacity - usize::from(write_behind)),
+        ..*input
+    };
+    enum Job {
+        Prefetch(Vec<usize>),
+        WriteBack(Vec<usize>),
+    }
+    std::thread::scope(|scope| {
+        let (sender, receiver) = std::sync::mpsc::channel::<Job>();
+        let helper = scope.spawn(move || -> Result<(), PagingError> {
+            for job in receiver {
+                match job {
+                    Job::Prefetch(next) => pages.pager.prefetch(next)?,
+                    Job::WriteBack(done) => pages.pager.write_back(done)?,
+                }
+            }
+            Ok(())
+        });
+        let out = sweep_with::<C, _, PagingError>(
+            input,
+            |slot, block, len| {
+                let page = pages.page(slot, block);
+                // A fused fill writes the whole block's work: nothing to read first.
+                let pin = if input.source.is_some() {
+                    pages.pager.overwrite(page)?
+                } else {
+                    pages.pager.write(page)?
+                };
+                Ok(Window { pin, len })
+            },
+            |slot, done, next| {
+                if write_behind && !done.is_empty() {
+                    let done = done.iter().map(|&b| pages.page(slot, b)).collect();
+                    let _ = sender.send(Job::WriteBack(done));
+                }
+                if prefetch && !next.is_empty() {
+                    let next = next.iter().map(|&b| pages.page(slot, b)).collect();
+                    let _ = sender.send(Job::Prefetch(next));
+                }
+            },
+        );
+        drop(sender);
+        match helper.join() {
+            Err(panic) => std::panic::resume_unwind(panic),
+            Ok(Err(e)) if out.is_ok() => Err(e),
+            Ok(_) => out,
+        }
+    })
+}
+
+/// The first `len` values of a pinned page.
+struct Window {
+    pin: WritePin<f64>,
+    len: usize,
+}
+
+impl std::ops::Deref for Window {
+    type Target = [f64];
+    fn deref(&self) -> &[f64] {
+        &self.pin[..self.len]
+    }
+}
+
+impl std::ops::DerefMut for Window {
+    fn deref_mut(&mut self) -> &mut [f64] {
+        &mut self.pin[..self.len]
+    }
+}
+
+/// The octant sweeps, each block's work for an octant taken from `chunk(octant slot,
+/// block, length)` (the octant slot counts non-empty octants) when its wavefront comes;
+/// `between(octant slot, done, next)` is told, as each wavefront starts, the blocks of the
+/// one just swept (their work released) and of the next.
+fn sweep_with<C, G, E>(
+    input: &SweepInput<'_>,
+    mut chunk: impl FnMut(usize, usize, usize) -> Result<G, E>,
+    mut between: impl FnMut(usize, &[usize], &[usize]),
+) -> Result<SweepOutput, E>
+where
+    C: CellClosure,
+    G: std::ops::DerefMut<Target = [f64]> + Send,
+{
+    let layout = input.layout;
     let dims = layout.dims();
     let mut fluence = vec![0.0f64; layout.cells()];
     let mut outflow: [Vec<f64>; 6] = std::array::from_fn(|f| {
@@ -202,6 +371,7 @@ pub(crate) fn sweep<C: CellClosure>(input: &SweepInput<'_>, work: &mut [f64]) ->
     let directions = input.ordinates.propagation().directions();
     let h = input.spacing;
     let volume = h[0] * h[1] * h[2];
+    let mut slot = 0;
     for octant in 0..8 {
         let dirs = input.ordinates.octant(octant);
         if dirs.is_empty() {
@@ -209,95 +379,191 @@ pub(crate) fn sweep<C: CellClosure>(input: &SweepInput<'_>, work: &mut [f64]) ->
         }
         let nd = dirs.len();
         let negative = [octant & 1 != 0, octant & 2 != 0, octant & 4 != 0];
-        let first = dirs[0];
-        let cells = layout.cells();
-        let octant_work = &mut work[cells * first..cells * (first + nd)];
-        let mut work_chunks: Vec<Option<&mut [f64]>> = split(octant_work, &layout.starts, nd)
-            .into_iter()
-            .map(Some)
-            .collect();
         let mut phi_chunks: Vec<Option<&mut [f64]>> = split(&mut fluence, &layout.starts, 1)
             .into_iter()
             .map(Some)
             .collect();
         let mut planes: Vec<Option<[Vec<f64>; 3]>> = vec![None; layout.block_count()];
         let nb = layout.bricks.bricks();
-        for plane in layout.bricks.wavefronts(negative) {
-            // The blocks of one hyperplane, counted from the octant's upwind corner.
-            let mut tasks = Vec::new();
-            for b in plane {
-                let coords = layout.bricks.coords(b);
-                if let (Some(j), Some(p)) = (work_chunks[b].take(), phi_chunks[b].take()) {
-                    tasks.push((b, coords, j, p));
-                }
-            }
-            let results: Vec<BlockResult> = tasks
-                .into_par_iter()
-                .map(|(b, coords, j, p)| {
-                    let upwind: [Option<&[Vec<f64>; 3]>; 3] = std::array::from_fn(|a| {
-                        let edge = if negative[a] {
-                            coords[a] + 1 == nb[a]
-                        } else {
-                            coords[a] == 0
-                        };
-                        if edge {
-                            return None;
-                        }
-                        let mut c = coords;
-                        if negative[a] {
-                            c[a] += 1
-                        } else {
-                            c[a] -= 1
-                        }
-                        planes[layout.block_index(c)].as_ref()
-                    });
-                    block_sweep::<C>(input, b, dirs, negative, upwind, j, p)
-                })
-                .collect();
-            for r in results {
-                // What leaves through the downstream domain faces.
-                let o = layout.origin(r.block);
-                let e = layout.extent(r.block);
-                for a in 0..3 {
-                    let at_edge = if negative[a] {
-                        o[a] == 0
-                    } else {
-                        o[a] + e[a] == dims[a]
-                    };
-                    if !at_edge {
-                        continue;
+        let wavefronts = layout.bricks.wavefronts(negative);
+        for (w, plane) in wavefronts.iter().enumerate() {
+            let done = if w > 0 { &wavefronts[w - 1][..] } else { &[] };
+            let next = wavefronts.get(w + 1).map_or(&[][..], |n| &n[..]);
+            between(slot, done, next);
+            // The blocks of one hyperplane, counted from the octant's upwind corner, in
+            // batches of at most `input.max_pinned` (a pager's pool).
+            for batch in plane.chunks(input.max_pinned.max(1)) {
+                let mut tasks = Vec::new();
+                for &b in batch {
+                    let coords = layout.bricks.coords(b);
+                    if let Some(p) = phi_chunks[b].take() {
+                        let len = (layout.starts[b + 1] - layout.starts[b]) * nd;
+                        tasks.push((b, coords, chunk(slot, b, len)?, p));
                     }
-                    let face = 2 * a + usize::from(!negative[a]);
-                    let (b, c) = ((a + 1) % 3, (a + 2) % 3);
-                    let area = volume / h[a];
-                    for v in 0..e[c] {
-                        for u in 0..e[b] {
-                            let mut local = [0; 3];
-                            local[b] = u;
-                            local[c] = v;
-                            let slot = plane_index(a, e, local);
-                            let mut current = 0.0;
-                            for (d, &n) in dirs.iter().enumerate() {
-                                current += weights[n]
-                                    * directions[n][a].abs()
-                                    * r.planes[a][slot * nd + d];
+                }
+                let results: Vec<BlockResult> = tasks
+                    .into_par_iter()
+                    .map(|(b, coords, mut j, p)| {
+                        let upwind: [Option<&[Vec<f64>; 3]>; 3] = std::array::from_fn(|a| {
+                            let edge = if negative[a] {
+                                coords[a] + 1 == nb[a]
+                            } else {
+                                coords[a] == 0
+                            };
+                            if edge {
+                                return None;
                             }
-                            let at = [o[0] + local[0], o[1] + local[1], o[2] + local[2]];
-                            outflow[face][face_cell(dims, a, at)] += current;
-                            outflow_power += current * area;
+                            let mut c = coords;
+                            if negative[a] {
+                                c[a] += 1
+                            } else {
+                                c[a] -= 1
+                            }
+                            planes[layout.block_index(c)].as_ref()
+                        });
+                        block_sweep::<C>(input, b, dirs, negative, upwind, &mut j, p)
+                    })
+                    .collect();
+                for r in results {
+                    // What leaves through the downstream domain faces.
+                    let o = layout.origin(r.block);
+                    let e = layout.extent(r.block);
+                    for a in 0..3 {
+                        let at_edge = if negative[a] {
+                            o[a] == 0
+                        } else {
+                            o[a] + e[a] == dims[a]
+                        };
+                        if !at_edge {
+                            continue;
+                        }
+                        let face = 2 * a + usize::from(!negative[a]);
+                        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+                        let area = volume / h[a];
+                        for v in 0..e[c] {
+                            for u in 0..e[b] {
+                                let mut local = [0; 3];
+                                local[b] = u;
+                                local[c] = v;
+                                let slot = plane_index(a, e, local);
+                                let mut current = 0.0;
+                                for (d, &n) in dirs.iter().enumerate() {
+                                    current += weights[n]
+                                        * directions[n][a].abs()
+                                        * r.planes[a][slot * nd + d];
+                                }
+                                let at = [o[0] + local[0], o[1] + local[1], o[2] + local[2]];
+                                outflow[face][face_cell(dims, a, at)] += current;
+                                outflow_power += current * area;
+                            }
                         }
                     }
+                    inflow_power += r.inflow_power;
+                    planes[r.block] = Some(r.planes);
                 }
-                inflow_power += r.inflow_power;
-                planes[r.block] = Some(r.planes);
             }
         }
+        if let Some(last) = wavefronts.last() {
+            between(slot, last, &[]);
+        }
+        slot += 1;
     }
-    SweepOutput {
+    Ok(SweepOutput {
         fluence,
         outflow,
         inflow_power,
         outflow_power,
+    })
+}
+
+/// The per-direction work of the sweeps in a pager of f64 pages, one page per (non-empty
+/// octant, block): a block's cells × the octant's directions, cell-major as in memory
+/// (pages of the smaller edge blocks use a prefix).
+#[derive(Debug)]
+pub struct WorkPages {
+    pager: Arc<Pager<f64>>,
+    first: usize,
+    blocks: usize,
+    /// Per octant slot: (first direction, count).
+    octants: Vec<(usize, usize)>,
+}
+
+impl WorkPages {
+    /// Values per page for `layout` and `ordinates`: the largest block's cells times the
+    /// largest octant's directions.
+    pub fn page_len(layout: &Layout, ordinates: &Ordinates) -> usize {
+        let block = layout.bricks.brick().pow(3);
+        let nd = (0..8).map(|o| ordinates.octant(o).len()).max().unwrap_or(0);
+        block * nd
+    }
+
+    /// Pages for `layout` and `ordinates` in `pager` (whose bricks must be
+    /// [`WorkPages::page_len`] long), all fresh.
+    pub fn new(
+        layout: &Layout,
+        ordinates: &Ordinates,
+        pager: Arc<Pager<f64>>,
+    ) -> Result<Self, PagingError> {
+        let len = Self::page_len(layout, ordinates);
+        if pager.brick_len() != len {
+            return Err(PagingError::Shape(format!(
+                "pages of {} values for work pages of {len}",
+                pager.brick_len()
+            )));
+        }
+        let octants: Vec<(usize, usize)> = (0..8)
+            .map(|o| ordinates.octant(o))
+            .filter(|d| !d.is_empty())
+            .map(|d| (d[0], d.len()))
+            .collect();
+        let blocks = layout.block_count();
+        let first = pager.add_bricks(octants.len() * blocks);
+        Ok(Self {
+            pager,
+            first,
+            blocks,
+            octants,
+        })
+    }
+
+    /// The pager.
+    pub fn pager(&self) -> &Arc<Pager<f64>> {
+        &self.pager
+    }
+
+    fn page(&self, slot: usize, block: usize) -> usize {
+        self.first + slot * self.blocks + block
+    }
+
+    /// Stores the octant-major `work` (as [`crate::SourceIteration`] holds it in memory)
+    /// into the pages.
+    pub fn store(&self, layout: &Layout, work: &[f64]) -> Result<(), PagingError> {
+        let cells = layout.cells();
+        for (slot, &(first, count)) in self.octants.iter().enumerate() {
+            for b in 0..self.blocks {
+                let range = layout.starts[b] * count..layout.starts[b + 1] * count;
+                let values = &work[cells * first..cells * (first + count)][range];
+                let mut pin = self.pager.overwrite(self.page(slot, b))?;
+                pin[..values.len()].copy_from_slice(values);
+                pin[values.len()..].fill(0.0);
+            }
+        }
+        Ok(())
+    }
+
+    /// The pages back as the octant-major work in memory.
+    pub fn load(&self, layout: &Layout, work: &mut [f64]) -> Result<(), PagingError> {
+        let cells = layout.cells();
+        for (slot, &(first, count)) in self.octants.iter().enumerate() {
+            for b in 0..self.blocks {
+                let range = layout.starts[b] * count..layout.starts[b + 1] * count;
+                let values = &mut work[cells * first..cells * (first + count)][range];
+                let pin = self.pager.read(self.page(slot, b))?;
+                let n = values.len();
+                values.copy_from_slice(&pin[..n]);
+            }
+        }
+        Ok(())
     }
 }
 
@@ -333,6 +599,18 @@ fn block_sweep<C: CellClosure>(
     let h = input.spacing;
     let volume = h[0] * h[1] * h[2];
     let mut inflow_power = 0.0;
+    if let Some(source) = &input.source {
+        // S_n = Q_n + σ_s J_n for this block and octant, as `fill` computes it.
+        let (first, m) = (dirs[0], source.storage);
+        for (local, row) in work.chunks_mut(nd).enumerate() {
+            let cell = start + local;
+            let s = f64::from(source.sigma_s[cell]);
+            let at = cell * m + first;
+            for (d, w) in row.iter_mut().enumerate() {
+                *w = f64::from(source.fixed[at + d]) + s * f64::from(source.previous[at + d]);
+            }
+        }
+    }
 
     // Incoming planes: the upwind block's outgoing plane, or the domain's inflow.
     let mut incoming = |a: usize| -> Vec<f64> {

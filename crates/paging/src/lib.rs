@@ -8,7 +8,10 @@
 //! - [`Pager`]: a pool of brick slots under a byte budget, a page table (fresh / stored /
 //!   resident), dirty and referenced bits, [`Eviction::Lru`] or [`Eviction::Nru`] (the
 //!   clock), dirty write-back, [`Pager::prefetch`] along a streaming order, counters
-//!   ([`PagerStats`]: hits, misses, evictions, bytes read and written). A brick in use is
+//!   ([`PagerStats`]: hits, misses, evictions, bytes read and written), and
+//!   [`Pager::write_back`] to write chosen bricks behind a sweep with the I/O outside the
+//!   lock. Bricks hold f32 values, or any [`Element`] (f64 for solver state whose stopping
+//!   test sits below f32 rounding). A brick in use is
 //!   *pinned* ([`ReadPin`], [`WritePin`]): pins own a reference to their slot and hold its
 //!   lock, so a pinned brick is never evicted and never changes under a reader — with no
 //!   `unsafe` (owned lock guards of `parking_lot`).

@@ -8,7 +8,9 @@
 //! victim and the I/O of a miss — happens under one mutex: a miss is serialised, a hit
 //! costs one short critical section, and no reader can observe a brick half loaded or a
 //! victim half written back. A write-back that fails leaves the victim resident and dirty
-//! (the error is returned; nothing is lost).
+//! (the error is returned; nothing is lost). [`Pager::write_back`] is the one exception:
+//! it writes resident bricks out with the I/O outside the lock (holding a reference and
+//! the slot's read lock instead), so that a helper can clean bricks behind a sweep.
 //!
 //! Eviction ([`Eviction`]): `Lru` evicts the unpinned slot used longest ago (a counter
 //! stamped at every pin); `Nru` is the clock algorithm (a hand sweeps the slots, clearing
@@ -374,6 +376,55 @@ impl<T: Element> Pager<T> {
                 Err(PagingError::PoolExhausted { .. }) => return Ok(()),
                 Err(e) => return Err(e),
             }
+        }
+        Ok(())
+    }
+
+    /// Writes the dirty resident bricks among `bricks` back to the store, leaving them
+    /// resident and clean, with the I/O outside the pager's lock: a helper thread can
+    /// write behind a sweep while other threads pin and work, so that evicting these
+    /// bricks later costs no I/O. A brick pinned for writing now is skipped (it is still
+    /// being changed); a brick pinned for writing while it is written back stays dirty.
+    pub fn write_back(&self, bricks: impl IntoIterator<Item = usize>) -> Result<(), PagingError> {
+        for brick in bricks {
+            let (s, slot) = {
+                let state = self.state.lock();
+                self.check(&state, brick)?;
+                let Entry::Resident(s) = state.table[brick] else {
+                    continue;
+                };
+                let s = s as usize;
+                if !state.meta[s].is_some_and(|m| m.dirty) {
+                    continue;
+                }
+                (s, state.slots[s].clone())
+            };
+            // Our reference keeps the slot from being evicted; the read lock keeps its
+            // values from changing while they are written.
+            let Some(data) = slot.try_read() else {
+                continue;
+            };
+            self.store
+                .write(brick, bytemuck::cast_slice(&data))
+                .map_err(|source| PagingError::Io {
+                    action: "writing",
+                    brick,
+                    store: self.store.describe(),
+                    source,
+                })?;
+            let mut state = self.state.lock();
+            state.stats.bytes_written += self.brick_len as u64 * Self::VALUE_BYTES;
+            state.stats.write_backs += 1;
+            // Clean only if no one else holds the slot: a writer that pinned it meanwhile
+            // (marked dirty, waiting for our read lock) keeps it dirty.
+            if Arc::strong_count(&slot) == 2
+                && let Some(m) = state.meta[s].as_mut()
+                && m.brick == brick
+            {
+                m.dirty = false;
+                m.stored = true;
+            }
+            drop(data);
         }
         Ok(())
     }

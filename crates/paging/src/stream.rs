@@ -145,6 +145,11 @@ pub fn skewed_steps(
 /// the output's bricks are overwritten, never read). Each brick of each field moves once
 /// per call, whatever `steps` is.
 ///
+/// Each output layer, once written, is written back to the store by the helper thread
+/// ([`Pager::write_back`](crate::Pager::write_back)) while the pass goes on, so that
+/// evicting its bricks later costs no I/O (when the output's pool holds a layer and a few
+/// more bricks).
+///
 /// Prefetch needs room: the layer being read, the layer being prefetched and the output
 /// layer being written must fit in the pool together, or the prefetched bricks are
 /// evicted before they are used and read twice (measured: twice the reads at 1/16
@@ -175,6 +180,9 @@ pub fn skewed_steps_paged(
     let shared = std::sync::Arc::ptr_eq(input.pager(), output.pager());
     let room = 2 * per_layer(input) + if shared { per_layer(output) } else { 0 };
     let prefetch = prefetch && input.pager().capacity() >= room;
+    // Writing behind holds one slot while the layer writes pin one per thread.
+    let write_behind =
+        output.pager().capacity() >= per_layer(output) + rayon::current_num_threads() + 1;
     let layer_bricks = |z: usize| -> Vec<usize> {
         input
             .layout()
@@ -186,13 +194,29 @@ pub fn skewed_steps_paged(
     // (the helper fell behind) is skipped instead of loading the layer a second time.
     let read_up_to = AtomicUsize::new(0);
     std::thread::scope(|scope| {
-        let (sender, receiver) = mpsc::channel::<usize>();
+        enum Job {
+            /// The input's brick layer starting at this slab.
+            Prefetch(usize),
+            /// The output's brick layer.
+            WriteBack(usize),
+        }
+        let (sender, receiver) = mpsc::channel::<Job>();
         let read_up_to = &read_up_to;
-        let helper = prefetch.then(|| {
+        let helper = (prefetch || write_behind).then(|| {
             scope.spawn(move || -> Result<(), PagingError> {
-                for z in receiver {
-                    if z >= read_up_to.load(Ordering::Acquire) {
-                        input.pager().prefetch(layer_bricks(z))?;
+                for job in receiver {
+                    match job {
+                        Job::Prefetch(z) if z >= read_up_to.load(Ordering::Acquire) => {
+                            input.pager().prefetch(layer_bricks(z))?;
+                        }
+                        Job::Prefetch(_) => {}
+                        Job::WriteBack(layer) => {
+                            let [bx, by, _] = output.layout().bricks();
+                            let bricks = (0..by).flat_map(|j| (0..bx).map(move |i| (i, j)));
+                            output.pager().write_back(bricks.map(|(i, j)| {
+                                output.pager_brick(output.layout().id([i, j, layer]))
+                            }))?;
+                        }
                     }
                 }
                 Ok(())
@@ -212,7 +236,7 @@ pub fn skewed_steps_paged(
                 if layer_in.0 != layer {
                     let (z0, z1) = (layer * b_in, ((layer + 1) * b_in).min(nz));
                     if prefetch && z1 < nz {
-                        let _ = sender.send(z1);
+                        let _ = sender.send(Job::Prefetch(z1));
                     }
                     layer_in.1.resize(plane * (z1 - z0), 0.0);
                     read_up_to.store(z1, Ordering::Release);
@@ -236,6 +260,9 @@ pub fn skewed_steps_paged(
                     }
                     let window = &out[(z_lo - out_lo) * plane..(z_hi - out_lo) * plane];
                     output.write_layer_window(next_layer, z_lo, window)?;
+                    if write_behind {
+                        let _ = sender.send(Job::WriteBack(next_layer));
+                    }
                     next_layer += 1;
                     let keep = (next_layer * b_out).saturating_sub(1).clamp(out_lo, z + 1);
                     out.drain(..(keep - out_lo) * plane);

@@ -320,6 +320,65 @@ fn threads_writing_their_own_bricks_lose_nothing() {
 }
 
 #[test]
+fn writing_behind_while_threads_write_loses_nothing() {
+    // Four writers update their bricks round after round while a fifth thread writes
+    // every brick back over and over (its I/O outside the pager's lock). A brick written
+    // back while a writer has it pinned, or pins it meanwhile, must stay dirty: otherwise
+    // its eviction would drop the writer's update and a later round would see old values.
+    const LEN: usize = 64;
+    let bricks = 48;
+    for eviction in [Eviction::Lru, Eviction::Nru] {
+        let pager = pager(
+            Box::new(FileStore::create().unwrap()),
+            bricks,
+            LEN,
+            6,
+            eviction,
+        );
+        let writers_done = AtomicBool::new(false);
+        std::thread::scope(|scope| {
+            let writers: Vec<_> = (0..4)
+                .map(|t| {
+                    let pager = &pager;
+                    scope.spawn(move || {
+                        for round in 0..50u32 {
+                            for b in (t..bricks).step_by(4) {
+                                let mut pin = pager.write(b).unwrap();
+                                for (i, v) in pin.iter_mut().enumerate() {
+                                    let before = if round == 0 { 0.0 } else { *v };
+                                    assert_eq!(before, round as f32 * (b * LEN + i) as f32 / 1e3);
+                                    *v = (round + 1) as f32 * (b * LEN + i) as f32 / 1e3;
+                                }
+                            }
+                        }
+                    })
+                })
+                .collect();
+            let behind = scope.spawn(|| {
+                while !writers_done.load(Ordering::Acquire) {
+                    pager.write_back(0..bricks).unwrap();
+                }
+            });
+            // Joined before any unwrap: a failing writer must not leave the writer-behind
+            // looping (the scope would wait for it forever).
+            let results: Vec<_> = writers.into_iter().map(|w| w.join()).collect();
+            writers_done.store(true, Ordering::Release);
+            behind.join().unwrap();
+            for r in results {
+                r.unwrap();
+            }
+        });
+        for b in 0..bricks {
+            let pin = pager.read(b).unwrap();
+            for (i, v) in pin.iter().enumerate() {
+                assert_eq!(*v, 50.0 * (b * LEN + i) as f32 / 1e3, "{eviction:?}");
+            }
+        }
+        assert!(pager.stats().write_backs > 0);
+    }
+}
+
+#[test]
 fn both_policies_keep_a_hot_brick_through_a_scan() {
     // Brick 0 is read between every two reads of a scan over bricks 1–5, with 4 slots.
     // LRU keeps the hot brick resident (one miss, then 49 hits) while the scan of five
