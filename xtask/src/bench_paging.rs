@@ -358,7 +358,7 @@ pub(crate) fn run(n: usize, brick: usize, dom_n: usize) -> Result<(), String> {
 /// hit rate, bytes moved, and whether fluence and outflow are bit for bit equal.
 fn dom_sweep(n: usize) -> Result<(), String> {
     use lucent::dom::angular::Ordinates;
-    use lucent::dom::{DomBoundary, DomProblem, DomSettings, SourceIteration};
+    use lucent::dom::{DomBoundary, DomProblem, DomSettings, PagedWork, SourceIteration};
     let err = |e: &dyn std::fmt::Display| e.to_string();
     let geometry =
         GridGeometry::from_bounds([n; 3], DVec3::ZERO, DVec3::ONE).map_err(|e| err(&e))?;
@@ -403,7 +403,7 @@ fn dom_sweep(n: usize) -> Result<(), String> {
     let mut best = f64::INFINITY;
     let mut reference = None;
     for _ in 0..3 {
-        let r = iteration.sweep_only(None).map_err(|e| err(&e))?;
+        let r = iteration.sweep_only().map_err(|e| err(&e))?;
         best = best.min(r.seconds);
         reference = Some(r);
     }
@@ -412,29 +412,23 @@ fn dom_sweep(n: usize) -> Result<(), String> {
         "| in memory | all | {best:.3} | {:.2} | 100 % | – | – | – |",
         best / cell_directions * 1e9
     );
-    let len = iteration.work_page_len();
+    let page = iteration.work_page_bytes();
+    let pages_total = iteration.work_bytes().div_ceil(page);
+    let slots = (pages_total / 16).max(SourceIteration::min_work_pages() as u64);
     for eviction in [Eviction::Lru, Eviction::Nru] {
-        let pages_total = iteration.work_bytes() / (8 * len as u64);
-        let slots = (pages_total / 16).max(1);
-        let pager = Arc::new(
-            Pager::new(
-                Box::new(FileStore::create().map_err(|e| err(&e))?),
-                0,
-                len,
-                1,
-                PagerOptions {
-                    budget_bytes: slots * 8 * len as u64,
-                    eviction,
-                    fill: 0.0f64,
-                },
-            )
-            .map_err(|e| err(&e))?,
-        );
-        let pages = iteration.work_pages(pager.clone()).map_err(|e| err(&e))?;
+        let paged = DomSettings {
+            paged_work: Some(PagedWork {
+                pool_bytes: slots * page,
+                eviction,
+            }),
+            ..settings
+        };
+        let mut iteration =
+            SourceIteration::new(&problem, &ordinates, &paged).map_err(|e| err(&e))?;
         let mut seconds = f64::INFINITY;
         let mut last = None;
         for _ in 0..3 {
-            let r = iteration.sweep_only(Some(&pages)).map_err(|e| err(&e))?;
+            let r = iteration.sweep_only().map_err(|e| err(&e))?;
             seconds = seconds.min(r.seconds);
             last = Some(r);
         }
@@ -447,9 +441,8 @@ fn dom_sweep(n: usize) -> Result<(), String> {
                 .zip(&reference.fluence)
                 .all(|(a, b)| a.to_bits() == b.to_bits());
         println!(
-            "| paged, {eviction:?} | {:.1} % ({slots} of {} pages) | {seconds:.3} | {:.2} | {:.0} % | {:.3} | {:.0} / {:.0} | {} |",
-            100.0 * slots as f64 / pages.pager().brick_count() as f64,
-            pages.pager().brick_count(),
+            "| paged, {eviction:?} | {:.1} % ({slots} of {pages_total} pages) | {seconds:.3} | {:.2} | {:.0} % | {:.3} | {:.0} / {:.0} | {} |",
+            100.0 * slots as f64 / pages_total as f64,
             seconds / cell_directions * 1e9,
             100.0 * best / seconds,
             stats.hit_rate(),

@@ -134,7 +134,10 @@ impl Anderson {
                     }
                     (ng, nx)
                 })
-                .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
+                // Chunk sums in chunk order: the same bits whatever the threads did.
+                .collect::<Vec<_>>()
+                .into_iter()
+                .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
         };
         let contraction = (norm_x > 0.0).then(|| (norm_g / norm_x).sqrt());
         // Pass 2: ⟨ΔF_new, ΔF_i⟩ for every i, and ⟨ΔF_i, f⟩ (f = last_f now).
@@ -168,13 +171,13 @@ impl Anderson {
                     }
                     out
                 })
-                .reduce(
-                    || vec![0.0; 2 * m],
-                    |mut a, b| {
-                        a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
-                        a
-                    },
-                )
+                // Chunk sums in chunk order: the same bits whatever the threads did.
+                .collect::<Vec<_>>()
+                .into_iter()
+                .fold(vec![0.0; 2 * m], |mut a, b| {
+                    a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
+                    a
+                })
         };
         let d = self.depth;
         for (k, &s) in slots.iter().enumerate() {

@@ -91,7 +91,7 @@ pub use error::DomError;
 pub use params::{DomParams, Family};
 pub use solve::{
     Acceleration, DomBalance, DomBoundary, DomConvergence, DomProblem, DomSettings, DomSolution,
-    SourceIteration, SweepOnly, solve,
+    PagedWork, SourceIteration, SweepOnly, solve,
 };
 pub use solver::{DomChannel, DomSolver};
 pub use sweep::WorkPages;

@@ -37,6 +37,10 @@ pub struct DomParams {
     pub anderson: usize,
     /// Wavefront block edge, in cells.
     pub block: usize,
+    /// Keep the sweeps' per-direction work out of core in a pool of this many MiB (a
+    /// temporary file holds the rest); `None`: in memory, or paged by itself when the
+    /// memory budget is too small for it in memory.
+    pub work_pool_mib: Option<u64>,
 }
 
 impl Default for DomParams {
@@ -49,6 +53,7 @@ impl Default for DomParams {
             acceleration: Acceleration::Dsa,
             anderson: 2,
             block: 16,
+            work_pool_mib: None,
         }
     }
 }
@@ -77,6 +82,10 @@ impl SolverParams for DomParams {
         ),
         ("anderson", "Anderson mixing depth, 0 to 16 (0: off)"),
         ("block", "wavefront block edge in cells, 1 to 256"),
+        (
+            "work_pool_mib",
+            "keep the sweeps' per-direction work (f64, cells × directions) in a page pool of this many MiB over a temporary file (none: in memory, or paged when the memory budget asks for it)",
+        ),
     ];
 
     fn validate(&self) -> Result<(), SolveError> {

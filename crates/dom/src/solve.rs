@@ -74,6 +74,20 @@ pub struct DomSettings {
     pub anderson: usize,
     /// Block edge of the wavefront (cells).
     pub block: usize,
+    /// Where the sweeps' per-direction work (cells × propagation directions, f64: the
+    /// solver's largest array) lives: in memory (`None`), or in a pager of f64 pages
+    /// backed by a temporary file, one page per octant and block.
+    pub paged_work: Option<PagedWork>,
+}
+
+/// The sweeps' work out of core: a pool of `pool_bytes` (at least
+/// [`SourceIteration::min_work_pages`] pages) under `eviction`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PagedWork {
+    /// Bytes of the page pool.
+    pub pool_bytes: u64,
+    /// Which page leaves the pool.
+    pub eviction: lucent_paging::Eviction,
 }
 
 impl Default for DomSettings {
@@ -83,8 +97,18 @@ impl Default for DomSettings {
             acceleration: Acceleration::default(),
             anderson: 2,
             block: 16,
+            paged_work: None,
         }
     }
+}
+
+/// Where the sweeps' per-direction work lives.
+#[derive(Debug)]
+enum Work {
+    /// Octant-major in memory: per octant, per block, cells × the octant's directions.
+    Memory(Vec<f64>),
+    /// The same chunks as pages.
+    Paged(WorkPages),
 }
 
 /// Energy accounting of a solve (power): at convergence
@@ -263,7 +287,7 @@ pub struct SourceIteration<'a> {
     /// Cell-average radiance per propagation direction, kept in f64 between the sweep and
     /// the scattering product: at albedo 0.99 light scatters ~100 times, so rounding in
     /// the in-scattered energy is amplified that much in the balance.
-    work: Vec<f64>,
+    work: Work,
     inflow: [Vec<f64>; 6],
     dsa: Option<Dsa>,
     anderson: Option<Anderson>,
@@ -364,7 +388,29 @@ impl<'a> SourceIteration<'a> {
             reflects: boundary.reflectance > 0.0,
             previous: vec![0.0; layout.cells() * m],
             inscattered: vec![0.0; layout.cells() * m],
-            work: vec![0.0; layout.cells() * n_dirs],
+            work: match settings.paged_work {
+                None => Work::Memory(vec![0.0; layout.cells() * n_dirs]),
+                Some(paged) => {
+                    let len = WorkPages::page_len(&layout, ordinates);
+                    let store = lucent_paging::FileStore::create()?;
+                    let pager = lucent_paging::Pager::new(
+                        Box::new(store),
+                        0,
+                        len,
+                        Self::min_work_pages(),
+                        lucent_paging::PagerOptions {
+                            budget_bytes: paged.pool_bytes,
+                            eviction: paged.eviction,
+                            fill: 0.0f64,
+                        },
+                    )?;
+                    Work::Paged(WorkPages::new(
+                        &layout,
+                        ordinates,
+                        std::sync::Arc::new(pager),
+                    )?)
+                }
+            },
             inflow: std::array::from_fn(|f| {
                 let a = f / 2;
                 vec![boundary.radiance; dims[(a + 1) % 3] * dims[(a + 2) % 3]]
@@ -385,84 +431,48 @@ impl<'a> SourceIteration<'a> {
         self.ordinates.storage().len()
     }
 
-    /// Bytes of the per-direction work the sweeps hold in memory (cells × propagation
-    /// directions, f64): what paging it saves.
+    /// Bytes of the per-direction work of the sweeps (cells × propagation directions,
+    /// f64), wherever it lives: what paging it saves.
     pub fn work_bytes(&self) -> u64 {
-        self.work.len() as u64 * 8
+        (self.layout.cells() * self.ordinates.propagation().len()) as u64 * 8
     }
 
-    /// Pages for the sweeps' work in `pager`, whose bricks must be
-    /// [`SourceIteration::work_page_len`] values long.
-    pub fn work_pages(
-        &self,
-        pager: std::sync::Arc<lucent_paging::Pager<f64>>,
-    ) -> Result<WorkPages, DomError> {
-        Ok(WorkPages::new(&self.layout, self.ordinates, pager)?)
+    /// Bytes of one page of paged work: one block's cells times one octant's directions.
+    pub fn work_page_bytes(&self) -> u64 {
+        WorkPages::page_len(&self.layout, self.ordinates) as u64 * 8
     }
 
-    /// Values per page of the sweeps' work: one block's cells times one octant's
-    /// directions.
-    pub fn work_page_len(&self) -> usize {
-        WorkPages::page_len(&self.layout, self.ordinates)
+    /// The fewest pages a pool of paged work may hold: the scattering product reads a
+    /// block's eight octant pages at once on every thread, and the sweep writes behind
+    /// with one more.
+    pub fn min_work_pages() -> usize {
+        8 * rayon::current_num_threads() + 2
+    }
+
+    /// What the pager of paged work did so far (`None` in memory).
+    pub fn work_pager_stats(&self) -> Option<lucent_paging::PagerStats> {
+        match &self.work {
+            Work::Memory(_) => None,
+            Work::Paged(pages) => Some(pages.pager().stats()),
+        }
     }
 
     /// One transport sweep of the current source (the fixed source plus σ_s times the
     /// in-scattered radiance of the last transport step; none before the first), for
-    /// studies of its cost: the per-direction work in memory, or with `pages` in a pager —
-    /// each block's page of an octant pinned while the block is swept — by the same
-    /// arithmetic in the same order, so with the same bits. The source is filled in memory
-    /// and stored into the pages before the clock starts, and the iteration does not
-    /// advance: this measures the sweep out of core, not the solver's memory.
-    pub fn sweep_only(&mut self, pages: Option<&WorkPages>) -> Result<SweepOnly, DomError> {
-        // As in `transport`: the source is filled inside the sweep unless interpolated.
-        if let Some(transposed) = &self.interpolation {
-            interpolate(
-                &self.fixed,
-                &self.previous,
-                &self.sigma_s,
-                &self.octants,
-                transposed,
-                &mut self.work,
-            );
-            if let Some(pages) = pages {
-                pages.store(&self.layout, &self.work)?;
-            }
-        }
-        let input = SweepInput {
-            layout: &self.layout,
-            ordinates: self.ordinates,
-            geometry: &self.geometry,
-            sigma_t: &self.sigma_t,
-            inflow: &self.inflow,
-            spacing: self.spacing,
-            max_pinned: pages.map_or(usize::MAX, |p| p.pager().capacity()),
-            // The sweep fills the source itself when storage and propagation agree.
-            source: self.interpolation.is_none().then(|| CellSource {
-                fixed: &self.fixed,
-                previous: &self.previous,
-                sigma_s: &self.sigma_s,
-                storage: self.ordinates.storage().len(),
-            }),
-        };
-        let before = pages.map(|p| p.pager().stats());
+    /// studies of its cost, with the work where the settings put it: in memory or paged
+    /// (each block's page of an octant pinned while the block is swept), by the same
+    /// arithmetic in the same order, so with the same bits. The iteration does not
+    /// advance.
+    pub fn sweep_only(&mut self) -> Result<SweepOnly, DomError> {
+        self.source()?;
+        let before = self.work_pager_stats();
         let start = Instant::now();
-        let closure = self.settings.closure;
-        let out = match pages {
-            None => match closure {
-                Closure::Step => sweep::<StepClosure>(&input, &mut self.work),
-                Closure::Diamond => sweep::<DiamondClosure>(&input, &mut self.work),
-                Closure::Exponential => sweep::<ExponentialClosure>(&input, &mut self.work),
-            },
-            Some(pages) => match closure {
-                Closure::Step => sweep_paged::<StepClosure>(&input, pages)?,
-                Closure::Diamond => sweep_paged::<DiamondClosure>(&input, pages)?,
-                Closure::Exponential => sweep_paged::<ExponentialClosure>(&input, pages)?,
-            },
-        };
+        let out = self.sweep()?;
         let seconds = start.elapsed().as_secs_f64();
-        let pager = pages
+        let pager = self
+            .work_pager_stats()
             .zip(before)
-            .map(|(p, before)| p.pager().stats().since(&before));
+            .map(|(after, before)| after.since(&before));
         Ok(SweepOnly {
             fluence: self.layout.to_grid(&out.fluence, 1),
             outflow_power: out.outflow_power,
@@ -471,26 +481,49 @@ impl<'a> SourceIteration<'a> {
         })
     }
 
-    /// One transport step: the source at the propagation directions,
-    /// S_n = W (Q + σ_s J) (W = 1 when storage is propagation), swept once with the
-    /// boundary's inflow, and the in-scattered radiance toward each storage direction
-    /// J = Ψ̄ (w p̄), one product of the (cells × N) radiance with the (N × M) scattering
-    /// matrix.
-    fn transport(&mut self) -> SweepOutput {
-        let t = Instant::now();
-        // With storage = propagation the source is filled block by block inside the sweep
-        // (one pass less over the work); with interpolation, here.
-        if let Some(transposed) = &self.interpolation {
-            interpolate(
-                &self.fixed,
-                &self.previous,
-                &self.sigma_s,
-                &self.octants,
-                transposed,
-                &mut self.work,
-            );
+    /// The source at the propagation directions where it is not filled inside the sweep:
+    /// interpolated from the storage directions, block by block.
+    fn source(&mut self) -> Result<(), DomError> {
+        let Some(transposed) = &self.interpolation else {
+            return Ok(());
+        };
+        let cells = self.layout.cells();
+        let m = transposed.nrows();
+        let (fixed, previous, sigma_s) = (&self.fixed, &self.previous, &self.sigma_s);
+        let layout = &self.layout;
+        for (slot, &(first, count)) in self.octants.iter().enumerate() {
+            let columns =
+                transposed.slice_axis(ndarray::Axis(1), ndarray::Slice::from(first..first + count));
+            let block = |b: usize, out: &mut [f64]| {
+                let range = layout.block_cells(b);
+                interpolate_block(fixed, previous, sigma_s, m, range, &columns, out);
+            };
+            match &mut self.work {
+                Work::Memory(work) => {
+                    let octant = &mut work[cells * first..cells * (first + count)];
+                    layout
+                        .block_chunks(octant, count)
+                        .into_par_iter()
+                        .enumerate()
+                        .for_each(|(b, out)| block(b, out));
+                }
+                Work::Paged(pages) => {
+                    (0..layout.block_count()).into_par_iter().try_for_each(
+                        |b| -> Result<(), DomError> {
+                            let mut pin = pages.pager().overwrite(pages.page(slot, b))?;
+                            let n = layout.block_cells(b).len() * count;
+                            block(b, &mut pin[..n]);
+                            Ok(())
+                        },
+                    )?;
+                }
+            }
         }
-        self.timings.scatter += t.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// One sweep of the work, wherever it lives.
+    fn sweep(&mut self) -> Result<SweepOutput, DomError> {
         let input = SweepInput {
             layout: &self.layout,
             ordinates: self.ordinates,
@@ -498,7 +531,10 @@ impl<'a> SourceIteration<'a> {
             sigma_t: &self.sigma_t,
             inflow: &self.inflow,
             spacing: self.spacing,
-            max_pinned: usize::MAX,
+            max_pinned: match &self.work {
+                Work::Memory(_) => usize::MAX,
+                Work::Paged(pages) => pages.pager().capacity(),
+            },
             // The sweep fills the source itself when storage and propagation agree.
             source: self.interpolation.is_none().then(|| CellSource {
                 fixed: &self.fixed,
@@ -507,22 +543,80 @@ impl<'a> SourceIteration<'a> {
                 storage: self.ordinates.storage().len(),
             }),
         };
+        let closure = self.settings.closure;
+        Ok(match &mut self.work {
+            Work::Memory(work) => match closure {
+                Closure::Step => sweep::<StepClosure>(&input, work),
+                Closure::Diamond => sweep::<DiamondClosure>(&input, work),
+                Closure::Exponential => sweep::<ExponentialClosure>(&input, work),
+            },
+            Work::Paged(pages) => match closure {
+                Closure::Step => sweep_paged::<StepClosure>(&input, pages)?,
+                Closure::Diamond => sweep_paged::<DiamondClosure>(&input, pages)?,
+                Closure::Exponential => sweep_paged::<ExponentialClosure>(&input, pages)?,
+            },
+        })
+    }
+
+    /// The in-scattered radiance J = Ψ̄ B from the swept work, block by block.
+    fn scatter(&mut self) -> Result<(), DomError> {
+        let cells = self.layout.cells();
+        let m = self.scattering.ncols();
+        let (layout, octants, b) = (&self.layout, &self.octants, &self.scattering);
+        let out = layout.block_chunks(&mut self.inscattered, m);
+        match &self.work {
+            Work::Memory(work) => {
+                out.into_par_iter().enumerate().for_each(|(block, out)| {
+                    let range = layout.block_cells(block);
+                    let chunks: Vec<&[f64]> = octants
+                        .iter()
+                        .map(|&(first, count)| {
+                            &work[cells * first..cells * (first + count)]
+                                [range.start * count..range.end * count]
+                        })
+                        .collect();
+                    scatter_block(&chunks, octants, b, out);
+                });
+            }
+            Work::Paged(pages) => {
+                out.into_par_iter().enumerate().try_for_each(
+                    |(block, out)| -> Result<(), DomError> {
+                        let n = layout.block_cells(block).len();
+                        let pins = (0..octants.len())
+                            .map(|slot| pages.pager().read(pages.page(slot, block)))
+                            .collect::<Result<Vec<_>, _>>()?;
+                        let chunks: Vec<&[f64]> = pins
+                            .iter()
+                            .zip(octants)
+                            .map(|(pin, &(_, count))| &pin[..n * count])
+                            .collect();
+                        scatter_block(&chunks, octants, b, out);
+                        Ok(())
+                    },
+                )?;
+            }
+        }
+        Ok(())
+    }
+
+    /// One transport step: the source at the propagation directions,
+    /// S_n = W (Q + σ_s J) (W = 1 when storage is propagation), swept once with the
+    /// boundary's inflow, and the in-scattered radiance toward each storage direction
+    /// J = Ψ̄ (w p̄), one product of the (cells × N) radiance with the (N × M) scattering
+    /// matrix.
+    fn transport(&mut self) -> Result<SweepOutput, DomError> {
         let t = Instant::now();
-        let out = match self.settings.closure {
-            Closure::Step => sweep::<StepClosure>(&input, &mut self.work),
-            Closure::Diamond => sweep::<DiamondClosure>(&input, &mut self.work),
-            Closure::Exponential => sweep::<ExponentialClosure>(&input, &mut self.work),
-        };
+        // With storage = propagation the source is filled block by block inside the sweep
+        // (one pass less over the work); with interpolation, here.
+        self.source()?;
+        self.timings.scatter += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let out = self.sweep()?;
         self.timings.sweep += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        scatter(
-            &self.work,
-            &self.octants,
-            &self.scattering,
-            &mut self.inscattered,
-        );
+        self.scatter()?;
         self.timings.scatter += t.elapsed().as_secs_f64();
-        out
+        Ok(out)
     }
 
     /// The diffusion synthetic correction of the sweep's fluence and in-scattered
@@ -576,24 +670,30 @@ impl<'a> SourceIteration<'a> {
     fn source_change(&mut self, out: &SweepOutput) -> f64 {
         let m = self.storage();
         let weights = self.ordinates.storage().weights();
+        // Sums over chunks of cells in parallel, added in chunk order: the same bits
+        // whatever the threads did (a work-stealing reduction is not).
         let (num, den) = self
             .inscattered
-            .par_chunks(m)
-            .zip(self.previous.par_chunks(m))
-            .zip(self.sigma_s.par_iter())
-            .map(|((new, old), s)| {
-                let s2 = f64::from(*s).powi(2);
+            .par_chunks(ROWS * m)
+            .zip(self.previous.par_chunks(ROWS * m))
+            .zip(self.sigma_s.par_chunks(ROWS))
+            .map(|((new, old), sigma_s)| {
                 let (mut num, mut den) = (0.0, 0.0);
-                if s2 > 0.0 {
-                    for q in 0..m {
-                        let (a, b) = (f64::from(new[q]), f64::from(old[q]));
-                        num += s2 * weights[q] * (a - b) * (a - b);
-                        den += s2 * weights[q] * a * a;
+                for ((new, old), s) in new.chunks(m).zip(old.chunks(m)).zip(sigma_s) {
+                    let s2 = f64::from(*s).powi(2);
+                    if s2 > 0.0 {
+                        for q in 0..m {
+                            let (a, b) = (f64::from(new[q]), f64::from(old[q]));
+                            num += s2 * weights[q] * (a - b) * (a - b);
+                            den += s2 * weights[q] * a * a;
+                        }
                     }
                 }
                 (num, den)
             })
-            .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
         let mut change = if den > 0.0 { (num / den).sqrt() } else { 0.0 };
         if self.reflects {
             let boundary = self.boundary;
@@ -657,7 +757,7 @@ impl<'a> SourceIteration<'a> {
     pub fn run(mut self, stopping: &Stopping) -> Result<DomSolution, DomError> {
         let started = Instant::now();
         let (stop_reason, last) = loop {
-            let mut out = self.transport();
+            let mut out = self.transport()?;
             let iteration = self.monitor.residuals.len() + 1;
             if out.fluence.iter().any(|v| !v.is_finite()) {
                 break (StopReason::DivergedNonFinite { iteration }, out);
@@ -813,73 +913,62 @@ enum Verdict {
 
 const ROWS: usize = 1024;
 
-/// The octant-major block of `work` for octant (first, count): cells × count.
-fn octant_rows(cells: usize, (first, count): (usize, usize)) -> std::ops::Range<usize> {
-    cells * first..cells * (first + count)
-}
-
-/// J = Ψ̄ B, B the (N × M) scattering matrix: per block of cells the octant-major radiance
-/// is gathered into one (rows × N) matrix (in cache) and multiplied once (ndarray's matrix
-/// product: matrixmultiply's SIMD kernels), in f64, stored in f32.
-fn scatter(psi: &[f64], octants: &[(usize, usize)], b: &ndarray::Array2<f64>, out: &mut [f32]) {
+/// J = Ψ̄ B for one block, B the (N × M) scattering matrix: `chunks` holds per octant the
+/// block's cells × the octant's directions; per chunk of up to `ROWS` cells the radiance is
+/// gathered into one (rows × N) matrix (in cache) and multiplied once (ndarray's matrix
+/// product: matrixmultiply's SIMD kernels), in f64, stored in f32 into `out` (cells × M).
+fn scatter_block(
+    chunks: &[&[f64]],
+    octants: &[(usize, usize)],
+    b: &ndarray::Array2<f64>,
+    out: &mut [f32],
+) {
     let (n, m) = (b.nrows(), b.ncols());
-    let cells = out.len() / m.max(1);
-    out.par_chunks_mut(ROWS * m)
-        .enumerate()
-        .for_each(|(chunk, out)| {
-            let rows = out.len() / m;
-            let start = chunk * ROWS;
-            let mut a = ndarray::Array2::<f64>::zeros((rows, n));
-            for &(first, count) in octants {
-                let block =
-                    &psi[octant_rows(cells, (first, count))][start * count..(start + rows) * count];
-                for (r, mut row) in a.rows_mut().into_iter().enumerate() {
-                    for d in 0..count {
-                        row[first + d] = block[r * count + d];
-                    }
+    for (chunk, out) in out.chunks_mut(ROWS * m).enumerate() {
+        let rows = out.len() / m;
+        let start = chunk * ROWS;
+        let mut a = ndarray::Array2::<f64>::zeros((rows, n));
+        for (psi, &(first, count)) in chunks.iter().zip(octants) {
+            let block = &psi[start * count..(start + rows) * count];
+            for (r, mut row) in a.rows_mut().into_iter().enumerate() {
+                for d in 0..count {
+                    row[first + d] = block[r * count + d];
                 }
             }
-            let mut c = ndarray::Array2::<f64>::zeros((rows, m));
-            ndarray::linalg::general_mat_mul(1.0, &a, b, 0.0, &mut c);
-            for (o, v) in out.iter_mut().zip(c.iter()) {
-                *o = *v as f32;
-            }
-        });
+        }
+        let mut c = ndarray::Array2::<f64>::zeros((rows, m));
+        ndarray::linalg::general_mat_mul(1.0, &a, b, 0.0, &mut c);
+        for (o, v) in out.iter_mut().zip(c.iter()) {
+            *o = *v as f32;
+        }
+    }
 }
 
-/// S = (Q + σ_s J) Wᵀ per cell, Wᵀ the (M × N) transposed interpolation matrix, into the
-/// octant-major `work`.
-fn interpolate(
+/// S = (Q + σ_s J) Wᵀ for the cells `range` (block order) and one octant's columns of the
+/// transposed interpolation matrix (M × count), into `out` (cells × count), per chunk of
+/// up to `ROWS` cells one matrix product.
+fn interpolate_block(
     fixed: &[f32],
     previous: &[f32],
     sigma_s: &[f32],
-    octants: &[(usize, usize)],
-    transposed: &ndarray::Array2<f64>,
-    work: &mut [f64],
+    m: usize,
+    range: std::ops::Range<usize>,
+    columns: &ndarray::ArrayView2<'_, f64>,
+    out: &mut [f64],
 ) {
-    let cells = sigma_s.len();
-    let m = transposed.nrows();
-    // Per octant: rows of cells in parallel chunks, each forming its (rows × M) sources.
-    for &(first, count) in octants {
-        let columns =
-            transposed.slice_axis(ndarray::Axis(1), ndarray::Slice::from(first..first + count));
-        work[octant_rows(cells, (first, count))]
-            .par_chunks_mut(ROWS * count)
-            .enumerate()
-            .for_each(|(chunk, w)| {
-                let rows = w.len() / count;
-                let start = chunk * ROWS;
-                let mut a = ndarray::Array2::<f64>::zeros((rows, m));
-                for (r, mut row) in a.rows_mut().into_iter().enumerate() {
-                    let cell = start + r;
-                    let s = f64::from(sigma_s[cell]);
-                    for (c, v) in row.iter_mut().enumerate() {
-                        *v = f64::from(fixed[cell * m + c]) + s * f64::from(previous[cell * m + c]);
-                    }
-                }
-                let mut c =
-                    ndarray::ArrayViewMut2::from_shape((rows, count), w).expect("rows × count");
-                ndarray::linalg::general_mat_mul(1.0, &a, &columns, 0.0, &mut c);
-            });
+    let count = columns.ncols();
+    for (chunk, w) in out.chunks_mut(ROWS * count).enumerate() {
+        let rows = w.len() / count;
+        let start = range.start + chunk * ROWS;
+        let mut a = ndarray::Array2::<f64>::zeros((rows, m));
+        for (r, mut row) in a.rows_mut().into_iter().enumerate() {
+            let cell = start + r;
+            let s = f64::from(sigma_s[cell]);
+            for (c, v) in row.iter_mut().enumerate() {
+                *v = f64::from(fixed[cell * m + c]) + s * f64::from(previous[cell * m + c]);
+            }
+        }
+        let mut c = ndarray::ArrayViewMut2::from_shape((rows, count), w).expect("rows × count");
+        ndarray::linalg::general_mat_mul(1.0, &a, columns, 0.0, &mut c);
     }
 }

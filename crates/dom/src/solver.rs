@@ -37,7 +37,7 @@ use lucent_optics::SphericalQuadrature;
 
 use crate::angular::Ordinates;
 use crate::params::{DomParams, Family};
-use crate::solve::{DomBoundary, DomProblem, DomSettings, solve};
+use crate::solve::{DomBoundary, DomProblem, DomSettings, PagedWork, SourceIteration, solve};
 
 /// One channel's record of a [`DomSolver::solve_with_details`] run.
 #[derive(Debug, Clone, PartialEq)]
@@ -92,6 +92,10 @@ impl DomSolver {
                 acceleration: p.acceleration,
                 anderson: p.anderson,
                 block: p.block,
+                paged_work: p.work_pool_mib.map(|mib| PagedWork {
+                    pool_bytes: mib.saturating_mul(1 << 20),
+                    eviction: lucent_paging::Eviction::Lru,
+                }),
             },
         };
         solver.ordinates(lucent_optics::Phase::Isotropic)?;
@@ -159,8 +163,60 @@ impl DomSolver {
         problem: &Problem,
         options: &SolveOptions,
     ) -> Result<(Solution, Vec<DomChannel>), SolveError> {
-        let (solution, extras) = driver::solve_per_channel(self, self, problem, options)?;
+        // A budget too small for the sweeps' work in memory pages it, if the rest fits.
+        let paged;
+        let solver = match self.paged_for_budget(problem, options.memory_budget) {
+            Some(s) => {
+                paged = s;
+                &paged
+            }
+            None => self,
+        };
+        let (solution, extras) = driver::solve_per_channel(solver, solver, problem, options)?;
         Ok((solution, extras.into_iter().map(|(_, r)| r).collect()))
+    }
+
+    /// Bytes of the sweeps' per-direction work per channel (cells × propagation
+    /// directions, f64).
+    fn work_bytes(&self, problem: &Problem) -> u64 {
+        let n = self
+            .ordinates(problem.medium().phase)
+            .map_or(0, |o| o.propagation().len());
+        problem.geometry().voxel_count() as u64 * n as u64 * 8
+    }
+
+    /// This solver with its work paged, when `budget` is below what it needs in memory
+    /// but holds everything else and a pool of at least the minimal pages: the pool takes
+    /// what the budget leaves (at most the work itself). `None` when the work is paged
+    /// already, fits, or cannot be made to fit.
+    fn paged_for_budget(&self, problem: &Problem, budget: u64) -> Option<Self> {
+        if self.settings.paged_work.is_some() {
+            return None;
+        }
+        // As the driver counts it: the channels' own data and the per-channel fields.
+        let dense = ChannelMethod::memory_bytes(self, problem)
+            .saturating_add(driver::per_channel_bytes(problem));
+        if dense <= budget {
+            return None;
+        }
+        let channels = problem.channels() as u64;
+        let work = self.work_bytes(problem);
+        let rest = dense - work * channels;
+        let ordinates = self.ordinates(problem.medium().phase).ok()?;
+        let layout = crate::sweep::Layout::new(problem.geometry().dims(), self.settings.block);
+        let page = crate::sweep::WorkPages::page_len(&layout, &ordinates) as u64 * 8;
+        let minimum = page * SourceIteration::min_work_pages() as u64;
+        let pool = (budget.checked_sub(rest)? / channels.max(1)).min(work);
+        (pool >= minimum && pool < work).then(|| Self {
+            settings: DomSettings {
+                paged_work: Some(PagedWork {
+                    pool_bytes: pool,
+                    eviction: lucent_paging::Eviction::Lru,
+                }),
+                ..self.settings
+            },
+            ..self.clone()
+        })
     }
 }
 
@@ -181,7 +237,12 @@ impl ChannelMethod for DomSolver {
             .map_or(0, |o| o.storage().len());
         let anderson_vectors = 2 * self.settings.anderson + 2;
         let n = problem.geometry().voxel_count();
-        (n * m * 4 * (3 + anderson_vectors) + n * 40) as u64 * problem.channels() as u64
+        // The sweeps' work: in memory, or its page pool.
+        let work = match self.settings.paged_work {
+            None => self.work_bytes(problem),
+            Some(paged) => paged.pool_bytes.min(self.work_bytes(problem)),
+        };
+        ((n * m * 4 * (3 + anderson_vectors) + n * 40) as u64 + work) * problem.channels() as u64
     }
 
     fn setup(&self, context: &Context<'_>) -> Result<Ordinates, SolveError> {

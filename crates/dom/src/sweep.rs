@@ -73,6 +73,20 @@ impl Layout {
         self.starts[self.block_count()]
     }
 
+    /// The cells of block `b` in block order.
+    pub(crate) fn block_cells(&self, b: usize) -> std::ops::Range<usize> {
+        self.starts[b]..self.starts[b + 1]
+    }
+
+    /// Block-ordered data (`per_cell` values per cell) cut into one chunk per block.
+    pub(crate) fn block_chunks<'a, T>(
+        &self,
+        data: &'a mut [T],
+        per_cell: usize,
+    ) -> Vec<&'a mut [T]> {
+        split(data, &self.starts, per_cell)
+    }
+
     fn block_index(&self, c: [usize; 3]) -> usize {
         self.bricks.id(c)
     }
@@ -484,8 +498,6 @@ pub struct WorkPages {
     pager: Arc<Pager<f64>>,
     first: usize,
     blocks: usize,
-    /// Per octant slot: (first direction, count).
-    octants: Vec<(usize, usize)>,
 }
 
 impl WorkPages {
@@ -511,18 +523,13 @@ impl WorkPages {
                 pager.brick_len()
             )));
         }
-        let octants: Vec<(usize, usize)> = (0..8)
-            .map(|o| ordinates.octant(o))
-            .filter(|d| !d.is_empty())
-            .map(|d| (d[0], d.len()))
-            .collect();
+        let octants = (0..8).filter(|&o| !ordinates.octant(o).is_empty()).count();
         let blocks = layout.block_count();
-        let first = pager.add_bricks(octants.len() * blocks);
+        let first = pager.add_bricks(octants * blocks);
         Ok(Self {
             pager,
             first,
             blocks,
-            octants,
         })
     }
 
@@ -531,39 +538,8 @@ impl WorkPages {
         &self.pager
     }
 
-    fn page(&self, slot: usize, block: usize) -> usize {
+    pub(crate) fn page(&self, slot: usize, block: usize) -> usize {
         self.first + slot * self.blocks + block
-    }
-
-    /// Stores the octant-major `work` (as [`crate::SourceIteration`] holds it in memory)
-    /// into the pages.
-    pub fn store(&self, layout: &Layout, work: &[f64]) -> Result<(), PagingError> {
-        let cells = layout.cells();
-        for (slot, &(first, count)) in self.octants.iter().enumerate() {
-            for b in 0..self.blocks {
-                let range = layout.starts[b] * count..layout.starts[b + 1] * count;
-                let values = &work[cells * first..cells * (first + count)][range];
-                let mut pin = self.pager.overwrite(self.page(slot, b))?;
-                pin[..values.len()].copy_from_slice(values);
-                pin[values.len()..].fill(0.0);
-            }
-        }
-        Ok(())
-    }
-
-    /// The pages back as the octant-major work in memory.
-    pub fn load(&self, layout: &Layout, work: &mut [f64]) -> Result<(), PagingError> {
-        let cells = layout.cells();
-        for (slot, &(first, count)) in self.octants.iter().enumerate() {
-            for b in 0..self.blocks {
-                let range = layout.starts[b] * count..layout.starts[b + 1] * count;
-                let values = &mut work[cells * first..cells * (first + count)][range];
-                let pin = self.pager.read(self.page(slot, b))?;
-                let n = values.len();
-                values.copy_from_slice(&pin[..n]);
-            }
-        }
-        Ok(())
     }
 }
 

@@ -181,8 +181,7 @@ pub fn skewed_steps_paged(
     let room = 2 * per_layer(input) + if shared { per_layer(output) } else { 0 };
     let prefetch = prefetch && input.pager().capacity() >= room;
     // Writing behind holds one slot while the layer writes pin one per thread.
-    let write_behind =
-        output.pager().capacity() >= per_layer(output) + rayon::current_num_threads() + 1;
+    let write_behind = output.pager().capacity() > per_layer(output) + rayon::current_num_threads();
     let layer_bricks = |z: usize| -> Vec<usize> {
         input
             .layout()
