@@ -70,7 +70,7 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
     );
     println!();
     println!(
-        "| run | wall | sweeps | sweeps alone | ns per cell-direction (sweeps) | sweep GB/s (work read + written, σ_t) | sources + scattering products | DSA | Anderson | rest (direct, first-collision, set-up) | stop |"
+        "| run | wall | sweeps | sweeps alone | ns per cell-direction (sweeps) | sweep GB/s (sources read, radiance written, σ_t, σ_s) | sources + scattering products | DSA | Anderson | rest (direct, first-collision, set-up) | stop |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for run in 0..3 {
@@ -88,9 +88,10 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
         let sweeps = r.sweeps as f64;
         let cells = (n * n * n) as f64;
         let updates = cells * directions as f64 * sweeps;
-        // Per cell and sweep the wavefronts read and write the f64 radiance of every
-        // direction once (16 B each) and read σ_t (4 B).
-        let gbs = cells * (16.0 * directions as f64 + 4.0) * sweeps / r.sweep_seconds / 1e9;
+        // Per cell and sweep the wavefronts fill each direction's source from the stored
+        // fixed source and in-scattered radiance (two f32 reads, 8 B; storage =
+        // propagation here), write its f64 radiance (8 B) and read σ_t and σ_s (8 B).
+        let gbs = cells * (16.0 * directions as f64 + 8.0) * sweeps / r.sweep_seconds / 1e9;
         let rest = wall - r.sweep_seconds - r.scatter_seconds - r.dsa_seconds - r.anderson_seconds;
         println!(
             "| {run} | {wall:.2} s | {} | {:.2} s | {:.2} | {gbs:.1} ({:.0}% of copy) | {:.2} s | {:.2} s | {:.2} s | {rest:.2} s | {:?} |",
