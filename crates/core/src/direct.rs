@@ -429,6 +429,7 @@ impl DirectSolver {
                 peak_memory_bytes: needed,
                 measured_peak_bytes: meter.and_then(|m| m.peak_bytes()),
                 stop_reason: crate::solver::StopReason::Exact,
+                paging: Some(after.since(&before)),
             },
             paging: after.since(&before),
         })

@@ -45,6 +45,7 @@ use std::time::{Duration, Instant};
 
 use lucent_grid::Grid;
 use lucent_optics::PhaseFunction;
+use lucent_paging::PagerStats;
 
 use crate::error::SolveError;
 use crate::iteration::Stopping;
@@ -65,6 +66,8 @@ pub struct Record {
     /// Bytes of working data at peak as the method counted them (the report keeps the
     /// larger of this and the estimate checked against the budget; 0: no count).
     pub memory_bytes: u64,
+    /// What the method's pager did, if it paged working data out of core.
+    pub paging: Option<PagerStats>,
 }
 
 impl Record {
@@ -75,6 +78,7 @@ impl Record {
             residuals: Vec::new(),
             stop_reason: StopReason::Exact,
             memory_bytes,
+            paging: None,
         }
     }
 
@@ -86,14 +90,19 @@ impl Record {
             residuals,
             stop_reason,
             memory_bytes,
+            paging: None,
         }
     }
 
     /// The one rule for merging channels' (or phases') records: the record of the one that
     /// stopped worse ([`StopReason::severity`]; among equals the one with more
-    /// iterations), with the larger memory of the two.
+    /// iterations), with the larger memory of the two and both pagers' counters.
     pub fn worse(self, other: Self) -> Self {
         let memory = self.memory_bytes.max(other.memory_bytes);
+        let paging = match (self.paging, other.paging) {
+            (Some(a), Some(b)) => Some(a.plus(&b)),
+            (a, b) => a.or(b),
+        };
         let key = |r: &Self| (r.stop_reason.severity(), r.iterations);
         let mut kept = if key(&other) > key(&self) {
             other
@@ -101,6 +110,7 @@ impl Record {
             self
         };
         kept.memory_bytes = memory;
+        kept.paging = paging;
         kept
     }
 }
@@ -311,6 +321,7 @@ where
             peak_memory_bytes: memory_bytes.max(record.memory_bytes),
             stop_reason: record.stop_reason,
             measured_peak_bytes: meter.and_then(|m| m.peak_bytes()),
+            paging: record.paging,
         },
     })
 }
@@ -672,6 +683,7 @@ mod tests {
             residuals: vec![1.0; iterations + 1],
             stop_reason,
             memory_bytes,
+            paging: None,
         }
     }
 

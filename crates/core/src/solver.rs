@@ -473,6 +473,10 @@ pub struct SolveReport {
     pub measured_peak_bytes: Option<u64>,
     /// Why it stopped.
     pub stop_reason: StopReason,
+    /// What the pager did, where the solver paged working data out of core (`dom`'s
+    /// sweeps under a tight memory budget): hits, misses, evictions, bytes moved.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub paging: Option<lucent_paging::PagerStats>,
 }
 
 /// A light-transport solver: one obvious way to be called.

@@ -161,6 +161,8 @@ pub struct DomConvergence {
     /// The sweep after which DSA was dropped because it amplified the error (thick
     /// cells), if it was.
     pub dsa_abandoned: Option<usize>,
+    /// What the pager of the sweeps' work did, when the work was paged.
+    pub work_paging: Option<lucent_paging::PagerStats>,
 }
 
 /// The solution of one channel.
@@ -859,6 +861,7 @@ impl<'a> SourceIteration<'a> {
     /// The solution from the last sweep: fluence and in-scattered radiance in grid order,
     /// the convergence record, the energy balance.
     fn finish(self, stop_reason: StopReason, last: SweepOutput) -> DomSolution {
+        let work_paging = self.work_pager_stats();
         let m = self.storage();
         let weights = self.ordinates.storage().weights();
         let volume = self.spacing.iter().product::<f64>();
@@ -894,6 +897,7 @@ impl<'a> SourceIteration<'a> {
                 dsa_seconds: timings.dsa,
                 anderson_seconds: timings.anderson,
                 dsa_abandoned: monitor.dsa_abandoned,
+                work_paging,
             },
             balance: DomBalance {
                 emitted,

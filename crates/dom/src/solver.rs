@@ -339,6 +339,7 @@ impl ChannelMethod for DomSolver {
                 residuals: conv.residuals.clone(),
                 stop_reason: conv.stop_reason.clone(),
                 memory_bytes: 0,
+                paging: conv.work_paging,
             },
             extra: (
                 solution.inscattered,

@@ -173,6 +173,7 @@ pub(crate) fn convection(
             peak_memory_bytes: needed,
             measured_peak_bytes: meter.and_then(|m| m.peak_bytes()),
             stop_reason: StopReason::Exact,
+            paging: Some(after.since(&before)),
         },
         paging: after.since(&before),
     })

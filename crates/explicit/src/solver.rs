@@ -693,6 +693,7 @@ fn ordinates(
         residuals: out.residuals,
         stop_reason: out.stop_reason,
         memory_bytes: (l.len() * quadrature.len() * 16) as u64,
+        paging: None,
     };
     Ok((out.fluence, record))
 }

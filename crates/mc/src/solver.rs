@@ -145,6 +145,7 @@ impl Solver for McSolver {
                         }
                     },
                     memory_bytes: needed,
+                    paging: None,
                 },
             })
         })

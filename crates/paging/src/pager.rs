@@ -76,6 +76,20 @@ impl PagerStats {
         }
     }
 
+    /// The counters of two pagers (or two runs) together; the larger pool's slot count.
+    pub fn plus(&self, other: &PagerStats) -> PagerStats {
+        PagerStats {
+            hits: self.hits + other.hits,
+            misses: self.misses + other.misses,
+            prefetched: self.prefetched + other.prefetched,
+            evictions: self.evictions + other.evictions,
+            write_backs: self.write_backs + other.write_backs,
+            bytes_read: self.bytes_read + other.bytes_read,
+            bytes_written: self.bytes_written + other.bytes_written,
+            slots: self.slots.max(other.slots),
+        }
+    }
+
     /// Hits over pins (1 when nothing was pinned).
     pub fn hit_rate(&self) -> f64 {
         let pins = self.hits + self.misses;

@@ -574,6 +574,7 @@ mod tests {
                 wall_time_s: 0.0,
                 peak_memory_bytes: 0,
                 measured_peak_bytes: None,
+                paging: None,
                 stop_reason: StopReason::Exact,
             },
         };

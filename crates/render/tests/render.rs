@@ -31,6 +31,7 @@ fn dark_solution(problem: &Problem) -> Solution {
             wall_time_s: 0.0,
             peak_memory_bytes: 0,
             measured_peak_bytes: None,
+            paging: None,
             stop_reason: StopReason::Exact,
         },
     }
