@@ -721,7 +721,6 @@ fn solve_paged_to_file(
         "fluence": ended.is_none().then(|| output.file_name().map(|n| n.to_string_lossy().into_owned())).flatten(),
         "converged": stop.is_converged(),
         "report": solution.report,
-        "paging": solution.paging,
     });
     let text = serde_json::to_string_pretty(&report).map_err(|e| Error::Io {
         path: report_path.clone(),

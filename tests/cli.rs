@@ -1330,11 +1330,14 @@ fn a_scene_beyond_the_budget_is_solved_out_of_core_to_the_same_bytes() {
         let report: serde_json::Value = serde_json::from_slice(&read("paged.json")).unwrap();
         assert_eq!(report["storage"], "paged", "{report}");
         assert!(
-            report["paging"]["evictions"].as_u64().unwrap() > 0,
+            report["report"]["paging"]["evictions"].as_u64().unwrap() > 0,
             "{report}"
         );
         assert!(
-            report["paging"]["bytes_written"].as_u64().unwrap() > 0,
+            report["report"]["paging"]["bytes_written"]
+                .as_u64()
+                .unwrap()
+                > 0,
             "{report}"
         );
     }
