@@ -655,6 +655,48 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
     Ok(Ended::Done)
 }
 
+/// `solve`'s JSON report: what was solved, how, on which grid, where the fluence went
+/// (`None` when it was not written) and the solver's report.
+fn solve_report(
+    name: &str,
+    chosen: &Chosen,
+    args: &SolverArgs,
+    g: &lucent::grid::GridGeometry,
+    channels: usize,
+    fluence: Option<&Path>,
+    report: &lucent::core::SolveReport,
+) -> serde_json::Value {
+    serde_json::json!({
+        "scene": name,
+        "solver": chosen.solver.name(),
+        "params": chosen.resolved,
+        "params_given": chosen.params,
+        "options": {
+            "tolerance": chosen.tolerance,
+            "max_iterations": args.max_iterations,
+            "time_limit_s": args.time_limit,
+        },
+        "capabilities": chosen.solver.capabilities(),
+        "channels": channels,
+        "dims": g.dims(),
+        "spacing": g.spacing().to_array(),
+        "origin": g.origin().to_array(),
+        "fluence": fluence.and_then(|f| f.file_name()).map(|n| n.to_string_lossy().into_owned()),
+        "converged": report.stop_reason.is_converged(),
+        "report": report,
+    })
+}
+
+/// Writes `report` as pretty JSON to `path`.
+fn write_report(path: &Path, report: &serde_json::Value) -> Result<(), Error> {
+    let io = |e: &dyn std::fmt::Display| Error::Io {
+        path: path.to_owned(),
+        reason: e.to_string(),
+    };
+    let text = serde_json::to_string_pretty(report).map_err(|e| io(&e))?;
+    std::fs::write(path, text + "\n").map_err(|e| io(&e))
+}
+
 /// `solve` on a paged medium ([`Scene::build_paged`]): the fluence streamed slab by slab
 /// into a `.npy` file (f32, channels first), and the report with the pager's counters.
 fn solve_paged_to_file(
@@ -700,36 +742,19 @@ fn solve_paged_to_file(
         })?;
     }
     let report_path = output.with_extension("json");
-    let report = serde_json::json!({
-        "scene": name,
-        "solver": chosen.solver.name(),
-        "params": chosen.resolved,
-        "params_given": chosen.params,
-        "options": {
-            "tolerance": chosen.tolerance,
-            "max_iterations": args.max_iterations,
-            "time_limit_s": args.time_limit,
-            "memory_budget": args.budget(),
-        },
-        "capabilities": chosen.solver.capabilities(),
-        "storage": "paged",
-        "brick": problem.layout().brick(),
-        "channels": channels,
-        "dims": g.dims(),
-        "spacing": g.spacing().to_array(),
-        "origin": g.origin().to_array(),
-        "fluence": ended.is_none().then(|| output.file_name().map(|n| n.to_string_lossy().into_owned())).flatten(),
-        "converged": stop.is_converged(),
-        "report": solution.report,
-    });
-    let text = serde_json::to_string_pretty(&report).map_err(|e| Error::Io {
-        path: report_path.clone(),
-        reason: e.to_string(),
-    })?;
-    std::fs::write(&report_path, text + "\n").map_err(|e| Error::Io {
-        path: report_path.clone(),
-        reason: e.to_string(),
-    })?;
+    let mut report = solve_report(
+        name,
+        chosen,
+        args,
+        g,
+        channels,
+        ended.is_none().then_some(output),
+        &solution.report,
+    );
+    report["options"]["memory_budget"] = args.budget().into();
+    report["storage"] = "paged".into();
+    report["brick"] = problem.layout().brick().into();
+    write_report(&report_path, &report)?;
     if let Some(ended) = ended {
         return Ok(ended);
     }
@@ -809,34 +834,16 @@ fn solve_to_file(
         }
     }
     // The report is written either way: it says why the solve stopped.
-    let g = built.problem.geometry();
-    let report = serde_json::json!({
-        "scene": name,
-        "solver": chosen.solver.name(),
-        "params": chosen.resolved,
-        "params_given": chosen.params,
-        "options": {
-            "tolerance": chosen.tolerance,
-            "max_iterations": args.max_iterations,
-            "time_limit_s": args.time_limit,
-        },
-        "capabilities": chosen.solver.capabilities(),
-        "channels": solution.fluence.len(),
-        "dims": g.dims(),
-        "spacing": g.spacing().to_array(),
-        "origin": g.origin().to_array(),
-        "fluence": ended.is_none().then(|| output.file_name().map(|n| n.to_string_lossy().into_owned())).flatten(),
-        "converged": stop.is_converged(),
-        "report": solution.report,
-    });
-    let text = serde_json::to_string_pretty(&report).map_err(|e| Error::Io {
-        path: report_path.clone(),
-        reason: e.to_string(),
-    })?;
-    std::fs::write(&report_path, text + "\n").map_err(|e| Error::Io {
-        path: report_path.clone(),
-        reason: e.to_string(),
-    })?;
+    let report = solve_report(
+        &name,
+        &chosen,
+        args,
+        built.problem.geometry(),
+        solution.fluence.len(),
+        ended.is_none().then_some(output),
+        &solution.report,
+    );
+    write_report(&report_path, &report)?;
     if let Some(ended) = ended {
         return Ok(ended);
     }

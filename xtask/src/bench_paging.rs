@@ -90,6 +90,22 @@ fn step_one_slab(dims: [usize; 3], slabs: [&[f32]; 3], out: &mut [f32]) {
     });
 }
 
+/// A pager of f32 bricks of `len` values over a fresh backing file, with a pool of
+/// `slots` bricks.
+fn file_pager(len: usize, slots: usize, eviction: Eviction) -> Result<Pager, PagingError> {
+    Pager::new(
+        Box::new(FileStore::create()?),
+        0,
+        len,
+        1,
+        PagerOptions {
+            budget_bytes: (slots * len * 4) as u64,
+            eviction,
+            fill: 0.0f32,
+        },
+    )
+}
+
 /// Runs the benchmark.
 pub(crate) fn run(n: usize, brick: usize, dom_n: usize) -> Result<(), String> {
     let err = |e: PagingError| e.to_string();
@@ -123,25 +139,11 @@ pub(crate) fn run(n: usize, brick: usize, dom_n: usize) -> Result<(), String> {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
     let layout = BrickLayout::new(dims, brick).map_err(|e| e.to_string())?;
-    let brick_bytes = layout.stored_len() as u64 * 4;
     for eviction in [Eviction::Lru, Eviction::Nru] {
         for prefetch in [false, true] {
             // 1/16 of both fields' bricks resident.
             let slots = (2 * layout.count() / 16).max(8);
-            let pager = Arc::new(
-                Pager::new(
-                    Box::new(FileStore::create().map_err(err)?),
-                    0,
-                    layout.stored_len(),
-                    1,
-                    PagerOptions {
-                        budget_bytes: slots as u64 * brick_bytes,
-                        eviction,
-                        fill: 0.0,
-                    },
-                )
-                .map_err(err)?,
-            );
+            let pager = Arc::new(file_pager(layout.stored_len(), slots, eviction).map_err(err)?);
             let mut fields = [
                 PagedGrid::from_grid(pager.clone(), &initial, brick).map_err(err)?,
                 PagedGrid::filled(pager.clone(), geometry, brick, 0.0).map_err(err)?,
@@ -252,20 +254,7 @@ pub(crate) fn run(n: usize, brick: usize, dom_n: usize) -> Result<(), String> {
         // has room for it (three brick layers; at 1/16 of 16 layers it has two, and
         // `skewed_steps_paged` leaves prefetch off).
         let slots = (2 * layout.count() / 16).max(8);
-        let pager = Arc::new(
-            Pager::new(
-                Box::new(FileStore::create().map_err(err)?),
-                0,
-                layout.stored_len(),
-                1,
-                PagerOptions {
-                    budget_bytes: slots as u64 * brick_bytes,
-                    eviction: Eviction::Lru,
-                    fill: 0.0,
-                },
-            )
-            .map_err(err)?,
-        );
+        let pager = Arc::new(file_pager(layout.stored_len(), slots, Eviction::Lru).map_err(err)?);
         let mut fields = [
             PagedGrid::from_grid(pager.clone(), &initial, brick).map_err(err)?,
             PagedGrid::filled(pager.clone(), geometry, brick, 0.0).map_err(err)?,
@@ -314,20 +303,7 @@ pub(crate) fn run(n: usize, brick: usize, dom_n: usize) -> Result<(), String> {
         let slots = (layout.count() / fraction).max(4);
         let mut row = Vec::new();
         for eviction in [Eviction::Lru, Eviction::Nru] {
-            let pager = Arc::new(
-                Pager::new(
-                    Box::new(FileStore::create().map_err(err)?),
-                    0,
-                    layout.stored_len(),
-                    1,
-                    PagerOptions {
-                        budget_bytes: slots as u64 * brick_bytes,
-                        eviction,
-                        fill: 0.0,
-                    },
-                )
-                .map_err(err)?,
-            );
+            let pager = Arc::new(file_pager(layout.stored_len(), slots, eviction).map_err(err)?);
             let field = PagedGrid::from_grid(pager.clone(), &initial, brick).map_err(err)?;
             let before = pager.stats();
             for octant in 0..8 {

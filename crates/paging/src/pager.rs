@@ -418,16 +418,9 @@ impl<T: Element> Pager<T> {
             let Some(data) = slot.try_read() else {
                 continue;
             };
-            self.store
-                .write(brick, bytemuck::cast_slice(&data))
-                .map_err(|source| PagingError::Io {
-                    action: "writing",
-                    brick,
-                    store: self.store.describe(),
-                    source,
-                })?;
+            let written = self.write_to_store(brick, &data)?;
             let mut state = self.state.lock();
-            state.stats.bytes_written += self.brick_len as u64 * Self::VALUE_BYTES;
+            state.stats.bytes_written += written;
             state.stats.write_backs += 1;
             // Clean only if no one else holds the slot: a writer that pinned it meanwhile
             // (marked dirty, waiting for our read lock) keeps it dirty.
@@ -615,6 +608,13 @@ impl<T: Element> Pager<T> {
         brick: usize,
         data: &[T],
     ) -> Result<(), PagingError> {
+        stats.bytes_written += self.write_to_store(brick, data)?;
+        Ok(())
+    }
+
+    /// Writes `data` as brick `brick` to the store (no lock needed: positioned I/O) and
+    /// returns the bytes written.
+    fn write_to_store(&self, brick: usize, data: &[T]) -> Result<u64, PagingError> {
         self.store
             .write(brick, bytemuck::cast_slice(data))
             .map_err(|source| PagingError::Io {
@@ -623,7 +623,6 @@ impl<T: Element> Pager<T> {
                 store: self.store.describe(),
                 source,
             })?;
-        stats.bytes_written += data.len() as u64 * Self::VALUE_BYTES;
-        Ok(())
+        Ok(data.len() as u64 * Self::VALUE_BYTES)
     }
 }

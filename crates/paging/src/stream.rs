@@ -58,16 +58,21 @@ pub fn for_each_layer(
             }
         }
         drop(sender);
-        if let Some(helper) = helper {
-            match helper.join() {
-                Ok(Err(e)) if result.is_ok() => result = Err(e),
-                Ok(_) => {}
-                // A panic in the helper is a bug: it goes on unwinding here.
-                Err(panic) => std::panic::resume_unwind(panic),
-            }
-        }
-        result
+        join_helper(helper, result)
     })
+}
+
+/// `result`, or the helper thread's error if `result` is fine (the caller has dropped the
+/// helper's channel, so it ends). A panic in the helper is a bug: it goes on unwinding here.
+fn join_helper(
+    helper: Option<std::thread::ScopedJoinHandle<'_, Result<(), PagingError>>>,
+    result: Result<(), PagingError>,
+) -> Result<(), PagingError> {
+    match helper.map(|h| h.join()) {
+        Some(Err(panic)) => std::panic::resume_unwind(panic),
+        Some(Ok(Err(e))) if result.is_ok() => Err(e),
+        _ => result,
+    }
 }
 
 /// `steps` steps of a stencil one slab deep (a 7-point stencil, FTCS), in **one** pass
@@ -272,14 +277,6 @@ pub fn skewed_steps_paged(
             step,
         );
         drop(sender);
-        let mut result = result;
-        if let Some(helper) = helper {
-            match helper.join() {
-                Ok(Err(e)) if result.is_ok() => result = Err(e),
-                Ok(_) => {}
-                Err(panic) => std::panic::resume_unwind(panic),
-            }
-        }
-        result
+        join_helper(helper, result)
     })
 }
