@@ -15,10 +15,13 @@
 //!
 //! Cost: O(N) per cell and light (N cells across), so O(N⁴) per light; grey extinction is
 //! marched once for all channels. Marching stops at τ = `max_optical_depth` (default 50,
-//! where e^{−τ} is below f32's normal range), which makes dense media cheaper.
+//! where e^{−τ} is below f32's normal range), which makes dense media cheaper, and crosses
+//! empty bricks (8³ in memory, the pager's bricks out of core) by advancing the walk's
+//! crossing times alone, without reading σ_t: a sparse cloud costs its occupied bricks, and
+//! every integral keeps its bits (`lucent_grid::EmptyBricks`).
 
 use glam::DVec3;
-use lucent_grid::Grid;
+use lucent_grid::{EmptyBricks, Grid};
 use lucent_optics::SphericalQuadrature;
 use rayon::prelude::*;
 
@@ -142,11 +145,21 @@ fn fluence_value(
     sum as f32
 }
 
-/// Transmittance from `source(x)` to every cell centre x through `sigma_t`.
-fn transmittance(sigma_t: &Grid, cutoff: f64, source: impl Fn(DVec3) -> DVec3 + Sync) -> Grid {
+/// Bricks of [`EmptyBricks`] for the in-memory walks: 8³ cells, a small mask (one flag
+/// per 512 cells) that still steps over most of the empty space around a cloud.
+const EMPTY_BRICK: usize = 8;
+
+/// Transmittance from `source(x)` to every cell centre x through `sigma_t`, whose empty
+/// bricks are `empty`.
+fn transmittance(
+    sigma_t: &Grid,
+    empty: &EmptyBricks,
+    cutoff: f64,
+    source: impl Fn(DVec3) -> DVec3 + Sync,
+) -> Grid {
     let geometry = *sigma_t.geometry();
     Grid::from_fn(geometry, |x| {
-        (-sigma_t.line_integral(source(x), x, cutoff)).exp() as f32
+        (-sigma_t.line_integral_skipping(empty, source(x), x, cutoff)).exp() as f32
     })
 }
 
@@ -419,6 +432,7 @@ impl DirectSolver {
         });
         Ok(PagedSolution {
             fluence,
+            standard_error: Vec::new(),
             transmittance,
             isotropic_fluence: isotropic,
             report: crate::solver::SolveReport {
@@ -453,6 +467,12 @@ impl DirectSolver {
         let cutoff = self.max_optical_depth;
         let directions = sky_directions(self.sky_level)?;
 
+        // Empty space is stepped over unread; the integrals keep their bits.
+        let empty = medium
+            .sigma_t
+            .iter()
+            .map(|sigma_t| EmptyBricks::of(sigma_t, EMPTY_BRICK))
+            .collect::<Result<Vec<_>, _>>()?;
         let result = {
             // Per-light transmittance, one grid per extinction channel.
             let mut per_light = Vec::with_capacity(point_lights.len());
@@ -460,8 +480,9 @@ impl DirectSolver {
                 let grids: Vec<Grid> = medium
                     .sigma_t
                     .iter()
-                    .map(|sigma_t| {
-                        transmittance(sigma_t, cutoff, |x| {
+                    .zip(&empty)
+                    .map(|(sigma_t, empty)| {
+                        transmittance(sigma_t, empty, cutoff, |x| {
                             light
                                 .arrival(x, far, min_distance)
                                 .map_or(x, |(_, _, from)| from)
@@ -482,7 +503,8 @@ impl DirectSolver {
                 let sum = medium
                     .sigma_t
                     .iter()
-                    .map(|sigma_t| {
+                    .zip(&empty)
+                    .map(|(sigma_t, empty)| {
                         let mut total = Grid::filled(geometry, 0.0);
                         total.slabs_mut().for_each(|(k, slab)| {
                             let [nx, ny, _] = geometry.dims();
@@ -491,7 +513,7 @@ impl DirectSolver {
                                     let x = geometry.cell_centre(i, j, k);
                                     let tau = |a, b| {
                                         Ok::<_, std::convert::Infallible>(
-                                            sigma_t.line_integral(a, b, cutoff),
+                                            sigma_t.line_integral_skipping(empty, a, b, cutoff),
                                         )
                                     };
                                     slab[i + nx * j] = match sky_sum(&directions, far, x, tau) {

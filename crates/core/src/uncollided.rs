@@ -32,7 +32,7 @@
 //! light ∮ I T r (ω·n)/r² dA, exact for a transparent cell.
 
 use glam::DVec3;
-use lucent_grid::{Grid, GridGeometry};
+use lucent_grid::{EmptyBricks, Grid, GridGeometry};
 use rayon::prelude::*;
 
 use crate::direct::DirectSolver;
@@ -137,6 +137,8 @@ impl std::ops::AddAssign for FaceFlux {
 
 struct Integrator<'a> {
     sigma_t: &'a Grid,
+    /// σ_t's empty bricks, crossed unread (the integrals keep their bits).
+    empty: Option<EmptyBricks>,
     light: &'a Light,
     source: Source,
     far: f64,
@@ -146,11 +148,21 @@ struct Integrator<'a> {
 }
 
 impl Integrator<'_> {
+    /// τ from `a` to `b`.
+    fn optical_depth(&self, a: DVec3, b: DVec3) -> f64 {
+        match &self.empty {
+            Some(empty) => self
+                .sigma_t
+                .line_integral_skipping(empty, a, b, self.cutoff),
+            None => self.sigma_t.line_integral(a, b, self.cutoff),
+        }
+    }
+
     /// I(ω) T(y) and the direction of travel at a point y, per unit of the light's spectrum.
     fn radiance_at(&self, y: DVec3) -> (f64, DVec3, f64) {
         match self.source {
             Source::Directional(d) => {
-                let t = (-self.sigma_t.line_integral(y - d * self.far, y, self.cutoff)).exp();
+                let t = (-self.optical_depth(y - d * self.far, y)).exp();
                 (t, d, 0.0)
             }
             Source::Point(p) => {
@@ -172,7 +184,7 @@ impl Integrator<'_> {
                 if intensity == 0.0 {
                     return (0.0, v / r, r);
                 }
-                let t = (-self.sigma_t.line_integral(p, y, self.cutoff)).exp();
+                let t = (-self.optical_depth(p, y)).exp();
                 (intensity * t, v / r, r)
             }
         }
@@ -411,6 +423,7 @@ pub fn uncollided_cells(sigma_t: &Grid, light: &Light, cutoff: f64) -> Option<Un
     };
     let integrator = Integrator {
         sigma_t,
+        empty: EmptyBricks::of(sigma_t, 8).ok(),
         light,
         source,
         far,

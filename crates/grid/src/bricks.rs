@@ -100,6 +100,14 @@ impl BrickLayout {
         [0, 1, 2].map(|a| self.brick.min(self.dims[a] - o[a]))
     }
 
+    /// The brick's first and last cells (inclusive).
+    #[inline]
+    pub fn cell_box(&self, id: usize) -> [[usize; 3]; 2] {
+        let o = self.origin(id);
+        let e = self.extent(id);
+        [o, [0, 1, 2].map(|a| o[a] + e[a] - 1)]
+    }
+
     /// The brick holding cell `cell` and the cell's coordinates inside it.
     #[inline]
     pub fn locate(&self, cell: [usize; 3]) -> (usize, [usize; 3]) {
