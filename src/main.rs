@@ -719,7 +719,8 @@ fn solve_paged_to_file(
     }
     let options = args.options(chosen, meter_free())?;
     options.validate()?;
-    let problem = parsed.build_paged(args.budget())?;
+    // The medium gets its share of the budget; the solver pages its own data in the rest.
+    let problem = parsed.build_paged(chosen.solver.paged_medium_budget(args.budget()))?;
     chosen.say_note();
     let (progress, meter) = bar(quiet, "solve");
     let options = args.options(chosen, meter.solver_callback())?;

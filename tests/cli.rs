@@ -1298,8 +1298,22 @@ fn a_memory_budget_refuses_before_allocating_naming_the_bytes() {
 fn a_scene_beyond_the_budget_is_solved_out_of_core_to_the_same_bytes() {
     let dir = tempfile::tempdir().unwrap();
     // The backlit cloud's 48³ fields are 442 kB each; a 1 MiB budget holds no dense scene,
-    // so `direct` and `convection-diffusion` page (bricks of 4³, a pool of a few hundred).
-    for solver in ["direct", "convection-diffusion"] {
+    // so `direct`, `convection-diffusion` and `mc` page (bricks of 4³, a pool of a few
+    // hundred; `mc` gives the medium half the budget and pages its tallies in the rest).
+    // `mc` in memory takes the bricks' majorant blocks, 4³, so that both trace alike.
+    let mc: &[&str] = &[
+        "--param",
+        "particles=300",
+        "--param",
+        "batches=3",
+        "--param",
+        "majorant_cells=4",
+    ];
+    for (solver, params) in [
+        ("direct", &[][..]),
+        ("convection-diffusion", &[]),
+        ("mc", mc),
+    ] {
         let run = |out: &str, budget: Option<&str>| {
             let mut args = vec![
                 "solve",
@@ -1311,6 +1325,7 @@ fn a_scene_beyond_the_budget_is_solved_out_of_core_to_the_same_bytes() {
                 "--quiet",
             ]
             .into_iter()
+            .chain(params.iter().copied())
             .map(str::to_owned)
             .collect::<Vec<_>>();
             if let Some(b) = budget {
@@ -1360,7 +1375,7 @@ fn a_scene_beyond_the_budget_is_solved_out_of_core_to_the_same_bytes() {
             "solve",
             &scene("backlit_anisotropic.toml"),
             "--solver",
-            "mc",
+            "diffusion-mg",
             "--memory-budget",
             "1MiB",
             "-o",

@@ -1,5 +1,5 @@
 //! `cargo xtask paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK]`: SOLVER (`direct`, the
-//! default, or `convection-diffusion`) on a sparse N³ cloud (default 256; a seeded noise
+//! default, `convection-diffusion` or `mc`) on a sparse N³ cloud (default 256; a seeded noise
 //! cloud of radius 0.3 in the unit box, mostly empty) lit by a low sun, out of core under a
 //! budget of BUDGET_MIB MiB (default 32; the brick pool is
 //! what `direct`'s slab buffers and bookkeeping leave of it, bricks of BRICK³ cells,
@@ -34,8 +34,22 @@ pub(crate) fn run(
     brick: usize,
 ) -> Result<(), String> {
     let registry = lucent::registry();
+    // `mc` takes the bricks as its majorant blocks (as it does on the paged medium), so
+    // that both runs trace the same paths; 20 000 particles in 4 batches.
+    let mut params = lucent::core::Params::default();
+    if solver_name == "mc" {
+        for (key, value) in [
+            ("majorant_cells", brick as i64),
+            ("particles", 20_000),
+            ("batches", 4),
+        ] {
+            params
+                .0
+                .insert(key.into(), lucent::core::ParamValue::Int(value));
+        }
+    }
     let solver = registry
-        .build(solver_name, &lucent::core::Params::default())
+        .build(solver_name, &params)
         .map_err(|e| e.to_string())?;
     if !solver.pages() {
         return Err(format!("`{solver_name}` does not run out of core"));
@@ -63,7 +77,9 @@ pub(crate) fn run(
         (n * n) as u64 * 36
     };
     let overhead = 3 * layer_bytes + 6 * layout.count() as u64 * 21 + planes;
-    let pool = budget.saturating_sub(overhead + (budget >> 4));
+    // The medium's share of the budget (`mc` keeps half for its tallies' pool).
+    let share = solver.paged_medium_budget(budget);
+    let pool = share.saturating_sub(overhead + (budget >> 4));
     if pool < 4 * layout.stored_len() as u64 * 4 {
         return Err(format!(
             "a budget of {budget_mib} MiB leaves no pool beside {} MiB of slab buffers: smaller bricks or a larger budget",

@@ -226,6 +226,9 @@ impl PagedProblem {
 pub struct PagedSolution {
     /// The fluence per channel.
     pub fluence: Vec<PagedGrid>,
+    /// The fluence's standard error per channel (Monte Carlo; empty for deterministic
+    /// solvers).
+    pub standard_error: Vec<PagedGrid>,
     /// Per point-like light (in the problem's order, the sky left out), transmittance per
     /// extinction channel (solvers that keep it: `direct`).
     pub transmittance: Vec<Vec<PagedGrid>>,

@@ -510,6 +510,13 @@ pub trait Solver: Send + Sync {
         false
     }
 
+    /// The part of a memory budget that a paged problem's medium (its pool and slabs) may
+    /// take when this solver runs out of core; the rest is the solver's own paged working
+    /// data. All of it by default: the medium's pool is the solver's working set.
+    fn paged_medium_budget(&self, budget: u64) -> u64 {
+        budget
+    }
+
     /// Solves a problem whose medium is paged ([`crate::PagedProblem`]), giving the bits
     /// [`Solver::solve`] gives on the same medium in memory. Solvers that need their
     /// fields in memory refuse with [`SolveError::Unsupported`] (the default).

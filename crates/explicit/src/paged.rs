@@ -163,6 +163,7 @@ pub(crate) fn convection(
     });
     Ok(PagedSolution {
         fluence,
+        standard_error: Vec::new(),
         transmittance: Vec::new(),
         isotropic_fluence: Vec::new(),
         report: SolveReport {

@@ -132,24 +132,28 @@ impl Grid {
     /// centres take the value of the nearest boundary face (no extrapolation, no wrap).
     /// Reproduces any field that is linear in x, y and z exactly between cell centres.
     pub fn sample_trilinear(&self, p: DVec3) -> f32 {
-        let v = self.geometry.world_to_voxel(p);
         let [nx, ny, nz] = self.dims();
-        let (i0, tx) = axis_lerp(v.x, nx);
-        let (j0, ty) = axis_lerp(v.y, ny);
-        let (k0, tz) = axis_lerp(v.z, nz);
+        let (lo, t) = trilinear_cell(self.dims(), self.geometry.world_to_voxel(p));
         // One base index and three strides (0 along an axis of a single cell).
-        let base = self.geometry.index(i0, j0, k0);
+        let base = self.geometry.index(lo[0], lo[1], lo[2]);
         let sx = usize::from(nx > 1);
         let sy = if ny > 1 { nx } else { 0 };
         let sz = if nz > 1 { nx * ny } else { 0 };
         let d = &self.data;
         let at = |offset: usize| f64::from(d[base + offset]);
-        let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
-        let c00 = lerp(at(0), at(sx), tx);
-        let c10 = lerp(at(sy), at(sy + sx), tx);
-        let c01 = lerp(at(sz), at(sz + sx), tx);
-        let c11 = lerp(at(sz + sy), at(sz + sy + sx), tx);
-        lerp(lerp(c00, c10, ty), lerp(c01, c11, ty), tz) as f32
+        trilinear_blend(
+            [
+                at(0),
+                at(sx),
+                at(sy),
+                at(sy + sx),
+                at(sz),
+                at(sz + sx),
+                at(sz + sy),
+                at(sz + sy + sx),
+            ],
+            t,
+        )
     }
 
     /// Σ values, in f64.
@@ -243,6 +247,31 @@ impl Grid {
             data: self.data,
         })
     }
+}
+
+/// The lower corner cell and the weights of [`Grid::sample_trilinear`] at continuous voxel
+/// coordinates `v` (cell centres at integers) on a grid of `dims` cells: the corners are
+/// `lo + {0, 1}³`, where the upper index of an axis of one cell is that cell again. Any
+/// storage that reads the same eight values and blends them with [`trilinear_blend`] gets
+/// the dense grid's bits.
+#[inline]
+pub fn trilinear_cell(dims: [usize; 3], v: DVec3) -> ([usize; 3], [f64; 3]) {
+    let (i0, tx) = axis_lerp(v.x, dims[0]);
+    let (j0, ty) = axis_lerp(v.y, dims[1]);
+    let (k0, tz) = axis_lerp(v.z, dims[2]);
+    ([i0, j0, k0], [tx, ty, tz])
+}
+
+/// The trilinear blend of the eight corner values `c[dx + 2 dy + 4 dz]` with weights `t`,
+/// in f64, rounded to f32 once.
+#[inline]
+pub fn trilinear_blend(c: [f64; 8], t: [f64; 3]) -> f32 {
+    let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
+    let c00 = lerp(c[0], c[1], t[0]);
+    let c10 = lerp(c[2], c[3], t[0]);
+    let c01 = lerp(c[4], c[5], t[0]);
+    let c11 = lerp(c[6], c[7], t[0]);
+    lerp(lerp(c00, c10, t[1]), lerp(c01, c11, t[1]), t[2]) as f32
 }
 
 /// Lower cell index and weight for a clamped linear interpolation along one axis of `n`

@@ -66,7 +66,7 @@ pub mod transfer;
 
 pub use bricked::BrickedGrid;
 pub use bricks::BrickLayout;
-pub use dense::{Grid, GridStats};
+pub use dense::{Grid, GridStats, trilinear_blend, trilinear_cell};
 pub use error::GridError;
 pub use geometry::{GridGeometry, MAX_VOXELS, ray_box};
-pub use line::{DualCorners, line_integral_with};
+pub use line::{DualCorners, EmptyBricks, line_integral_with};

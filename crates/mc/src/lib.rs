@@ -36,6 +36,17 @@
 //! batch tallies are summed in batch order: the same seed gives bitwise identical results
 //! for any thread count.
 //!
+//! ## Out of core
+//! On a paged medium (`Solver::solve_paged`, Bernabei ch. 5) the same tracer reads σ_t and
+//! the albedo brick by brick through the pager, takes its majorant from the bricks' ranges
+//! (brick and apron bound the trilinear σ_t: no pass over the medium; `majorant_cells` is
+//! then the brick size), and pages its tallies: each batch logs its track lengths and
+//! applies them to f64 pages sorted by brick with a stable sort, so every cell receives its
+//! additions in path order, and the pages are folded into Σφ and Σφ² in batch order. With
+//! bricks of `majorant_cells`³ cells the result has the in-memory solve's bits
+//! (`tests/paged.rs`). The medium gets half of the memory budget; the tallies' logs and
+//! pages the rest.
+//!
 //! ## Units and limits
 //! Scene units, fluence in W/length² for lights in W. The box faces are vacuum boundaries.
 //! With embedded geometry (a signed distance grid, negative inside) the medium is the
@@ -71,6 +82,7 @@
 
 mod camera;
 mod majorant;
+mod paged;
 mod params;
 mod rng;
 mod solver;

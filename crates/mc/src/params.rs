@@ -19,7 +19,7 @@ pub struct McParams {
     pub seed: u64,
     /// Scattering events after which a path ends.
     pub max_depth: u32,
-    /// Cells per majorant block edge.
+    /// Cells per majorant block edge (on a paged medium the bricks are the blocks).
     pub majorant_cells: usize,
     /// One majorant for the whole grid instead of per block.
     pub global_majorant: bool,
@@ -53,7 +53,7 @@ impl SolverParams for McParams {
         ("max_depth", "scattering events after which a path ends"),
         (
             "majorant_cells",
-            "cells per edge of a majorant block (delta tracking's bound on σ_t)",
+            "cells per edge of a majorant block (delta tracking's bound on σ_t; out of core the bricks are the blocks)",
         ),
         (
             "global_majorant",

@@ -3,8 +3,8 @@
 use lucent_core::driver::{self, Outcome, Record};
 use lucent_core::{
     BoundaryKind, Capabilities, FluenceKind, ImageEstimate, ImageRequest, ImageSolver, LightKind,
-    OutputKind, Params, Problem, Progress, Solution, SolveError, SolveOptions, Solver, SolverEntry,
-    StopReason, param_docs, resolved_params,
+    OutputKind, PagedProblem, PagedSolution, Params, Problem, Progress, Solution, SolveError,
+    SolveOptions, Solver, SolverEntry, StopReason, param_docs, resolved_params,
 };
 
 use crate::params::McParams;
@@ -86,6 +86,31 @@ impl Solver for McSolver {
 
     fn images(&self) -> Option<&dyn ImageSolver> {
         Some(self)
+    }
+
+    fn pages(&self) -> bool {
+        true
+    }
+
+    /// Half: the other half holds the tallies' pool, which a paged solve takes from what
+    /// the budget leaves beside the medium's pool.
+    fn paged_medium_budget(&self, budget: u64) -> u64 {
+        budget / 2
+    }
+
+    fn solve_paged(
+        &self,
+        problem: &PagedProblem,
+        options: &SolveOptions,
+    ) -> Result<PagedSolution, SolveError> {
+        options.validate()?;
+        if !matches!(problem.boundary(), lucent_core::Boundary::Vacuum) {
+            return Err(SolveError::Unsupported {
+                solver: Self::NAME.into(),
+                feature: format!("a {} boundary on a paged medium", problem.boundary()),
+            });
+        }
+        options.install(|| crate::paged::solve_paged(self, problem, options))?
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {

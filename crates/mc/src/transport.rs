@@ -88,23 +88,112 @@ pub struct McEstimate {
     pub batches: usize,
 }
 
-/// Per-batch tallies of one tracing group (the channels sharing one extinction).
-struct Tally {
-    fluence: Vec<Vec<f64>>,
-    emitted: Vec<f64>,
-    absorbed: Vec<f64>,
-    escaped: Vec<f64>,
-    truncated: Vec<f64>,
+/// Per-batch tallies of one tracing group (the channels sharing one extinction): the track
+/// lengths in `fluence` (per member channel and cell) and where the power went.
+pub(crate) struct Tally<F> {
+    pub(crate) fluence: F,
+    pub(crate) emitted: Vec<f64>,
+    pub(crate) absorbed: Vec<f64>,
+    pub(crate) escaped: Vec<f64>,
+    pub(crate) truncated: Vec<f64>,
 }
 
-impl Tally {
-    fn new(channels: usize, voxels: usize) -> Self {
+impl<F> Tally<F> {
+    fn new(channels: usize, fluence: F) -> Self {
         Self {
-            fluence: vec![vec![0.0; voxels]; channels],
+            fluence,
             emitted: vec![0.0; channels],
             absorbed: vec![0.0; channels],
             escaped: vec![0.0; channels],
             truncated: vec![0.0; channels],
+        }
+    }
+}
+
+/// Where a batch leaves its track lengths: dense per-channel arrays in memory, paged
+/// bricks out of core. Each cell receives its additions in the path order on either.
+pub(crate) trait FluenceTally {
+    /// Adds `value` (weight × length) to cell `cell` (x-fastest index) of member channel
+    /// `member`.
+    fn add(&mut self, member: usize, cell: usize, value: f64);
+}
+
+impl FluenceTally for Vec<Vec<f64>> {
+    #[inline]
+    fn add(&mut self, member: usize, cell: usize, value: f64) {
+        self[member][cell] += value;
+    }
+}
+
+/// What a batch reads of the medium: dense grids in memory, paged fields out of core, with
+/// the same trilinear arithmetic (the same bits).
+pub(crate) trait MediumSampler {
+    /// σ_t of extinction channel `e` at `p` (1/length).
+    fn sigma_t(&mut self, e: usize, p: DVec3) -> f64;
+    /// The albedo of channel `c` at `p`.
+    fn albedo(&mut self, c: usize, p: DVec3) -> f64;
+}
+
+/// A problem's medium in memory.
+struct DenseMedium<'a>(&'a lucent_core::Medium);
+
+impl MediumSampler for DenseMedium<'_> {
+    #[inline]
+    fn sigma_t(&mut self, e: usize, p: DVec3) -> f64 {
+        f64::from(self.0.sigma_t(e).sample_trilinear(p))
+    }
+
+    #[inline]
+    fn albedo(&mut self, c: usize, p: DVec3) -> f64 {
+        f64::from(self.0.albedo(c).sample(p))
+    }
+}
+
+/// What every batch of a run shares: the box, the phase function, the lights (with the
+/// emission samplers) and, in memory, the embedded surface.
+pub(crate) struct Scene<'a> {
+    pub(crate) geometry: lucent_grid::GridGeometry,
+    pub(crate) phase: lucent_optics::Phase,
+    pub(crate) lights: Vec<&'a Light>,
+    pub(crate) emission: Vec<Option<EmissionCdf>>,
+    surface: Option<Interface<'a>>,
+}
+
+impl<'a> Scene<'a> {
+    /// A problem's scene.
+    fn of(problem: &'a Problem) -> Self {
+        let lights: Vec<&Light> = problem.lights().iter().collect();
+        let emission = lights
+            .iter()
+            .map(|l| match l {
+                Light::Emission { grid, .. } => Some(EmissionCdf::new(grid)),
+                _ => None,
+            })
+            .collect();
+        Self {
+            geometry: *problem.geometry(),
+            phase: problem.medium().phase,
+            lights,
+            emission,
+            surface: problem
+                .embedded()
+                .map(|sdf| Interface::new(sdf, problem.boundary())),
+        }
+    }
+
+    /// A scene of point-like lights and the sky in a box with nothing embedded (a paged
+    /// problem's).
+    pub(crate) fn plain(
+        geometry: lucent_grid::GridGeometry,
+        phase: lucent_optics::Phase,
+        lights: &'a [Light],
+    ) -> Self {
+        Self {
+            geometry,
+            phase,
+            lights: lights.iter().collect(),
+            emission: lights.iter().map(|_| None).collect(),
+            surface: None,
         }
     }
 }
@@ -377,14 +466,7 @@ pub fn estimate_with(
     let medium = problem.medium();
     let channels = problem.channels();
     let voxels = geometry.voxel_count();
-    let lights: Vec<&Light> = problem.lights().iter().collect();
-    let emission: Vec<Option<EmissionCdf>> = lights
-        .iter()
-        .map(|l| match l {
-            Light::Emission { grid, .. } => Some(EmissionCdf::new(grid)),
-            _ => None,
-        })
-        .collect();
+    let scene = Scene::of(problem);
     // Tracing groups: one per extinction grid; a grey extinction carries every channel, and
     // an RGB one too with spectral MIS (`SPECTRAL` marks that group).
     const SPECTRAL: usize = usize::MAX;
@@ -439,28 +521,30 @@ pub fn estimate_with(
             } else {
                 chunk
             };
-            let tallies: Vec<Tally> = chunk
+            let tallies: Vec<Tally<Vec<Vec<f64>>>> = chunk
                 .par_iter()
                 .map(|&batch| {
+                    let fluence = vec![vec![0.0f64; voxels]; members.len()];
+                    let mut medium = DenseMedium(medium);
                     let tally = if *extinction == SPECTRAL {
                         trace_batch_spectral(
-                            problem,
-                            &lights,
-                            &emission,
+                            &scene,
+                            &mut medium,
                             &majorant,
                             config,
                             batch as u64,
+                            fluence,
                         )
                     } else {
                         trace_batch(
-                            problem,
-                            &lights,
-                            &emission,
-                            sigma_t,
+                            &scene,
+                            &mut medium,
+                            *extinction,
                             &majorant,
                             members,
                             config,
                             batch as u64 + 1000 * *extinction as u64,
+                            fluence,
                         )
                     };
                     // One report per batch, as each finishes.
@@ -551,7 +635,7 @@ pub fn estimate_with(
             }
         })
         .collect();
-    let paths = config.particles * lights.len() as u64 * finished as u64;
+    let paths = config.particles * scene.lights.len() as u64 * finished as u64;
     Ok(McEstimate {
         fluence,
         standard_error,
@@ -562,31 +646,29 @@ pub fn estimate_with(
 }
 
 /// One batch of one tracing group: every light emits `config.particles` particles.
+/// `extinction` is the group's extinction channel; the fluence goes to `fluence`.
 #[allow(clippy::too_many_arguments)]
-fn trace_batch(
-    problem: &Problem,
-    lights: &[&Light],
-    emission: &[Option<EmissionCdf>],
-    sigma_t: &Grid,
+pub(crate) fn trace_batch<M: MediumSampler, F: FluenceTally>(
+    scene: &Scene<'_>,
+    medium: &mut M,
+    extinction: usize,
     majorant: &MajorantGrid,
     members: &[usize],
     config: &McConfig,
     batch: u64,
-) -> Tally {
-    let geometry = *problem.geometry();
+    fluence: F,
+) -> Tally<F> {
+    let geometry = scene.geometry;
     let (lo, hi) = geometry.bounds();
-    let medium = problem.medium();
-    let phase = medium.phase;
-    let mut tally = Tally::new(members.len(), geometry.voxel_count());
+    let phase = scene.phase;
+    let mut tally = Tally::new(members.len(), fluence);
     let n = config.particles as f64;
-    let surface = problem
-        .embedded()
-        .map(|sdf| Interface::new(sdf, problem.boundary()));
-    for (l, light) in lights.iter().enumerate() {
+    let surface = scene.surface.as_ref();
+    for (l, light) in scene.lights.iter().enumerate() {
         for path in 0..config.particles {
             let mut rng = PathRng::new(config.seed, batch, (l as u64) << 40 | path);
             let Some((mut pos, mut dir, power)) =
-                emit(light, emission[l].as_ref(), lo, hi, &mut rng)
+                emit(light, scene.emission[l].as_ref(), lo, hi, &mut rng)
             else {
                 continue;
             };
@@ -618,10 +700,8 @@ fn trace_batch(
                 }
                 // With embedded geometry the flight also ends where it meets the surface,
                 // and only the inside holds medium.
-                let inside = surface.as_ref().is_none_or(|s| s.inside(pos));
-                let t_surface = surface
-                    .as_ref()
-                    .and_then(|s| s.hit(pos, dir, t_in, t_out, inside));
+                let inside = surface.is_none_or(|s| s.inside(pos));
+                let t_surface = surface.and_then(|s| s.hit(pos, dir, t_in, t_out, inside));
                 let t_stop = t_surface.unwrap_or(t_out);
                 // Delta tracking between t_in and t_stop.
                 let mut collision = None;
@@ -633,7 +713,7 @@ fn trace_batch(
                         t_stop,
                         &mut rng,
                         |t, sigma_max, rng| {
-                            let sigma = f64::from(sigma_t.sample_trilinear(pos + dir * t));
+                            let sigma = medium.sigma_t(extinction, pos + dir * t);
                             if rng.uniform() * sigma_max < sigma {
                                 collision = Some(t);
                                 return false;
@@ -646,12 +726,12 @@ fn trace_batch(
                 // Track-length estimator: w·ℓ in every cell the free flight crosses.
                 geometry.traverse(pos + dir * t_in, pos + dir * t_end, |index, enter, exit| {
                     for (m, w) in weight.iter().enumerate() {
-                        tally.fluence[m][index] += w * (exit - enter);
+                        tally.fluence.add(m, index, w * (exit - enter));
                     }
                     true
                 });
                 let Some(t) = collision else {
-                    if let (Some(s), Some(t)) = (&surface, t_surface) {
+                    if let (Some(s), Some(t)) = (surface, t_surface) {
                         // At the interface: Fresnel reflection or refraction, then fly on.
                         crossings += 1;
                         if crossings > 100_000 {
@@ -674,7 +754,7 @@ fn trace_batch(
                 pos += dir * t;
                 // Implicit capture: the absorbed share is tallied, the rest scatters on.
                 for (m, &c) in members.iter().enumerate() {
-                    let albedo = f64::from(medium.albedo(c).sample(pos)).clamp(0.0, 1.0);
+                    let albedo = medium.albedo(c, pos).clamp(0.0, 1.0);
                     tally.absorbed[m] += weight[m] * (1.0 - albedo);
                     weight[m] *= albedo;
                 }
@@ -703,28 +783,24 @@ fn trace_batch(
 /// every piece between tentative collisions with the weights of the path up to its start:
 /// the next tentative point is drawn from the shared majorant, the same for every channel,
 /// so no weight is owed for it.
-fn trace_batch_spectral(
-    problem: &Problem,
-    lights: &[&Light],
-    emission: &[Option<EmissionCdf>],
+pub(crate) fn trace_batch_spectral<M: MediumSampler, F: FluenceTally>(
+    scene: &Scene<'_>,
+    medium: &mut M,
     majorant: &MajorantGrid,
     config: &McConfig,
     batch: u64,
-) -> Tally {
-    let geometry = *problem.geometry();
+    fluence: F,
+) -> Tally<F> {
+    let geometry = scene.geometry;
     let (lo, hi) = geometry.bounds();
-    let medium = problem.medium();
-    let phase = medium.phase;
-    let mut tally = Tally::new(3, geometry.voxel_count());
+    let phase = scene.phase;
+    let mut tally = Tally::new(3, fluence);
     let n = config.particles as f64;
-    let sigma = |x: DVec3| -> [f64; 3] {
-        std::array::from_fn(|c| f64::from(medium.sigma_t(c).sample_trilinear(x)))
-    };
-    for (l, light) in lights.iter().enumerate() {
+    for (l, light) in scene.lights.iter().enumerate() {
         for path in 0..config.particles {
             let mut rng = PathRng::new(config.seed, batch + 5000, (l as u64) << 40 | path);
             let Some((mut pos, mut dir, power)) =
-                emit(light, emission[l].as_ref(), lo, hi, &mut rng)
+                emit(light, scene.emission[l].as_ref(), lo, hi, &mut rng)
             else {
                 continue;
             };
@@ -765,12 +841,13 @@ fn trace_batch_spectral(
                         let piece = (pos + dir * start, pos + dir * t);
                         geometry.traverse(piece.0, piece.1, |index, enter, exit| {
                             for c in 0..3 {
-                                tally.fluence[c][index] += f[c] * (exit - enter);
+                                tally.fluence.add(c, index, f[c] * (exit - enter));
                             }
                             true
                         });
                         start = t;
-                        let s = sigma(pos + dir * t);
+                        let x = pos + dir * t;
+                        let s: [f64; 3] = std::array::from_fn(|c| medium.sigma_t(c, x));
                         let real = rng.uniform() * sigma_max < s[hero];
                         for c in 0..3 {
                             let q = (s[c] / sigma_max).min(1.0);
@@ -799,7 +876,7 @@ fn trace_batch_spectral(
                         pos + dir * t_out,
                         |index, enter, exit| {
                             for c in 0..3 {
-                                tally.fluence[c][index] += f[c] * (exit - enter);
+                                tally.fluence.add(c, index, f[c] * (exit - enter));
                             }
                             true
                         },
@@ -813,7 +890,7 @@ fn trace_batch_spectral(
                 // The real-collision factor σ_c/σ̄ is in f already; the scattered share is
                 // the albedo of σ_c, the rest is absorbed.
                 for c in 0..3 {
-                    let albedo = f64::from(medium.albedo(c).sample(pos)).clamp(0.0, 1.0);
+                    let albedo = medium.albedo(c, pos).clamp(0.0, 1.0);
                     tally.absorbed[c] += f[c] * (1.0 - albedo);
                     f[c] *= albedo;
                 }

@@ -24,6 +24,12 @@ pub enum PagingError {
         /// Slots in the pool.
         slots: usize,
     },
+    /// A brick that is pinned cannot be discarded.
+    #[error("brick {brick} is pinned and cannot be discarded")]
+    Pinned {
+        /// The brick.
+        brick: usize,
+    },
     /// A brick number beyond the pager's bricks.
     #[error("brick {brick} does not exist (the pager has {count})")]
     NoSuchBrick {

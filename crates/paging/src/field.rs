@@ -425,6 +425,14 @@ impl PagedGrid {
         lucent_grid::line_integral_with(&self.geometry, a, b, cutoff, &mut self.corners())
     }
 
+    /// A reader of trilinear samples ([`PagedSampler`]).
+    pub fn sampler(&self) -> PagedSampler<'_> {
+        PagedSampler {
+            field: self,
+            current: None,
+        }
+    }
+
     /// A reader of dual-cell corners for [`lucent_grid::line_integral_with`].
     pub fn corners(&self) -> PagedCorners<'_> {
         PagedCorners {
@@ -549,6 +557,16 @@ pub struct PagedCorners<'a> {
 impl DualCorners for PagedCorners<'_> {
     type Error = PagingError;
 
+    /// The cell's brick; empty when its range (apron included) is [0, 0], as the
+    /// constant bricks of empty space are: crossed without a pin.
+    #[inline]
+    fn region(&mut self, cell: [usize; 3]) -> Option<([[usize; 3]; 2], bool)> {
+        let layout = &self.field.layout;
+        let (id, _) = layout.locate(cell);
+        let (min, max) = self.field.brick_range(id)?;
+        Some((layout.cell_box(id), min == 0.0 && max == 0.0))
+    }
+
     #[inline]
     fn corners(&mut self, lo: [usize; 3], hi: [usize; 3]) -> Result<[f64; 8], PagingError> {
         let layout = &self.field.layout;
@@ -574,5 +592,54 @@ impl DualCorners for PagedCorners<'_> {
             at([lo[0], hi[1], hi[2]]),
             at(hi),
         ])
+    }
+}
+
+/// Trilinear samples of a [`PagedGrid`] with the bits of [`Grid::sample_trilinear`] on the
+/// same values: the eight corners come from the stored brick of the lower corner (its apron
+/// holds the upper ones, clamped copies at the faces), blended by the dense grid's own
+/// arithmetic ([`lucent_grid::trilinear_blend`]). The brick last read stays pinned, so a
+/// path sampling along a flight pins once per brick it enters.
+#[derive(Debug)]
+pub struct PagedSampler<'a> {
+    field: &'a PagedGrid,
+    current: Option<(usize, BrickView)>,
+}
+
+impl PagedSampler<'_> {
+    /// The field's trilinear interpolant at world point `p` (clamped at the faces).
+    #[inline]
+    pub fn sample_trilinear(&mut self, p: DVec3) -> Result<f32, PagingError> {
+        let field = self.field;
+        let layout = &field.layout;
+        let (lo, t) =
+            lucent_grid::trilinear_cell(field.geometry.dims(), field.geometry.world_to_voxel(p));
+        let (id, local) = layout.locate(lo);
+        let view = match &self.current {
+            Some((current, view)) if *current == id => view,
+            _ => {
+                self.current = None;
+                &self.current.insert((id, field.brick(id)?)).1
+            }
+        };
+        if let BrickView::Constant(v) = view {
+            return Ok(lucent_grid::trilinear_blend([f64::from(*v); 8], t));
+        }
+        let [x, y, z] = local.map(|c| c as isize);
+        let at =
+            |dx: isize, dy: isize, dz: isize| f64::from(view.get(layout, [x + dx, y + dy, z + dz]));
+        Ok(lucent_grid::trilinear_blend(
+            [
+                at(0, 0, 0),
+                at(1, 0, 0),
+                at(0, 1, 0),
+                at(1, 1, 0),
+                at(0, 0, 1),
+                at(1, 0, 1),
+                at(0, 1, 1),
+                at(1, 1, 1),
+            ],
+            t,
+        ))
     }
 }

@@ -71,7 +71,7 @@ pub mod store;
 mod stream;
 
 pub use error::PagingError;
-pub use field::{BrickView, PagedCorners, PagedGrid};
+pub use field::{BrickView, PagedCorners, PagedGrid, PagedSampler};
 pub use pager::{Element, Eviction, Pager, PagerOptions, PagerStats, ReadPin, WritePin};
 pub use store::{BrickStore, FileStore, MemoryStore};
 pub use stream::{for_each_layer, skewed_steps, skewed_steps_paged};

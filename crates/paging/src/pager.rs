@@ -304,6 +304,30 @@ impl<T: Element> Pager<T> {
         matches!(self.state.lock().table.get(brick), Some(Entry::Resident(_)))
     }
 
+    /// Whether `brick` was never written (or was discarded): it reads as the fill.
+    pub fn is_fresh(&self, brick: usize) -> bool {
+        matches!(self.state.lock().table.get(brick), Some(Entry::Fresh))
+    }
+
+    /// Forgets `brick`'s values: it reads as the fill again, its slot (if resident) is
+    /// freed without a write-back, and its old copy in the store is never read again.
+    /// Scratch bricks (a batch's tallies, once folded) are recycled this way. Fails with
+    /// [`PagingError::Pinned`] while the brick is pinned.
+    pub fn discard(&self, brick: usize) -> Result<(), PagingError> {
+        let mut state = self.state.lock();
+        self.check(&state, brick)?;
+        if let Entry::Resident(s) = state.table[brick] {
+            let s = s as usize;
+            if Arc::strong_count(&state.slots[s]) > 1 {
+                return Err(PagingError::Pinned { brick });
+            }
+            state.meta[s] = None;
+            state.free.push(s as u32);
+        }
+        state.table[brick] = Entry::Fresh;
+        Ok(())
+    }
+
     /// Pins `brick` for reading.
     pub fn read(&self, brick: usize) -> Result<ReadPin<T>, PagingError> {
         let slot = self.pin(brick, Access::Read)?;

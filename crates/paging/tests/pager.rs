@@ -590,3 +590,65 @@ fn reads_and_writes_that_do_not_fit_the_field_are_errors() {
     // The field is untouched.
     assert!(field.to_grid().unwrap().data().iter().all(|&v| v == 1.0));
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    #[test]
+    fn trilinear_samples_of_paged_fields_are_the_dense_ones_bit_for_bit(
+        dims in proptest::array::uniform3(1usize..14),
+        brick_log2 in 0u32..4,
+        points in proptest::collection::vec(proptest::array::uniform3(-0.3f64..1.3), 1..64),
+        slots in 1u64..3,
+    ) {
+        // Points inside and outside the box (clamped), axes of one cell, bricks of 1 to 8
+        // cells, constant bricks (the lower half is 0): the values and blend are the dense
+        // grid's.
+        let brick = 1 << brick_log2;
+        let geometry = GridGeometry::new(dims, DVec3::new(0.1, 0.13, 0.08), DVec3::ZERO).unwrap();
+        let layout = BrickLayout::new(dims, brick).unwrap();
+        let pager = Arc::new(pager(Box::new(MemoryStore::default()), 0, layout.stored_len(), slots, Eviction::Nru));
+        let dense = Grid::from_fn(geometry, |p| {
+            if p.z < 0.4 { 0.0 } else { (0.5 + (7.0 * p.x).sin() * (5.0 * p.y).cos()).abs() as f32 }
+        });
+        let field = PagedGrid::from_grid(pager, &dense, brick).unwrap();
+        let (lo, hi) = geometry.bounds();
+        let mut sampler = field.sampler();
+        for p in points {
+            let x = lo + (hi - lo) * DVec3::from_array(p);
+            let want = dense.sample_trilinear(x);
+            let got = sampler.sample_trilinear(x).unwrap();
+            prop_assert_eq!(got.to_bits(), want.to_bits(), "at {:?}: {} vs {}", x, got, want);
+        }
+    }
+}
+
+#[test]
+fn discarded_bricks_read_as_the_fill_and_free_their_slots() {
+    let store = Box::new(FileStore::create().unwrap());
+    let pager = pager(store, 4, 8, 2, Eviction::Lru);
+    for b in 0..4 {
+        pager.write(b).unwrap().fill(b as f32);
+    }
+    // Bricks 0 and 1 were evicted to the file, 2 and 3 are resident.
+    assert!(!pager.is_resident(0) && pager.is_resident(3));
+    let pin = pager.read(3).unwrap();
+    assert!(matches!(
+        pager.discard(3),
+        Err(PagingError::Pinned { brick: 3 })
+    ));
+    drop(pin);
+    for b in [0, 3] {
+        pager.discard(b).unwrap();
+        assert!(pager.is_fresh(b));
+        assert_eq!(
+            *pager.read(b).unwrap(),
+            vec![-1.0; 8],
+            "brick {b} reads as the fill"
+        );
+    }
+    // The other bricks keep their values.
+    assert_eq!(*pager.read(2).unwrap(), vec![2.0; 8]);
+    assert_eq!(*pager.read(1).unwrap(), vec![1.0; 8]);
+    assert!(!pager.is_fresh(1));
+}
