@@ -238,17 +238,7 @@ pub(crate) fn estimate_paged(
     let peak = (0..medium.sigma_t.len())
         .flat_map(extinction_max)
         .fold(0.0f32, f32::max);
-    let (lo, hi) = geometry.bounds();
-    if f64::from(peak) * (hi - lo).length() > crate::transport::MAX_OPTICAL_REACH {
-        return Err(SolveError::InvalidParameter {
-            name: "medium".into(),
-            reason: format!(
-                "σ_t up to {peak} across a box of diagonal {:.3e} is more than {:e} mean free paths: Monte Carlo cannot cross it; use a diffusion solver",
-                (hi - lo).length(),
-                crate::transport::MAX_OPTICAL_REACH
-            ),
-        });
-    }
+    crate::transport::check_reach(&geometry, f64::from(peak))?;
     let majorant_of = |maxima: Vec<f32>| {
         if config.global_majorant {
             let max = maxima.iter().copied().fold(0.0f32, f32::max);

@@ -423,13 +423,22 @@ pub const MAX_OPTICAL_REACH: f64 = 1e6;
 /// At 10⁶ (a box a million mean free paths across) light is diffuse long before it gets
 /// anywhere, and the diffusion solvers are the tool.
 pub fn check_optical_reach(problem: &Problem) -> Result<(), SolveError> {
-    let (lo, hi) = problem.geometry().bounds();
     let peak = problem
         .medium()
         .sigma_t
         .iter()
         .flat_map(|g| g.data().iter())
         .fold(0.0f64, |m, &v| m.max(f64::from(v)));
+    check_reach(problem.geometry(), peak)
+}
+
+/// [`check_optical_reach`] for the largest extinction `peak` on `geometry` (a paged
+/// medium's comes from its bricks' ranges).
+pub(crate) fn check_reach(
+    geometry: &lucent_grid::GridGeometry,
+    peak: f64,
+) -> Result<(), SolveError> {
+    let (lo, hi) = geometry.bounds();
     let reach = peak * (hi - lo).length();
     if reach > MAX_OPTICAL_REACH {
         return Err(SolveError::TooMuchWork {

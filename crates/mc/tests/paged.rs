@@ -258,5 +258,27 @@ fn paged_monte_carlo_refuses_what_it_cannot_do() {
         ),
         Err(SolveError::Unsupported { .. })
     ));
+    // A medium too thick to cross, as in memory: refused by the bricks' ranges, before
+    // any path.
+    let thick = |_: DVec3| 1e8f32;
+    let problem = PagedProblem::from_fn(
+        pager(64),
+        g,
+        brick,
+        CellMedium {
+            sigma_t: vec![&thick],
+            albedo: vec![&albedo],
+            phase: Phase::Isotropic,
+        },
+        vec![Light::Sky {
+            radiance: Spectrum::Grey(1.0),
+        }],
+        Boundary::Vacuum,
+    )
+    .unwrap();
+    assert!(matches!(
+        mc.solve_paged(&problem, &SolveOptions::default()),
+        Err(SolveError::TooMuchWork { .. })
+    ));
     assert!(mc.pages());
 }
