@@ -5,7 +5,7 @@
 //! outside the box, the sky, grey and RGB extinction — with the pool a small part of the
 //! bricks. A solver that pages but cannot take a scene says `Unsupported` on both paths
 //! alike (and each solver must take at least one scene). Solvers that do not page refuse
-//! with `Unsupported`.
+//! with `Unsupported` naming themselves.
 
 use std::sync::Arc;
 
@@ -108,6 +108,42 @@ fn params_for(name: &str, brick: usize) -> Params {
     p
 }
 
+/// The class's medium paged in bricks of `brick`³ cells, with a pool of an eighth of the
+/// bricks of the medium and a dozen result fields (at least the pins of running batches).
+fn paged_problem(class: &Class, brick: usize) -> PagedProblem {
+    let g = class.geometry;
+    let layout = BrickLayout::new(g.dims(), brick).unwrap();
+    let len = layout.stored_len();
+    let slots = (layout.count() * 16 / 8).max(32) as u64;
+    let pager = Arc::new(
+        Pager::new(
+            Box::new(FileStore::create().unwrap()),
+            0,
+            len,
+            1,
+            PagerOptions {
+                budget_bytes: slots * 4 * len as u64,
+                eviction: Eviction::Nru,
+                fill: 0.0,
+            },
+        )
+        .unwrap(),
+    );
+    PagedProblem::from_fn(
+        pager,
+        g,
+        brick,
+        CellMedium {
+            sigma_t: class.sigma_t.iter().map(|f| f.as_ref()).collect(),
+            albedo: vec![class.albedo.as_ref()],
+            phase: Phase::henyey_greenstein(0.3).unwrap(),
+        },
+        class.lights.clone(),
+        Boundary::Vacuum,
+    )
+    .unwrap()
+}
+
 fn bits(grid: &Grid) -> Vec<u32> {
     grid.data().iter().map(|v| v.to_bits()).collect()
 }
@@ -118,7 +154,15 @@ fn paging_solvers_give_their_in_memory_bits_on_every_scene_class() {
     let mut paging = Vec::new();
     for entry in registry.entries() {
         let name = entry.name;
-        if !registry.build(name, &Params::default()).unwrap().pages() {
+        let solver = registry.build(name, &Params::default()).unwrap();
+        if !solver.pages() {
+            // It says so, by name, before any work.
+            let class = &classes()[0];
+            let paged = paged_problem(class, 4);
+            match solver.solve_paged(&paged, &SolveOptions::default()) {
+                Err(SolveError::Unsupported { solver, .. }) => assert_eq!(solver, name),
+                other => panic!("{name} does not page but answered {other:?}"),
+            }
             continue;
         }
         paging.push(name);
@@ -135,38 +179,7 @@ fn paging_solvers_give_their_in_memory_bits_on_every_scene_class() {
                 };
                 let dense =
                     Problem::new(g, medium, class.lights.clone(), Boundary::Vacuum, None).unwrap();
-                // A pool of an eighth of the bricks of the medium and a dozen result fields,
-                // but at least the pins of the running batches.
-                let layout = BrickLayout::new(g.dims(), brick).unwrap();
-                let len = layout.stored_len();
-                let slots = (layout.count() * 16 / 8).max(32) as u64;
-                let pager = Arc::new(
-                    Pager::new(
-                        Box::new(FileStore::create().unwrap()),
-                        0,
-                        len,
-                        1,
-                        PagerOptions {
-                            budget_bytes: slots * 4 * len as u64,
-                            eviction: Eviction::Nru,
-                            fill: 0.0,
-                        },
-                    )
-                    .unwrap(),
-                );
-                let paged = PagedProblem::from_fn(
-                    pager,
-                    g,
-                    brick,
-                    CellMedium {
-                        sigma_t: class.sigma_t.iter().map(|f| f.as_ref()).collect(),
-                        albedo: vec![class.albedo.as_ref()],
-                        phase: Phase::henyey_greenstein(0.3).unwrap(),
-                    },
-                    class.lights.clone(),
-                    Boundary::Vacuum,
-                )
-                .unwrap();
+                let paged = paged_problem(&class, brick);
                 let options = SolveOptions::default();
                 let out_of_core = match solver.solve_paged(&paged, &options) {
                     Err(SolveError::Unsupported { feature, .. }) => {

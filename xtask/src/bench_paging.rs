@@ -12,10 +12,10 @@
 //! ratio to the in-core sweep, hit rate, bytes read and written per sweep; and whether
 //! the paged result is bit for bit the in-core one.
 //!
-//! Then time skewing (`skewed_steps`): 1, 2, 4, 8 and 16 steps per pass, in memory and
+//! Then time skewing (`skewed_steps`): 1, 2, 4, 8, 16 and 32 steps per pass, in memory and
 //! out of core at 1/16 resident, each against the in-memory pass with the same number of
 //! steps and against plain in-memory sweeps of the same slab kernel, the results checked
-//! bit for bit against 16 plain sweeps.
+//! bit for bit against 32 plain sweeps.
 //!
 //! Then the discrete ordinates' access pattern: the eight octant sweeps over one field in
 //! their wavefront orders (`BrickLayout::wavefronts`), each brick pinned for writing once
@@ -38,7 +38,7 @@ const KAPPA: f32 = 0.01;
 const SWEEPS: usize = 3;
 /// Steps per measurement of the time-skewed passes (a multiple of every steps-per-pass
 /// measured).
-const SKEWED: usize = 16;
+const SKEWED: usize = 32;
 
 /// One FTCS step of the slabs `z0..z1` of a grid of `dims` into `out`, reading `window`,
 /// which holds slabs `w0..` (at least z0 − 1 .. z1 + 1 within the grid).
@@ -210,7 +210,7 @@ pub(crate) fn run(n: usize, brick: usize, dom_n: usize) -> Result<(), String> {
             .all(|(p, q)| p.to_bits() == q.to_bits())
     };
     let plane = n * n;
-    let skews = [1, 2, 4, 8, SKEWED];
+    let skews = [1, 2, 4, 8, 16, SKEWED];
     // In core: the same pipeline over dense arrays (one step per pass is a plain sweep
     // slab by slab).
     let mut in_core_skewed = Vec::new();
