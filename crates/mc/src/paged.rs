@@ -179,6 +179,9 @@ impl FluenceTally for PagedTally<'_> {
     }
 }
 
+/// Bytes per entry of a tally log: the entry and the stable sort's scratch.
+const LOG_ENTRY_BYTES: u64 = 24;
+
 /// What [`estimate_paged`] returns.
 pub(crate) struct PagedEstimate {
     pub(crate) fluence: Vec<PagedGrid>,
@@ -264,7 +267,7 @@ pub(crate) fn estimate_paged(
     let tally_pages = (2 + threads) * count;
     let medium_pool = problem.pager().capacity() as u64 * layout.stored_len() as u64 * 4;
     let fixed = medium_pool + overhead_bytes(problem, tally_pages);
-    let min_pool = 3 * threads as u64 * page_bytes + threads as u64 * 1024 * 16;
+    let min_pool = 3 * threads as u64 * page_bytes + threads as u64 * 1024 * LOG_ENTRY_BYTES;
     if fixed + min_pool > options.memory_budget {
         return Err(SolveError::OverBudget {
             solver: name.into(),
@@ -272,11 +275,12 @@ pub(crate) fn estimate_paged(
             budget: options.memory_budget,
         });
     }
-    // Half of the rest for the tallies' logs (16 bytes an entry, one log per running
-    // batch), half for their pages.
+    // Up to half of the rest for the tallies' logs (one per running batch; 16 bytes an
+    // entry and half that again for the stable sort's buffer; 2²⁰ entries amortise a
+    // brick's pin over hundreds of additions), the rest for their pages.
     let rest = options.memory_budget - fixed;
-    let log_capacity = ((rest / 2 / 16) as usize / threads).max(1024);
-    let pool = rest - (log_capacity * threads * 16) as u64;
+    let log_capacity = ((rest / 2 / LOG_ENTRY_BYTES) as usize / threads).clamp(1024, 1 << 20);
+    let pool = rest - (log_capacity * threads) as u64 * LOG_ENTRY_BYTES;
     let pages = TallyPages {
         pager: Pager::new(
             Box::new(FileStore::create().map_err(err)?),
