@@ -2,7 +2,6 @@
 //! layer prefetched while the current one is worked on (Bernabei's precomputed streaming
 //! order, for stencils the z-slab order).
 
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
 
 use crate::error::PagingError;
@@ -144,21 +143,23 @@ pub fn skewed_steps(
 }
 
 /// [`skewed_steps`] from one paged field into another: the input is read brick layer by
-/// brick layer ([`PagedGrid::read_slabs`]) with its next layer prefetched on a helper
-/// thread (with `prefetch`), and the output written a whole brick layer at a time, aprons
-/// included, once the slabs its bricks store are done ([`PagedGrid::write_layer_window`]:
-/// the output's bricks are overwritten, never read). Each brick of each field moves once
+/// brick layer ([`PagedGrid::read_slabs`]) and the output written a whole brick layer at a
+/// time, aprons included, from a window of slabs ([`PagedGrid::write_layer_window`]: the
+/// output's bricks are overwritten, never read). Each brick of each field moves once
 /// per call, whatever `steps` is.
 ///
-/// Each output layer, once written, is written back to the store by the helper thread
+/// With `prefetch`, a reader thread reads the input's next brick layer into a host buffer
+/// while the pass computes (at most two layers ahead: a bounded channel), so the pass's
+/// thread never waits for the store; the reads pin one brick at a time, so this needs no
+/// room in the pool beyond a brick per thread (reading ahead into the pool instead needed
+/// the layer read, the layer prefetched and the layer written resident together, and at
+/// 1/16 of 16 layers the output's writes evicted the prefetched bricks before use). Memory:
+/// up to three input layers of slabs.
+///
+/// Each output layer, once written, is written back to the store by a helper thread
 /// ([`Pager::write_back`](crate::Pager::write_back)) while the pass goes on, so that
 /// evicting its bricks later costs no I/O (when the output's pool holds a layer and a few
 /// more bricks).
-///
-/// Prefetch needs room: the layer being read, the layer being prefetched and the output
-/// layer being written must fit in the pool together, or the prefetched bricks are
-/// evicted before they are used and read twice (measured: twice the reads at 1/16
-/// resident on 16 layers, `cargo xtask bench-paging`). Below that, `prefetch` is ignored.
 pub fn skewed_steps_paged(
     input: &PagedGrid,
     output: &PagedGrid,
@@ -182,46 +183,38 @@ pub fn skewed_steps_paged(
         let [bx, by, _] = field.layout().bricks();
         bx * by
     };
-    let shared = std::sync::Arc::ptr_eq(input.pager(), output.pager());
-    let room = 2 * per_layer(input) + if shared { per_layer(output) } else { 0 };
-    let prefetch = prefetch && input.pager().capacity() >= room;
+    let layers_in = input.layout().bricks()[2];
+    let layer_range = |layer: usize| (layer * b_in, ((layer + 1) * b_in).min(nz));
     // Writing behind holds one slot while the layer writes pin one per thread.
     let write_behind = output.pager().capacity() > per_layer(output) + rayon::current_num_threads();
-    let layer_bricks = |z: usize| -> Vec<usize> {
-        input
-            .layout()
-            .bricks_of_slabs(z, z + 1)
-            .map(|id| input.pager_brick(id))
-            .collect()
-    };
-    // The first input slab not yet read: a prefetch that arrives after its layer was read
-    // (the helper fell behind) is skipped instead of loading the layer a second time.
-    let read_up_to = AtomicUsize::new(0);
     std::thread::scope(|scope| {
-        enum Job {
-            /// The input's brick layer starting at this slab.
-            Prefetch(usize),
-            /// The output's brick layer.
-            WriteBack(usize),
-        }
-        let (sender, receiver) = mpsc::channel::<Job>();
-        let read_up_to = &read_up_to;
-        let helper = (prefetch || write_behind).then(|| {
+        // The reader: input layers in order, each read into its own buffer.
+        let (layers, arriving) = mpsc::sync_channel::<Result<Vec<f32>, PagingError>>(1);
+        let reader = prefetch.then(|| {
             scope.spawn(move || -> Result<(), PagingError> {
-                for job in receiver {
-                    match job {
-                        Job::Prefetch(z) if z >= read_up_to.load(Ordering::Acquire) => {
-                            input.pager().prefetch(layer_bricks(z))?;
-                        }
-                        Job::Prefetch(_) => {}
-                        Job::WriteBack(layer) => {
-                            let [bx, by, _] = output.layout().bricks();
-                            let bricks = (0..by).flat_map(|j| (0..bx).map(move |i| (i, j)));
-                            output.pager().write_back(bricks.map(|(i, j)| {
-                                output.pager_brick(output.layout().id([i, j, layer]))
-                            }))?;
-                        }
+                for layer in 0..layers_in {
+                    let (z0, z1) = layer_range(layer);
+                    let mut buffer = vec![0f32; plane * (z1 - z0)];
+                    let read = input.read_slabs(z0, z1, &mut buffer).map(|()| buffer);
+                    let failed = read.is_err();
+                    // A closed channel: the pass ended early (an error of its own).
+                    if layers.send(read).is_err() || failed {
+                        break;
                     }
+                }
+                Ok(())
+            })
+        });
+        // The writer behind: the output's finished layers back to the store.
+        let (sender, receiver) = mpsc::channel::<usize>();
+        let helper = write_behind.then(|| {
+            scope.spawn(move || -> Result<(), PagingError> {
+                for layer in receiver {
+                    let [bx, by, _] = output.layout().bricks();
+                    let bricks = (0..by).flat_map(|j| (0..bx).map(move |i| (i, j)));
+                    output.pager().write_back(
+                        bricks.map(|(i, j)| output.pager_brick(output.layout().id([i, j, layer]))),
+                    )?;
                 }
                 Ok(())
             })
@@ -238,13 +231,17 @@ pub fn skewed_steps_paged(
             |z, slab| {
                 let layer = z / b_in;
                 if layer_in.0 != layer {
-                    let (z0, z1) = (layer * b_in, ((layer + 1) * b_in).min(nz));
-                    if prefetch && z1 < nz {
-                        let _ = sender.send(Job::Prefetch(z1));
-                    }
-                    layer_in.1.resize(plane * (z1 - z0), 0.0);
-                    read_up_to.store(z1, Ordering::Release);
-                    input.read_slabs(z0, z1, &mut layer_in.1)?;
+                    layer_in.1 = if prefetch {
+                        arriving.recv().map_err(|_| {
+                            PagingError::Shape("the layer reader stopped early".into())
+                        })??
+                    } else {
+                        let (z0, z1) = layer_range(layer);
+                        let mut buffer = std::mem::take(&mut layer_in.1);
+                        buffer.resize(plane * (z1 - z0), 0.0);
+                        input.read_slabs(z0, z1, &mut buffer)?;
+                        buffer
+                    };
                     layer_in.0 = layer;
                 }
                 let at = (z - layer * b_in) * plane;
@@ -265,7 +262,7 @@ pub fn skewed_steps_paged(
                     let window = &out[(z_lo - out_lo) * plane..(z_hi - out_lo) * plane];
                     output.write_layer_window(next_layer, z_lo, window)?;
                     if write_behind {
-                        let _ = sender.send(Job::WriteBack(next_layer));
+                        let _ = sender.send(next_layer);
                     }
                     next_layer += 1;
                     let keep = (next_layer * b_out).saturating_sub(1).clamp(out_lo, z + 1);
@@ -276,7 +273,9 @@ pub fn skewed_steps_paged(
             },
             step,
         );
+        drop(arriving);
         drop(sender);
+        let result = join_helper(reader, result);
         join_helper(helper, result)
     })
 }
