@@ -37,7 +37,8 @@
 //!   with and without prefetch, time skewing (1–16 steps per pass); then a discrete-
 //!   ordinates sweep at DOM_N³ (128, S6) with its per-direction work in memory and paged at
 //!   1/16 resident; and whether the results are bit for bit equal.
-//! - `paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK]`: `direct` (or `convection-diffusion`)
+//! - `paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK]`: `direct` (or `convection-diffusion`,
+//!   `mc`, `ftcs-diffusion`, `jacobi-diffusion`)
 //!   on a sparse N³ cloud (256) out of core under a budget (32 MiB) and in memory: wall
 //!   time, measured peak resident memory, pager counters, and whether the results are bit
 //!   for bit equal.

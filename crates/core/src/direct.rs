@@ -203,7 +203,7 @@ impl Solver for DirectSolver {
                 feature: format!("a {} boundary", problem.boundary()),
             });
         }
-        options.install(|| self.transport_paged(problem, options))?
+        options.install(|| self.transport_paged(problem, problem.lights(), options))?
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
@@ -230,9 +230,12 @@ impl DirectSolver {
     /// with the same walk and arithmetic as in memory), then the isotropic fluence and the
     /// fluence layer by layer from those fields with the same per-cell formulas: the bits
     /// of [`Solver::solve`] on the same medium.
-    fn transport_paged(
+    /// `lights` stand for the problem's own (the uncollided light of some of them, for a
+    /// solver that adds scattered light).
+    pub(crate) fn transport_paged(
         &self,
         problem: &PagedProblem,
+        lights: &[Light],
         options: &SolveOptions,
     ) -> Result<PagedSolution, SolveError> {
         let started = std::time::Instant::now();
@@ -244,8 +247,8 @@ impl DirectSolver {
         let layout = *problem.layout();
         let b = layout.brick();
         let medium = problem.medium();
-        let channels = problem.channels();
-        let (point_lights, sky) = split_lights(problem.lights());
+        let channels = problem.channels_with(lights);
+        let (point_lights, sky) = split_lights(lights);
         let (far, min_distance) = distances(&geometry);
         let cutoff = self.max_optical_depth;
         let directions = sky_directions(self.sky_level)?;

@@ -156,7 +156,7 @@ pub fn solves_started() -> u64 {
 }
 
 /// `callback` with its fractions mapped into [lo, hi].
-fn progress_within(callback: ProgressFn, lo: f64, hi: f64) -> ProgressFn {
+pub(crate) fn progress_within(callback: ProgressFn, lo: f64, hi: f64) -> ProgressFn {
     Arc::new(move |p: Progress| {
         callback(Progress {
             fraction: lo + (hi - lo) * p.fraction.clamp(0.0, 1.0),
@@ -383,12 +383,7 @@ impl Coefficients {
         let n = sigma_t.len();
         let (mut sigma_s, mut sigma_a, mut diffusion) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
         for c in 0..n {
-            let s = (albedo.at(c) * sigma_t[c]).min(sigma_t[c]);
-            let (a, d) =
-                Self::absorption_and_diffusion(f64::from(sigma_t[c]), f64::from(s), g, floor);
-            sigma_s[c] = s;
-            sigma_a[c] = a as f32;
-            diffusion[c] = d as f32;
+            [sigma_s[c], sigma_a[c], diffusion[c]] = Self::at(sigma_t[c], albedo.at(c), g, floor);
         }
         Self {
             sigma_t,
@@ -398,9 +393,25 @@ impl Coefficients {
         }
     }
 
+    /// σ_s, σ_a and D of one cell from its σ_t and albedo (f32, as stored), the phase
+    /// function's mean cosine `g` and the floor of σ_t′: the one per-cell definition, for
+    /// [`Coefficients::of`] and for the solvers that compute coefficients brick by brick
+    /// out of core.
+    #[inline]
+    pub fn at(sigma_t: f32, albedo: f32, g: f64, floor: f64) -> [f32; 3] {
+        let s = (albedo * sigma_t).min(sigma_t);
+        let (a, d) = Self::absorption_and_diffusion(f64::from(sigma_t), f64::from(s), g, floor);
+        [s, a as f32, d as f32]
+    }
+
     /// The floor of σ_t′ in `problem`: 10⁻³ of the largest cell's inverse width.
     pub fn reduced_floor(problem: &Problem) -> f64 {
-        1e-3 / problem.geometry().spacing().max_element()
+        Self::reduced_floor_of(problem.geometry())
+    }
+
+    /// [`Coefficients::reduced_floor`] of a grid.
+    pub fn reduced_floor_of(geometry: &lucent_grid::GridGeometry) -> f64 {
+        1e-3 / geometry.spacing().max_element()
     }
 
     /// σ_a = max(σ_t − σ_s, 0) and D = 1/(3 max(σ_a + (1 − g)σ_s, floor)) at one point:

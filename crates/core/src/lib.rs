@@ -66,6 +66,7 @@ mod error;
 mod iteration;
 pub mod memory;
 mod paged;
+mod paged_collisions;
 mod problem;
 mod registry;
 mod singular;
@@ -79,11 +80,15 @@ pub use error::{ProblemError, SolveError};
 pub use iteration::{History, Stopping};
 pub use lucent_paging::PagerStats;
 pub use paged::{CellMedium, PagedMedium, PagedProblem, PagedSolution, Storage, paging_error};
+pub use paged_collisions::PagedFirstCollisions;
 pub use problem::{Boundary, BoundaryKind, Field, Light, LightKind, Medium, Problem};
 pub use registry::{
     ParamDoc, ParamValue, Params, Registry, SolverEntry, SolverParams, param_docs, resolved_params,
 };
-pub use singular::{SingularPart, point_source_singular_part};
+pub use singular::{
+    SingularCell, SingularPart, point_source_singular_cells, point_source_singular_part,
+    singular_reach,
+};
 pub use solution::{Angular, LightTransmittance, OrdinateRadiance, Solution};
 pub use solver::{
     Capabilities, FluenceKind, ImageEstimate, ImageRequest, ImageSolver, OutputKind, Progress,

@@ -195,8 +195,14 @@ impl PagedProblem {
 
     /// Channels: 1 (grey) or 3 (RGB), from the medium and the lights' spectra.
     pub fn channels(&self) -> usize {
+        self.channels_with(&self.lights)
+    }
+
+    /// Channels of the medium under `lights` (some of the problem's): what
+    /// [`PagedProblem::channels`] would be with only those.
+    pub fn channels_with(&self, lights: &[Light]) -> usize {
         let medium = self.medium.sigma_t.len().max(self.medium.albedo.len());
-        self.lights
+        lights
             .iter()
             .map(|l| l.spectrum().channels())
             .fold(medium, usize::max)

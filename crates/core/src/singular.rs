@@ -107,6 +107,49 @@ pub fn point_source_singular_part(
     position: DVec3,
     power: f64,
 ) -> Option<SingularPart> {
+    let (mut part, cells) =
+        point_source_singular_cells(geometry, |c| d[c], |c| sigma_a[c], whole, position, power)?;
+    let n = geometry.voxel_count();
+    part.source = vec![0.0f32; n];
+    part.fluence = vec![0.0f32; n];
+    for cell in cells {
+        part.source[cell.cell] = cell.source;
+        part.fluence[cell.cell] = cell.fluence;
+    }
+    Some(part)
+}
+
+/// One cell of a [`SingularPart`] (what its dense vectors hold at `cell`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SingularCell {
+    /// The cell's index in the grid.
+    pub cell: usize,
+    /// The remainder's source f averaged over the cell (power/length³).
+    pub source: f32,
+    /// G̃ at the cell centre (the cell average in the source's cell).
+    pub fluence: f32,
+}
+
+/// How far from a point source [`point_source_singular_cells`] reads coefficients: every
+/// cell it asks `d`, `sigma_a` and `whole` about has its centre within this distance of
+/// the source, or is the source's cell (for readers that fetch a window of cells first).
+pub fn singular_reach(geometry: &GridGeometry) -> f64 {
+    let h = geometry.spacing();
+    MAX_CELLS as f64 * h.max_element() + 0.5 * h.length()
+}
+
+/// [`point_source_singular_part`] with the coefficients read cell by cell (`d(cell)`,
+/// `sigma_a(cell)`, for cells within [`singular_reach`] only) and the part's cells listed
+/// instead of stored densely: the same values, for solvers whose coefficients are paged.
+/// The returned part's `source` and `fluence` are empty; the cells come in index order.
+pub fn point_source_singular_cells(
+    geometry: &GridGeometry,
+    d: impl Fn(usize) -> f32,
+    sigma_a: impl Fn(usize) -> f32,
+    whole: impl Fn(usize) -> bool,
+    position: DVec3,
+    power: f64,
+) -> Option<(SingularPart, Vec<SingularCell>)> {
     let h = geometry.spacing();
     let v = (position - geometry.origin()) / h;
     let dims = geometry.dims();
@@ -114,7 +157,7 @@ pub fn point_source_singular_part(
         return None;
     }
     let source_cell = geometry.index(v.x as usize, v.y as usize, v.z as usize);
-    let (d0, sa0) = (f64::from(d[source_cell]), f64::from(sigma_a[source_cell]));
+    let (d0, sa0) = (f64::from(d(source_cell)), f64::from(sigma_a(source_cell)));
     if !(d0 > 0.0 && sa0 >= 0.0) {
         return None;
     }
@@ -126,8 +169,17 @@ pub fn point_source_singular_part(
     let half_diagonal = 0.5 * h.length();
     let same = |c: usize| {
         whole(c)
-            && (f64::from(d[c]) - d0).abs() <= 1e-6 * d0
-            && (f64::from(sigma_a[c]) - sa0).abs() <= 1e-6 * sa0.max(1e-30)
+            && (f64::from(d(c)) - d0).abs() <= 1e-6 * d0
+            && (f64::from(sigma_a(c)) - sa0).abs() <= 1e-6 * sa0.max(1e-30)
+    };
+    // The cells whose box may meet a ball of `reach` about the source.
+    let range = |a: usize, reach: f64| {
+        let lo = ((position[a] - reach - geometry.origin()[a]) / h[a])
+            .floor()
+            .max(0.0) as usize;
+        let hi =
+            (((position[a] + reach - geometry.origin()[a]) / h[a]).ceil() as usize).min(dims[a]);
+        lo..hi
     };
     let radius = (3..=MAX_CELLS)
         .rev()
@@ -138,24 +190,16 @@ pub fn point_source_singular_part(
             }
             // Every cell whose box meets the ball.
             let reach = radius + half_diagonal;
-            let range = |a: usize| {
-                let lo = ((position[a] - reach - geometry.origin()[a]) / h[a])
-                    .floor()
-                    .max(0.0) as usize;
-                let hi = (((position[a] + reach - geometry.origin()[a]) / h[a]).ceil() as usize)
-                    .min(dims[a]);
-                lo..hi
-            };
-            range(2).all(|k| {
-                range(1).all(|j| {
-                    range(0).all(|i| {
+            range(2, reach).all(|k| {
+                range(1, reach).all(|j| {
+                    range(0, reach).all(|i| {
                         let c = geometry.index(i, j, k);
                         (geometry.cell_centre(i, j, k) - position).length() > reach || same(c)
                     })
                 })
             })
         })?;
-    let mut part = SingularPart {
+    let part = SingularPart {
         source: Vec::new(),
         fluence: Vec::new(),
         radius,
@@ -164,47 +208,54 @@ pub fn point_source_singular_part(
         kappa: (sa0 / d0).sqrt(),
         power,
     };
-    let n = geometry.voxel_count();
-    let mut source = vec![0.0f32; n];
-    let mut fluence = vec![0.0f32; n];
+    let mut cells = Vec::new();
     let g = 0.5 / 3f64.sqrt();
-    for index in 0..n {
-        let [i, j, k] = geometry.coords(index);
-        let centre = geometry.cell_centre(i, j, k);
-        let r = (centre - position).length();
-        if r > radius + half_diagonal {
-            continue;
-        }
-        // f by 2×2×2 Gauss points (smooth in the shell).
-        let mut f = 0.0;
-        for corner in 0..8 {
-            let offset = DVec3::new(
-                if corner & 1 == 0 { -g } else { g },
-                if corner & 2 == 0 { -g } else { g },
-                if corner & 4 == 0 { -g } else { g },
-            );
-            f += 0.125 * part.source_at(centre + offset * h);
-        }
-        source[index] = f as f32;
-        fluence[index] = if index == source_cell {
-            // The cell average of G₀ (χ = 1 there): 16³ sub-cell centres, the singular
-            // sub-cell's share floored at its half width (relative error about 1/256).
-            let m = 16;
-            let mut sum = 0.0;
-            let floor = 0.5 * h.min_element() / m as f64;
-            for sub in 0..m * m * m {
-                let (a, b, c) = (sub % m, (sub / m) % m, sub / (m * m));
-                let x = centre
-                    + (DVec3::new(a as f64, b as f64, c as f64) + 0.5 - 0.5 * m as f64) / m as f64
-                        * h;
-                sum += part.green((x - position).length().max(floor)).0;
+    let reach = radius + half_diagonal;
+    for k in range(2, reach) {
+        for j in range(1, reach) {
+            for i in range(0, reach) {
+                let index = geometry.index(i, j, k);
+                let centre = geometry.cell_centre(i, j, k);
+                let r = (centre - position).length();
+                if r > reach {
+                    continue;
+                }
+                // f by 2×2×2 Gauss points (smooth in the shell).
+                let mut f = 0.0;
+                for corner in 0..8 {
+                    let offset = DVec3::new(
+                        if corner & 1 == 0 { -g } else { g },
+                        if corner & 2 == 0 { -g } else { g },
+                        if corner & 4 == 0 { -g } else { g },
+                    );
+                    f += 0.125 * part.source_at(centre + offset * h);
+                }
+                let fluence = if index == source_cell {
+                    // The cell average of G₀ (χ = 1 there): 16³ sub-cell centres, the
+                    // singular sub-cell's share floored at its half width (relative error
+                    // about 1/256).
+                    let m = 16;
+                    let mut sum = 0.0;
+                    let floor = 0.5 * h.min_element() / m as f64;
+                    for sub in 0..m * m * m {
+                        let (a, b, c) = (sub % m, (sub / m) % m, sub / (m * m));
+                        let x = centre
+                            + (DVec3::new(a as f64, b as f64, c as f64) + 0.5 - 0.5 * m as f64)
+                                / m as f64
+                                * h;
+                        sum += part.green((x - position).length().max(floor)).0;
+                    }
+                    (sum / (m * m * m) as f64) as f32
+                } else {
+                    part.fluence_at(centre) as f32
+                };
+                cells.push(SingularCell {
+                    cell: index,
+                    source: f as f32,
+                    fluence,
+                });
             }
-            (sum / (m * m * m) as f64) as f32
-        } else {
-            part.fluence_at(centre) as f32
-        };
+        }
     }
-    part.source = source;
-    part.fluence = fluence;
-    Some(part)
+    Some((part, cells))
 }

@@ -292,6 +292,18 @@ impl SolveOptions {
         Ok(())
     }
 
+    /// These options with progress mapped into [lo, hi] of the caller's bar: for a phase
+    /// of a solve (its own final report lands at `hi`).
+    pub fn progress_within(&self, lo: f64, hi: f64) -> SolveOptions {
+        SolveOptions {
+            progress: self
+                .progress
+                .clone()
+                .map(|callback| crate::driver::progress_within(callback, lo, hi)),
+            ..self.clone()
+        }
+    }
+
     /// Runs `f` on a pool of `threads` workers, or on rayon's global pool.
     pub fn install<T: Send>(&self, f: impl FnOnce() -> T + Send) -> Result<T, SolveError> {
         match self.threads {

@@ -135,41 +135,90 @@ impl std::ops::AddAssign for FaceFlux {
     }
 }
 
-struct Integrator<'a> {
-    sigma_t: &'a Grid,
-    /// σ_t's empty bricks, crossed unread (the integrals keep their bits).
-    empty: Option<EmptyBricks>,
+/// The uncollided light of one point-like light through some σ_t: the face and cell rules
+/// above, with the optical depth τ(a, b) handed in by the caller (`tau`), so that a dense
+/// grid and a paged one run the same arithmetic.
+pub(crate) struct Integrator<'a> {
     light: &'a Light,
     source: Source,
     far: f64,
-    cutoff: f64,
     /// Cell size scale for the near/far face rules.
     h: f64,
+    geometry: GridGeometry,
+    /// The light's whole power and first moment (per unit of its spectrum).
+    power: f64,
+    moment: DVec3,
+    /// The cell (possibly outside the grid) holding a point light.
+    light_cell: Option<[i64; 3]>,
 }
 
-impl Integrator<'_> {
-    /// τ from `a` to `b`.
-    fn optical_depth(&self, a: DVec3, b: DVec3) -> f64 {
-        match &self.empty {
-            Some(empty) => self
-                .sigma_t
-                .line_integral_skipping(empty, a, b, self.cutoff),
-            None => self.sigma_t.line_integral(a, b, self.cutoff),
-        }
+/// What [`Integrator::cell`] finds in one cell.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct CellValues {
+    pub(crate) fluence: f64,
+    pub(crate) collided: f64,
+    pub(crate) directed: DVec3,
+}
+
+impl<'a> Integrator<'a> {
+    /// The integrator of `light` on `g`; `None` for sky and emission, which are not
+    /// point-like.
+    pub(crate) fn new(g: &GridGeometry, light: &'a Light) -> Option<Self> {
+        let (lo, hi) = g.bounds();
+        let h = g.spacing();
+        let far = 4.0 * (hi - lo).length() + 1.0;
+        let source = match *light {
+            Light::Directional { direction, .. } => Source::Directional(direction),
+            Light::Point { position, .. } | Light::Spot { position, .. } => {
+                // A light exactly on a face plane of the grid would sit on faces whose
+                // polar rule is 0/0: move it a billionth of a cell into the cell above.
+                let mut p = position;
+                let v = (p - g.origin()) / h;
+                for axis in 0..3 {
+                    if (v[axis] - v[axis].round()).abs() < 1e-9 {
+                        p[axis] = g.origin()[axis] + (v[axis].round() + 1e-9) * h[axis];
+                    }
+                }
+                Source::Point(p)
+            }
+            Light::Sky { .. } | Light::Emission { .. } => return None,
+        };
+        let (power, moment) = light_power(light);
+        let light_cell = match source {
+            Source::Point(p) => {
+                let v = ((p - g.origin()) / h).floor();
+                Some([v.x as i64, v.y as i64, v.z as i64])
+            }
+            Source::Directional(_) => None,
+        };
+        Some(Self {
+            light,
+            source,
+            far,
+            h: h.max_element(),
+            geometry: *g,
+            power,
+            moment,
+            light_cell,
+        })
     }
 
     /// I(ω) T(y) and the direction of travel at a point y, per unit of the light's spectrum.
-    fn radiance_at(&self, y: DVec3) -> (f64, DVec3, f64) {
+    fn radiance_at<E>(
+        &self,
+        y: DVec3,
+        tau: &mut impl FnMut(DVec3, DVec3) -> Result<f64, E>,
+    ) -> Result<(f64, DVec3, f64), E> {
         match self.source {
             Source::Directional(d) => {
-                let t = (-self.optical_depth(y - d * self.far, y)).exp();
-                (t, d, 0.0)
+                let t = (-tau(y - d * self.far, y)?).exp();
+                Ok((t, d, 0.0))
             }
             Source::Point(p) => {
                 let v = y - p;
                 let r = v.length();
                 if r == 0.0 {
-                    return (0.0, DVec3::ZERO, 0.0);
+                    return Ok((0.0, DVec3::ZERO, 0.0));
                 }
                 // I(ω): the light's irradiance at unit distance along ω (the light may sit a
                 // billionth of a cell from `p`, which must not enter its 1/r²).
@@ -182,10 +231,10 @@ impl Integrator<'_> {
                     _ => 0.0,
                 };
                 if intensity == 0.0 {
-                    return (0.0, v / r, r);
+                    return Ok((0.0, v / r, r));
                 }
-                let t = (-self.optical_depth(p, y)).exp();
-                (intensity * t, v / r, r)
+                let t = (-tau(p, y)?).exp();
+                Ok((intensity * t, v / r, r))
             }
         }
     }
@@ -207,20 +256,26 @@ impl Integrator<'_> {
     }
 
     /// Tensor Gauss rule with `n`×`n` points (n = 1: midpoint).
-    fn face_tensor(&self, face: Face, n: usize) -> FaceFlux {
+    fn face_tensor<E>(
+        &self,
+        face: Face,
+        n: usize,
+        tau: &mut impl FnMut(DVec3, DVec3) -> Result<f64, E>,
+    ) -> Result<FaceFlux, E> {
         let (b, c) = ((face.axis + 1) % 3, (face.axis + 2) % 3);
         let area = (face.hi[b] - face.lo[b]) * (face.hi[c] - face.lo[c]);
         let mut out = FaceFlux::default();
-        let mut visit = |y: DVec3, w: f64| {
-            let (value, omega, r) = self.radiance_at(y);
+        let mut visit = |y: DVec3, w: f64| -> Result<(), E> {
+            let (value, omega, r) = self.radiance_at(y, tau)?;
             let k = self.kernel(y, face.axis) * w;
             out.power += k * value;
             out.directed += omega * (k * value);
             out.radial += k * value * r;
+            Ok(())
         };
         if n == 1 {
-            visit(0.5 * (face.lo + face.hi), area);
-            return out;
+            visit(0.5 * (face.lo + face.hi), area)?;
+            return Ok(out);
         }
         let (x, w) = gauss(n);
         for (xb, wb) in x.iter().zip(w) {
@@ -228,19 +283,24 @@ impl Integrator<'_> {
                 let mut y = 0.5 * (face.lo + face.hi);
                 y[b] += 0.5 * xb * (face.hi[b] - face.lo[b]);
                 y[c] += 0.5 * xc * (face.hi[c] - face.lo[c]);
-                visit(y, 0.25 * area * wb * wc);
+                visit(y, 0.25 * area * wb * wc)?;
             }
         }
-        out
+        Ok(out)
     }
 
     /// Polar rule about the foot of the perpendicular from the point light `p`: θ pieces
     /// between the corners' directions, u = |d|/r radially (the kernel d/r² dr = ∓du).
-    fn face_polar(&self, face: Face, p: DVec3) -> FaceFlux {
+    fn face_polar<E>(
+        &self,
+        face: Face,
+        p: DVec3,
+        tau: &mut impl FnMut(DVec3, DVec3) -> Result<f64, E>,
+    ) -> Result<FaceFlux, E> {
         let (a, b, c) = (face.axis, (face.axis + 1) % 3, (face.axis + 2) % 3);
         let d = face.lo[a] - p[a];
         if d == 0.0 {
-            return FaceFlux::default();
+            return Ok(FaceFlux::default());
         }
         let (fb, fc) = (p[b], p[c]);
         let (b0, b1, c0, c1) = (face.lo[b], face.hi[b], face.lo[c], face.hi[c]);
@@ -316,30 +376,40 @@ impl Integrator<'_> {
                     y[a] = face.lo[a];
                     y[b] = fb + rho * co;
                     y[c] = fc + rho * s;
-                    let (value, omega, r) = self.radiance_at(y);
+                    let (value, omega, r) = self.radiance_at(y, tau)?;
                     out.power += weight * value;
                     out.directed += omega * (weight * value);
                     out.radial += weight * value * r;
                 }
             }
         }
-        out
+        Ok(out)
     }
 
     /// The flux through a face: the polar rule for the faces of cells next to a point light
     /// (`near`) and within three cell widths of it, 2×2 Gauss elsewhere.
-    fn face(&self, face: Face, near: bool) -> FaceFlux {
+    fn face<E>(
+        &self,
+        face: Face,
+        near: bool,
+        tau: &mut impl FnMut(DVec3, DVec3) -> Result<f64, E>,
+    ) -> Result<FaceFlux, E> {
         match self.source {
             Source::Point(p) if near || (p.clamp(face.lo, face.hi) - p).length() < 3.0 * self.h => {
-                self.face_polar(face, p)
+                self.face_polar(face, p, tau)
             }
-            _ => self.face_tensor(face, 2),
+            _ => self.face_tensor(face, 2, tau),
         }
     }
 
     /// (1/V) ∫_cell φ_u dV and (1/V) ∫_cell φ_u ω dV by 2×2×2 Gauss points (cells away
     /// from a point light).
-    fn sampled(&self, g: &GridGeometry, i: usize, j: usize, k: usize) -> (f64, DVec3) {
+    fn sampled<E>(
+        &self,
+        [i, j, k]: [usize; 3],
+        tau: &mut impl FnMut(DVec3, DVec3) -> Result<f64, E>,
+    ) -> Result<(f64, DVec3), E> {
+        let g = &self.geometry;
         let (x, w) = gauss(2);
         let centre = g.cell_centre(i, j, k);
         let h = g.spacing();
@@ -349,7 +419,7 @@ impl Integrator<'_> {
             for (xb, wb) in x.iter().zip(w) {
                 for (xc, wc) in x.iter().zip(w) {
                     let y = centre + 0.5 * h * DVec3::new(*xa, *xb, *xc);
-                    let (value, omega, r) = self.radiance_at(y);
+                    let (value, omega, r) = self.radiance_at(y, tau)?;
                     let spread = match self.source {
                         Source::Directional(_) => 1.0,
                         Source::Point(_) => 1.0 / (r * r).max(1e-300),
@@ -360,7 +430,84 @@ impl Integrator<'_> {
                 }
             }
         }
-        (phi, directed)
+        Ok((phi, directed))
+    }
+
+    /// The face of cell `c` (possibly outside the grid) on its lower side along `axis`.
+    fn lower_face(&self, c: [i64; 3], axis: usize) -> Face {
+        let g = &self.geometry;
+        let h = g.spacing();
+        let corner =
+            |c: [i64; 3]| g.origin() + DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) * h;
+        let mut far_corner = c;
+        far_corner[(axis + 1) % 3] += 1;
+        far_corner[(axis + 2) % 3] += 1;
+        Face {
+            axis,
+            lo: corner(c),
+            hi: corner(far_corner),
+        }
+    }
+
+    /// Whether cell `c` is within [`NEAR_CELLS`] of a point light's cell along every axis.
+    fn near(&self, c: [i64; 3]) -> bool {
+        self.light_cell
+            .is_some_and(|l| (0..3).all(|a| c[a].abs_diff(l[a]) <= NEAR_CELLS.unsigned_abs()))
+    }
+
+    /// The cell integrals of cell `at`, whose σ_t (at its centre, as the grid stores it)
+    /// is `sigma`.
+    pub(crate) fn cell<E>(
+        &self,
+        at: [usize; 3],
+        sigma: f64,
+        tau: &mut impl FnMut(DVec3, DVec3) -> Result<f64, E>,
+    ) -> Result<CellValues, E> {
+        let g = &self.geometry;
+        let volume = g.cell_volume();
+        let h = g.spacing();
+        let c = at.map(|v| v as i64);
+        if !self.near(c) {
+            let (phi, m) = self.sampled(at, tau)?;
+            return Ok(CellValues {
+                fluence: phi,
+                collided: sigma * phi * volume,
+                directed: m * (sigma * volume),
+            });
+        }
+        // Net inflow through the six faces, plus the light's power in its own cell.
+        let mut net = FaceFlux::default();
+        for axis in 0..3 {
+            let mut above = c;
+            above[axis] += 1;
+            let inflow = self.face(self.lower_face(c, axis), true, tau)?;
+            let outflow = self.face(self.lower_face(above, axis), true, tau)?;
+            net += inflow;
+            net += FaceFlux {
+                power: -outflow.power,
+                directed: -outflow.directed,
+                radial: -outflow.radial,
+            };
+        }
+        let (mut cell_power, mut m) = (net.power, net.directed);
+        if self.light_cell == Some(c) {
+            cell_power += self.power;
+            m += self.moment;
+        }
+        // C/(σV) is a difference of nearly equal fluxes divided by σ h: the polar rule's
+        // relative error (below 1e-9) allows it down to σ h = 1e-6. Below that the cell is
+        // transparent, and ∮ I T r (ω·n)/r² dA, which is ∫ I T/r² dV − ∫ σ_t I T/r dV, is
+        // its integral.
+        let fluence = if sigma * h.min_element() >= 1e-6 {
+            cell_power / (sigma * volume)
+        } else {
+            net.radial / volume
+        };
+        Ok(CellValues {
+            fluence,
+            collided: cell_power,
+            directed: m,
+        })
     }
 }
 
@@ -402,61 +549,17 @@ fn light_power(light: &Light) -> (f64, DVec3) {
 /// `cutoff`. `None` for sky and emission, which are not point-like.
 pub fn uncollided_cells(sigma_t: &Grid, light: &Light, cutoff: f64) -> Option<UncollidedCells> {
     let g = *sigma_t.geometry();
-    let (lo, hi) = g.bounds();
-    let h = g.spacing();
-    let far = 4.0 * (hi - lo).length() + 1.0;
-    let source = match *light {
-        Light::Directional { direction, .. } => Source::Directional(direction),
-        Light::Point { position, .. } | Light::Spot { position, .. } => {
-            // A light exactly on a face plane of the grid would sit on faces whose polar
-            // rule is 0/0: move it a billionth of a cell into the cell above.
-            let mut p = position;
-            let v = (p - g.origin()) / h;
-            for axis in 0..3 {
-                if (v[axis] - v[axis].round()).abs() < 1e-9 {
-                    p[axis] = g.origin()[axis] + (v[axis].round() + 1e-9) * h[axis];
-                }
-            }
-            Source::Point(p)
-        }
-        Light::Sky { .. } | Light::Emission { .. } => return None,
-    };
-    let integrator = Integrator {
-        sigma_t,
-        empty: EmptyBricks::of(sigma_t, 8).ok(),
-        light,
-        source,
-        far,
-        cutoff,
-        h: h.max_element(),
+    let integrator = Integrator::new(&g, light)?;
+    let empty = EmptyBricks::of(sigma_t, 8).ok();
+    // Empty space is crossed unread; the integrals keep their bits.
+    let tau = |a: DVec3, b: DVec3| {
+        Ok::<f64, std::convert::Infallible>(match &empty {
+            Some(empty) => sigma_t.line_integral_skipping(empty, a, b, cutoff),
+            None => sigma_t.line_integral(a, b, cutoff),
+        })
     };
     let [nx, ny, nz] = g.dims();
     let dims = [nx as i64, ny as i64, nz as i64];
-    let corner = |c: [i64; 3]| g.origin() + DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) * h;
-    // The face of cell c on its lower side along `axis`.
-    let lower_face = |c: [i64; 3], axis: usize| {
-        let mut far_corner = c;
-        far_corner[(axis + 1) % 3] += 1;
-        far_corner[(axis + 2) % 3] += 1;
-        Face {
-            axis,
-            lo: corner(c),
-            hi: corner(far_corner),
-        }
-    };
-    let (power, moment) = light_power(light);
-    // The cell (possibly outside the grid) that holds a point light.
-    let light_cell = match source {
-        Source::Point(p) => {
-            let v = ((p - g.origin()) / h).floor();
-            Some([v.x as i64, v.y as i64, v.z as i64])
-        }
-        Source::Directional(_) => None,
-    };
-    let near = |c: [i64; 3]| {
-        light_cell.is_some_and(|l| (0..3).all(|a| c[a].abs_diff(l[a]) <= NEAR_CELLS.unsigned_abs()))
-    };
-    let volume = g.cell_volume();
     let slab = g.slab_len();
     let n = g.voxel_count();
     let mut collided = vec![0.0; n];
@@ -468,53 +571,19 @@ pub fn uncollided_cells(sigma_t: &Grid, light: &Light, cutoff: f64) -> Option<Un
         .zip(fluence.par_chunks_mut(slab))
         .enumerate()
         .for_each(|(k, ((collided, directed), fluence))| {
+            let mut tau = tau;
             for ij in 0..slab {
-                let (i, j) = (ij % nx, ij / nx);
-                let c = [i as i64, j as i64, k as i64];
                 let sigma = f64::from(sigma_t.data()[ij + slab * k]);
-                if !near(c) {
-                    let (phi, m) = integrator.sampled(&g, i, j, k);
-                    fluence[ij] = phi;
-                    collided[ij] = sigma * phi * volume;
-                    directed[ij] = m * (sigma * volume);
-                    continue;
-                }
-                // Net inflow through the six faces, plus the light's power in its own cell.
-                let mut net = FaceFlux::default();
-                for axis in 0..3 {
-                    let mut above = c;
-                    above[axis] += 1;
-                    let inflow = integrator.face(lower_face(c, axis), true);
-                    let outflow = integrator.face(lower_face(above, axis), true);
-                    net += inflow;
-                    net += FaceFlux {
-                        power: -outflow.power,
-                        directed: -outflow.directed,
-                        radial: -outflow.radial,
-                    };
-                }
-                let (mut cell_power, mut m) = (net.power, net.directed);
-                if light_cell == Some(c) {
-                    cell_power += power;
-                    m += moment;
-                }
-                // C/(σV) is a difference of nearly equal fluxes divided by σ h: the polar
-                // rule's relative error (below 1e-9) allows it down to σ h = 1e-6. Below
-                // that the cell is transparent, and ∮ I T r (ω·n)/r² dA, which is
-                // ∫ I T/r² dV − ∫ σ_t I T/r dV, is its integral.
-                fluence[ij] = if sigma * h.min_element() >= 1e-6 {
-                    cell_power / (sigma * volume)
-                } else {
-                    net.radial / volume
-                };
-                collided[ij] = cell_power;
-                directed[ij] = m;
+                let Ok(cell) = integrator.cell([ij % nx, ij / nx, k], sigma, &mut tau);
+                fluence[ij] = cell.fluence;
+                collided[ij] = cell.collided;
+                directed[ij] = cell.directed;
             }
         });
     // What enters and leaves the box: fluxes through its faces, and the power of a light
     // inside it.
-    let mut emitted = match light_cell {
-        Some(l) if (0..3).all(|a| l[a] >= 0 && l[a] < dims[a]) => power,
+    let mut emitted = match integrator.light_cell {
+        Some(l) if (0..3).all(|a| l[a] >= 0 && l[a] < dims[a]) => integrator.power,
         _ => 0.0,
     };
     let mut escaped = 0.0;
@@ -528,7 +597,10 @@ pub fn uncollided_cells(sigma_t: &Grid, light: &Light, cutoff: f64) -> Option<Un
                     cell[axis] = level;
                     cell[b] = index % dims[b];
                     cell[c] = index / dims[b];
-                    integrator.face(lower_face(cell, axis), false).power * inward
+                    let mut tau = tau;
+                    let Ok(flux) =
+                        integrator.face(integrator.lower_face(cell, axis), false, &mut tau);
+                    flux.power * inward
                 })
                 .collect();
             for f in faces {

@@ -329,9 +329,6 @@ impl CellGeometry {
     fn add_box_patches(&mut self) {
         let g = self.geometry;
         let [nx, ny, nz] = g.dims();
-        let h = g.spacing();
-        let (lo, hi) = g.bounds();
-        let areas = [h.y * h.z, h.x * h.z, h.x * h.y];
         for k in 0..nz {
             for j in 0..ny {
                 for i in 0..nx {
@@ -339,33 +336,12 @@ impl CellGeometry {
                     if self.volume_fraction[c] <= 0.0 {
                         continue;
                     }
-                    let at = [i, j, k];
-                    let n = [nx, ny, nz];
-                    let faces = face_indices(n, i, j, k);
-                    let centre = g.cell_centre(i, j, k);
-                    for axis in 0..3 {
-                        for (end, on_box) in [(0, at[axis] == 0), (1, at[axis] + 1 == n[axis])] {
-                            if !on_box {
-                                continue;
-                            }
-                            let aperture = f64::from(self.apertures[axis][faces[axis][end]]);
-                            if aperture <= 0.0 {
-                                continue;
-                            }
-                            let mut normal = DVec3::ZERO;
-                            normal[axis] = if end == 0 { -1.0 } else { 1.0 };
-                            let distance = if end == 0 {
-                                centre[axis] - lo[axis]
-                            } else {
-                                hi[axis] - centre[axis]
-                            };
-                            self.patches.push(Patch {
-                                cell: c,
-                                area: aperture * areas[axis],
-                                distance: distance.max(0.01 * h[axis]),
-                                normal,
-                                side: Side::Box(2 * axis + end),
-                            });
+                    let faces = face_indices([nx, ny, nz], i, j, k);
+                    for (axis, end) in box_sides(&g, [i, j, k]) {
+                        let aperture = f64::from(self.apertures[axis][faces[axis][end]]);
+                        if aperture > 0.0 {
+                            self.patches
+                                .push(box_patch(&g, [i, j, k], axis, end, aperture));
                         }
                     }
                 }
@@ -424,6 +400,50 @@ impl CellGeometry {
 }
 
 /// Indices of a cell's low and high faces along each axis in the face arrays.
+/// The box faces cell `at` touches, as (axis, end) with end 0 the lower face: in the order
+/// the box patches are listed (axis by axis, lower before upper).
+pub(crate) fn box_sides(
+    g: &GridGeometry,
+    at: [usize; 3],
+) -> impl Iterator<Item = (usize, usize)> + use<> {
+    let n = g.dims();
+    (0..3).flat_map(move |axis| {
+        [(0, at[axis] == 0), (1, at[axis] + 1 == n[axis])]
+            .into_iter()
+            .filter(|&(_, on_box)| on_box)
+            .map(move |(end, _)| (axis, end))
+    })
+}
+
+/// The boundary patch of cell `at` on the box face (`axis`, `end`) whose open fraction is
+/// `aperture`.
+pub(crate) fn box_patch(
+    g: &GridGeometry,
+    [i, j, k]: [usize; 3],
+    axis: usize,
+    end: usize,
+    aperture: f64,
+) -> Patch {
+    let h = g.spacing();
+    let (lo, hi) = g.bounds();
+    let areas = [h.y * h.z, h.x * h.z, h.x * h.y];
+    let centre = g.cell_centre(i, j, k);
+    let mut normal = DVec3::ZERO;
+    normal[axis] = if end == 0 { -1.0 } else { 1.0 };
+    let distance = if end == 0 {
+        centre[axis] - lo[axis]
+    } else {
+        hi[axis] - centre[axis]
+    };
+    Patch {
+        cell: g.index(i, j, k),
+        area: aperture * areas[axis],
+        distance: distance.max(0.01 * h[axis]),
+        normal,
+        side: Side::Box(2 * axis + end),
+    }
+}
+
 pub(crate) fn face_indices(dims: [usize; 3], i: usize, j: usize, k: usize) -> [[usize; 2]; 3] {
     let [nx, ny, _] = dims;
     let x = i + (nx + 1) * (j + ny * k);

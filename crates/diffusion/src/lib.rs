@@ -32,6 +32,10 @@
 //! f32 cycles on an f64 correction), and on the same operator the baselines Jacobi,
 //! red–black SOR, Jacobi-preconditioned CG and multigrid-preconditioned CG.
 //!
+//! For solvers that stream their fields slab by slab (out of core), [`slab`] gives the
+//! same system row by row for a medium that fills the box: the assembled matrix's rows and
+//! right-hand side, bit for bit, from slabs of D, σ_a and the sources.
+//!
 //! # Accuracy and limits
 //!
 //! Second order in h away from sources (point sources are spread over eight cells by
@@ -67,6 +71,7 @@ mod level;
 mod multigrid;
 mod params;
 mod problem;
+pub mod slab;
 mod solve;
 mod solver;
 
@@ -79,5 +84,6 @@ pub use params::{
     SorParams,
 };
 pub use problem::{AssembledSystem, Balance, Boundaries, Condition, DiffusionProblem, Sources};
+pub use slab::SlabSystem;
 pub use solve::{DiffusionSolution, Method, solve};
-pub use solver::{DiffusionSolver, LinearSolve};
+pub use solver::{DiffusionSolver, LinearSolve, conditions};

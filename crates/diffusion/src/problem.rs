@@ -62,6 +62,25 @@ impl Boundaries {
         }
     }
 
+    /// `Ok` if every condition is usable: Robin factors A ≥ 1, finite values.
+    pub fn check(&self) -> Result<(), DiffusionError> {
+        let mut conditions = vec![self.surface];
+        conditions.extend(self.faces);
+        for c in conditions {
+            let ok = match c {
+                Condition::Robin { a } => a.is_finite() && a >= 1.0,
+                Condition::Dirichlet { value } => value.is_finite(),
+                Condition::Neumann { flux } => flux.is_finite(),
+            };
+            if !ok {
+                return Err(DiffusionError::Invalid(format!(
+                    "boundary condition {c:?}: A ≥ 1 and finite values"
+                )));
+            }
+        }
+        Ok(())
+    }
+
     /// The condition on `side`.
     pub fn on(&self, side: Side) -> Condition {
         match side {
@@ -98,7 +117,32 @@ pub(crate) struct LevelPatch {
     pub(crate) width: f64,
 }
 
+/// The diffusion coefficient of the face between cells of coefficients `a` and `b`: their
+/// harmonic mean (0 where either is not positive), so a face's flux is that of the two
+/// half-cells in series.
+pub(crate) fn face_diffusion(a: f32, b: f32) -> f64 {
+    let (da, db) = (f64::from(a), f64::from(b));
+    if da <= 0.0 || db <= 0.0 {
+        return 0.0;
+    }
+    2.0 * da * db / (da + db)
+}
+
 impl LevelPatch {
+    /// The finest level's patch for geometry patch `p` of a cell whose D is `d`, on cells
+    /// of size `h`.
+    pub(crate) fn fine(p: &crate::geometry::Patch, d: f32, h: DVec3) -> Self {
+        Self {
+            cell: p.cell,
+            area: p.area,
+            distance: p.distance,
+            normal: p.normal,
+            diffusion: f64::from(d),
+            side: p.side,
+            width: p.normal.abs().dot(h),
+        }
+    }
+
     /// The distance used for a Dirichlet value: the cell's unknown may sit outside the
     /// medium (negative distance), where extrapolating to a fixed value would make the
     /// coupling negative; it is kept at least a quarter of the cell's width.
@@ -126,7 +170,7 @@ impl LevelPatch {
 
     /// The part of the outward flux that does not depend on φ (boundary data and the
     /// first-moment term q = Q₁·n): it moves to the right-hand side with a minus sign.
-    fn data_flux(&self, condition: Condition, q: f64) -> f64 {
+    pub(crate) fn data_flux(&self, condition: Condition, q: f64) -> f64 {
         let d = self.diffusion;
         match condition {
             Condition::Robin { a } => {
@@ -211,20 +255,7 @@ impl DiffusionProblem {
                 )));
             }
         }
-        let mut conditions = vec![boundaries.surface];
-        conditions.extend(boundaries.faces);
-        for c in conditions {
-            let ok = match c {
-                Condition::Robin { a } => a.is_finite() && a >= 1.0,
-                Condition::Dirichlet { value } => value.is_finite(),
-                Condition::Neumann { flux } => flux.is_finite(),
-            };
-            if !ok {
-                return Err(DiffusionError::Invalid(format!(
-                    "boundary condition {c:?}: A ≥ 1 and finite values"
-                )));
-            }
-        }
+        boundaries.check()?;
         let absorbs = (0..n).any(|c| cells.is_active(c) && absorption[c] > 0.0);
         let holds = cells
             .patches()
@@ -267,11 +298,7 @@ impl DiffusionProblem {
     }
 
     fn face_diffusion(&self, a: usize, b: usize) -> f64 {
-        let (da, db) = (f64::from(self.diffusion[a]), f64::from(self.diffusion[b]));
-        if da <= 0.0 || db <= 0.0 {
-            return 0.0;
-        }
-        2.0 * da * db / (da + db)
+        face_diffusion(self.diffusion[a], self.diffusion[b])
     }
 
     fn fine_patches(&self) -> Vec<LevelPatch> {
@@ -279,15 +306,7 @@ impl DiffusionProblem {
         self.cells
             .patches()
             .iter()
-            .map(|p| LevelPatch {
-                cell: p.cell,
-                area: p.area,
-                distance: p.distance,
-                normal: p.normal,
-                diffusion: f64::from(self.diffusion[p.cell]),
-                side: p.side,
-                width: p.normal.abs().dot(h),
-            })
+            .map(|p| LevelPatch::fine(p, self.diffusion[p.cell], h))
             .collect()
     }
 
@@ -525,7 +544,20 @@ impl DiffusionProblem {
 /// Where the power of a point source goes: trilinear weights over the eight cell centres
 /// around it, renormalised over the cells in the medium.
 fn point_weights(problem: &DiffusionProblem, position: DVec3) -> Vec<(usize, f64)> {
-    let g = problem.cells.geometry();
+    point_weights_in(
+        problem.cells.geometry(),
+        |c| problem.cells.is_active(c),
+        position,
+    )
+}
+
+/// The cells a point source at `position` is shared among (the eight nearest cell centres
+/// that are `active`, by trilinear weights renormalised to 1), each cell once.
+pub(crate) fn point_weights_in(
+    g: &lucent_grid::GridGeometry,
+    active: impl Fn(usize) -> bool,
+    position: DVec3,
+) -> Vec<(usize, f64)> {
     let v = g.world_to_voxel(position);
     let dims = g.dims();
     let base = v.floor();
@@ -547,7 +579,7 @@ fn point_weights(problem: &DiffusionProblem, position: DVec3) -> Vec<(usize, f64
             continue;
         }
         let c = g.index(at[0], at[1], at[2]);
-        if problem.cells.is_active(c) {
+        if active(c) {
             match out.iter_mut().find(|(cell, _)| *cell == c) {
                 Some((_, weight)) => *weight += w,
                 None => out.push((c, w)),

@@ -149,7 +149,10 @@ impl DiffusionSolver {
     ];
 }
 
-fn conditions(boundary: Boundary) -> Boundaries {
+/// The discrete conditions of a problem's boundary on every face (and the embedded
+/// surface): Robin with `Boundary::robin_factor` for vacuum and Robin, Dirichlet and
+/// Neumann as given.
+pub fn conditions(boundary: Boundary) -> Boundaries {
     Boundaries::uniform(match boundary {
         Boundary::Vacuum | Boundary::Robin { .. } => Condition::Robin {
             a: boundary.robin_factor().unwrap_or(1.0),

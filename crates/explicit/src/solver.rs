@@ -3,7 +3,8 @@
 //! - `ftcs-diffusion`, `jacobi-diffusion`: FTCS and Jacobi on exactly the discrete problem
 //!   `diffusion-mg` solves (lucent-diffusion's mapping: reduced-intensity source, Robin
 //!   boundaries, embedded surfaces), marched to the stopping tolerance. Parameters
-//!   `step_fraction` (of the FTCS bound, 0.9), `omega` (Jacobi, 1), `allow_unstable`.
+//!   `step_fraction` (of the FTCS bound, 0.9), `omega` (Jacobi, 1), `allow_unstable`. On
+//!   a paged medium they run out of core with the same bits (`paged_steady`).
 //! - `convection-diffusion`: Zhang & Ma per channel: every directional and point light
 //!   marched by convection–absorption (σ_t as the absorption), composed, then the implicit
 //!   scattering step with `scattering` = σ̂_s t (length², 0 by default: the uncollided
@@ -250,7 +251,15 @@ impl Solver for ExplicitSolver {
     }
 
     fn pages(&self) -> bool {
-        self.paged_convection().is_ok()
+        matches!(self.scheme, Scheme::Steady { .. }) || self.paged_convection().is_ok()
+    }
+
+    /// Half for the steady schemes: the other half holds their f64 iterates' pool.
+    fn paged_medium_budget(&self, budget: u64) -> u64 {
+        match self.scheme {
+            Scheme::Steady { .. } => budget / 2,
+            _ => budget,
+        }
     }
 
     fn solve_paged(
@@ -258,6 +267,22 @@ impl Solver for ExplicitSolver {
         problem: &PagedProblem,
         options: &SolveOptions,
     ) -> Result<PagedSolution, SolveError> {
+        if let Scheme::Steady {
+            iteration,
+            allow_unstable,
+        } = &self.scheme
+        {
+            options.validate()?;
+            let kind = match *iteration {
+                SteadyKind::Ftcs { fraction } => {
+                    self.check_fraction(fraction, *allow_unstable)?;
+                    crate::paged_steady::Kind::Ftcs { fraction }
+                }
+                SteadyKind::Jacobi { omega } => crate::paged_steady::Kind::Jacobi { omega },
+            };
+            return options
+                .install(|| crate::paged_steady::solve(self.name, kind, problem, options))?;
+        }
         self.paged_convection()?;
         options.validate()?;
         crate::paged::convection(self.name, problem, options)
@@ -305,17 +330,8 @@ impl Solver for ExplicitSolver {
                 iteration,
                 allow_unstable,
             } => {
-                if let SteadyKind::Ftcs { fraction } = iteration
-                    && *fraction > 1.0
-                    && !allow_unstable
-                {
-                    // The bound is computed per system below; as a fraction of it, 1.
-                    return Err(SolveError::Unstable {
-                        solver: self.name.into(),
-                        parameter: "step_fraction (of the FTCS bound)".into(),
-                        limit: 1.0,
-                        requested: *fraction,
-                    });
+                if let SteadyKind::Ftcs { fraction } = iteration {
+                    self.check_fraction(*fraction, *allow_unstable)?;
                 }
                 let volume = problem.geometry().cell_volume();
                 let (iteration, allow_unstable) = (*iteration, *allow_unstable);
@@ -523,6 +539,20 @@ impl ExplicitSolver {
 }
 
 impl ExplicitSolver {
+    /// FTCS's step as a fraction of its bound: at most 1 unless `allow_unstable`.
+    fn check_fraction(&self, fraction: f64, allow_unstable: bool) -> Result<(), SolveError> {
+        if fraction > 1.0 && !allow_unstable {
+            // The bound is computed per system; as a fraction of it, 1.
+            return Err(SolveError::Unstable {
+                solver: self.name.into(),
+                parameter: "step_fraction (of the FTCS bound)".into(),
+                limit: 1.0,
+                requested: fraction,
+            });
+        }
+        Ok(())
+    }
+
     /// `Ok` where this entry runs out of core: `convection-diffusion` with the
     /// characteristic model, ordered sweeps and no scattering step (the one-pass
     /// absorption march, plane by plane); else why not.

@@ -173,13 +173,16 @@ fn what_cannot_march_plane_by_plane_is_refused() {
         intensity: Spectrum::Grey(1.0),
     };
     assert!(refused(&[], vec![point]).contains("point"));
-    // Other explicit schemes need their fields in memory.
-    let ftcs = (ExplicitSolver::FTCS_DIFFUSION.build)(&Params::default()).unwrap();
-    assert!(!ftcs.pages() && solver().pages());
-    assert!(matches!(
-        ftcs.solve_paged(&problem(vec![sun()]), &SolveOptions::default()),
-        Err(SolveError::Unsupported { .. })
-    ));
+    // The P1 and ordinates marches need their fields in memory (the steady diffusion
+    // schemes page: tests/paged_steady.rs).
+    for entry in [ExplicitSolver::FTCS_P1, ExplicitSolver::FTCS_ORDINATES] {
+        let marching = (entry.build)(&Params::default()).unwrap();
+        assert!(!marching.pages() && solver().pages());
+        assert!(matches!(
+            marching.solve_paged(&problem(vec![sun()]), &SolveOptions::default()),
+            Err(SolveError::Unsupported { .. })
+        ));
+    }
     // A budget below the pool.
     let tight = SolveOptions {
         memory_budget: 4096,

@@ -25,6 +25,9 @@
 //!   majorants come from the field. Writes update every stored copy of a cell (the owner
 //!   and the neighbours' aprons), so a stencil or a trilinear sample on one stored brick
 //!   never sees a stale neighbour.
+//! - [`PagedSlabs`]: solver state that needs no apron (iterates, residuals, right-hand
+//!   sides; f64 where a stopping test needs it) paged as whole z-slabs, the stencils'
+//!   streaming order.
 //! - [`for_each_layer`]: a field streamed through a stencil brick layer by brick layer (the
 //!   z-slab order), the next layer prefetched on a helper thread.
 //! - [`skewed_steps`] and [`skewed_steps_paged`]: time skewing — T steps of a stencil one
@@ -69,11 +72,13 @@
 mod error;
 mod field;
 mod pager;
+mod slabs;
 pub mod store;
 mod stream;
 
 pub use error::PagingError;
 pub use field::{BrickView, PagedCorners, PagedGrid, PagedSampler};
 pub use pager::{Element, Eviction, Pager, PagerOptions, PagerStats, ReadPin, WritePin};
+pub use slabs::PagedSlabs;
 pub use store::{BrickStore, FileStore, MemoryStore};
 pub use stream::{for_each_layer, skewed_steps, skewed_steps_paged};
