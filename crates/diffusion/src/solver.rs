@@ -371,7 +371,11 @@ impl ChannelMethod for Channels<'_, '_> {
                     .enumerate()
                     .map(|(c, s)| {
                         let mut s = std::mem::replace(s, Grid::filled(*s.geometry(), 0.0));
-                        if let Some(iso) = lights.isotropic_fluence.get(c) {
+                        // The uncollided lights may have fewer channels than the
+                        // problem (a grey sky beside an RGB point light): their last
+                        // channel serves the rest, as everywhere.
+                        let last = lights.isotropic_fluence.len().saturating_sub(1);
+                        if let Some(iso) = lights.isotropic_fluence.get(c.min(last)) {
                             for (a, b) in s.data_mut().iter_mut().zip(iso.data()) {
                                 *a += b;
                             }

@@ -554,7 +554,10 @@ impl Channel<'_> {
         let out = self.problem.new_field().map_err(err)?;
         let iso = self.problem.new_field().map_err(err)?;
         let uncollided = collisions.map(|k| &k.fluence[c]);
-        let sky = collisions.and_then(|k| k.direct.isotropic_fluence.get(c));
+        let sky = collisions.and_then(|k| {
+            let iso = &k.direct.isotropic_fluence;
+            iso.get(c.min(iso.len().saturating_sub(1)))
+        });
         let layout = *self.problem.layout();
         let brick = layout.brick();
         let mut phi = vec![0.0f64; slab];
