@@ -164,6 +164,116 @@ impl Capabilities {
     }
 }
 
+impl Capabilities {
+    /// [`Capabilities::check`] for a paged problem (which has no embedded geometry and no
+    /// emission): the same verdicts, uniformity taken from the fields' brick ranges and the
+    /// absorption test made slab by slab.
+    pub fn check_paged(
+        &self,
+        solver: &str,
+        problem: &crate::PagedProblem,
+    ) -> Result<(), SolveError> {
+        let unsupported = |feature: String| {
+            Err(SolveError::Unsupported {
+                solver: solver.to_owned(),
+                feature,
+            })
+        };
+        let boundary = problem.boundary().kind();
+        if !self.boundaries.contains(&boundary) {
+            return unsupported(format!(
+                "a {boundary:?} boundary (it handles {:?})",
+                self.boundaries
+            ));
+        }
+        if let Some(light) = problem
+            .lights()
+            .iter()
+            .find(|l| !self.lights.contains(&l.kind()))
+        {
+            return unsupported(format!(
+                "{:?} lights (it handles {:?})",
+                light.kind(),
+                self.lights
+            ));
+        }
+        let medium = problem.medium();
+        let phase = medium.phase;
+        if !self.anisotropic && !matches!(phase, lucent_optics::Phase::Isotropic) {
+            return unsupported(format!("an anisotropic phase function ({phase:?})"));
+        }
+        if !self.heterogeneous {
+            if !medium.sigma_t.iter().all(|f| f.uniform_value().is_some()) {
+                return unsupported("a heterogeneous medium".into());
+            }
+            if !medium.albedo.iter().all(|f| f.uniform_value().is_some()) {
+                return unsupported("a heterogeneous albedo".into());
+            }
+        }
+        let h = problem.geometry().spacing();
+        if self.cubic_cells_only
+            && ((h.x - h.y).abs() > 1e-9 * h.x || (h.x - h.z).abs() > 1e-9 * h.x)
+        {
+            return unsupported(format!("non-cubic cells ({} × {} × {})", h.x, h.y, h.z));
+        }
+        if let crate::problem::Boundary::Neumann { flux } = problem.boundary()
+            && self.reflecting_neumann_only
+            && *flux != 0.0
+        {
+            return unsupported(format!(
+                "a Neumann boundary with flux {flux} (only a reflecting box, flux 0)"
+            ));
+        }
+        if self.robin_needs_embedded_surface
+            && matches!(problem.boundary(), crate::problem::Boundary::Robin { .. })
+        {
+            return unsupported(
+                "a Robin boundary without embedded geometry (its interface is the embedded surface)"
+                    .into(),
+            );
+        }
+        if self.point_lights_inside_grid {
+            let (lo, hi) = problem.geometry().bounds();
+            for light in problem.lights() {
+                if let crate::problem::Light::Point { position, .. }
+                | crate::problem::Light::Spot { position, .. } = light
+                    && !(position.cmpge(lo).all() && position.cmplt(hi).all())
+                {
+                    return unsupported(format!("a point light outside the grid (at {position})"));
+                }
+            }
+        }
+        if self.needs_absorption {
+            let [nx, ny, nz] = problem.geometry().dims();
+            let (mut sigma, mut albedo) = (vec![0.0f32; nx * ny], vec![0.0f32; nx * ny]);
+            for c in 0..problem.channels() {
+                let sigma_t = &medium.sigma_t[c.min(medium.sigma_t.len() - 1)];
+                let alb = &medium.albedo[c.min(medium.albedo.len() - 1)];
+                let mut absorbs = false;
+                for z in 0..nz {
+                    let read = sigma_t
+                        .read_slabs(z, z + 1, &mut sigma)
+                        .and_then(|()| alb.read_slabs(z, z + 1, &mut albedo));
+                    if let Err(e) = read {
+                        return Err(crate::paged::paging_error(solver, e));
+                    }
+                    absorbs |= sigma
+                        .iter()
+                        .zip(&albedo)
+                        .any(|(&t, &a)| f64::from(t) > f64::from(a * t) * (1.0 + 1e-6));
+                    if absorbs {
+                        break;
+                    }
+                }
+                if !absorbs {
+                    return unsupported("a medium without absorption".into());
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Progress of a running solve, passed to [`SolveOptions::progress`].
 ///
 /// Through [`crate::driver::run`] (every registered solver) the fraction the caller sees

@@ -16,11 +16,12 @@
 //! study schemes whose tests measure growth factors to 1% and conservation to 1e-10,
 //! which f32 rounding would blur.
 //!
-//! Out of core (`Solver::solve_paged` on a `lucent_core::PagedProblem`): the registry's
-//! `convection-diffusion` (its characteristic absorption march, plane by plane) and
-//! `ftcs-diffusion`/`jacobi-diffusion` (b, φ and r streamed as f64 slab pages, the system's
-//! rows built slab by slab by `lucent_diffusion::SlabSystem`) give the in-memory bits;
-//! `ftcs-p1` and `ftcs-ordinates` need their fields in memory.
+//! Out of core (`Solver::solve_paged` on a `lucent_core::PagedProblem`) every registry
+//! entry gives the in-memory bits: `convection-diffusion` (its characteristic absorption
+//! march, plane by plane), `ftcs-diffusion`/`jacobi-diffusion` (b, φ and r streamed as f64
+//! slab pages, the system's rows built slab by slab by `lucent_diffusion::SlabSystem`),
+//! `ftcs-p1` and `ftcs-ordinates` (the state twice in f64 slab pages, each step from a ring
+//! of three old slabs).
 //!
 //! Every march checks its step against [`stability`] before running and refuses a step
 //! beyond the correct bound with [`ExplicitError::Unstable`] unless the study option
@@ -51,6 +52,7 @@ mod lattice;
 pub mod ordinates;
 pub mod p1;
 mod paged;
+mod paged_march;
 mod paged_steady;
 mod params;
 pub mod scatter;

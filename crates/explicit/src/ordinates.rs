@@ -67,26 +67,14 @@ pub fn march(
         ));
     }
     let dt = settings.time_step;
-    if !(dt > 0.0 && dt.is_finite()) {
-        return Err(ExplicitError::Invalid(format!("time step {dt}")));
-    }
+    let r = checked_ratio(
+        quadrature,
+        sigma_t.iter().fold(0.0f64, |a, &b| a.max(b)),
+        settings,
+        lattice.spacing,
+    )?;
     let dirs = quadrature.directions();
     let weights = quadrature.weights();
-    let s_max = dirs
-        .iter()
-        .map(|d| d.abs().element_sum())
-        .fold(0.0, f64::max);
-    let k_max = dt * sigma_t.iter().fold(0.0f64, |a, &b| a.max(b));
-    let r = dt / lattice.spacing;
-    let limit = crate::stability::ordinates::von_neumann_limit(s_max, k_max);
-    if r > limit * (1.0 + 1e-12) && !settings.allow_unstable {
-        return Err(ExplicitError::Unstable {
-            scheme: "FTCS ordinates",
-            parameter: "r = cΔt/h",
-            limit,
-            requested: r,
-        });
-    }
     let n = lattice.len();
     let m = dirs.len();
     let s = lattice.strides();
@@ -99,15 +87,7 @@ pub fn march(
         .sum::<f64>()
         .sqrt()
         .max(f64::MIN_POSITIVE);
-    let monitor = GrowthMonitor {
-        reference: source.iter().fold(0.0f64, |a, b| a.max(b.abs()))
-            * dt
-            * settings.stopping.max_iterations.min(1 << 40) as f64
-            / (4.0 * std::f64::consts::PI)
-            + f64::MIN_POSITIVE,
-        factor: 1e6,
-    };
-    let four_pi = 4.0 * std::f64::consts::PI;
+    let monitor = growth_monitor(source.iter().fold(0.0f64, |a, b| a.max(b.abs())), settings);
     let mut history = History::start();
     let mut step = 0;
     loop {
@@ -115,29 +95,30 @@ pub fn march(
         {
             let (radiance, phi) = (&radiance, &phi);
             next.par_chunks_mut(m).enumerate().for_each(|(g, out)| {
-                let emission = dt * (sigma_s[g] * phi[g] + source[g]) / four_pi;
                 let at = lattice.coords(g);
                 // The neighbours' blocks of m radiances, low and high, per axis.
-                let blocks: [[Option<usize>; 2]; 3] = std::array::from_fn(|axis| {
+                let blocks: [[Option<&[f64]>; 2]; 3] = std::array::from_fn(|axis| {
                     [
-                        (at[axis] > 0).then(|| (g - s[axis]) * m),
-                        (at[axis] + 1 < lattice.dims[axis]).then(|| (g + s[axis]) * m),
+                        (at[axis] > 0).then(|| &radiance[(g - s[axis]) * m..(g - s[axis] + 1) * m]),
+                        (at[axis] + 1 < lattice.dims[axis])
+                            .then(|| &radiance[(g + s[axis]) * m..(g + s[axis] + 1) * m]),
                     ]
                 });
-                let damping = 1.0 - dt * sigma_t[g];
-                for (d, o) in out.iter_mut().enumerate() {
-                    let l = radiance[g * m + d];
-                    let mut change = 0.0;
-                    for axis in 0..3 {
-                        let w = dirs[d][axis];
-                        if w != 0.0 {
-                            let side = usize::from(w < 0.0);
-                            let up = blocks[axis][side].map_or(0.0, |b| radiance[b + d]);
-                            change += w.abs() * (l - up);
-                        }
-                    }
-                    *o = damping * l - r * change + emission;
-                }
+                let cell = Cell {
+                    sigma_t: sigma_t[g],
+                    sigma_s: sigma_s[g],
+                    source: source[g],
+                    phi: phi[g],
+                };
+                cell_step(
+                    dirs,
+                    dt,
+                    r,
+                    &cell,
+                    &radiance[g * m..(g + 1) * m],
+                    &blocks,
+                    out,
+                );
             });
         }
         if let Some(stop_reason) = monitor.check(&next, step) {
@@ -151,7 +132,7 @@ pub fn march(
         std::mem::swap(&mut radiance, &mut next);
         let new_phi: Vec<f64> = radiance
             .par_chunks(m)
-            .map(|l| l.iter().zip(weights).map(|(l, w)| l * w).sum())
+            .map(|l| cell_fluence(l, weights))
             .collect();
         let change = new_phi
             .iter()
@@ -170,6 +151,96 @@ pub fn march(
             });
         }
     }
+}
+
+/// r = cΔt/h for `settings` on cells of width `spacing` in a medium whose largest σ_t is
+/// `sigma_t_max`, checked: a positive finite step within the von Neumann bound (unless
+/// `allow_unstable`).
+pub(crate) fn checked_ratio(
+    quadrature: &SphericalQuadrature,
+    sigma_t_max: f64,
+    settings: &OrdinatesSettings,
+    spacing: f64,
+) -> Result<f64, ExplicitError> {
+    let dt = settings.time_step;
+    if !(dt > 0.0 && dt.is_finite()) {
+        return Err(ExplicitError::Invalid(format!("time step {dt}")));
+    }
+    let s_max = quadrature
+        .directions()
+        .iter()
+        .map(|d| d.abs().element_sum())
+        .fold(0.0, f64::max);
+    let k_max = dt * sigma_t_max;
+    let r = dt / spacing;
+    let limit = crate::stability::ordinates::von_neumann_limit(s_max, k_max);
+    if r > limit * (1.0 + 1e-12) && !settings.allow_unstable {
+        return Err(ExplicitError::Unstable {
+            scheme: "FTCS ordinates",
+            parameter: "r = cΔt/h",
+            limit,
+            requested: r,
+        });
+    }
+    Ok(r)
+}
+
+/// The growth monitor of a march from zero with sources of largest magnitude `source`.
+pub(crate) fn growth_monitor(source: f64, settings: &OrdinatesSettings) -> GrowthMonitor {
+    GrowthMonitor {
+        reference: source
+            * settings.time_step
+            * settings.stopping.max_iterations.min(1 << 40) as f64
+            / (4.0 * std::f64::consts::PI)
+            + f64::MIN_POSITIVE,
+        factor: 1e6,
+    }
+}
+
+/// One cell's coefficients and φ for [`cell_step`].
+pub(crate) struct Cell {
+    pub(crate) sigma_t: f64,
+    pub(crate) sigma_s: f64,
+    pub(crate) source: f64,
+    pub(crate) phi: f64,
+}
+
+/// One FTCS step of the cell whose radiances are `here` (one per direction of `dirs`) into
+/// `out`, with the neighbours' radiances `blocks[axis][side]` (side 0 below, 1 above; `None`
+/// beyond a vacuum edge): the one definition of the update, for the in-memory march and
+/// the paged one.
+#[inline]
+pub(crate) fn cell_step(
+    dirs: &[glam::DVec3],
+    dt: f64,
+    r: f64,
+    cell: &Cell,
+    here: &[f64],
+    blocks: &[[Option<&[f64]>; 2]; 3],
+    out: &mut [f64],
+) {
+    let four_pi = 4.0 * std::f64::consts::PI;
+    let emission = dt * (cell.sigma_s * cell.phi + cell.source) / four_pi;
+    let damping = 1.0 - dt * cell.sigma_t;
+    for (d, o) in out.iter_mut().enumerate() {
+        let l = here[d];
+        let mut change = 0.0;
+        for axis in 0..3 {
+            let w = dirs[d][axis];
+            if w != 0.0 {
+                let side = usize::from(w < 0.0);
+                let up = blocks[axis][side].map_or(0.0, |b| b[d]);
+                change += w.abs() * (l - up);
+            }
+        }
+        *o = damping * l - r * change + emission;
+    }
+}
+
+/// φ = Σ_d w_d L_d of one cell: the one definition for both storages.
+#[inline]
+pub(crate) fn cell_fluence(radiance: &[f64], weights: &[f64]) -> f64 {
+    radiance.iter().zip(weights).map(|(l, w)| l * w).sum()
 }
 
 /// The angular (ray-effect) error of `fluence`: its relative L2 difference from

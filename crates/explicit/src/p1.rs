@@ -103,6 +103,95 @@ impl P1Settings {
     }
 }
 
+/// What one FTCS step of P1 needs besides the state: the layout, the damping per step
+/// (K_φ, K_E), r = cΔt/h and cΔt.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct StepCoefficients {
+    pub(crate) layout: Layout,
+    pub(crate) k_phi: f64,
+    pub(crate) k_flux: f64,
+    pub(crate) r: f64,
+    pub(crate) dt: f64,
+}
+
+/// The growth monitor of a march from a state whose largest magnitude is `initial` with
+/// sources of largest magnitude `source`: a stable run stays below the initial state plus
+/// every step's source.
+pub(crate) fn growth_monitor(initial: f64, source: f64, settings: &P1Settings) -> GrowthMonitor {
+    GrowthMonitor {
+        reference: initial
+            + source * settings.time_step * settings.stopping.max_iterations.min(1 << 40) as f64
+            + f64::MIN_POSITIVE,
+        factor: 1e6,
+    }
+}
+
+impl StepCoefficients {
+    /// The step of `settings` on cells of width `spacing`, checked: a positive finite
+    /// time step, damping rates ≥ 0, and (unless `allow_unstable`) r within the layout's
+    /// von Neumann bound and K ≤ 2.
+    pub(crate) fn checked(settings: &P1Settings, spacing: f64) -> Result<Self, ExplicitError> {
+        let dt = settings.time_step;
+        if !(dt > 0.0 && dt.is_finite()) {
+            return Err(ExplicitError::Invalid(format!("time step {dt}")));
+        }
+        let (k_phi, k_flux) = settings.damping_per_step();
+        if !(k_phi >= 0.0 && k_flux >= 0.0) {
+            return Err(ExplicitError::Invalid("damping rates must be ≥ 0".into()));
+        }
+        let r = dt / spacing;
+        let limit = match settings.layout {
+            Layout::Collocated => crate::stability::p1::collocated_limit(k_phi, k_flux),
+            Layout::Staggered => crate::stability::p1::staggered_limit(k_phi, k_flux),
+        };
+        let unstable = r > limit * (1.0 + 1e-12) || k_phi > 2.0 || k_flux > 2.0;
+        if unstable && !settings.allow_unstable {
+            return Err(ExplicitError::Unstable {
+                scheme: "P1 FTCS",
+                parameter: "r = cΔt/h",
+                limit: limit * spacing,
+                requested: dt,
+            });
+        }
+        Ok(Self {
+            layout: settings.layout,
+            k_phi,
+            k_flux,
+            r,
+            dt,
+        })
+    }
+
+    /// One step at one cell of source `q`: (φ′, E′_x, E′_y, E′_z) from `value(c, axis,
+    /// offset)`, component c (0: φ, 1–3: E along x, y, z) of the cell `offset` ∈ {−1, 0, 1}
+    /// cells away along `axis` (0 beyond a zero edge). The one definition of the update,
+    /// for the in-memory march and the paged one.
+    #[inline]
+    pub(crate) fn cell(&self, q: f64, value: impl Fn(usize, usize, isize) -> f64) -> [f64; 4] {
+        let divergence: f64 = (0..3)
+            .map(|a| match self.layout {
+                Layout::Collocated => 0.5 * (value(1 + a, a, 1) - value(1 + a, a, -1)),
+                Layout::Staggered => value(1 + a, a, 0) - value(1 + a, a, -1),
+            })
+            .sum();
+        let phi = value(0, 0, 0);
+        let mut out = [
+            (1.0 - self.k_phi) * phi - self.r * divergence + self.dt * q,
+            0.0,
+            0.0,
+            0.0,
+        ];
+        for a in 0..3 {
+            let gradient = match self.layout {
+                Layout::Collocated => 0.5 * (value(0, a, 1) - value(0, a, -1)),
+                Layout::Staggered => value(0, a, 1) - phi,
+            };
+            out[1 + a] = (1.0 - self.k_flux) * value(1 + a, a, 0) - self.r * gradient / 3.0;
+        }
+        out
+    }
+}
+
 /// Runs up to `settings.stopping.max_iterations` FTCS steps from zero with source `q` (fluence per length per
 /// step unit) on a periodic grid, or from `initial` (φ, E) when given.
 pub fn march(
@@ -112,28 +201,7 @@ pub fn march(
     initial: Option<(Vec<f64>, [Vec<f64>; 3])>,
 ) -> Result<P1State, ExplicitError> {
     lattice.check_field("source", source)?;
-    let dt = settings.time_step;
-    if !(dt > 0.0 && dt.is_finite()) {
-        return Err(ExplicitError::Invalid(format!("time step {dt}")));
-    }
-    let (k_phi, k_flux) = settings.damping_per_step();
-    if !(k_phi >= 0.0 && k_flux >= 0.0) {
-        return Err(ExplicitError::Invalid("damping rates must be ≥ 0".into()));
-    }
-    let r = dt / lattice.spacing;
-    let limit = match settings.layout {
-        Layout::Collocated => crate::stability::p1::collocated_limit(k_phi, k_flux),
-        Layout::Staggered => crate::stability::p1::staggered_limit(k_phi, k_flux),
-    };
-    let unstable = r > limit * (1.0 + 1e-12) || k_phi > 2.0 || k_flux > 2.0;
-    if unstable && !settings.allow_unstable {
-        return Err(ExplicitError::Unstable {
-            scheme: "P1 FTCS",
-            parameter: "r = cΔt/h",
-            limit: limit * lattice.spacing,
-            requested: dt,
-        });
-    }
+    let step_of = StepCoefficients::checked(settings, lattice.spacing)?;
     let n = lattice.len();
     let (mut phi, mut flux) = match initial {
         Some((p, f)) => {
@@ -146,13 +214,11 @@ pub fn march(
         None => (vec![0.0; n], [vec![0.0; n], vec![0.0; n], vec![0.0; n]]),
     };
     let largest = |v: &[f64]| v.iter().fold(0.0f64, |a, b| a.max(b.abs()));
-    let monitor = GrowthMonitor {
-        reference: largest(&phi)
-            + flux.iter().map(|f| largest(f)).fold(0.0, f64::max)
-            + largest(source) * dt * settings.stopping.max_iterations.min(1 << 40) as f64
-            + f64::MIN_POSITIVE,
-        factor: 1e6,
-    };
+    let monitor = growth_monitor(
+        largest(&phi) + flux.iter().map(|f| largest(f)).fold(0.0, f64::max),
+        largest(source),
+        settings,
+    );
     let s = lattice.strides();
     let neighbour = |g: usize, axis: usize, step: isize| -> Option<usize> {
         let at = lattice.coords(g);
@@ -173,24 +239,22 @@ pub fn march(
         let mut next_phi = vec![0.0; n];
         let mut next_flux = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
         for g in 0..n {
-            let divergence: f64 = (0..3)
-                .map(|a| match settings.layout {
-                    Layout::Collocated => {
-                        0.5 * (at(&flux[a], neighbour(g, a, 1)) - at(&flux[a], neighbour(g, a, -1)))
-                    }
-                    Layout::Staggered => flux[a][g] - at(&flux[a], neighbour(g, a, -1)),
-                })
-                .sum();
-            next_phi[g] = (1.0 - k_phi) * phi[g] - r * divergence + dt * source[g];
-            for a in 0..3 {
-                let gradient = match settings.layout {
-                    Layout::Collocated => {
-                        0.5 * (at(&phi, neighbour(g, a, 1)) - at(&phi, neighbour(g, a, -1)))
-                    }
-                    Layout::Staggered => at(&phi, neighbour(g, a, 1)) - phi[g],
+            let [p, fx, fy, fz] = step_of.cell(source[g], |component, axis, offset| {
+                let field = if component == 0 {
+                    &phi
+                } else {
+                    &flux[component - 1]
                 };
-                next_flux[a][g] = (1.0 - k_flux) * flux[a][g] - r * gradient / 3.0;
-            }
+                if offset == 0 {
+                    field[g]
+                } else {
+                    at(field, neighbour(g, axis, offset))
+                }
+            });
+            next_phi[g] = p;
+            next_flux[0][g] = fx;
+            next_flux[1][g] = fy;
+            next_flux[2][g] = fz;
         }
         let stop = monitor
             .check(&next_phi, step)

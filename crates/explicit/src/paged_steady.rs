@@ -262,15 +262,15 @@ fn read_slab(field: Option<&PagedGrid>, z: usize, out: &mut [f32]) -> Result<(),
     }
 }
 
-/// A ring of the slabs z − 1, z, z + 1 of an f32 field (read as f64 pages or paged f32).
-struct Ring<T> {
-    slabs: [Vec<T>; 3],
+/// A ring of the slabs z − 1, z, z + 1 of a field, read from pages as a pass comes.
+pub(crate) struct Ring<T> {
+    pub(crate) slabs: [Vec<T>; 3],
     /// The slab held in `slabs[i]`, if any.
-    held: [Option<usize>; 3],
+    pub(crate) held: [Option<usize>; 3],
 }
 
 impl<T: Copy + Default> Ring<T> {
-    fn new(len: usize) -> Self {
+    pub(crate) fn new(len: usize) -> Self {
         Self {
             slabs: std::array::from_fn(|_| vec![T::default(); len]),
             held: [None; 3],
@@ -278,7 +278,7 @@ impl<T: Copy + Default> Ring<T> {
     }
 
     /// Makes slab `z` held (reading it with `read` if it is not), returning its index.
-    fn hold(
+    pub(crate) fn hold(
         &mut self,
         z: usize,
         read: &mut impl FnMut(usize, &mut [T]) -> Result<(), PagingError>,
@@ -292,7 +292,7 @@ impl<T: Copy + Default> Ring<T> {
     }
 
     /// The window around slab `z` of a field of `nz` slabs (all three must be held).
-    fn window(&self, z: usize, nz: usize) -> Window<'_, T> {
+    pub(crate) fn window(&self, z: usize, nz: usize) -> Window<'_, T> {
         Window {
             below: (z > 0).then(|| self.slabs[(z - 1) % 3].as_slice()),
             here: &self.slabs[z % 3],
@@ -301,7 +301,7 @@ impl<T: Copy + Default> Ring<T> {
     }
 
     /// Holds slabs z − 1 ..= z + 1 that exist.
-    fn hold_around(
+    pub(crate) fn hold_around(
         &mut self,
         z: usize,
         nz: usize,

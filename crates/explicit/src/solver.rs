@@ -23,7 +23,8 @@
 //!   Parameters `order` (level-symmetric S_N, 4), `step_fraction` (0.9), `allow_unstable`.
 //!
 //! The last two take point lights inside the grid (power 4πI into the cell that holds
-//! them) and emission; the fluence they return counts all light.
+//! them) and emission; the fluence they return counts all light. On a paged medium they
+//! march with their state in slab pages, with the same bits (`paged_march`).
 
 use std::time::Instant;
 
@@ -56,7 +57,7 @@ fn invalid(name: &str, reason: impl Into<String>) -> SolveError {
     }
 }
 
-fn explicit_error(e: ExplicitError) -> SolveError {
+pub(crate) fn explicit_error(e: ExplicitError) -> SolveError {
     match e {
         ExplicitError::Unstable {
             scheme,
@@ -251,14 +252,15 @@ impl Solver for ExplicitSolver {
     }
 
     fn pages(&self) -> bool {
-        matches!(self.scheme, Scheme::Steady { .. }) || self.paged_convection().is_ok()
+        !matches!(self.scheme, Scheme::Convection { .. }) || self.paged_convection().is_ok()
     }
 
-    /// Half for the steady schemes: the other half holds their f64 iterates' pool.
+    /// Half for the steady schemes and the marches: the other half holds the pool of their
+    /// f64 state. All of it for the absorption march, whose planes are its only state.
     fn paged_medium_budget(&self, budget: u64) -> u64 {
         match self.scheme {
-            Scheme::Steady { .. } => budget / 2,
-            _ => budget,
+            Scheme::Convection { .. } => budget,
+            _ => budget / 2,
         }
     }
 
@@ -280,8 +282,36 @@ impl Solver for ExplicitSolver {
                 }
                 SteadyKind::Jacobi { omega } => crate::paged_steady::Kind::Jacobi { omega },
             };
+            self.capabilities().check_paged(self.name, problem)?;
             return options
                 .install(|| crate::paged_steady::solve(self.name, kind, problem, options))?;
+        }
+        let march = match self.scheme {
+            Scheme::P1 {
+                layout,
+                fraction,
+                allow_unstable,
+            } => Some(crate::paged_march::March::P1 {
+                layout,
+                fraction,
+                allow_unstable,
+            }),
+            Scheme::Ordinates {
+                order,
+                fraction,
+                allow_unstable,
+            } => Some(crate::paged_march::March::Ordinates {
+                order,
+                fraction,
+                allow_unstable,
+            }),
+            _ => None,
+        };
+        if let Some(march) = march {
+            options.validate()?;
+            self.capabilities().check_paged(self.name, problem)?;
+            return options
+                .install(|| crate::paged_march::solve(self.name, march, problem, options))?;
         }
         self.paged_convection()?;
         options.validate()?;
@@ -657,14 +687,37 @@ fn p1(
     let g = channel.problem.medium().phase.mean_cosine();
     // Homogeneous (the capabilities ask for it): any cell's coefficients.
     let coefficients = &channel.coefficients;
-    let sigma_t = f64::from(coefficients.sigma_t[0]);
-    let sigma_s = f64::from(coefficients.sigma_s[0]);
+    let settings = p1_settings(
+        [coefficients.sigma_t[0], coefficients.sigma_s[0]],
+        g,
+        l.spacing,
+        (layout, fraction, allow_unstable),
+        channel.stopping.clone(),
+    )?;
+    let out = crate::p1::march(l, q, &settings, None).map_err(explicit_error)?;
+    let mut record = Record::exact((l.len() * 8 * 8) as u64);
+    record.iterations = out.steps;
+    record.stop_reason = out.stop_reason;
+    Ok((out.fluence, record))
+}
+
+/// The registry's P1 march on a homogeneous medium of σ_t and σ_s (as stored) with phase
+/// mean cosine `g`: consistent damping, zero edges, `fraction` of the largest stable step
+/// of the layout; refused without absorption (no stable step).
+pub(crate) fn p1_settings(
+    [sigma_t, sigma_s]: [f32; 2],
+    g: f64,
+    spacing: f64,
+    (layout, fraction, allow_unstable): (crate::p1::Layout, f64, bool),
+    stopping: lucent_core::Stopping,
+) -> Result<crate::p1::P1Settings, SolveError> {
+    let (sigma_t, sigma_s) = (f64::from(sigma_t), f64::from(sigma_s));
     let (sigma_a, reduced) = (sigma_t - sigma_s, sigma_t - g * sigma_s);
     let lo = crate::stability::p1::largest_step(
         layout == crate::p1::Layout::Staggered,
         sigma_a,
         reduced,
-        l.spacing,
+        spacing,
     );
     if lo <= 0.0 {
         return Err(invalid(
@@ -672,22 +725,48 @@ fn p1(
             "P1 FTCS has no stable step without absorption",
         ));
     }
-    let settings = crate::p1::P1Settings {
+    Ok(crate::p1::P1Settings {
         layout,
         damping: crate::p1::Damping::Consistent {
             sigma_a,
             sigma_t_reduced: reduced,
         },
         time_step: fraction * lo,
-        stopping: channel.stopping.clone(),
+        stopping,
         edges: crate::p1::P1Edges::Zero,
         allow_unstable,
+    })
+}
+
+/// The registry's ordinates march: the level-symmetric set of `order` and `fraction` of
+/// the positivity bound for the largest σ_t `sigma_t_max`.
+pub(crate) fn ordinates_settings(
+    order: usize,
+    sigma_t_max: f64,
+    spacing: f64,
+    (fraction, allow_unstable): (f64, bool),
+    stopping: lucent_core::Stopping,
+) -> Result<
+    (
+        lucent_optics::SphericalQuadrature,
+        crate::ordinates::OrdinatesSettings,
+    ),
+    SolveError,
+> {
+    let quadrature = lucent_optics::SphericalQuadrature::level_symmetric(order)
+        .map_err(|e| invalid("order", e.to_string()))?;
+    let s_max = quadrature
+        .directions()
+        .iter()
+        .map(|d| d.abs().element_sum())
+        .fold(0.0, f64::max);
+    let step = crate::stability::ordinates::largest_step(s_max, sigma_t_max, spacing);
+    let settings = crate::ordinates::OrdinatesSettings {
+        time_step: fraction * step,
+        stopping,
+        allow_unstable,
     };
-    let out = crate::p1::march(l, q, &settings, None).map_err(explicit_error)?;
-    let mut record = Record::exact((l.len() * 8 * 8) as u64);
-    record.iterations = out.steps;
-    record.stop_reason = out.stop_reason;
-    Ok((out.fluence, record))
+    Ok((quadrature, settings))
 }
 
 /// Upwind FTCS ordinates on one channel at `fraction` of the positivity bound.
@@ -699,23 +778,17 @@ fn ordinates(
     fraction: f64,
     allow_unstable: bool,
 ) -> Result<(Vec<f64>, Record), SolveError> {
-    let quadrature = lucent_optics::SphericalQuadrature::level_symmetric(order)
-        .map_err(|e| invalid("order", e.to_string()))?;
-    let s_max = quadrature
-        .directions()
-        .iter()
-        .map(|d| d.abs().element_sum())
-        .fold(0.0, f64::max);
     let widen = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>();
     let sigma_t = widen(&channel.coefficients.sigma_t);
     let sigma_s = widen(&channel.coefficients.sigma_s);
     let k_max = sigma_t.iter().fold(0.0f64, |a, &b| a.max(b));
-    let step = crate::stability::ordinates::largest_step(s_max, k_max, l.spacing);
-    let settings = crate::ordinates::OrdinatesSettings {
-        time_step: fraction * step,
-        stopping: channel.stopping.clone(),
-        allow_unstable,
-    };
+    let (quadrature, settings) = ordinates_settings(
+        order,
+        k_max,
+        l.spacing,
+        (fraction, allow_unstable),
+        channel.stopping.clone(),
+    )?;
     let out = crate::ordinates::march(l, &quadrature, &sigma_t, &sigma_s, q, &settings)
         .map_err(explicit_error)?;
     let record = Record {

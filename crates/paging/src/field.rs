@@ -215,6 +215,15 @@ impl PagedGrid {
         })
     }
 
+    /// The one value of every cell, if the field is uniform (every brick's range, apron
+    /// included, is that value alone): from the ranges, no brick is read.
+    pub fn uniform_value(&self) -> Option<f32> {
+        let first = self.brick_range(0)?.0;
+        (0..self.layout.count())
+            .all(|id| self.brick_range(id) == Some((first, first)))
+            .then_some(first)
+    }
+
     /// The largest brick maximum over the bricks holding cells `lo..=hi` (clamped): a
     /// majorant of the trilinear interpolant there, from the ranges alone (no brick is
     /// read).

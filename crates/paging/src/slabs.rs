@@ -84,6 +84,15 @@ impl<T: Element> PagedSlabs<T> {
         Ok((page, (z % self.slabs_per_page) * self.slab_len()))
     }
 
+    /// Forgets every value: the field reads as the pager's fill again, its pages freed
+    /// without a write-back (state reused for another solve). Fails while a page is pinned.
+    pub fn clear(&self) -> Result<(), PagingError> {
+        for page in 0..self.dims[2].div_ceil(self.slabs_per_page) {
+            self.pager.discard(self.first + page)?;
+        }
+        Ok(())
+    }
+
     /// Copies slab `z` into `out` (one slab's values).
     pub fn read_slab(&self, z: usize, out: &mut [T]) -> Result<(), PagingError> {
         let (page, offset) = self.locate(z, out.len())?;
