@@ -14,6 +14,7 @@
 //! | [`diffusion`] | `lucent-diffusion` | steady diffusion, embedded boundary, matrix-free multigrid |
 //! | [`fem`] | `lucent-fem` | Murray's finite elements for the RTE, Krylov solvers on a linear-operator trait |
 //! | [`dom`] | `lucent-dom` | discrete ordinates: octant wavefront sweeps, first-collision sources, DSA |
+//! | [`lbm`] | `lucent-lbm` | Lattice-Boltzmann lighting: D3Q7/D3Q19, TRT matched to diffusion, AA streaming |
 //! | [`explicit`] | `lucent-explicit` | FTCS, P1, ordinates, Zhang & Ma convection–diffusion, Jacobi, with their stability bounds |
 //! | [`scene`] | (here) | TOML scene files and the built-in default scene |
 //!
@@ -44,6 +45,7 @@ pub use lucent_fem as fem;
 pub use lucent_gpu as gpu;
 pub use lucent_gpu_solvers as gpu_solvers;
 pub use lucent_grid as grid;
+pub use lucent_lbm as lbm;
 pub use lucent_mc as mc;
 pub use lucent_optics as optics;
 pub use lucent_paging as paging;
@@ -62,6 +64,7 @@ pub fn registry() -> lucent_core::Registry {
     registry.register(lucent_fem::FemP1Solver::ENTRY);
     registry.register(lucent_fem::FemDiffusionSolver::ENTRY);
     registry.register(lucent_dom::DomSolver::ENTRY);
+    registry.register(lucent_lbm::LbmSolver::ENTRY);
     for entry in lucent_gpu_solvers::GpuSolver::ENTRIES {
         registry.register(entry);
     }

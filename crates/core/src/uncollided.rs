@@ -668,6 +668,35 @@ impl Uncollided {
         })
     }
 
+    /// The renderer's angular radiance of a solver that adds `scattered` fluence (per
+    /// channel, taken) to this uncollided light: `direct`'s per-light transmittance for
+    /// exact single scattering, and the scattered fluence plus the sky's uncollided fluence
+    /// in-scattering isotropically (the lights' last channel serving any further ones).
+    /// `None` when `direct` kept no transmittance.
+    pub fn into_angular(self, scattered: &mut [Grid]) -> Option<Angular> {
+        match self.direct.angular {
+            Some(Angular::Lights(mut lights)) => {
+                let last = lights.isotropic_fluence.len().saturating_sub(1);
+                lights.isotropic_fluence = scattered
+                    .iter_mut()
+                    .enumerate()
+                    .map(|(c, s)| {
+                        let mut s = std::mem::replace(s, Grid::filled(*s.geometry(), 0.0));
+                        if let Some(iso) = lights.isotropic_fluence.get(c.min(last)) {
+                            for (a, b) in s.data_mut().iter_mut().zip(iso.data()) {
+                                *a += b;
+                            }
+                        }
+                        s
+                    })
+                    .collect();
+                Some(Angular::Lights(lights))
+            }
+            // `direct` keeps per-light transmittance only.
+            Some(Angular::Ordinates(_)) | None => None,
+        }
+    }
+
     /// The light's cell integrals in `channel`.
     fn cells_of(&self, light: usize, channel: usize) -> &UncollidedCells {
         let per_channel = &self.cells[light];

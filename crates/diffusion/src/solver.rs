@@ -364,29 +364,6 @@ impl ChannelMethod for Channels<'_, '_> {
         scattered: &mut [Grid],
         uncollided: Option<Uncollided>,
     ) -> Result<Option<Angular>, SolveError> {
-        Ok(uncollided.and_then(|u| match u.direct.angular {
-            Some(Angular::Lights(mut lights)) => {
-                lights.isotropic_fluence = scattered
-                    .iter_mut()
-                    .enumerate()
-                    .map(|(c, s)| {
-                        let mut s = std::mem::replace(s, Grid::filled(*s.geometry(), 0.0));
-                        // The uncollided lights may have fewer channels than the
-                        // problem (a grey sky beside an RGB point light): their last
-                        // channel serves the rest, as everywhere.
-                        let last = lights.isotropic_fluence.len().saturating_sub(1);
-                        if let Some(iso) = lights.isotropic_fluence.get(c.min(last)) {
-                            for (a, b) in s.data_mut().iter_mut().zip(iso.data()) {
-                                *a += b;
-                            }
-                        }
-                        s
-                    })
-                    .collect();
-                Some(Angular::Lights(lights))
-            }
-            // `direct` keeps per-light transmittance only.
-            Some(Angular::Ordinates(_)) | None => None,
-        }))
+        Ok(uncollided.and_then(|u| u.into_angular(scattered)))
     }
 }

@@ -1,0 +1,1005 @@
+//! The lattice march to steady state on a box: collision, streaming (in place by the AA
+//! pattern, or between two arrays), boundaries, sources, the stopping test and the energy
+//! bookkeeping. Lattice units throughout: one cell is one lattice spacing and one step.
+
+use lucent_core::{History, StopReason, Stopping};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::error::LbmError;
+use crate::lattice::{Links, Velocities};
+
+/// What happens to absorbed light.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Absorption {
+    /// It leaves: a sink of κ_a ρ per step (σ_a per unit length).
+    #[default]
+    True,
+    /// Bernabei's and Geist's collision matrices as printed (with the sign of Geist's
+    /// diagonal corrected): the absorbed fraction moves to the rest population and is
+    /// re-emitted at the next step, so energy is conserved and κ_a only slows diffusion.
+    Thesis,
+}
+
+/// The collision operator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Collision {
+    /// Two relaxation times: odd moments (the flux) relax at ω⁻, set so that the lattice's
+    /// diffusion coefficient c_s²(1/ω⁻ − ½) is the medium's D = 1/(3σ_t′) (the phase
+    /// function enters through σ_t′ = σ_a + (1 − g)σ_s); even moments at ω⁺ with
+    /// Λ = (1/ω⁺ − ½)(1/ω⁻ − ½) = ¼, which puts the walls' conditions at the half-links.
+    #[default]
+    Trt,
+    /// One relaxation time ω⁺ = ω⁻ (BGK) from the same D: the walls' conditions then sit at
+    /// a distance from the half-link that depends on ω (first order at the walls).
+    Bgk,
+    /// Geist et al.'s physical probabilities per step: κ_t = 1 − e^{−σ_t h} interacting,
+    /// κ_s = albedo κ_t scattering isotropically (the transport approximation for g ≠ 0:
+    /// κ_s(1 − g), κ_t − gκ_s), the rest population as the thesis has it. Its D is
+    /// h(2/κ_t − 1)/(6(1 + κ_a)) (D3Q7, Bernabei) or h(2/κ_t − 1)/(4(1 + κ_a)) (D3Q19,
+    /// Geist), first order in h against 1/(3σ_t′).
+    Geist,
+}
+
+/// The streaming pattern.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Streaming {
+    /// One array of populations (Bailey et al.'s AA pattern): even steps collide in place
+    /// into the opposite slots, odd steps read from and write to the neighbours' slots.
+    #[default]
+    InPlace,
+    /// Two arrays: read one, write the other (twice the memory).
+    TwoArrays,
+}
+
+/// A box's wall condition, in lattice units: the fluence at the half-link ρ_w relates to
+/// the outward flux J_n through the wall.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Wall {
+    /// ρ_w = 2A J_n (Robin; a vacuum is A from the Milne problem).
+    Robin {
+        /// The boundary factor A ≥ 1.
+        a: f64,
+    },
+    /// ρ_w given.
+    Dirichlet {
+        /// Fluence at the wall.
+        value: f64,
+    },
+    /// J_n given (0: reflecting).
+    Neumann {
+        /// Outward flux per unit area per step.
+        flux: f64,
+    },
+    /// The physical wall of Geist's and Bernabei's lattices: a fraction `reflectance` of
+    /// the light leaving along a link comes back along its opposite, the rest leaves
+    /// (0: a vacuum, nothing enters; a Robin interface's diffuse reflectance).
+    Reflect {
+        /// Fraction sent back, in [0, 1].
+        reflectance: f64,
+    },
+}
+
+/// A problem on the lattice: per cell coefficients and sources in lattice units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LatticeProblem {
+    /// Cells along x, y, z.
+    pub dims: [usize; 3],
+    /// `Trt`/`Bgk`: D/h per cell. `Geist`: κ_t per cell.
+    pub first: Vec<f32>,
+    /// `Trt`/`Bgk`: κ_a = σ_a h per cell. `Geist`: κ_s per cell.
+    pub second: Vec<f32>,
+    /// Isotropic source per step (q₀ h: fluence per step).
+    pub source: Vec<f32>,
+    /// First moment of the source per step (q₁ h), or empty.
+    pub first_moment: Vec<[f32; 3]>,
+    /// The walls' condition.
+    pub wall: Wall,
+}
+
+/// How to march.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MarchSettings {
+    /// The velocity set.
+    pub velocities: Velocities,
+    /// The collision operator.
+    pub collision: Collision,
+    /// What absorption does.
+    pub absorption: Absorption,
+    /// The streaming pattern.
+    pub streaming: Streaming,
+    /// When to stop: the residual is the relative change of the fluence in one step,
+    /// ‖ρ′ − ρ‖/‖ρ′‖.
+    pub stopping: Stopping,
+}
+
+/// The energy bookkeeping of a march (lattice units: fluence × cell volume).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Bookkeeping {
+    /// Emitted by the sources over the march.
+    pub emitted: f64,
+    /// Absorbed over the march (0 for the thesis's absorption).
+    pub absorbed: f64,
+    /// Net outflow through the walls over the march.
+    pub escaped: f64,
+    /// What the lattice holds at the end.
+    pub held: f64,
+    /// Per step at the end: emitted, absorbed and escaped (the steady-state balance).
+    pub rates: [f64; 3],
+}
+
+impl Bookkeeping {
+    /// |emitted − absorbed − escaped − held| / emitted: the lattice conserves energy, so
+    /// this is rounding only.
+    pub fn conservation_error(&self) -> f64 {
+        (self.emitted - self.absorbed - self.escaped - self.held).abs() / self.emitted.max(1e-300)
+    }
+
+    /// |emitted − absorbed − escaped| / emitted per step at the end: how far from steady.
+    pub fn steady_imbalance(&self) -> f64 {
+        let [e, a, x] = self.rates;
+        (e - a - x).abs() / e.max(1e-300)
+    }
+}
+
+/// A marched lattice.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Marched {
+    /// ρ = Σ f_i per cell at the last step (the fluence).
+    pub fluence: Vec<f32>,
+    /// Steps run.
+    pub steps: usize,
+    /// Residual after each step.
+    pub residuals: Vec<f64>,
+    /// Why it stopped.
+    pub stop_reason: StopReason,
+    /// Energy.
+    pub bookkeeping: Bookkeeping,
+}
+
+/// The per-cell collision of one operator, with the lattice's constants.
+#[derive(Debug, Clone)]
+pub(crate) struct Collider {
+    pub(crate) links: Links,
+    pub(crate) q: usize,
+    collision: Collision,
+    absorption: Absorption,
+    /// Source weights (the equilibrium's: `w` for TRT/BGK, Geist's redistribution for
+    /// Geist, whose rest weight is 0).
+    source_w: Vec<f32>,
+    /// 3 e_i as f32.
+    e3: Vec<[f32; 3]>,
+    w: Vec<f32>,
+    cs2: f32,
+    /// Geist's redistribution weight per link (1/6; 1/12 axis, 1/24 diagonal).
+    geist_w: Vec<f32>,
+}
+
+/// Per-cell inputs of a collision.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct CellInputs {
+    pub(crate) first: f32,
+    pub(crate) second: f32,
+    pub(crate) source: f32,
+    pub(crate) moment: [f32; 3],
+}
+
+impl Collider {
+    pub(crate) fn new(settings: &MarchSettings) -> Self {
+        let links = settings.velocities.links();
+        let q = links.e.len();
+        let geist_w: Vec<f32> = links
+            .e
+            .iter()
+            .map(|e| {
+                let len2 = e.iter().map(|v| v * v).sum::<i32>();
+                match (settings.velocities, len2) {
+                    (_, 0) => 0.0,
+                    (Velocities::D3q7, _) => 1.0 / 6.0,
+                    (Velocities::D3q19, 1) => 1.0 / 12.0,
+                    (Velocities::D3q19, _) => 1.0 / 24.0,
+                }
+            })
+            .collect();
+        let w: Vec<f32> = links.w.iter().map(|&w| w as f32).collect();
+        let source_w = match settings.collision {
+            Collision::Geist => geist_w.clone(),
+            _ => w.clone(),
+        };
+        let e3 = links.e.iter().map(|e| e.map(|v| 3.0 * v as f32)).collect();
+        Self {
+            cs2: links.cs2 as f32,
+            links,
+            q,
+            collision: settings.collision,
+            absorption: settings.absorption,
+            source_w,
+            e3,
+            w,
+            geist_w,
+        }
+    }
+
+    /// Relaxation rates (ω⁺, ω⁻) for D/h = `d`: c_s²(1/ω⁻ − ½) = d, and Λ = ¼ (TRT) or
+    /// ω⁺ = ω⁻ (BGK).
+    #[inline]
+    fn rates(&self, d: f32) -> (f32, f32) {
+        let odd = 1.0 / (d / self.cs2 + 0.5);
+        let even = match self.collision {
+            Collision::Bgk => odd,
+            _ => 1.0 / (0.25 * self.cs2 / d + 0.5),
+        };
+        (even, odd)
+    }
+
+    /// Collides `f` (incoming populations) into `out`; returns (ρ, absorbed).
+    #[inline]
+    pub(crate) fn collide(&self, f: &[f32], cell: CellInputs, out: &mut [f32]) -> (f32, f32) {
+        let rho: f32 = f.iter().sum();
+        let src = |i: usize| {
+            let m = cell.moment;
+            let e = self.e3[i];
+            self.source_w[i] * (cell.source + e[0] * m[0] + e[1] * m[1] + e[2] * m[2])
+        };
+        match self.collision {
+            Collision::Trt | Collision::Bgk => {
+                let (even, odd) = self.rates(cell.first);
+                let ka = cell.second;
+                // The fluence at the collision, second order in the source S = Q₀ − κ_a ρ̂:
+                // ρ̂ = Σf + S/2 (the populations hold the mean of before and after the
+                // source). With the thesis's absorption nothing leaves: S = Q₀, and κ_a ρ̂
+                // moves to the rest population.
+                let (rho_hat, sink, kept) = match self.absorption {
+                    Absorption::True => {
+                        let r = (rho + 0.5 * cell.source) / (1.0 + 0.5 * ka);
+                        (r, ka * r, 0.0)
+                    }
+                    Absorption::Thesis => {
+                        let r = rho + 0.5 * cell.source;
+                        (r, ka * r, ka * r)
+                    }
+                };
+                // The isotropic source and sink enter the even moments with the weight
+                // 1 − ω⁺/2 that keeps them second order.
+                let half = 1.0 - 0.5 * even;
+                // The first moment's odd source, weighted 1 − ω⁻/2: the flux it drives is
+                // then 3 c_s² (1/ω⁻ − ½) Q₁ = 3 D Q₁, as P1 has it (unweighted it would be
+                // 3 c_s² Q₁/ω⁻, an O(1) error in the scattered light's direction).
+                let odd_half = 1.0 - 0.5 * odd;
+                let odd_src = |i: usize| {
+                    let m = cell.moment;
+                    let e = self.e3[i];
+                    odd_half * self.source_w[i] * (e[0] * m[0] + e[1] * m[1] + e[2] * m[2])
+                };
+                let net = cell.source - sink;
+                out[0] =
+                    f[0] - even * (f[0] - self.w[0] * rho_hat) + half * (self.w[0] * net + kept);
+                for i in (1..self.q).step_by(2) {
+                    let j = i + 1;
+                    let plus = 0.5 * (f[i] + f[j]);
+                    let minus = 0.5 * (f[i] - f[j]);
+                    let common = even * (plus - self.w[i] * rho_hat) - half * self.w[i] * net;
+                    out[i] = f[i] - common - odd * minus + odd_src(i);
+                    out[j] = f[j] - common + odd * minus + odd_src(j);
+                }
+                let absorbed = match self.absorption {
+                    Absorption::True => sink,
+                    Absorption::Thesis => 0.0,
+                };
+                (rho_hat, absorbed)
+            }
+            Collision::Geist => {
+                let (kt, ks) = (cell.first, cell.second);
+                let ka = kt - ks;
+                let moving = rho - f[0];
+                let scattered = ks * moving;
+                out[0] = match self.absorption {
+                    Absorption::Thesis => ka * moving,
+                    Absorption::True => 0.0,
+                } + src(0);
+                for i in 1..self.q {
+                    out[i] = self.geist_w[i] * (f[0] + scattered) + (1.0 - kt) * f[i] + src(i);
+                }
+                let absorbed = match self.absorption {
+                    Absorption::True => ka * moving,
+                    Absorption::Thesis => 0.0,
+                };
+                (rho, absorbed)
+            }
+        }
+    }
+
+    /// The wall's incoming populations at a cell from its outgoing ones: for each face the
+    /// cell touches, the links leaving through it (`out` holds f*_k for them), ρ_w at the
+    /// half-link from the condition, and f_in,k̄ = −f*_k + 2 w_k ρ_w into `incoming[k̄]`
+    /// (anti-bounce-back; a link leaving through c faces counts 1/c in each face's sums
+    /// and gets the mean of their rules). Returns the net outflow Σ (f*_k − f_in,k̄).
+    pub(crate) fn wall(
+        &self,
+        wall: Wall,
+        at: [usize; 3],
+        dims: [usize; 3],
+        out: &[f32],
+        incoming: &mut [f32],
+    ) -> f64 {
+        // How many faces each link leaves through: a link leaving through an edge or a
+        // corner counts 1/c in each face's sums and takes the mean of their rules, so
+        // that each face's net outflow is its condition's and a reflecting box holds
+        // every photon.
+        if let Wall::Reflect { reflectance } = wall {
+            let r = reflectance as f32;
+            let mut escaped = 0.0f64;
+            for k in 1..self.q {
+                let leaves = (0..3).any(|a| {
+                    let e = self.links.e[k][a];
+                    (e < 0 && at[a] == 0) || (e > 0 && at[a] + 1 == dims[a])
+                });
+                if leaves {
+                    let value = r * out[k];
+                    incoming[self.links.opposite[k]] = value;
+                    escaped += f64::from(out[k]) - f64::from(value);
+                }
+            }
+            return escaped;
+        }
+        let mut crossings = [0u8; 19];
+        for axis in 0..3 {
+            for side in [-1i32, 1] {
+                let on = if side < 0 {
+                    at[axis] == 0
+                } else {
+                    at[axis] + 1 == dims[axis]
+                };
+                if on {
+                    for k in 1..self.q {
+                        if self.links.e[k][axis] == side {
+                            crossings[k] += 1;
+                        }
+                    }
+                }
+            }
+        }
+        let mut count = [0u8; 19];
+        let mut sum = [0f32; 19];
+        for axis in 0..3 {
+            for side in [-1i32, 1] {
+                let on = if side < 0 {
+                    at[axis] == 0
+                } else {
+                    at[axis] + 1 == dims[axis]
+                };
+                if !on {
+                    continue;
+                }
+                // F = Σ f*_k and W = Σ w_k over the links leaving through this face.
+                let (mut big_f, mut big_w) = (0.0f32, 0.0f32);
+                for k in 1..self.q {
+                    if self.links.e[k][axis] == side {
+                        let share = 1.0 / f32::from(crossings[k]);
+                        big_f += share * out[k];
+                        big_w += share * self.w_wall(k);
+                    }
+                }
+                let rho_w = match wall {
+                    Wall::Robin { a } => {
+                        let a = a as f32;
+                        4.0 * a * big_f / (1.0 + 4.0 * a * big_w)
+                    }
+                    Wall::Dirichlet { value } => value as f32,
+                    Wall::Neumann { flux } => (2.0 * big_f - flux as f32) / (2.0 * big_w),
+                    Wall::Reflect { .. } => unreachable!("handled above"),
+                };
+                for k in 1..self.q {
+                    if self.links.e[k][axis] == side {
+                        sum[k] += -out[k] + 2.0 * self.w_wall(k) * rho_w;
+                        count[k] += 1;
+                    }
+                }
+            }
+        }
+        let mut escaped = 0.0f64;
+        for k in 1..self.q {
+            if count[k] > 0 {
+                let value = sum[k] / f32::from(count[k]);
+                incoming[self.links.opposite[k]] = value;
+                escaped += f64::from(out[k]) - f64::from(value);
+            }
+        }
+        escaped
+    }
+
+    /// The weight the wall rule uses for link k (the equilibrium's).
+    #[inline]
+    fn w_wall(&self, k: usize) -> f32 {
+        self.source_w[k]
+    }
+}
+
+/// Checks a problem and the settings: coefficients finite and in range, the stability
+/// limits.
+pub(crate) fn check(problem: &LatticeProblem, settings: &MarchSettings) -> Result<(), LbmError> {
+    let n: usize = problem.dims.iter().product();
+    if n == 0 {
+        return Err(LbmError::Invalid("an empty grid".into()));
+    }
+    for (name, len) in [
+        ("first coefficient", problem.first.len()),
+        ("second coefficient", problem.second.len()),
+        ("source", problem.source.len()),
+    ] {
+        if len != n {
+            return Err(LbmError::Invalid(format!(
+                "{name}: {len} values for {n} cells"
+            )));
+        }
+    }
+    if !problem.first_moment.is_empty() && problem.first_moment.len() != n {
+        return Err(LbmError::Invalid(
+            "first moment: one per cell or none".into(),
+        ));
+    }
+    if let Some(c) = problem
+        .source
+        .iter()
+        .position(|v| !v.is_finite())
+        .or_else(|| {
+            problem
+                .first_moment
+                .iter()
+                .position(|v| v.iter().any(|x| !x.is_finite()))
+        })
+    {
+        return Err(LbmError::Invalid(format!(
+            "a source that is not finite in cell {c}"
+        )));
+    }
+    match settings.collision {
+        Collision::Trt | Collision::Bgk => {
+            if let Some(c) = problem
+                .first
+                .iter()
+                .position(|d| !(d.is_finite() && *d > 0.0))
+            {
+                return Err(LbmError::Invalid(format!(
+                    "D/h = {} in cell {c}: it must be finite and positive",
+                    problem.first[c]
+                )));
+            }
+            // The sink removes κ_a ρ per step; beyond 1 a step removes more than the cell
+            // holds and the march oscillates (the stability limit σ_a h < 1).
+            if let Some(c) = problem.second.iter().position(|k| !(*k >= 0.0 && *k < 1.0)) {
+                return Err(LbmError::Unstable {
+                    parameter: "σ_a h",
+                    limit: 1.0,
+                    value: f64::from(problem.second[c]),
+                });
+            }
+        }
+        Collision::Geist => {
+            let bad = problem
+                .first
+                .iter()
+                .zip(&problem.second)
+                .position(|(t, s)| !(*t >= 0.0 && *t <= 1.0 && *s >= 0.0 && s <= t));
+            if let Some(c) = bad {
+                return Err(LbmError::Invalid(format!(
+                    "per-step probabilities κ_t = {}, κ_s = {} in cell {c}: need 0 ≤ κ_s ≤ κ_t ≤ 1",
+                    problem.first[c], problem.second[c]
+                )));
+            }
+        }
+    }
+    let ok = match problem.wall {
+        Wall::Robin { a } => a.is_finite() && a >= 1.0,
+        Wall::Dirichlet { value } => value.is_finite(),
+        Wall::Neumann { flux } => flux.is_finite(),
+        Wall::Reflect { reflectance } => (0.0..=1.0).contains(&reflectance),
+    };
+    if !ok {
+        return Err(LbmError::Invalid(format!(
+            "wall condition {:?}",
+            problem.wall
+        )));
+    }
+    Ok(())
+}
+
+/// Per-slab side storage of the cells on the box's walls (AA pattern): for each such cell
+/// and link, the incoming population the wall sends in (`incoming`) and the outgoing one
+/// that left through it and awaits the wall's rule (`outgoing`). Keeping them beside the
+/// population arrays leaves every population slot to the cells that stream into it.
+#[derive(Debug, Clone)]
+pub(crate) struct WallSlots {
+    /// Per slab: the wall index of each cell (`u32::MAX` for an interior cell).
+    index: Vec<Vec<u32>>,
+    /// Per slab: Q values per wall cell.
+    incoming: Vec<Vec<f32>>,
+    outgoing: Vec<Vec<f32>>,
+}
+
+impl WallSlots {
+    fn new(dims: [usize; 3], q: usize) -> Self {
+        let [nx, ny, nz] = dims;
+        let mut index = Vec::with_capacity(nz);
+        let mut incoming = Vec::with_capacity(nz);
+        for z in 0..nz {
+            let mut count = 0u32;
+            let slab: Vec<u32> = (0..nx * ny)
+                .map(|local| {
+                    if on_wall([local % nx, local / nx, z], dims) {
+                        count += 1;
+                        count - 1
+                    } else {
+                        u32::MAX
+                    }
+                })
+                .collect();
+            incoming.push(vec![0.0; count as usize * q]);
+            index.push(slab);
+        }
+        let outgoing = incoming.clone();
+        Self {
+            index,
+            incoming,
+            outgoing,
+        }
+    }
+}
+
+/// The state of a march.
+pub(crate) struct State {
+    /// Populations, one array per link over the cells: AA — post-streaming after odd steps,
+    /// post-collision in the opposite slots after even steps; two arrays — post-collision.
+    f: Vec<Vec<f32>>,
+    /// The second array (two-array streaming).
+    g: Vec<Vec<f32>>,
+    /// The walls' side slots (AA).
+    walls: WallSlots,
+    /// ρ at the last step.
+    rho: Vec<f32>,
+}
+
+/// Per-slab sums of a step.
+#[derive(Debug, Clone, Copy)]
+struct StepSums {
+    change: f64,
+    size: f64,
+    absorbed: f64,
+    escaped: f64,
+    finite: bool,
+}
+
+impl StepSums {
+    fn new() -> Self {
+        Self {
+            change: 0.0,
+            size: 0.0,
+            absorbed: 0.0,
+            escaped: 0.0,
+            finite: true,
+        }
+    }
+
+    fn plus(self, o: Self) -> Self {
+        Self {
+            change: self.change + o.change,
+            size: self.size + o.size,
+            absorbed: self.absorbed + o.absorbed,
+            escaped: self.escaped + o.escaped,
+            finite: self.finite && o.finite,
+        }
+    }
+
+    /// Adds one cell's step.
+    #[inline]
+    fn cell(&mut self, rho: f32, old: &mut f32, absorbed: f32) {
+        let d = f64::from(rho) - f64::from(*old);
+        self.change += d * d;
+        self.size += f64::from(rho) * f64::from(rho);
+        self.absorbed += f64::from(absorbed);
+        self.finite &= rho.is_finite();
+        *old = rho;
+    }
+}
+
+/// Marches `problem` from zero to steady state.
+pub fn march(problem: &LatticeProblem, settings: &MarchSettings) -> Result<Marched, LbmError> {
+    check(problem, settings)?;
+    let collider = Collider::new(settings);
+    let [nx, ny, nz] = problem.dims;
+    let n = nx * ny * nz;
+    let q = collider.q;
+    let mut state = State {
+        f: vec![vec![0.0; n]; q],
+        g: match settings.streaming {
+            Streaming::InPlace => Vec::new(),
+            Streaming::TwoArrays => vec![vec![0.0; n]; q],
+        },
+        walls: WallSlots::new(problem.dims, q),
+        rho: vec![0.0; n],
+    };
+    let mut book = Bookkeeping::default();
+    if settings.streaming == Streaming::InPlace {
+        // The zero state's wall inflow (non-zero for a Dirichlet value), as the two-array
+        // pattern's first pull computes it.
+        let zero = vec![0.0f32; q];
+        for (z, slab) in state.walls.index.iter().enumerate() {
+            for (local, &w) in slab.iter().enumerate() {
+                if w != u32::MAX {
+                    let at = [local % nx, local / nx, z];
+                    let slot = &mut state.walls.incoming[z][w as usize * q..(w as usize + 1) * q];
+                    book.escaped += collider.wall(problem.wall, at, problem.dims, &zero, slot);
+                }
+            }
+        }
+    }
+    // Emitted per step: Σ_i s_i over the cells (the first moment's part sums to 0).
+    let w_sum: f64 = collider.source_w.iter().map(|&w| f64::from(w)).sum();
+    let emitted_per_step: f64 = problem.source.iter().map(|&s| f64::from(s)).sum::<f64>() * w_sum;
+    let mut history = History::start();
+    let mut step = 0usize;
+    let stop_reason = loop {
+        let sums = match settings.streaming {
+            Streaming::InPlace if step.is_multiple_of(2) => aa_even(problem, &collider, &mut state),
+            Streaming::InPlace => aa_odd(problem, &collider, &mut state),
+            Streaming::TwoArrays => pull(problem, &collider, &mut state),
+        };
+        step += 1;
+        book.emitted += emitted_per_step;
+        book.absorbed += sums.absorbed;
+        book.escaped += sums.escaped;
+        book.rates = [emitted_per_step, sums.absorbed, sums.escaped];
+        if !sums.finite {
+            break StopReason::DivergedNonFinite { iteration: step };
+        }
+        // Before any light has reached a cell the relative change is undefined: not
+        // converged, unless nothing shines at all (the zero field is the solution).
+        let shines = emitted_per_step != 0.0
+            || matches!(problem.wall, Wall::Dirichlet { value } if value != 0.0)
+            || matches!(problem.wall, Wall::Neumann { flux } if flux != 0.0);
+        let (relative, absolute) = if sums.size > 0.0 {
+            ((sums.change / sums.size).sqrt(), sums.change.sqrt())
+        } else if shines {
+            (1.0, f64::MAX)
+        } else {
+            (0.0, 0.0)
+        };
+        if let Some(stop) = history.record_step(&settings.stopping, step, relative, absolute) {
+            break stop;
+        }
+    };
+    let (held, pending) = in_flight(problem, &collider, &state, settings.streaming, step);
+    book.held = held;
+    book.escaped += pending;
+    Ok(Marched {
+        fluence: state.rho,
+        steps: step,
+        residuals: history.into_residuals(),
+        stop_reason,
+        bookkeeping: book,
+    })
+}
+
+/// x − e if inside the box.
+#[inline]
+fn upstream(at: [usize; 3], e: [i32; 3], dims: [usize; 3]) -> Option<[usize; 3]> {
+    shifted(at, e.map(|v| -v), dims)
+}
+
+/// x + e if inside the box.
+#[inline]
+fn shifted(at: [usize; 3], e: [i32; 3], dims: [usize; 3]) -> Option<[usize; 3]> {
+    let mut out = [0usize; 3];
+    for a in 0..3 {
+        let v = at[a] as i64 + i64::from(e[a]);
+        if v < 0 || v >= dims[a] as i64 {
+            return None;
+        }
+        out[a] = v as usize;
+    }
+    Some(out)
+}
+
+#[inline]
+fn on_wall(at: [usize; 3], dims: [usize; 3]) -> bool {
+    (0..3).any(|a| at[a] == 0 || at[a] + 1 == dims[a])
+}
+
+#[inline]
+fn inputs(problem: &LatticeProblem, c: usize) -> CellInputs {
+    CellInputs {
+        first: problem.first[c],
+        second: problem.second[c],
+        source: problem.source[c],
+        moment: problem.first_moment.get(c).copied().unwrap_or([0.0; 3]),
+    }
+}
+
+/// Per slab z, of every link's array, chunk z + dz(k) (mutable).
+fn chunks_by_slab(
+    arrays: &mut [Vec<f32>],
+    slab: usize,
+    nz: usize,
+    dz: impl Fn(usize) -> i32,
+) -> Vec<Vec<Option<&mut [f32]>>> {
+    let q = arrays.len();
+    let mut out: Vec<Vec<Option<&mut [f32]>>> =
+        (0..nz).map(|_| (0..q).map(|_| None).collect()).collect();
+    for (k, arr) in arrays.iter_mut().enumerate() {
+        for (chunk_z, chunk) in arr.chunks_mut(slab).enumerate() {
+            let z = chunk_z as i64 - i64::from(dz(k));
+            if (0..nz as i64).contains(&z) {
+                out[z as usize][k] = Some(chunk);
+            }
+        }
+    }
+    out
+}
+
+/// Two arrays, pull: f holds post-collision populations; each cell pulls f_k(x − e_k) (the
+/// wall's rule on its own outgoing ones where x − e_k is outside), collides into g, and the
+/// arrays swap. Reads are shared, writes are the cell's own: one pass, no conflicts.
+fn pull(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> StepSums {
+    let dims = problem.dims;
+    let [nx, ny, nz] = dims;
+    let q = collider.q;
+    let slab = nx * ny;
+    let e = &collider.links.e;
+    let f = &state.f;
+    let mut g_slabs = chunks_by_slab(&mut state.g, slab, nz, |_| 0);
+    let sums = g_slabs
+        .par_iter_mut()
+        .zip(state.rho.par_chunks_mut(slab))
+        .enumerate()
+        .map(|(z, (g, rho_slab))| {
+            let mut sums = StepSums::new();
+            let (mut fin, mut fout) = (vec![0.0f32; q], vec![0.0f32; q]);
+            let (mut outgoing, mut incoming) = (vec![0.0f32; q], vec![0.0f32; q]);
+            for y in 0..ny {
+                for x in 0..nx {
+                    let at = [x, y, z];
+                    let c = x + nx * y + slab * z;
+                    if on_wall(at, dims) {
+                        for k in 0..q {
+                            outgoing[k] = match shifted(at, e[k], dims) {
+                                None => f[k][c],
+                                Some(_) => 0.0,
+                            };
+                        }
+                        incoming.fill(0.0);
+                        sums.escaped +=
+                            collider.wall(problem.wall, at, dims, &outgoing, &mut incoming);
+                    }
+                    for k in 0..q {
+                        fin[k] = match upstream(at, e[k], dims) {
+                            Some(u) => f[k][u[0] + nx * (u[1] + ny * u[2])],
+                            None => incoming[k],
+                        };
+                    }
+                    let (rho, absorbed) = collider.collide(&fin, inputs(problem, c), &mut fout);
+                    sums.cell(rho, &mut rho_slab[x + nx * y], absorbed);
+                    for k in 0..q {
+                        g[k].as_deref_mut().expect("own chunk")[x + nx * y] = fout[k];
+                    }
+                }
+            }
+            sums
+        })
+        .reduce(StepSums::new, StepSums::plus);
+    std::mem::swap(&mut state.f, &mut state.g);
+    sums
+}
+
+/// AA even step: each cell reads its own slots (the walls' inflow from its side slots),
+/// collides, writes f*_k into slot k̄ (outgoing through a wall into its side slots).
+fn aa_even(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> StepSums {
+    let dims = problem.dims;
+    let [nx, ny, nz] = dims;
+    let q = collider.q;
+    let slab = nx * ny;
+    let e = &collider.links.e;
+    let opposite = &collider.links.opposite;
+    let mut slabs = chunks_by_slab(&mut state.f, slab, nz, |_| 0);
+    let walls = &mut state.walls;
+    slabs
+        .par_iter_mut()
+        .zip(state.rho.par_chunks_mut(slab))
+        .zip(walls.incoming.par_iter_mut())
+        .zip(walls.outgoing.par_iter_mut())
+        .zip(walls.index.par_iter())
+        .enumerate()
+        .map(|(z, ((((f, rho_slab), w_in), w_out), index))| {
+            let mut sums = StepSums::new();
+            let (mut fin, mut fout) = (vec![0.0f32; q], vec![0.0f32; q]);
+            for local in 0..slab {
+                let at = [local % nx, local / nx, z];
+                let w = index[local];
+                for k in 0..q {
+                    fin[k] = f[k].as_deref().expect("own")[local];
+                }
+                if w != u32::MAX {
+                    let side = &w_in[w as usize * q..(w as usize + 1) * q];
+                    for k in 0..q {
+                        if upstream(at, e[k], dims).is_none() {
+                            fin[k] = side[k];
+                        }
+                    }
+                }
+                let c = local + slab * z;
+                let (rho, absorbed) = collider.collide(&fin, inputs(problem, c), &mut fout);
+                sums.cell(rho, &mut rho_slab[local], absorbed);
+                for k in 0..q {
+                    f[opposite[k]].as_deref_mut().expect("own")[local] = fout[k];
+                }
+                if w != u32::MAX {
+                    let side = &mut w_out[w as usize * q..(w as usize + 1) * q];
+                    for k in 0..q {
+                        side[k] = if shifted(at, e[k], dims).is_none() {
+                            fout[k]
+                        } else {
+                            0.0
+                        };
+                    }
+                }
+            }
+            sums
+        })
+        .reduce(StepSums::new, StepSums::plus)
+}
+
+/// AA odd step: each cell reads f_k from slot k̄ of x − e_k (the wall's rule on its
+/// pending outgoing populations where x − e_k is outside), collides, and writes f*_k into
+/// slot k of x + e_k (through a wall: the rule's inflow into its side slots). Slab z owns
+/// chunk z + e_kz of link k's array: every slot it reads or writes, and no other slab's.
+fn aa_odd(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> StepSums {
+    let dims = problem.dims;
+    let [nx, ny, nz] = dims;
+    let q = collider.q;
+    let slab = nx * ny;
+    let e = &collider.links.e;
+    let opposite = &collider.links.opposite;
+    let mut owned = chunks_by_slab(&mut state.f, slab, nz, |k| e[k][2]);
+    let walls = &mut state.walls;
+    owned
+        .par_iter_mut()
+        .zip(state.rho.par_chunks_mut(slab))
+        .zip(walls.incoming.par_iter_mut())
+        .zip(walls.outgoing.par_iter())
+        .zip(walls.index.par_iter())
+        .enumerate()
+        .map(|(z, ((((slots, rho_slab), w_in), w_out), index))| {
+            let mut sums = StepSums::new();
+            let (mut fin, mut fout) = (vec![0.0f32; q], vec![0.0f32; q]);
+            let mut incoming = vec![0.0f32; q];
+            for y in 0..ny {
+                for x in 0..nx {
+                    let at = [x, y, z];
+                    let local = x + nx * y;
+                    let w = index[local];
+                    if w != u32::MAX {
+                        let pending = &w_out[w as usize * q..(w as usize + 1) * q];
+                        incoming.fill(0.0);
+                        sums.escaped +=
+                            collider.wall(problem.wall, at, dims, pending, &mut incoming);
+                    }
+                    for k in 0..q {
+                        fin[k] = match upstream(at, e[k], dims) {
+                            // f*_k(x − e_k) sits in slot k̄ of x − e_k = x + e_k̄: chunk
+                            // z + e_k̄z of array k̄, this slab's.
+                            Some(u) => {
+                                slots[opposite[k]].as_deref().expect("owned")[u[0] + nx * u[1]]
+                            }
+                            None => incoming[k],
+                        };
+                    }
+                    let c = local + slab * z;
+                    let (rho, absorbed) = collider.collide(&fin, inputs(problem, c), &mut fout);
+                    sums.cell(rho, &mut rho_slab[local], absorbed);
+                    for k in 0..q {
+                        if let Some(d) = shifted(at, e[k], dims) {
+                            slots[k].as_deref_mut().expect("owned")[d[0] + nx * d[1]] = fout[k];
+                        }
+                    }
+                    if w != u32::MAX {
+                        // The outgoing f*_k through the walls: the rule's inflow for the
+                        // next (even) step.
+                        for k in 0..q {
+                            if shifted(at, e[k], dims).is_some() {
+                                fout[k] = 0.0;
+                            }
+                        }
+                        let side = &mut w_in[w as usize * q..(w as usize + 1) * q];
+                        incoming.fill(0.0);
+                        sums.escaped += collider.wall(problem.wall, at, dims, &fout, &mut incoming);
+                        for k in 0..q {
+                            if upstream(at, e[k], dims).is_none() {
+                                side[k] = incoming[k];
+                            }
+                        }
+                    }
+                }
+            }
+            sums
+        })
+        .reduce(StepSums::new, StepSums::plus)
+}
+
+/// What the lattice holds after `steps` steps (the populations the next step would
+/// collide) and the escape still pending (outgoing populations the walls have not yet
+/// answered: the rule is applied to them here).
+fn in_flight(
+    problem: &LatticeProblem,
+    collider: &Collider,
+    state: &State,
+    streaming: Streaming,
+    steps: usize,
+) -> (f64, f64) {
+    let dims = problem.dims;
+    let [nx, ny, nz] = dims;
+    let q = collider.q;
+    let e = &collider.links.e;
+    let opposite = &collider.links.opposite;
+    let (mut held, mut pending) = (0.0f64, 0.0f64);
+    let (mut outgoing, mut incoming) = (vec![0.0f32; q], vec![0.0f32; q]);
+    let f = &state.f;
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                let at = [x, y, z];
+                let local = x + nx * y;
+                let c = local + nx * ny * z;
+                let w = state.walls.index[z][local];
+                // The wall's inflow into this cell for the next step.
+                incoming.fill(0.0);
+                let after_even = streaming == Streaming::InPlace && steps % 2 == 1;
+                if w != u32::MAX {
+                    let range = w as usize * q..(w as usize + 1) * q;
+                    match streaming {
+                        Streaming::InPlace if !after_even => {
+                            incoming.copy_from_slice(&state.walls.incoming[z][range]);
+                        }
+                        Streaming::InPlace => {
+                            pending += collider.wall(
+                                problem.wall,
+                                at,
+                                dims,
+                                &state.walls.outgoing[z][range],
+                                &mut incoming,
+                            );
+                        }
+                        Streaming::TwoArrays => {
+                            for k in 0..q {
+                                outgoing[k] = if shifted(at, e[k], dims).is_none() {
+                                    f[k][c]
+                                } else {
+                                    0.0
+                                };
+                            }
+                            pending +=
+                                collider.wall(problem.wall, at, dims, &outgoing, &mut incoming);
+                        }
+                    }
+                }
+                for k in 0..q {
+                    held += f64::from(match upstream(at, e[k], dims) {
+                        None => incoming[k],
+                        Some(u) => {
+                            let uc = u[0] + nx * (u[1] + ny * u[2]);
+                            match streaming {
+                                // After an odd step the slots hold post-streaming values.
+                                Streaming::InPlace if !after_even => f[k][c],
+                                // After an even step f*_k(x − e_k) sits in slot k̄ there.
+                                Streaming::InPlace => f[opposite[k]][uc],
+                                Streaming::TwoArrays => f[k][uc],
+                            }
+                        }
+                    });
+                }
+            }
+        }
+    }
+    (held, pending)
+}
