@@ -183,6 +183,30 @@ pub fn runs() -> Vec<Run> {
             )
         });
     }
+    // Lattice-Boltzmann: both lattices over the resolution and the stopping tolerance
+    // (second order in h towards the diffusion model's error), and Geist's collision,
+    // first order in h.
+    for (lattice, collision, factors, tolerances) in [
+        ("d3q7", "trt", &[1, 2][..], &[1e-3, 1e-6][..]),
+        ("d3q19", "trt", &[1][..], &[1e-6][..]),
+        ("d3q7", "geist", &[1, 2][..], &[1e-6][..]),
+    ] {
+        for &factor in factors {
+            for &tolerance in tolerances {
+                runs.push(Run {
+                    tolerance: Some(tolerance),
+                    ..Run::new(
+                        "lbm",
+                        format!("lattice = \"{lattice}\"\ncollision = \"{collision}\""),
+                        factor,
+                        format!(
+                            "{lattice} {collision}, {factor}x cells, tolerance {tolerance:.0e}"
+                        ),
+                    )
+                });
+            }
+        }
+    }
     // Murray's finite elements by Jacobi: the error grows with every iteration (the
     // iteration matrix's spectral radius is ≥ 19/8); GMRES on the same system shows what
     // the Galerkin solution itself is worth (one tolerance: restarted GMRES stagnates on

@@ -219,3 +219,37 @@ fn a_sink_beyond_one_per_step_is_refused() {
     assert!(matches!(m.stop_reason, StopReason::IterationLimit { .. }));
     assert!(m.fluence.iter().all(|v| v.is_finite()));
 }
+
+#[test]
+fn a_converged_march_balances_its_energy_to_the_tolerance() {
+    // The stopping test includes the energy imbalance per step, so a march converged to
+    // 1e-6 emits what it absorbs and lets escape to 1e-6, for every wall and lattice.
+    for velocities in [Velocities::D3q7, Velocities::D3q19] {
+        for kind in 0..5 {
+            let p = problem([10, 9, 11], Collision::Trt, wall_of(kind), 11, true);
+            let mut s = settings(
+                velocities,
+                Collision::Trt,
+                Absorption::True,
+                Streaming::InPlace,
+                100_000,
+            );
+            s.stopping.relative_tolerance = 1e-6;
+            let m = march(&p, &s).unwrap();
+            assert!(
+                m.stop_reason.is_converged(),
+                "{velocities:?} {kind}: {:?}",
+                m.stop_reason
+            );
+            let b = m.bookkeeping;
+            assert!(
+                b.steady_imbalance() <= 1e-6,
+                "{velocities:?} wall {kind}: {b:?}"
+            );
+            assert!(
+                b.conservation_error() < 1e-6,
+                "{velocities:?} wall {kind}: {b:?}"
+            );
+        }
+    }
+}
