@@ -42,6 +42,8 @@
 //!   on a sparse N³ cloud (256) out of core under a budget (32 MiB) and in memory: wall
 //!   time, measured peak resident memory, pager counters, and whether the results are bit
 //!   for bit equal.
+//! - `bench-lbm [N]`: lattice steps at N³ (128) for D3Q7 and D3Q19, in place and with two
+//!   arrays: million lattice updates per second and GB/s beside the copy bandwidth.
 //! - `stability`: each explicit scheme's measured blow-up boundary against its theoretical
 //!   curves, as `docs/stability/*.svg` and `.csv` (see `docs/stability.md`).
 
@@ -53,13 +55,14 @@ mod bench_dom;
 mod bench_explicit;
 mod bench_fem;
 mod bench_gpu;
+mod bench_lbm;
 mod bench_paging;
 mod paged_solve;
 mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] | bench-lbm [N] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -158,6 +161,19 @@ fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("xtask: bench-fem: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
+    if command.as_deref() == Some("bench-lbm") {
+        let n = std::env::args()
+            .nth(2)
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(128);
+        return match bench_lbm::run(n) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("xtask: bench-lbm: {e}");
                 ExitCode::FAILURE
             }
         };
