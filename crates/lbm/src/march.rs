@@ -228,22 +228,110 @@ impl Collider {
         }
     }
 
-    /// Relaxation rates (ω⁺, ω⁻) for D/h = `d`: c_s²(1/ω⁻ − ½) = d, and Λ = ¼ (TRT) or
-    /// ω⁺ = ω⁻ (BGK).
+    /// Whether the relaxation collisions (TRT, BGK) run: the lane kernel's operators.
     #[inline]
-    fn rates(&self, d: f32) -> (f32, f32) {
-        let odd = 1.0 / (d / self.cs2 + 0.5);
-        let even = match self.collision {
-            Collision::Bgk => odd,
-            _ => 1.0 / (0.25 * self.cs2 / d + 0.5),
-        };
-        (even, odd)
+    pub(crate) fn relaxes(&self) -> bool {
+        matches!(self.collision, Collision::Trt | Collision::Bgk)
     }
 
-    /// Collides `f` (incoming populations) into `out`; returns (ρ, absorbed).
+    /// The relaxation collision of L cells at once (populations `f[k][lane]`): the one
+    /// definition of its arithmetic, for single cells (L = 1) and for the interior's
+    /// blocks of [`LANES`] cells, whose lane loops the compiler vectorises. `moment` is
+    /// `None` when the problem has no first moment. Writes `out`, ρ̂ and the absorbed
+    /// amount per lane.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub(crate) fn relax_lanes<const L: usize>(
+        &self,
+        f: &[[f32; L]],
+        d: &[f32; L],
+        ka: &[f32; L],
+        q0: &[f32; L],
+        moment: Option<&[[f32; L]; 3]>,
+        out: &mut [[f32; L]],
+        rho_out: &mut [f32; L],
+        absorbed_out: &mut [f32; L],
+    ) {
+        let cs2 = self.cs2;
+        let mut rho = [0.0f32; L];
+        for fk in &f[..self.q] {
+            for l in 0..L {
+                rho[l] += fk[l];
+            }
+        }
+        let (mut even, mut odd) = ([0.0f32; L], [0.0f32; L]);
+        for l in 0..L {
+            odd[l] = 1.0 / (d[l] / cs2 + 0.5);
+            even[l] = match self.collision {
+                Collision::Bgk => odd[l],
+                _ => 1.0 / (0.25 * cs2 / d[l] + 0.5),
+            };
+        }
+        // The fluence at the collision, second order in the source S = Q₀ − κ_a ρ̂:
+        // ρ̂ = Σf + S/2 (the populations hold the mean of before and after the source).
+        // With the thesis's absorption nothing leaves: S = Q₀, and κ_a ρ̂ moves to the rest.
+        let (mut r, mut net, mut kept) = ([0.0f32; L], [0.0f32; L], [0.0f32; L]);
+        for l in 0..L {
+            let (rh, sink) = match self.absorption {
+                Absorption::True => {
+                    let rh = (rho[l] + 0.5 * q0[l]) / (1.0 + 0.5 * ka[l]);
+                    absorbed_out[l] = ka[l] * rh;
+                    (rh, ka[l] * rh)
+                }
+                Absorption::Thesis => {
+                    let rh = rho[l] + 0.5 * q0[l];
+                    absorbed_out[l] = 0.0;
+                    kept[l] = ka[l] * rh;
+                    (rh, ka[l] * rh)
+                }
+            };
+            r[l] = rh;
+            net[l] = q0[l] - sink;
+            rho_out[l] = rh;
+        }
+        // The isotropic source and sink enter the even moments weighted 1 − ω⁺/2; the
+        // first moment's odd source is weighted 1 − ω⁻/2, so that it drives the flux
+        // 3 c_s² (1/ω⁻ − ½) Q₁ = 3 D Q₁ as P1 has it.
+        let w0 = self.w[0];
+        for l in 0..L {
+            let half = 1.0 - 0.5 * even[l];
+            out[0][l] = f[0][l] - even[l] * (f[0][l] - w0 * r[l]) + half * (w0 * net[l] + kept[l]);
+        }
+        for i in (1..self.q).step_by(2) {
+            let j = i + 1;
+            let w = self.w[i];
+            for l in 0..L {
+                let half = 1.0 - 0.5 * even[l];
+                let plus = 0.5 * (f[i][l] + f[j][l]);
+                let minus = 0.5 * (f[i][l] - f[j][l]);
+                let common = even[l] * (plus - w * r[l]) - half * w * net[l];
+                out[i][l] = f[i][l] - common - odd[l] * minus;
+                out[j][l] = f[j][l] - common + odd[l] * minus;
+            }
+            if let Some(m) = moment {
+                let (ei, ej) = (self.e3[i], self.e3[j]);
+                let (si, sj) = (self.source_w[i], self.source_w[j]);
+                for l in 0..L {
+                    let odd_half = 1.0 - 0.5 * odd[l];
+                    out[i][l] +=
+                        odd_half * si * (ei[0] * m[0][l] + ei[1] * m[1][l] + ei[2] * m[2][l]);
+                    out[j][l] +=
+                        odd_half * sj * (ej[0] * m[0][l] + ej[1] * m[1][l] + ej[2] * m[2][l]);
+                }
+            }
+        }
+    }
+
+    /// Collides `f` (incoming populations) into `out`; returns (ρ̂, absorbed). `moment`
+    /// says whether the problem has a first moment (the cell's may still be zero).
     #[inline]
-    pub(crate) fn collide(&self, f: &[f32], cell: CellInputs, out: &mut [f32]) -> (f32, f32) {
-        let rho: f32 = f.iter().sum();
+    pub(crate) fn collide(
+        &self,
+        f: &[f32],
+        cell: CellInputs,
+        moment: bool,
+        out: &mut [f32],
+    ) -> (f32, f32) {
         let src = |i: usize| {
             let m = cell.moment;
             let e = self.e3[i];
@@ -251,52 +339,30 @@ impl Collider {
         };
         match self.collision {
             Collision::Trt | Collision::Bgk => {
-                let (even, odd) = self.rates(cell.first);
-                let ka = cell.second;
-                // The fluence at the collision, second order in the source S = Q₀ − κ_a ρ̂:
-                // ρ̂ = Σf + S/2 (the populations hold the mean of before and after the
-                // source). With the thesis's absorption nothing leaves: S = Q₀, and κ_a ρ̂
-                // moves to the rest population.
-                let (rho_hat, sink, kept) = match self.absorption {
-                    Absorption::True => {
-                        let r = (rho + 0.5 * cell.source) / (1.0 + 0.5 * ka);
-                        (r, ka * r, 0.0)
-                    }
-                    Absorption::Thesis => {
-                        let r = rho + 0.5 * cell.source;
-                        (r, ka * r, ka * r)
-                    }
-                };
-                // The isotropic source and sink enter the even moments with the weight
-                // 1 − ω⁺/2 that keeps them second order.
-                let half = 1.0 - 0.5 * even;
-                // The first moment's odd source, weighted 1 − ω⁻/2: the flux it drives is
-                // then 3 c_s² (1/ω⁻ − ½) Q₁ = 3 D Q₁, as P1 has it (unweighted it would be
-                // 3 c_s² Q₁/ω⁻, an O(1) error in the scattered light's direction).
-                let odd_half = 1.0 - 0.5 * odd;
-                let odd_src = |i: usize| {
-                    let m = cell.moment;
-                    let e = self.e3[i];
-                    odd_half * self.source_w[i] * (e[0] * m[0] + e[1] * m[1] + e[2] * m[2])
-                };
-                let net = cell.source - sink;
-                out[0] =
-                    f[0] - even * (f[0] - self.w[0] * rho_hat) + half * (self.w[0] * net + kept);
-                for i in (1..self.q).step_by(2) {
-                    let j = i + 1;
-                    let plus = 0.5 * (f[i] + f[j]);
-                    let minus = 0.5 * (f[i] - f[j]);
-                    let common = even * (plus - self.w[i] * rho_hat) - half * self.w[i] * net;
-                    out[i] = f[i] - common - odd * minus + odd_src(i);
-                    out[j] = f[j] - common + odd * minus + odd_src(j);
+                let mut lanes = [[0.0f32; 1]; 19];
+                for (l, v) in lanes.iter_mut().zip(f) {
+                    l[0] = *v;
                 }
-                let absorbed = match self.absorption {
-                    Absorption::True => sink,
-                    Absorption::Thesis => 0.0,
-                };
-                (rho_hat, absorbed)
+                let mut result = [[0.0f32; 1]; 19];
+                let m = cell.moment.map(|v| [v]);
+                let (mut rho, mut absorbed) = ([0.0f32], [0.0f32]);
+                self.relax_lanes::<1>(
+                    &lanes,
+                    &[cell.first],
+                    &[cell.second],
+                    &[cell.source],
+                    moment.then_some(&m),
+                    &mut result,
+                    &mut rho,
+                    &mut absorbed,
+                );
+                for (o, v) in out.iter_mut().zip(&result) {
+                    *o = v[0];
+                }
+                (rho[0], absorbed[0])
             }
             Collision::Geist => {
+                let rho: f32 = f.iter().sum();
                 let (kt, ks) = (cell.first, cell.second);
                 let ka = kt - ks;
                 let moving = rho - f[0];
@@ -751,6 +817,59 @@ fn inputs(problem: &LatticeProblem, c: usize) -> CellInputs {
     }
 }
 
+/// Cells per block of the interior kernels: the lane width the relaxation collision is
+/// vectorised over.
+const LANES: usize = 8;
+
+/// The relaxation collision of the L cells from global index `c`: their inputs read
+/// from the problem, `fin` collided into `fout`, the sums accounted in cell order.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn relax_block<const L: usize>(
+    problem: &LatticeProblem,
+    collider: &Collider,
+    c: usize,
+    fin: &[[f32; L]; 19],
+    fout: &mut [[f32; L]; 19],
+    rho_slab: &mut [f32],
+    local: usize,
+    sums: &mut StepSums,
+) {
+    let take = |v: &[f32]| -> [f32; L] { v[c..c + L].try_into().expect("a block") };
+    let moment = (!problem.first_moment.is_empty()).then(|| {
+        let m = &problem.first_moment[c..c + L];
+        [0, 1, 2].map(|a| std::array::from_fn(|l| m[l][a]))
+    });
+    let (mut rho, mut absorbed) = ([0.0f32; L], [0.0f32; L]);
+    collider.relax_lanes::<L>(
+        fin,
+        &take(&problem.first),
+        &take(&problem.second),
+        &take(&problem.source),
+        moment.as_ref(),
+        fout,
+        &mut rho,
+        &mut absorbed,
+    );
+    for l in 0..L {
+        sums.cell(rho[l], &mut rho_slab[local + l], absorbed[l]);
+    }
+}
+
+/// How many cells from x on a row the interior kernels take at once: a block of [`LANES`]
+/// where that many interior cells follow, a single cell where fewer do, none on a wall.
+#[inline]
+fn interior_run(x: usize, y: usize, z: usize, dims: [usize; 3]) -> usize {
+    let [nx, ny, nz] = dims;
+    if !(z > 0 && z + 1 < nz && y > 0 && y + 1 < ny && x > 0 && x + 1 < nx) {
+        0
+    } else if x + LANES < nx {
+        LANES
+    } else {
+        1
+    }
+}
+
 /// Per slab z, of every link's array, chunk z + dz(k) (mutable).
 fn chunks_by_slab(
     arrays: &mut [Vec<f32>],
@@ -782,6 +901,11 @@ fn pull(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> Ste
     let slab = nx * ny;
     let e = &collider.links.e;
     let f = &state.f;
+    // Each link's offset in the global numbering: f_k(x − e_k) is at c − offsets[k].
+    let offsets: Vec<isize> = e
+        .iter()
+        .map(|v| v[0] as isize + nx as isize * (v[1] as isize + ny as isize * v[2] as isize))
+        .collect();
     let mut g_slabs = chunks_by_slab(&mut state.g, slab, nz, |_| 0);
     let sums = g_slabs
         .par_iter_mut()
@@ -791,10 +915,60 @@ fn pull(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> Ste
             let mut sums = StepSums::new();
             let (mut fin, mut fout) = (vec![0.0f32; q], vec![0.0f32; q]);
             let (mut outgoing, mut incoming) = (vec![0.0f32; q], vec![0.0f32; q]);
+            let (mut bin, mut bout) = ([[0.0f32; LANES]; 19], [[0.0f32; LANES]; 19]);
+            let (mut one_in, mut one_out) = ([[0.0f32; 1]; 19], [[0.0f32; 1]; 19]);
             for y in 0..ny {
-                for x in 0..nx {
+                let mut x = 0;
+                while x < nx {
                     let at = [x, y, z];
                     let c = x + nx * y + slab * z;
+                    let run = if collider.relaxes() {
+                        interior_run(x, y, z, dims)
+                    } else {
+                        0
+                    };
+                    if run == LANES {
+                        for k in 0..q {
+                            let up = c as isize - offsets[k];
+                            bin[k].copy_from_slice(&f[k][up as usize..up as usize + LANES]);
+                        }
+                        relax_block(
+                            problem,
+                            collider,
+                            c,
+                            &bin,
+                            &mut bout,
+                            rho_slab,
+                            x + nx * y,
+                            &mut sums,
+                        );
+                        for k in 0..q {
+                            g[k].as_deref_mut().expect("own chunk")[x + nx * y..x + nx * y + LANES]
+                                .copy_from_slice(&bout[k]);
+                        }
+                        x += LANES;
+                        continue;
+                    }
+                    if run == 1 {
+                        for k in 0..q {
+                            one_in[k][0] = f[k][(c as isize - offsets[k]) as usize];
+                        }
+                        relax_block(
+                            problem,
+                            collider,
+                            c,
+                            &one_in,
+                            &mut one_out,
+                            rho_slab,
+                            x + nx * y,
+                            &mut sums,
+                        );
+                        for k in 0..q {
+                            g[k].as_deref_mut().expect("own chunk")[x + nx * y] = one_out[k][0];
+                        }
+                        x += 1;
+                        continue;
+                    }
                     if on_wall(at, dims) {
                         for k in 0..q {
                             outgoing[k] = match shifted(at, e[k], dims) {
@@ -812,11 +986,17 @@ fn pull(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> Ste
                             None => incoming[k],
                         };
                     }
-                    let (rho, absorbed) = collider.collide(&fin, inputs(problem, c), &mut fout);
+                    let (rho, absorbed) = collider.collide(
+                        &fin,
+                        inputs(problem, c),
+                        !problem.first_moment.is_empty(),
+                        &mut fout,
+                    );
                     sums.cell(rho, &mut rho_slab[x + nx * y], absorbed);
                     for k in 0..q {
                         g[k].as_deref_mut().expect("own chunk")[x + nx * y] = fout[k];
                     }
+                    x += 1;
                 }
             }
             sums
@@ -847,8 +1027,58 @@ fn aa_even(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> 
         .map(|(z, ((((f, rho_slab), w_in), w_out), index))| {
             let mut sums = StepSums::new();
             let (mut fin, mut fout) = (vec![0.0f32; q], vec![0.0f32; q]);
-            for local in 0..slab {
+            let (mut bin, mut bout) = ([[0.0f32; LANES]; 19], [[0.0f32; LANES]; 19]);
+            let (mut one_in, mut one_out) = ([[0.0f32; 1]; 19], [[0.0f32; 1]; 19]);
+            let mut local = 0;
+            while local < slab {
                 let at = [local % nx, local / nx, z];
+                let run = if collider.relaxes() {
+                    interior_run(at[0], at[1], z, dims)
+                } else {
+                    0
+                };
+                if run == LANES {
+                    for k in 0..q {
+                        bin[k]
+                            .copy_from_slice(&f[k].as_deref().expect("own")[local..local + LANES]);
+                    }
+                    relax_block(
+                        problem,
+                        collider,
+                        local + slab * z,
+                        &bin,
+                        &mut bout,
+                        rho_slab,
+                        local,
+                        &mut sums,
+                    );
+                    for k in 0..q {
+                        f[opposite[k]].as_deref_mut().expect("own")[local..local + LANES]
+                            .copy_from_slice(&bout[k]);
+                    }
+                    local += LANES;
+                    continue;
+                }
+                if run == 1 {
+                    for k in 0..q {
+                        one_in[k][0] = f[k].as_deref().expect("own")[local];
+                    }
+                    relax_block(
+                        problem,
+                        collider,
+                        local + slab * z,
+                        &one_in,
+                        &mut one_out,
+                        rho_slab,
+                        local,
+                        &mut sums,
+                    );
+                    for k in 0..q {
+                        f[opposite[k]].as_deref_mut().expect("own")[local] = one_out[k][0];
+                    }
+                    local += 1;
+                    continue;
+                }
                 let w = index[local];
                 for k in 0..q {
                     fin[k] = f[k].as_deref().expect("own")[local];
@@ -862,7 +1092,12 @@ fn aa_even(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> 
                     }
                 }
                 let c = local + slab * z;
-                let (rho, absorbed) = collider.collide(&fin, inputs(problem, c), &mut fout);
+                let (rho, absorbed) = collider.collide(
+                    &fin,
+                    inputs(problem, c),
+                    !problem.first_moment.is_empty(),
+                    &mut fout,
+                );
                 sums.cell(rho, &mut rho_slab[local], absorbed);
                 for k in 0..q {
                     f[opposite[k]].as_deref_mut().expect("own")[local] = fout[k];
@@ -877,6 +1112,7 @@ fn aa_even(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> 
                         };
                     }
                 }
+                local += 1;
             }
             sums
         })
@@ -894,6 +1130,11 @@ fn aa_odd(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> S
     let slab = nx * ny;
     let e = &collider.links.e;
     let opposite = &collider.links.opposite;
+    // Each link's in-slab offset: x − e_k is local − offsets[k] in its chunk.
+    let offsets: Vec<isize> = e
+        .iter()
+        .map(|v| v[0] as isize + nx as isize * v[1] as isize)
+        .collect();
     let mut owned = chunks_by_slab(&mut state.f, slab, nz, |k| e[k][2]);
     let walls = &mut state.walls;
     owned
@@ -907,10 +1148,65 @@ fn aa_odd(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> S
             let mut sums = StepSums::new();
             let (mut fin, mut fout) = (vec![0.0f32; q], vec![0.0f32; q]);
             let mut incoming = vec![0.0f32; q];
+            let (mut bin, mut bout) = ([[0.0f32; LANES]; 19], [[0.0f32; LANES]; 19]);
+            let (mut one_in, mut one_out) = ([[0.0f32; 1]; 19], [[0.0f32; 1]; 19]);
             for y in 0..ny {
-                for x in 0..nx {
+                let mut x = 0;
+                while x < nx {
                     let at = [x, y, z];
                     let local = x + nx * y;
+                    let run = if collider.relaxes() {
+                        interior_run(x, y, z, dims)
+                    } else {
+                        0
+                    };
+                    if run == LANES {
+                        for k in 0..q {
+                            let up = (local as isize - offsets[k]) as usize;
+                            bin[k].copy_from_slice(
+                                &slots[opposite[k]].as_deref().expect("owned")[up..up + LANES],
+                            );
+                        }
+                        relax_block(
+                            problem,
+                            collider,
+                            local + slab * z,
+                            &bin,
+                            &mut bout,
+                            rho_slab,
+                            local,
+                            &mut sums,
+                        );
+                        for k in 0..q {
+                            let down = (local as isize + offsets[k]) as usize;
+                            slots[k].as_deref_mut().expect("owned")[down..down + LANES]
+                                .copy_from_slice(&bout[k]);
+                        }
+                        x += LANES;
+                        continue;
+                    }
+                    if run == 1 {
+                        for k in 0..q {
+                            let up = (local as isize - offsets[k]) as usize;
+                            one_in[k][0] = slots[opposite[k]].as_deref().expect("owned")[up];
+                        }
+                        relax_block(
+                            problem,
+                            collider,
+                            local + slab * z,
+                            &one_in,
+                            &mut one_out,
+                            rho_slab,
+                            local,
+                            &mut sums,
+                        );
+                        for k in 0..q {
+                            let down = (local as isize + offsets[k]) as usize;
+                            slots[k].as_deref_mut().expect("owned")[down] = one_out[k][0];
+                        }
+                        x += 1;
+                        continue;
+                    }
                     let w = index[local];
                     if w != u32::MAX {
                         let pending = &w_out[w as usize * q..(w as usize + 1) * q];
@@ -929,7 +1225,12 @@ fn aa_odd(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> S
                         };
                     }
                     let c = local + slab * z;
-                    let (rho, absorbed) = collider.collide(&fin, inputs(problem, c), &mut fout);
+                    let (rho, absorbed) = collider.collide(
+                        &fin,
+                        inputs(problem, c),
+                        !problem.first_moment.is_empty(),
+                        &mut fout,
+                    );
                     sums.cell(rho, &mut rho_slab[local], absorbed);
                     for k in 0..q {
                         if let Some(d) = shifted(at, e[k], dims) {
@@ -953,6 +1254,7 @@ fn aa_odd(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> S
                             }
                         }
                     }
+                    x += 1;
                 }
             }
             sums

@@ -70,4 +70,3 @@ fn the_printed_matrices_diffuse_with_the_notes_coefficients() {
         );
     }
 }
-
