@@ -41,6 +41,8 @@
 //!   and exact Robin solutions for a sphere, a half-space and a slab.
 //! - [`materials`]: Jensen et al. 2001's measured table.
 //! - [`integrate`]: the Gauss–Legendre and adaptive Gauss–Kronrod rules used above.
+//! - [`eikonal`]: rays through a varying refractive index (d/ds(η dx/ds) = ∇η, RK4 with
+//!   step control; uniform, linear and Luneburg indices).
 //!
 //! ## Stability and validity limits
 //! - |g| < 1 everywhere (|g| = 1 is a delta function); Henyey–Greenstein sampling and
@@ -74,6 +76,7 @@
 
 pub mod analytic;
 mod coefficients;
+pub mod eikonal;
 mod error;
 pub mod fresnel;
 pub mod integrate;
