@@ -26,7 +26,7 @@
 //! Luneburg lens's rim) is crossed at the smallest step (`min_step`), where RK4's error,
 //! the jump times the step, is negligible.
 
-use glam::DVec3;
+use glam::{DMat3, DVec3};
 
 use crate::error::OpticsError;
 
@@ -36,6 +36,16 @@ pub trait IndexField: Sync {
     fn eta(&self, x: DVec3) -> f64;
     /// ∇η(x) (1/length).
     fn gradient(&self, x: DVec3) -> DVec3;
+    /// ∇∇η(x) (1/length²), which the ray tube's variational equations need.
+    fn hessian(&self, x: DVec3) -> DMat3;
+    /// Where ∇η jumps (η continuous, its gradient not: a Luneburg lens's rim), a level
+    /// function k(x) whose sign changes across that surface, and ∇k there: (k(x), ∇k(x)).
+    /// `None` (the default) for fields whose gradient is continuous. The ray tube picks
+    /// up the jump where a ray crosses it (the saltation of its variational equations).
+    fn kink(&self, x: DVec3) -> Option<(f64, DVec3)> {
+        let _ = x;
+        None
+    }
 }
 
 /// A uniform index: rays are straight.
@@ -48,6 +58,9 @@ impl IndexField for UniformIndex {
     }
     fn gradient(&self, _: DVec3) -> DVec3 {
         DVec3::ZERO
+    }
+    fn hessian(&self, _: DVec3) -> DMat3 {
+        DMat3::ZERO
     }
 }
 
@@ -69,6 +82,9 @@ impl IndexField for LinearIndex {
     }
     fn gradient(&self, _: DVec3) -> DVec3 {
         self.gradient
+    }
+    fn hessian(&self, _: DVec3) -> DMat3 {
+        DMat3::ZERO
     }
 }
 
@@ -95,6 +111,65 @@ impl IndexField for Luneburg {
         } else {
             DVec3::ZERO
         }
+    }
+    fn hessian(&self, x: DVec3) -> DMat3 {
+        // ∂ⱼ(−dᵢ/(R²η)) = −δᵢⱼ/(R²η) − dᵢdⱼ/(R⁴η³).
+        let d = x - self.centre;
+        let r2 = self.radius * self.radius;
+        if d.length_squared() < r2 {
+            let eta = (2.0 - d.length_squared() / r2).sqrt();
+            let outer = DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+            DMat3::IDENTITY * (-1.0 / (r2 * eta)) - outer * (1.0 / (r2 * r2 * eta * eta * eta))
+        } else {
+            DMat3::ZERO
+        }
+    }
+    fn kink(&self, x: DVec3) -> Option<(f64, DVec3)> {
+        // The rim r = R, where ∇η jumps from −(x − c)/R² to 0.
+        let d = x - self.centre;
+        let r2 = self.radius * self.radius;
+        Some((d.length_squared() / r2 - 1.0, d * (2.0 / r2)))
+    }
+}
+
+/// A Gaussian bump of index, η = η₀ + A e^{−|x − c|²/w²}: a smooth graded lens (converging
+/// for A > 0, diverging for A < 0), smooth everywhere (no rim, unlike Luneburg's).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GaussianBump {
+    /// η far from the centre.
+    pub eta0: f64,
+    /// The bump's height A (η₀ + A at the centre).
+    pub amplitude: f64,
+    /// Its centre c.
+    pub centre: DVec3,
+    /// Its width w (length).
+    pub width: f64,
+}
+
+impl GaussianBump {
+    fn bump(&self, x: DVec3) -> (DVec3, f64) {
+        let d = x - self.centre;
+        (
+            d,
+            self.amplitude * (-d.length_squared() / (self.width * self.width)).exp(),
+        )
+    }
+}
+
+impl IndexField for GaussianBump {
+    fn eta(&self, x: DVec3) -> f64 {
+        self.eta0 + self.bump(x).1
+    }
+    fn gradient(&self, x: DVec3) -> DVec3 {
+        let (d, b) = self.bump(x);
+        d * (-2.0 * b / (self.width * self.width))
+    }
+    fn hessian(&self, x: DVec3) -> DMat3 {
+        // ∂ⱼ(−2 dᵢ b/w²) = b (−2δᵢⱼ/w² + 4 dᵢdⱼ/w⁴).
+        let (d, b) = self.bump(x);
+        let w2 = self.width * self.width;
+        let outer = DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        DMat3::IDENTITY * (-2.0 * b / w2) + outer * (4.0 * b / (w2 * w2))
     }
 }
 
@@ -182,6 +257,33 @@ impl RaySettings {
     }
 }
 
+/// How a ray's neighbours differ from it: the ray tube. For a family of rays x(s; a₁, a₂)
+/// with launch parameters a₁, a₂ (an offset on a beam's cross-section, the two angles of
+/// a point light's emission), `dx[i]` = ∂x/∂aᵢ and `dv[i]` = ∂v/∂aᵢ at equal arc length,
+/// carried by the variational equations of the ray equation,
+///
+/// d(δx)/ds = δv/η − v (∇η·δx)/η²,    d(δv)/ds = (∇∇η) δx,
+///
+/// integrated by the same RK4 steps as the ray. The tube's cross-section normal to the
+/// ray is |(`dx[0]` × `dx[1]`)·t| per unit of da₁ da₂ (t the unit direction; the part of δx
+/// along the ray is a shift along it and drops out), so the flux a tube carries over that
+/// cross-section gives the irradiance.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Tube {
+    /// ∂x/∂aᵢ (length per unit of aᵢ).
+    pub dx: [DVec3; 2],
+    /// ∂v/∂aᵢ, v = η dx/ds the optical direction.
+    pub dv: [DVec3; 2],
+}
+
+impl Tube {
+    /// The cross-section normal to the unit direction `t` per unit of da₁ da₂ (signed: it
+    /// changes sign where the ray passes a caustic, where neighbouring rays cross).
+    pub fn cross_section(&self, t: DVec3) -> f64 {
+        self.dx[0].cross(self.dx[1]).dot(t)
+    }
+}
+
 /// A point on a traced ray.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RayPoint {
@@ -191,13 +293,30 @@ pub struct RayPoint {
     pub direction: DVec3,
     /// Arc length from the start.
     pub arc_length: f64,
+    /// The ray tube ([`trace_tube`]; zero for [`trace`]).
+    pub tube: Tube,
 }
 
-/// The state (x, v) and its derivative.
+/// The state (x, v, and the tube when traced) and its derivative.
 #[derive(Clone, Copy)]
 struct State {
     x: DVec3,
     v: DVec3,
+    tube: Option<Tube>,
+}
+
+impl State {
+    /// base + k·f, component by component.
+    fn plus(self, k: State, f: f64) -> State {
+        State {
+            x: self.x + k.x * f,
+            v: self.v + k.v * f,
+            tube: self.tube.zip(k.tube).map(|(a, b)| Tube {
+                dx: [a.dx[0] + b.dx[0] * f, a.dx[1] + b.dx[1] * f],
+                dv: [a.dv[0] + b.dv[0] * f, a.dv[1] + b.dv[1] * f],
+            }),
+        }
+    }
 }
 
 fn derivative(field: &dyn IndexField, s: State) -> Result<State, EikonalError> {
@@ -210,26 +329,89 @@ fn derivative(field: &dyn IndexField, s: State) -> Result<State, EikonalError> {
             gradient,
         });
     }
+    let tube = s.tube.map(|t| {
+        let hessian = field.hessian(s.x);
+        let (inv, inv2) = (1.0 / eta, 1.0 / (eta * eta));
+        let dx = |i: usize| t.dv[i] * inv - s.v * (gradient.dot(t.dx[i]) * inv2);
+        Tube {
+            dx: [dx(0), dx(1)],
+            dv: [hessian * t.dx[0], hessian * t.dx[1]],
+        }
+    });
     Ok(State {
         x: s.v / eta,
         v: gradient,
+        tube,
     })
 }
 
 /// One classical RK4 step of length h.
 fn rk4(field: &dyn IndexField, s: State, h: f64) -> Result<State, EikonalError> {
-    let at = |base: State, k: State, f: f64| State {
-        x: base.x + k.x * f,
-        v: base.v + k.v * f,
-    };
     let k1 = derivative(field, s)?;
-    let k2 = derivative(field, at(s, k1, 0.5 * h))?;
-    let k3 = derivative(field, at(s, k2, 0.5 * h))?;
-    let k4 = derivative(field, at(s, k3, h))?;
-    Ok(State {
-        x: s.x + (k1.x + 2.0 * k2.x + 2.0 * k3.x + k4.x) * (h / 6.0),
-        v: s.v + (k1.v + 2.0 * k2.v + 2.0 * k3.v + k4.v) * (h / 6.0),
-    })
+    let k2 = derivative(field, s.plus(k1, 0.5 * h))?;
+    let k3 = derivative(field, s.plus(k2, 0.5 * h))?;
+    let k4 = derivative(field, s.plus(k3, h))?;
+    Ok(s.plus(k1, h / 6.0)
+        .plus(k2, h / 3.0)
+        .plus(k3, h / 3.0)
+        .plus(k4, h / 6.0))
+}
+
+/// One step of length h by step doubling: RK4 over h and over two halves, the halves'
+/// result Richardson-corrected by their difference (fifth-order accurate), and the
+/// estimated local error (length). The optical direction is set back to |v| = η after it.
+fn doubled_step(
+    field: &dyn IndexField,
+    state: State,
+    h: f64,
+    scale: f64,
+) -> Result<(State, f64), EikonalError> {
+    let full = rk4(field, state, h)?;
+    let half = rk4(field, state, 0.5 * h)?;
+    let halves = rk4(field, half, 0.5 * h)?;
+    // RK4's local error is O(h⁵): the two results differ by about 15/16 of the error of
+    // the full step. A direction error δθ moves the ray by δθ per unit of length still to
+    // go, so it counts over the features' scale (`scale`, ten largest steps): across a
+    // kink of η (a lens's rim) the position is still good when the direction is not.
+    let eta_here = field.eta(state.x);
+    let turn = (halves.v - full.v).length() / eta_here;
+    let error = (halves.x - full.x).length().max(turn * scale) / 15.0;
+    let corrected = halves.plus(halves.plus(full, -1.0), 1.0 / 15.0);
+    let eta = field.eta(corrected.x);
+    Ok((
+        State {
+            v: corrected.v.normalize_or_zero() * eta,
+            ..corrected
+        },
+        error,
+    ))
+}
+
+/// Where the step from `before` to `after` crossed a kink of the field (a jump of ∇η),
+/// adds the jump to the tube: with the state's derivative F = (v/η, ∇η) jumping by
+/// ΔF = (0, [∇η]) across the surface k(x) = 0, the variational solution jumps by
+/// ΔF (∇k·δx)/(∇k·v/η) (the saltation matrix of a piecewise smooth flow). The tracer
+/// crosses a kink at its smallest step, so both sides' gradients are taken at the step's
+/// ends.
+fn cross_kink(field: &dyn IndexField, before: &State, after: &mut State) {
+    let Some(mut tube) = after.tube else {
+        return;
+    };
+    let (Some((k0, _)), Some((k1, normal))) = (field.kink(before.x), field.kink(after.x)) else {
+        return;
+    };
+    if (k0 < 0.0) == (k1 < 0.0) {
+        return;
+    }
+    let jump = field.gradient(after.x) - field.gradient(before.x);
+    let rate = normal.dot(after.v) / field.eta(after.x);
+    if rate == 0.0 {
+        return;
+    }
+    for i in 0..2 {
+        tube.dv[i] += jump * (normal.dot(tube.dx[i]) / rate);
+    }
+    after.tube = Some(tube);
 }
 
 /// Traces a ray from `start` along `direction` (normalised here) for an arc length of
@@ -239,6 +421,63 @@ pub fn trace(
     field: &dyn IndexField,
     start: DVec3,
     direction: DVec3,
+    length: f64,
+    settings: &RaySettings,
+    visit: impl FnMut(&RayPoint) -> bool,
+) -> Result<RayPoint, EikonalError> {
+    run(field, start, direction, None, length, settings, visit)
+}
+
+/// [`trace`] with the ray tube: `tube` holds ∂x/∂aᵢ and ∂v/∂aᵢ at the start, and every
+/// point the tube there (its variational equations integrated by the same steps; the step
+/// control watches the ray alone). Needs the field's Hessian.
+pub fn trace_tube(
+    field: &dyn IndexField,
+    start: DVec3,
+    direction: DVec3,
+    tube: Tube,
+    length: f64,
+    settings: &RaySettings,
+    visit: impl FnMut(&RayPoint) -> bool,
+) -> Result<RayPoint, EikonalError> {
+    run(field, start, direction, Some(tube), length, settings, visit)
+}
+
+/// Continues a traced ray from `point` by one step of exactly `h` (step doubling, as the
+/// tracer's steps; the tube if `point` carries one and `with_tube`): for landing on a
+/// given place, e.g. the foot of a target's perpendicular inside the last step.
+pub fn step_from(
+    field: &dyn IndexField,
+    point: &RayPoint,
+    h: f64,
+    with_tube: bool,
+    settings: &RaySettings,
+) -> Result<RayPoint, EikonalError> {
+    let state = State {
+        x: point.position,
+        v: point.direction * field.eta(point.position),
+        tube: with_tube.then_some(point.tube),
+    };
+    derivative(field, state)?;
+    let (mut next, _) = doubled_step(field, state, h, 10.0 * settings.max_step)?;
+    cross_kink(field, &state, &mut next);
+    Ok(ray_point(&next, point.arc_length + h))
+}
+
+fn ray_point(s: &State, arc_length: f64) -> RayPoint {
+    RayPoint {
+        position: s.x,
+        direction: s.v.normalize_or_zero(),
+        arc_length,
+        tube: s.tube.unwrap_or_default(),
+    }
+}
+
+fn run(
+    field: &dyn IndexField,
+    start: DVec3,
+    direction: DVec3,
+    tube: Option<Tube>,
     length: f64,
     settings: &RaySettings,
     mut visit: impl FnMut(&RayPoint) -> bool,
@@ -261,44 +500,21 @@ pub fn trace(
         .into());
     }
     let eta0 = field.eta(start);
-    derivative(
-        field,
-        State {
-            x: start,
-            v: d * eta0,
-        },
-    )?;
     let mut state = State {
         x: start,
         v: d * eta0,
+        tube,
     };
-    let point = |s: &State, arc_length: f64| RayPoint {
-        position: s.x,
-        direction: s.v.normalize_or_zero(),
-        arc_length,
-    };
+    derivative(field, state)?;
     let mut s = 0.0;
     let mut h = settings.max_step;
     let mut steps = 0usize;
-    if !visit(&point(&state, s)) {
-        return Ok(point(&state, s));
+    if !visit(&ray_point(&state, s)) {
+        return Ok(ray_point(&state, s));
     }
     while s < length {
         let step = h.min(length - s);
-        let full = rk4(field, state, step)?;
-        let half = rk4(field, state, 0.5 * step)?;
-        let halves = rk4(field, half, 0.5 * step)?;
-        // RK4's local error is O(h⁵): the two results differ by about 15/16 of the
-        // error of the full step. A direction error δθ moves the ray by δθ per unit of
-        // length still to go, so it counts over the features' scale (ten largest steps):
-        // across a kink of η (a lens's rim) the position is still good when the direction
-        // is not.
-        let eta_here = field.eta(state.x);
-        let turn = (halves.v - full.v).length() / eta_here;
-        let error = (halves.x - full.x)
-            .length()
-            .max(turn * 10.0 * settings.max_step)
-            / 15.0;
+        let (next, error) = doubled_step(field, state, step, 10.0 * settings.max_step)?;
         // Per unit length, above the rounding of the position (without that floor a
         // straight stretch after the smallest step would never grow again).
         let allowed = settings.tolerance * step
@@ -319,14 +535,9 @@ pub fn trace(
                 steps: MAX_STEPS,
             });
         }
-        // Richardson: the halves' result corrected by the estimated error.
-        let x = halves.x + (halves.x - full.x) / 15.0;
-        let v = halves.v + (halves.v - full.v) / 15.0;
-        let eta = field.eta(x);
-        state = State {
-            x,
-            v: v.normalize_or_zero() * eta,
-        };
+        let mut next = next;
+        cross_kink(field, &state, &mut next);
+        state = next;
         s += step;
         let grow = if error > 0.0 {
             0.9 * (allowed / error).powf(0.2)
@@ -334,11 +545,11 @@ pub fn trace(
             4.0
         };
         h = (step * grow.clamp(0.25, 4.0)).clamp(settings.min_step, settings.max_step);
-        if !visit(&point(&state, s)) {
+        if !visit(&ray_point(&state, s)) {
             break;
         }
     }
-    Ok(point(&state, s))
+    Ok(ray_point(&state, s))
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! linear gradient (catenaries), Luneburg's lens (parallel rays focus on the far rim).
 
 use glam::DVec3;
-use lucent_optics::eikonal::{LinearIndex, Luneburg, RaySettings, UniformIndex, trace};
+use lucent_optics::eikonal::{IndexField, LinearIndex, Luneburg, RaySettings, UniformIndex, trace};
 use proptest::prelude::*;
 
 proptest! {
@@ -96,4 +96,65 @@ fn luneburg_lens_focuses_parallel_rays_on_its_far_rim() {
             );
         }
     }
+}
+
+/// The ray tube carried by the variational equations is the derivative of the ray family:
+/// against central differences of neighbouring rays traced to the same arc length through
+/// a Luneburg lens, entering it across its rim, where ∇η jumps and the tube must take the
+/// jump (both traced at 1e-12 per unit length: the differences are good to about
+/// 1e-12/δ + δ² ≈ 1e-6 relative, the assertion's 1e-5 leaves room; without the rim's
+/// jump the tube is off by tens of percent).
+#[test]
+fn the_ray_tube_is_the_derivative_of_neighbouring_rays() {
+    use lucent_optics::eikonal::{Tube, trace_tube};
+    let lens = Luneburg {
+        centre: DVec3::ZERO,
+        radius: 1.0,
+    };
+    let settings = RaySettings::for_scale(1.0, 1e-12);
+    // From outside the lens through its rim, where ∇η jumps, to inside it.
+    let length = 1.9;
+    let start = |a: f64, b: f64| DVec3::new(0.3 + a, -0.2 + b, -1.3);
+    let end = |a: f64, b: f64| {
+        trace(&lens, start(a, b), DVec3::Z, length, &settings, |_| true)
+            .unwrap()
+            .position
+    };
+    let eta0 = lens.eta(start(0.0, 0.0));
+    let g = lens.gradient(start(0.0, 0.0));
+    // Rays start on the plane z = −1.3 (outside the lens) with v = η d: ∂v/∂aᵢ = d (∇η·eᵢ).
+    let tube = Tube {
+        dx: [DVec3::X, DVec3::Y],
+        dv: [DVec3::Z * g.x, DVec3::Z * g.y],
+    };
+    let traced = trace_tube(
+        &lens,
+        start(0.0, 0.0),
+        DVec3::Z,
+        tube,
+        length,
+        &settings,
+        |_| true,
+    )
+    .unwrap();
+    assert!(
+        eta0 == 1.0 && traced.position.length() < 0.95,
+        "from outside the rim to inside"
+    );
+    let delta = 1e-4;
+    let fd = [
+        (end(delta, 0.0) - end(-delta, 0.0)) / (2.0 * delta),
+        (end(0.0, delta) - end(0.0, -delta)) / (2.0 * delta),
+    ];
+    for i in 0..2 {
+        let err = (traced.tube.dx[i] - fd[i]).length() / fd[i].length();
+        assert!(
+            err < 1e-5,
+            "∂x/∂a{i}: tube {:?}, differences {:?}",
+            traced.tube.dx[i],
+            fd[i]
+        );
+    }
+    // Converging: the lens shrinks the tube's cross-section on its way to the focus.
+    assert!(traced.tube.cross_section(traced.direction).abs() < 0.9);
 }
