@@ -873,11 +873,12 @@ fn list_solvers() -> Result<(), Error> {
         writeln!(out, "{:<16} {}", entry.name, entry.summary).map_err(io_err)?;
         writeln!(
             out,
-            "{:<16} anisotropic: {}, heterogeneous: {}, embedded geometry: {}, output: {}\n{:<16} boundaries: {}\n{:<16} lights: {}",
+            "{:<16} anisotropic: {}, heterogeneous: {}, embedded geometry: {}, graded index: {}, output: {}\n{:<16} boundaries: {}\n{:<16} lights: {}",
             "",
             yes_no(c.anisotropic),
             yes_no(c.heterogeneous),
             yes_no(c.embedded_geometry),
+            yes_no(c.graded_index),
             kebab(&c.output),
             "",
             list(c.boundaries.iter().map(kebab).collect()),
@@ -980,6 +981,9 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
         writeln!(out, "  light     {light}").map_err(io_err)?;
     }
     writeln!(out, "  boundary  {}", p.boundary()).map_err(io_err)?;
+    if let Some(index) = p.refractive_index() {
+        writeln!(out, "  index     {index}").map_err(io_err)?;
+    }
     if p.embedded().is_some() {
         writeln!(
             out,

@@ -66,6 +66,9 @@ pub struct Scene {
     /// on its surface.
     #[serde(default)]
     pub embedded: Option<ShapeSpec>,
+    /// The medium's refractive index, where it is graded (curved rays: `direct-refractive`).
+    #[serde(default)]
+    pub refractive_index: Option<IndexSpec>,
     /// The camera.
     pub camera: Camera,
     /// Image size and tone mapping.
@@ -74,6 +77,93 @@ pub struct Scene {
     /// Which solver, with which parameters.
     #[serde(default)]
     pub solver: SolverSpec,
+}
+
+/// A refractive-index field η(x) (dimensionless) through the medium.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum IndexSpec {
+    /// The same η everywhere (rays stay straight).
+    Uniform {
+        /// η.
+        eta: f64,
+    },
+    /// η = η₀ + g·(x − origin).
+    Linear {
+        /// η at `origin`.
+        eta0: f64,
+        /// ∇η (1/length).
+        gradient: [f64; 3],
+        /// Where η = η₀ (default the world origin).
+        #[serde(default)]
+        origin: [f64; 3],
+    },
+    /// Luneburg's lens: η = √(2 − (r/R)²) inside the sphere, 1 outside.
+    Luneburg {
+        /// Centre.
+        centre: [f64; 3],
+        /// Radius R.
+        radius: f64,
+    },
+    /// A Gaussian bump η₀ + A e^{−|x − c|²/w²}.
+    Gaussian {
+        /// η far away (default 1).
+        #[serde(default = "one")]
+        eta0: f64,
+        /// The bump's height A.
+        amplitude: f64,
+        /// Centre c.
+        centre: [f64; 3],
+        /// Width w.
+        width: f64,
+    },
+    /// η = base + scale · the scene's volume (before the medium mapping), per voxel, as
+    /// a cubic B-spline: e.g. heat shimmer, η falling where hot smoke is dense.
+    Volume {
+        /// η where the volume is 0.
+        base: f64,
+        /// dη per unit of the volume's value.
+        scale: f64,
+    },
+}
+
+impl IndexSpec {
+    /// The index on the scene's `volume`.
+    fn to_index(self, volume: &Grid) -> lucent_core::RefractiveIndex {
+        use lucent_core::RefractiveIndex as R;
+        use lucent_optics::eikonal::{GaussianBump, LinearIndex, Luneburg};
+        let v = |a: [f64; 3]| DVec3::from_array(a);
+        match self {
+            IndexSpec::Uniform { eta } => R::Uniform(eta),
+            IndexSpec::Linear {
+                eta0,
+                gradient,
+                origin,
+            } => R::Linear(LinearIndex {
+                eta0,
+                gradient: v(gradient),
+                origin: v(origin),
+            }),
+            IndexSpec::Luneburg { centre, radius } => R::Luneburg(Luneburg {
+                centre: v(centre),
+                radius,
+            }),
+            IndexSpec::Gaussian {
+                eta0,
+                amplitude,
+                centre,
+                width,
+            } => R::Gaussian(GaussianBump {
+                eta0,
+                amplitude,
+                centre: v(centre),
+                width,
+            }),
+            IndexSpec::Volume { base, scale } => R::Grid(lucent_core::IndexGrid::new(
+                volume.map(|d| (base + scale * f64::from(d)) as f32),
+            )),
+        }
+    }
 }
 
 /// Where the scalar volume comes from.
@@ -510,7 +600,10 @@ impl Scene {
             Some(spec) => Some(to_shape(spec).sdf_grid(geometry)?),
             None => None,
         };
-        let problem = Problem::new(geometry, medium, lights, boundary, embedded)?;
+        let mut problem = Problem::new(geometry, medium, lights, boundary, embedded)?;
+        if let Some(index) = self.refractive_index {
+            problem = problem.with_refractive_index(index.to_index(&volume))?;
+        }
         self.camera.validate()?;
         let i = self.image;
         let settings = RenderSettings {
@@ -664,6 +757,11 @@ impl Scene {
         }
         if self.embedded.is_some() {
             return Err(invalid("a paged scene has no embedded shape".into()));
+        }
+        if self.refractive_index.is_some() {
+            return Err(invalid(
+                "a paged scene has no refractive index (curved rays run in memory)".into(),
+            ));
         }
         let m = &self.medium;
         if !(m.density.is_finite() && m.density >= 0.0) {

@@ -566,7 +566,7 @@ fn distances(geometry: &lucent_grid::GridGeometry) -> (f64, f64) {
 }
 
 /// The sky's directions of travel with their quadrature weights (`sky_level`).
-fn sky_directions(sky_level: usize) -> Result<Vec<(DVec3, f64)>, SolveError> {
+pub(crate) fn sky_directions(sky_level: usize) -> Result<Vec<(DVec3, f64)>, SolveError> {
     let quadrature =
         SphericalQuadrature::octahedral(sky_level).map_err(|e| SolveError::InvalidParameter {
             name: "sky_level".into(),
@@ -645,6 +645,7 @@ pub fn uncollided_outcome(
         far,
         min_distance,
         isotropic_fluence,
+        arrivals: Vec::new(),
     };
     crate::driver::Outcome {
         fluence,

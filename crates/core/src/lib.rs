@@ -63,11 +63,13 @@
 mod direct;
 pub mod driver;
 mod error;
+mod index;
 mod iteration;
 pub mod memory;
 mod paged;
 mod paged_collisions;
 mod problem;
+mod refractive;
 mod registry;
 mod singular;
 mod solution;
@@ -77,11 +79,13 @@ mod uncollided;
 
 pub use direct::{DirectSolver, light_distances, uncollided_outcome};
 pub use error::{ProblemError, SolveError};
+pub use index::{IndexGrid, RefractiveIndex};
 pub use iteration::{History, Stopping};
 pub use lucent_paging::PagerStats;
 pub use paged::{CellMedium, PagedMedium, PagedProblem, PagedSolution, Storage, paging_error};
 pub use paged_collisions::PagedFirstCollisions;
 pub use problem::{Boundary, BoundaryKind, Field, Light, LightKind, Medium, Problem};
+pub use refractive::DirectRefractiveSolver;
 pub use registry::{
     ParamDoc, ParamValue, Params, Registry, SolverEntry, SolverParams, param_docs, resolved_params,
 };
@@ -89,7 +93,7 @@ pub use singular::{
     SingularCell, SingularPart, point_source_singular_cells, point_source_singular_part,
     singular_reach,
 };
-pub use solution::{Angular, LightTransmittance, OrdinateRadiance, Solution};
+pub use solution::{Angular, CurvedArrival, LightTransmittance, OrdinateRadiance, Solution};
 pub use solver::{
     Capabilities, FluenceKind, ImageEstimate, ImageRequest, ImageSolver, OutputKind, Progress,
     ProgressFn, SolveOptions, SolveReport, Solver, StopReason,

@@ -278,16 +278,47 @@ impl Light {
             Light::Spot {
                 position,
                 direction,
-                inner_angle,
-                outer_angle,
                 ..
             } => {
                 let d = x - position;
                 let r2 = d.length_squared();
                 let w = if r2 > 0.0 { d / r2.sqrt() } else { direction };
+                Some((w, self.emission_toward(w) / r2.max(floor), position))
+            }
+            Light::Sky { .. } | Light::Emission { .. } => None,
+        }
+    }
+
+    /// The geometric spreading of a light's irradiance at `x`, per unit of its spectrum
+    /// and emission: 1 for a directional light, 1/max(r², min_distance²) for point and spot
+    /// lights (r from the light to `x`); 0 for the others. [`Light::arrival`]'s irradiance
+    /// is this times [`Light::emission_toward`] its direction.
+    pub fn spreading(&self, x: DVec3, min_distance: f64) -> f64 {
+        let floor = (min_distance * min_distance).max(1e-300);
+        match *self {
+            Light::Directional { .. } => 1.0,
+            Light::Point { position, .. } | Light::Spot { position, .. } => {
+                1.0 / (x - position).length_squared().max(floor)
+            }
+            Light::Sky { .. } | Light::Emission { .. } => 0.0,
+        }
+    }
+
+    /// The relative intensity a point or spot light emits toward the unit direction `w`
+    /// (1 for a point light; for a spot, 1 inside the inner cone, 0 outside the outer one,
+    /// a smoothstep in the cosine between). 1 for directional lights, 0 for the others.
+    pub fn emission_toward(&self, w: DVec3) -> f64 {
+        match *self {
+            Light::Directional { .. } | Light::Point { .. } => 1.0,
+            Light::Spot {
+                direction,
+                inner_angle,
+                outer_angle,
+                ..
+            } => {
                 let cos = w.dot(direction);
                 let (ci, co) = (inner_angle.cos(), outer_angle.cos());
-                let falloff = if cos >= ci {
+                if cos >= ci {
                     1.0
                 } else if cos <= co {
                     0.0
@@ -295,10 +326,9 @@ impl Light {
                     // Smoothstep between the outer and inner cone.
                     let t = (cos - co) / (ci - co);
                     t * t * (3.0 - 2.0 * t)
-                };
-                Some((w, falloff / r2.max(floor), position))
+                }
             }
-            Light::Sky { .. } | Light::Emission { .. } => None,
+            Light::Sky { .. } | Light::Emission { .. } => 0.0,
         }
     }
 }
@@ -415,6 +445,7 @@ pub struct Problem {
     lights: Vec<Light>,
     boundary: Boundary,
     embedded: Option<Grid>,
+    refractive_index: Option<crate::RefractiveIndex>,
 }
 
 impl Problem {
@@ -517,7 +548,33 @@ impl Problem {
             lights,
             boundary,
             embedded,
+            refractive_index: None,
         })
+    }
+
+    /// The problem with a refractive index η(x) through its medium, checked positive and
+    /// finite over the box. Only solvers that trace curved rays take a graded index
+    /// ([`crate::Capabilities::graded_index`]; `direct-refractive`); a uniform one leaves
+    /// every ray straight and every solver as it was.
+    pub fn with_refractive_index(
+        mut self,
+        index: crate::RefractiveIndex,
+    ) -> Result<Self, ProblemError> {
+        index.check(self.geometry.bounds()).map_err(ProblemError)?;
+        self.refractive_index = Some(index);
+        Ok(self)
+    }
+
+    /// The medium's refractive index, if the problem has one (none: η = 1, straight rays).
+    pub fn refractive_index(&self) -> Option<&crate::RefractiveIndex> {
+        self.refractive_index.as_ref()
+    }
+
+    /// Whether rays bend in this problem (a refractive index that is not uniform).
+    pub fn has_graded_index(&self) -> bool {
+        self.refractive_index
+            .as_ref()
+            .is_some_and(|n| !n.is_uniform())
     }
 
     /// The grid geometry (the domain).

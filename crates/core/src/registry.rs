@@ -175,10 +175,11 @@ impl Registry {
         Self::default()
     }
 
-    /// A registry holding the solvers of this crate (`direct`).
+    /// A registry holding the solvers of this crate (`direct`, `direct-refractive`).
     pub fn with_core_solvers() -> Self {
         let mut registry = Self::new();
         registry.register(crate::direct::DirectSolver::ENTRY);
+        registry.register(crate::refractive::DirectRefractiveSolver::ENTRY);
         registry
     }
 

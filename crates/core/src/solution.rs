@@ -27,6 +27,28 @@ pub struct LightTransmittance {
     /// `direct`, the scattered fluence for a solver that adds multiple scattering), per
     /// channel.
     pub isotropic_fluence: Vec<Grid>,
+    /// Where rays bend (`direct-refractive`): per light, the irradiance and direction the
+    /// light's curved ray arrives with at every cell centre, in place of the straight
+    /// line's 1/r² and direction. Empty for straight rays.
+    pub arrivals: Vec<CurvedArrival>,
+}
+
+/// How one light's curved rays arrive at the cell centres, relative to the straight line
+/// from the light: where rays are straight the focusing is 1 and both bends are zero, and
+/// the in-scattered radiance is `direct`'s. Kept as corrections to the straight line so
+/// that interpolating between cell centres keeps the straight part exact (a point light's
+/// 1/r² is far from trilinear near it).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CurvedArrival {
+    /// The irradiance the ray tube delivers over the straight line's geometric spreading
+    /// ([`Light::spreading`]): 1 for straight rays, above 1 where rays converge. Zero
+    /// where no ray arrives.
+    pub focusing: Grid,
+    /// The direction of travel on arrival minus the straight line's, per component.
+    pub bend: [Grid; 3],
+    /// The launch direction minus the straight line's (point and spot lights: a spot's
+    /// emission is taken toward it), per component; zero for directional lights.
+    pub launch_bend: [Grid; 3],
 }
 
 impl LightTransmittance {
@@ -45,8 +67,29 @@ impl LightTransmittance {
 
     fn sum(&self, channel: usize, x: DVec3, weight: impl Fn(DVec3) -> f64) -> f64 {
         let mut total = 0.0;
-        for (light, grids) in self.lights.iter().zip(&self.transmittance) {
-            if let Some((w, irradiance, _)) = light.arrival(x, self.far, self.min_distance) {
+        for (l, (light, grids)) in self.lights.iter().zip(&self.transmittance).enumerate() {
+            let arrival =
+                light
+                    .arrival(x, self.far, self.min_distance)
+                    .map(|(w, irradiance, _)| match self.arrivals.get(l) {
+                        Some(curved) => {
+                            let sample = |g: &[Grid; 3]| {
+                                DVec3::from_array(
+                                    g.each_ref().map(|g| f64::from(g.sample_trilinear(x))),
+                                )
+                            };
+                            let emission = light.emission_toward(
+                                (w + sample(&curved.launch_bend)).normalize_or_zero(),
+                            );
+                            let focusing = f64::from(curved.focusing.sample_trilinear(x));
+                            (
+                                (w + sample(&curved.bend)).normalize_or_zero(),
+                                emission * light.spreading(x, self.min_distance) * focusing,
+                            )
+                        }
+                        None => (w, irradiance),
+                    });
+            if let Some((w, irradiance)) = arrival {
                 let t = grids[channel.min(grids.len() - 1)].sample_trilinear(x);
                 total += weight(w) * light.spectrum().channel(channel) * irradiance * f64::from(t);
             }

@@ -43,6 +43,8 @@ pub struct Capabilities {
     pub needs_absorption: bool,
     /// Handles an embedded boundary (SDF).
     pub embedded_geometry: bool,
+    /// Traces curved rays through a graded refractive index ([`Problem::has_graded_index`]).
+    pub graded_index: bool,
     /// Boundary conditions it implements.
     pub boundaries: Vec<BoundaryKind>,
     /// Lights it implements.
@@ -93,6 +95,11 @@ impl Capabilities {
         }
         if !self.embedded_geometry && problem.embedded().is_some() {
             return unsupported("embedded geometry".into());
+        }
+        if !self.graded_index && problem.has_graded_index() {
+            return unsupported(
+                "a graded refractive index (curved rays: `direct-refractive` traces them)".into(),
+            );
         }
         let phase = problem.medium().phase;
         if !self.anisotropic && !matches!(phase, lucent_optics::Phase::Isotropic) {

@@ -422,6 +422,11 @@ impl<'a> Sources<'a> {
                 (vec![None; channels], o.lights.as_ref(), Some(o))
             }
         };
+        if lights.is_some_and(|l| !l.arrivals.is_empty()) {
+            return Err(RenderError::Invalid(
+                "the solution's light arrives along curved rays (direct-refractive), which the GPU renderer does not read: render on the CPU".into(),
+            ));
+        }
         for g in iso.iter().flatten() {
             on_grid(g, "fluence")?;
         }
@@ -565,6 +570,7 @@ mod tests {
                 far: 100.0,
                 min_distance: 0.05,
                 isotropic_fluence: vec![Grid::filled(g, 0.5)],
+                arrivals: Vec::new(),
             })),
             standard_error: None,
             report: SolveReport {
