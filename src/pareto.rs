@@ -137,6 +137,16 @@ pub fn runs() -> Vec<Run> {
             ));
         }
     }
+    // `direct-refractive`: the ray tracer's tolerance (on the suite's uniform index its rays
+    // are straight: what the curved machinery costs over `direct`).
+    for tolerance in ["1e-6", "1e-9"] {
+        runs.push(Run::new(
+            "direct-refractive",
+            format!("tolerance = {tolerance}"),
+            1,
+            format!("ray tolerance {tolerance}"),
+        ));
+    }
     // Diffusion: every iterative method on the same operator, over the stopping tolerance
     // and (for the multigrid ones) the grid resolution. Its error against the total
     // fluence levels off at the diffusion model's own error.
@@ -474,10 +484,10 @@ pub fn svg(title: &str, points: &[Point]) -> String {
                 100.0 * p.error
             ));
         }
-        let label = if *solver == "direct" {
-            "direct (uncollided)"
-        } else {
-            solver
+        let label = match *solver {
+            "direct" => "direct (uncollided)",
+            "direct-refractive" => "direct-refractive (uncollided)",
+            _ => solver,
         };
         let ly = top + 20.0 + 20.0 * i as f64;
         s.push_str(&format!(

@@ -243,7 +243,7 @@ impl Collider {
     #[inline(always)]
     pub(crate) fn relax_lanes<const L: usize>(
         &self,
-        f: &[[f32; L]],
+        f: &[&[f32; L]],
         d: &[f32; L],
         ka: &[f32; L],
         q0: &[f32; L],
@@ -259,36 +259,42 @@ impl Collider {
                 rho[l] += fk[l];
             }
         }
+        // The matches are hoisted out of the lane loops, which stay branch-free.
         let (mut even, mut odd) = ([0.0f32; L], [0.0f32; L]);
+        let inv_cs2 = 1.0 / cs2;
         for l in 0..L {
-            odd[l] = 1.0 / (d[l] / cs2 + 0.5);
-            even[l] = match self.collision {
-                Collision::Bgk => odd[l],
-                _ => 1.0 / (0.25 * cs2 / d[l] + 0.5),
-            };
+            odd[l] = 1.0 / (d[l] * inv_cs2 + 0.5);
+        }
+        match self.collision {
+            Collision::Bgk => even = odd,
+            _ => {
+                for l in 0..L {
+                    even[l] = 1.0 / (0.25 * cs2 / d[l] + 0.5);
+                }
+            }
         }
         // The fluence at the collision, second order in the source S = Q₀ − κ_a ρ̂:
         // ρ̂ = Σf + S/2 (the populations hold the mean of before and after the source).
         // With the thesis's absorption nothing leaves: S = Q₀, and κ_a ρ̂ moves to the rest.
         let (mut r, mut net, mut kept) = ([0.0f32; L], [0.0f32; L], [0.0f32; L]);
-        for l in 0..L {
-            let (rh, sink) = match self.absorption {
-                Absorption::True => {
-                    let rh = (rho[l] + 0.5 * q0[l]) / (1.0 + 0.5 * ka[l]);
-                    absorbed_out[l] = ka[l] * rh;
-                    (rh, ka[l] * rh)
+        match self.absorption {
+            Absorption::True => {
+                for l in 0..L {
+                    r[l] = (rho[l] + 0.5 * q0[l]) / (1.0 + 0.5 * ka[l]);
+                    absorbed_out[l] = ka[l] * r[l];
+                    net[l] = q0[l] - ka[l] * r[l];
                 }
-                Absorption::Thesis => {
-                    let rh = rho[l] + 0.5 * q0[l];
+            }
+            Absorption::Thesis => {
+                for l in 0..L {
+                    r[l] = rho[l] + 0.5 * q0[l];
                     absorbed_out[l] = 0.0;
-                    kept[l] = ka[l] * rh;
-                    (rh, ka[l] * rh)
+                    kept[l] = ka[l] * r[l];
+                    net[l] = q0[l] - ka[l] * r[l];
                 }
-            };
-            r[l] = rh;
-            net[l] = q0[l] - sink;
-            rho_out[l] = rh;
+            }
         }
+        *rho_out = r;
         // The isotropic source and sink enter the even moments weighted 1 − ω⁺/2; the
         // first moment's odd source is weighted 1 − ω⁻/2, so that it drives the flux
         // 3 c_s² (1/ω⁻ − ½) Q₁ = 3 D Q₁ as P1 has it.
@@ -346,6 +352,7 @@ impl Collider {
                 let mut result = [[0.0f32; 1]; 19];
                 let m = cell.moment.map(|v| [v]);
                 let (mut rho, mut absorbed) = ([0.0f32], [0.0f32]);
+                let lanes: [&[f32; 1]; 19] = std::array::from_fn(|k| &lanes[k]);
                 self.relax_lanes::<1>(
                     &lanes,
                     &[cell.first],
@@ -818,8 +825,46 @@ fn inputs(problem: &LatticeProblem, c: usize) -> CellInputs {
 }
 
 /// Cells per block of the interior kernels: the lane width the relaxation collision is
-/// vectorised over.
+/// vectorised over, for the end of a row.
 const LANES: usize = 8;
+
+/// Cells per long block: most of an interior row at once, so that each link's populations
+/// move as one contiguous burst per row (a few streams at a time for the prefetchers, not
+/// 2Q + 4 interleaved ones) and the per-block work is amortised. 19 × 64 × 4 B × 2 = 9.7 KiB
+/// of buffers: L1.
+const BIG: usize = 64;
+
+/// A block's collided populations (the inputs are read in place).
+struct Buffers<const L: usize> {
+    fout: [[f32; L]; 19],
+    zero: [f32; L],
+}
+
+impl<const L: usize> Buffers<L> {
+    fn new() -> Box<Self> {
+        Box::new(Self {
+            fout: [[0.0; L]; 19],
+            zero: [0.0; L],
+        })
+    }
+}
+
+/// The buffers of every block size a kernel uses.
+struct BlockBuffers {
+    big: Box<Buffers<BIG>>,
+    lanes: Box<Buffers<LANES>>,
+    one: Box<Buffers<1>>,
+}
+
+impl BlockBuffers {
+    fn new() -> Self {
+        Self {
+            big: Buffers::new(),
+            lanes: Buffers::new(),
+            one: Buffers::new(),
+        }
+    }
+}
 
 /// The relaxation collision of the L cells from global index `c`: their inputs read
 /// from the problem, `fin` collided into `fout`, the sums accounted in cell order.
@@ -829,13 +874,15 @@ fn relax_block<const L: usize>(
     problem: &LatticeProblem,
     collider: &Collider,
     c: usize,
-    fin: &[[f32; L]; 19],
+    fin: &[&[f32; L]; 19],
     fout: &mut [[f32; L]; 19],
     rho_slab: &mut [f32],
     local: usize,
     sums: &mut StepSums,
 ) {
-    let take = |v: &[f32]| -> [f32; L] { v[c..c + L].try_into().expect("a block") };
+    fn block<const L: usize>(v: &[f32], c: usize) -> &[f32; L] {
+        v[c..c + L].try_into().expect("a block")
+    }
     let moment = (!problem.first_moment.is_empty()).then(|| {
         let m = &problem.first_moment[c..c + L];
         [0, 1, 2].map(|a| std::array::from_fn(|l| m[l][a]))
@@ -843,9 +890,9 @@ fn relax_block<const L: usize>(
     let (mut rho, mut absorbed) = ([0.0f32; L], [0.0f32; L]);
     collider.relax_lanes::<L>(
         fin,
-        &take(&problem.first),
-        &take(&problem.second),
-        &take(&problem.source),
+        block(&problem.first, c),
+        block(&problem.second, c),
+        block(&problem.source, c),
         moment.as_ref(),
         fout,
         &mut rho,
@@ -856,17 +903,142 @@ fn relax_block<const L: usize>(
     }
 }
 
-/// How many cells from x on a row the interior kernels take at once: a block of [`LANES`]
-/// where that many interior cells follow, a single cell where fewer do, none on a wall.
+/// References to L populations of each link, `at(k)` giving link k's slice from the
+/// block's first cell (links beyond Q read `zero`): the collision reads the arrays in place.
+#[inline(always)]
+fn lane_refs<'a, const L: usize>(
+    q: usize,
+    zero: &'a [f32; L],
+    at: impl Fn(usize) -> &'a [f32],
+) -> [&'a [f32; L]; 19] {
+    std::array::from_fn(|k| {
+        if k < q {
+            at(k)[..L].try_into().expect("a block")
+        } else {
+            zero
+        }
+    })
+}
+
+/// How many cells from x on a row the interior kernels take at once: a block of [`BIG`] or
+/// [`LANES`] where that many interior cells follow, a single cell where fewer do, none on a
+/// wall.
 #[inline]
 fn interior_run(x: usize, y: usize, z: usize, dims: [usize; 3]) -> usize {
     let [nx, ny, nz] = dims;
     if !(z > 0 && z + 1 < nz && y > 0 && y + 1 < ny && x > 0 && x + 1 < nx) {
         0
+    } else if x + BIG < nx {
+        BIG
     } else if x + LANES < nx {
         LANES
     } else {
         1
+    }
+}
+
+/// Two arrays: L interior cells from global index `c` (slab index `local`) pull
+/// f_k(x − e_k), collide, and write their own cells of g.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn pull_block<const L: usize>(
+    problem: &LatticeProblem,
+    collider: &Collider,
+    f: &[Vec<f32>],
+    offsets: &[isize],
+    g: &mut [Option<&mut [f32]>],
+    (c, local): (usize, usize),
+    rho_slab: &mut [f32],
+    buffers: &mut Buffers<L>,
+    sums: &mut StepSums,
+) {
+    {
+        let fin = lane_refs(collider.q, &buffers.zero, |k| {
+            &f[k][(c as isize - offsets[k]) as usize..]
+        });
+        relax_block(
+            problem,
+            collider,
+            c,
+            &fin,
+            &mut buffers.fout,
+            rho_slab,
+            local,
+            sums,
+        );
+    }
+    for k in 0..collider.q {
+        g[k].as_deref_mut().expect("own chunk")[local..local + L].copy_from_slice(&buffers.fout[k]);
+    }
+}
+
+/// AA even step: L interior cells read their own slots and write f*_k into slot k̄.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn aa_even_block<const L: usize>(
+    problem: &LatticeProblem,
+    collider: &Collider,
+    f: &mut [Option<&mut [f32]>],
+    (c, local): (usize, usize),
+    rho_slab: &mut [f32],
+    buffers: &mut Buffers<L>,
+    sums: &mut StepSums,
+) {
+    let opposite = &collider.links.opposite;
+    {
+        let fin = lane_refs(collider.q, &buffers.zero, |k| {
+            &f[k].as_deref().expect("own")[local..]
+        });
+        relax_block(
+            problem,
+            collider,
+            c,
+            &fin,
+            &mut buffers.fout,
+            rho_slab,
+            local,
+            sums,
+        );
+    }
+    for k in 0..collider.q {
+        f[opposite[k]].as_deref_mut().expect("own")[local..local + L]
+            .copy_from_slice(&buffers.fout[k]);
+    }
+}
+
+/// AA odd step: L interior cells read slot k̄ of x − e_k and write f*_k into slot k of
+/// x + e_k (`offsets`: each link's in-slab offset).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn aa_odd_block<const L: usize>(
+    problem: &LatticeProblem,
+    collider: &Collider,
+    slots: &mut [Option<&mut [f32]>],
+    offsets: &[isize],
+    (c, local): (usize, usize),
+    rho_slab: &mut [f32],
+    buffers: &mut Buffers<L>,
+    sums: &mut StepSums,
+) {
+    let opposite = &collider.links.opposite;
+    {
+        let fin = lane_refs(collider.q, &buffers.zero, |k| {
+            &slots[opposite[k]].as_deref().expect("owned")[(local as isize - offsets[k]) as usize..]
+        });
+        relax_block(
+            problem,
+            collider,
+            c,
+            &fin,
+            &mut buffers.fout,
+            rho_slab,
+            local,
+            sums,
+        );
+    }
+    for k in 0..collider.q {
+        let down = (local as isize + offsets[k]) as usize;
+        slots[k].as_deref_mut().expect("owned")[down..down + L].copy_from_slice(&buffers.fout[k]);
     }
 }
 
@@ -915,8 +1087,7 @@ fn pull(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> Ste
             let mut sums = StepSums::new();
             let (mut fin, mut fout) = (vec![0.0f32; q], vec![0.0f32; q]);
             let (mut outgoing, mut incoming) = (vec![0.0f32; q], vec![0.0f32; q]);
-            let (mut bin, mut bout) = ([[0.0f32; LANES]; 19], [[0.0f32; LANES]; 19]);
-            let (mut one_in, mut one_out) = ([[0.0f32; 1]; 19], [[0.0f32; 1]; 19]);
+            let mut buffers = BlockBuffers::new();
             for y in 0..ny {
                 let mut x = 0;
                 while x < nx {
@@ -927,46 +1098,45 @@ fn pull(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> Ste
                     } else {
                         0
                     };
-                    if run == LANES {
-                        for k in 0..q {
-                            let up = c as isize - offsets[k];
-                            bin[k].copy_from_slice(&f[k][up as usize..up as usize + LANES]);
-                        }
-                        relax_block(
+                    let cell = (c, x + nx * y);
+                    match run {
+                        BIG => pull_block(
                             problem,
                             collider,
-                            c,
-                            &bin,
-                            &mut bout,
+                            f,
+                            &offsets,
+                            g,
+                            cell,
                             rho_slab,
-                            x + nx * y,
+                            &mut buffers.big,
                             &mut sums,
-                        );
-                        for k in 0..q {
-                            g[k].as_deref_mut().expect("own chunk")[x + nx * y..x + nx * y + LANES]
-                                .copy_from_slice(&bout[k]);
-                        }
-                        x += LANES;
-                        continue;
+                        ),
+                        LANES => pull_block(
+                            problem,
+                            collider,
+                            f,
+                            &offsets,
+                            g,
+                            cell,
+                            rho_slab,
+                            &mut buffers.lanes,
+                            &mut sums,
+                        ),
+                        1 => pull_block(
+                            problem,
+                            collider,
+                            f,
+                            &offsets,
+                            g,
+                            cell,
+                            rho_slab,
+                            &mut buffers.one,
+                            &mut sums,
+                        ),
+                        _ => {}
                     }
-                    if run == 1 {
-                        for k in 0..q {
-                            one_in[k][0] = f[k][(c as isize - offsets[k]) as usize];
-                        }
-                        relax_block(
-                            problem,
-                            collider,
-                            c,
-                            &one_in,
-                            &mut one_out,
-                            rho_slab,
-                            x + nx * y,
-                            &mut sums,
-                        );
-                        for k in 0..q {
-                            g[k].as_deref_mut().expect("own chunk")[x + nx * y] = one_out[k][0];
-                        }
-                        x += 1;
+                    if run > 0 {
+                        x += run;
                         continue;
                     }
                     if on_wall(at, dims) {
@@ -1027,8 +1197,7 @@ fn aa_even(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> 
         .map(|(z, ((((f, rho_slab), w_in), w_out), index))| {
             let mut sums = StepSums::new();
             let (mut fin, mut fout) = (vec![0.0f32; q], vec![0.0f32; q]);
-            let (mut bin, mut bout) = ([[0.0f32; LANES]; 19], [[0.0f32; LANES]; 19]);
-            let (mut one_in, mut one_out) = ([[0.0f32; 1]; 19], [[0.0f32; 1]; 19]);
+            let mut buffers = BlockBuffers::new();
             let mut local = 0;
             while local < slab {
                 let at = [local % nx, local / nx, z];
@@ -1037,46 +1206,39 @@ fn aa_even(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> 
                 } else {
                     0
                 };
-                if run == LANES {
-                    for k in 0..q {
-                        bin[k]
-                            .copy_from_slice(&f[k].as_deref().expect("own")[local..local + LANES]);
-                    }
-                    relax_block(
+                let cell = (local + slab * z, local);
+                match run {
+                    BIG => aa_even_block(
                         problem,
                         collider,
-                        local + slab * z,
-                        &bin,
-                        &mut bout,
+                        f,
+                        cell,
                         rho_slab,
-                        local,
+                        &mut buffers.big,
                         &mut sums,
-                    );
-                    for k in 0..q {
-                        f[opposite[k]].as_deref_mut().expect("own")[local..local + LANES]
-                            .copy_from_slice(&bout[k]);
-                    }
-                    local += LANES;
-                    continue;
+                    ),
+                    LANES => aa_even_block(
+                        problem,
+                        collider,
+                        f,
+                        cell,
+                        rho_slab,
+                        &mut buffers.lanes,
+                        &mut sums,
+                    ),
+                    1 => aa_even_block(
+                        problem,
+                        collider,
+                        f,
+                        cell,
+                        rho_slab,
+                        &mut buffers.one,
+                        &mut sums,
+                    ),
+                    _ => {}
                 }
-                if run == 1 {
-                    for k in 0..q {
-                        one_in[k][0] = f[k].as_deref().expect("own")[local];
-                    }
-                    relax_block(
-                        problem,
-                        collider,
-                        local + slab * z,
-                        &one_in,
-                        &mut one_out,
-                        rho_slab,
-                        local,
-                        &mut sums,
-                    );
-                    for k in 0..q {
-                        f[opposite[k]].as_deref_mut().expect("own")[local] = one_out[k][0];
-                    }
-                    local += 1;
+                if run > 0 {
+                    local += run;
                     continue;
                 }
                 let w = index[local];
@@ -1148,8 +1310,7 @@ fn aa_odd(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> S
             let mut sums = StepSums::new();
             let (mut fin, mut fout) = (vec![0.0f32; q], vec![0.0f32; q]);
             let mut incoming = vec![0.0f32; q];
-            let (mut bin, mut bout) = ([[0.0f32; LANES]; 19], [[0.0f32; LANES]; 19]);
-            let (mut one_in, mut one_out) = ([[0.0f32; 1]; 19], [[0.0f32; 1]; 19]);
+            let mut buffers = BlockBuffers::new();
             for y in 0..ny {
                 let mut x = 0;
                 while x < nx {
@@ -1160,51 +1321,42 @@ fn aa_odd(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> S
                     } else {
                         0
                     };
-                    if run == LANES {
-                        for k in 0..q {
-                            let up = (local as isize - offsets[k]) as usize;
-                            bin[k].copy_from_slice(
-                                &slots[opposite[k]].as_deref().expect("owned")[up..up + LANES],
-                            );
-                        }
-                        relax_block(
+                    let cell = (local + slab * z, local);
+                    match run {
+                        BIG => aa_odd_block(
                             problem,
                             collider,
-                            local + slab * z,
-                            &bin,
-                            &mut bout,
+                            slots,
+                            &offsets,
+                            cell,
                             rho_slab,
-                            local,
+                            &mut buffers.big,
                             &mut sums,
-                        );
-                        for k in 0..q {
-                            let down = (local as isize + offsets[k]) as usize;
-                            slots[k].as_deref_mut().expect("owned")[down..down + LANES]
-                                .copy_from_slice(&bout[k]);
-                        }
-                        x += LANES;
-                        continue;
+                        ),
+                        LANES => aa_odd_block(
+                            problem,
+                            collider,
+                            slots,
+                            &offsets,
+                            cell,
+                            rho_slab,
+                            &mut buffers.lanes,
+                            &mut sums,
+                        ),
+                        1 => aa_odd_block(
+                            problem,
+                            collider,
+                            slots,
+                            &offsets,
+                            cell,
+                            rho_slab,
+                            &mut buffers.one,
+                            &mut sums,
+                        ),
+                        _ => {}
                     }
-                    if run == 1 {
-                        for k in 0..q {
-                            let up = (local as isize - offsets[k]) as usize;
-                            one_in[k][0] = slots[opposite[k]].as_deref().expect("owned")[up];
-                        }
-                        relax_block(
-                            problem,
-                            collider,
-                            local + slab * z,
-                            &one_in,
-                            &mut one_out,
-                            rho_slab,
-                            local,
-                            &mut sums,
-                        );
-                        for k in 0..q {
-                            let down = (local as isize + offsets[k]) as usize;
-                            slots[k].as_deref_mut().expect("owned")[down] = one_out[k][0];
-                        }
-                        x += 1;
+                    if run > 0 {
+                        x += run;
                         continue;
                     }
                     let w = index[local];
