@@ -88,6 +88,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             max_iterations: 100_000,
             ..Stopping::default()
         },
+        blocks: None,
     };
     let marched = march(&lattice, &settings)?;
     let b = marched.bookkeeping;

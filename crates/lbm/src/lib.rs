@@ -30,6 +30,9 @@
 //! - **Streaming** ([`Streaming`]): in place by Bailey et al.'s AA pattern (one array of
 //!   populations: even steps collide into the opposite slots, odd steps read from and
 //!   write to the neighbours'), or between two arrays; the same bits either way (tested).
+//!   Between two arrays the volume can also be advanced block by block ([`Blocks`],
+//!   Bernabei's blockwise scheduling): the same steady state, the energy books balanced at
+//!   convergence only.
 //! - **Walls**: at the box's faces the fluence at the half-link ρ_w meets the condition
 //!   (Robin ρ_w = 2A J_n — a vacuum is A of the Milne problem —, Dirichlet, Neumann) and
 //!   the incoming populations are f_in = −f*_out + 2 w ρ_w (anti-bounce-back).
@@ -52,8 +55,8 @@ mod solver;
 pub use error::LbmError;
 pub use lattice::{Links, Velocities};
 pub use march::{
-    Absorption, Bookkeeping, Collision, LatticeProblem, MarchSettings, Marched, Streaming, Wall,
-    march,
+    Absorption, Blocks, Bookkeeping, Collision, LatticeProblem, MarchSettings, Marched, Streaming,
+    Wall, march,
 };
 pub use params::LbmParams;
 pub use solver::{LbmSolver, wall};

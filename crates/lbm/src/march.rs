@@ -115,6 +115,24 @@ pub struct MarchSettings {
     /// one step, ‖ρ′ − ρ‖/‖ρ′‖, and the energy imbalance per step,
     /// |emitted − absorbed − escaped| / max(emitted, absorbed + |escaped|).
     pub stopping: Stopping,
+    /// Bernabei's blockwise scheduling (`None`: every cell steps together).
+    pub blocks: Option<Blocks>,
+}
+
+/// Blockwise scheduling (Bernabei ch. 4, after the GPU's texture-sized blocks): the volume
+/// is cut into blocks of `slabs` z-slabs, advanced in turn, each by `steps_per_visit`
+/// steps while the others wait; a block streams in what its neighbours last left (a
+/// neighbour visited earlier in the sweep has already moved on: a Gauss–Seidel-like
+/// order). One iteration of the march is one sweep over the blocks. The steady state is
+/// the synchronous lattice's (the same fixed point), but the transient is not a physical
+/// time history: a population crossing a block's face can be skipped or repeated, so the
+/// energy books balance only at convergence. Needs two arrays of populations.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Blocks {
+    /// z-slabs per block (≥ 1).
+    pub slabs: usize,
+    /// Steps a block takes per visit (≥ 1).
+    pub steps_per_visit: usize,
 }
 
 /// The energy bookkeeping of a march (lattice units: fluence × cell volume).
@@ -503,6 +521,19 @@ pub(crate) fn check(problem: &LatticeProblem, settings: &MarchSettings) -> Resul
     if n == 0 {
         return Err(LbmError::Invalid("an empty grid".into()));
     }
+    if let Some(b) = settings.blocks {
+        if b.slabs == 0 || b.steps_per_visit == 0 {
+            return Err(LbmError::Invalid(
+                "blockwise scheduling needs at least one slab per block and one step per visit"
+                    .into(),
+            ));
+        }
+        if settings.streaming != Streaming::TwoArrays {
+            return Err(LbmError::Invalid(
+                "blockwise scheduling streams between two arrays of populations".into(),
+            ));
+        }
+    }
     for (name, len) in [
         ("first coefficient", problem.first.len()),
         ("second coefficient", problem.second.len()),
@@ -723,7 +754,10 @@ pub fn march(problem: &LatticeProblem, settings: &MarchSettings) -> Result<March
     }
     // Emitted per step: Σ_i s_i over the cells (the first moment's part sums to 0).
     let w_sum: f64 = collider.source_w.iter().map(|&w| f64::from(w)).sum();
-    let emitted_per_step: f64 = problem.source.iter().map(|&s| f64::from(s)).sum::<f64>() * w_sum;
+    // One iteration of a blockwise march advances every cell `steps_per_visit` steps.
+    let steps_per_iteration = settings.blocks.map_or(1, |b| b.steps_per_visit) as f64;
+    let emitted_per_step: f64 =
+        problem.source.iter().map(|&s| f64::from(s)).sum::<f64>() * w_sum * steps_per_iteration;
     let mut history = History::start();
     let mut step = 0usize;
     let mut previous = [0.0f64; 3];
@@ -732,7 +766,10 @@ pub fn march(problem: &LatticeProblem, settings: &MarchSettings) -> Result<March
         let mut sums = match settings.streaming {
             Streaming::InPlace if step.is_multiple_of(2) => aa_even(problem, &collider, &mut state),
             Streaming::InPlace => aa_odd(problem, &collider, &mut state),
-            Streaming::TwoArrays => pull(problem, &collider, &mut state),
+            Streaming::TwoArrays => match settings.blocks {
+                None => pull(problem, &collider, &mut state),
+                Some(blocks) => blockwise(problem, &collider, &mut state, blocks),
+            },
         };
         sums.escaped += carried;
         carried = sums.later;
@@ -1067,6 +1104,43 @@ fn chunks_by_slab(
 /// wall's rule on its own outgoing ones where x − e_k is outside), collides into g, and the
 /// arrays swap. Reads are shared, writes are the cell's own: one pass, no conflicts.
 fn pull(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> StepSums {
+    let nz = problem.dims[2];
+    let sums = pull_slabs(problem, collider, state, 0..nz);
+    std::mem::swap(&mut state.f, &mut state.g);
+    sums
+}
+
+/// One blockwise sweep: each block of slabs in turn takes its steps, pulling from f (its
+/// neighbours' latest populations) into g and copying its slabs of g back into f.
+fn blockwise(
+    problem: &LatticeProblem,
+    collider: &Collider,
+    state: &mut State,
+    blocks: Blocks,
+) -> StepSums {
+    let [nx, ny, nz] = problem.dims;
+    let slab = nx * ny;
+    let mut sums = StepSums::new();
+    for start in (0..nz).step_by(blocks.slabs) {
+        let range = start..(start + blocks.slabs).min(nz);
+        for _ in 0..blocks.steps_per_visit {
+            sums = sums.plus(pull_slabs(problem, collider, state, range.clone()));
+            let cells = range.start * slab..range.end * slab;
+            for (f, g) in state.f.iter_mut().zip(&state.g) {
+                f[cells.clone()].copy_from_slice(&g[cells.clone()]);
+            }
+        }
+    }
+    sums
+}
+
+/// The pull step of the slabs `range`: their cells pull from f and collide into g.
+fn pull_slabs(
+    problem: &LatticeProblem,
+    collider: &Collider,
+    state: &mut State,
+    range: std::ops::Range<usize>,
+) -> StepSums {
     let dims = problem.dims;
     let [nx, ny, nz] = dims;
     let q = collider.q;
@@ -1079,10 +1153,11 @@ fn pull(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> Ste
         .map(|v| v[0] as isize + nx as isize * (v[1] as isize + ny as isize * v[2] as isize))
         .collect();
     let mut g_slabs = chunks_by_slab(&mut state.g, slab, nz, |_| 0);
-    let sums = g_slabs
+    g_slabs
         .par_iter_mut()
         .zip(state.rho.par_chunks_mut(slab))
         .enumerate()
+        .filter(|(z, _)| range.contains(z))
         .map(|(z, (g, rho_slab))| {
             let mut sums = StepSums::new();
             let (mut fin, mut fout) = (vec![0.0f32; q], vec![0.0f32; q]);
@@ -1171,9 +1246,7 @@ fn pull(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> Ste
             }
             sums
         })
-        .reduce(StepSums::new, StepSums::plus);
-    std::mem::swap(&mut state.f, &mut state.g);
-    sums
+        .reduce(StepSums::new, StepSums::plus)
 }
 
 /// AA even step: each cell reads its own slots (the walls' inflow from its side slots),

@@ -158,6 +158,10 @@ impl LbmSolver {
             absorption: self.params.absorption,
             streaming: self.params.streaming,
             stopping,
+            blocks: (self.params.block_slabs > 0).then_some(crate::march::Blocks {
+                slabs: self.params.block_slabs,
+                steps_per_visit: self.params.block_steps,
+            }),
         }
     }
 

@@ -36,6 +36,7 @@ fn spread(velocities: Velocities, kappa_t: f32, kappa_a: f32, n: usize, steps: u
             max_iterations: steps,
             ..Stopping::default()
         },
+        blocks: None,
     };
     let m = march(&problem, &settings).unwrap();
     let (mut mass, mut second) = (0.0f64, 0.0f64);

@@ -77,6 +77,7 @@ fn settings(
             max_iterations: steps,
             ..Stopping::default()
         },
+        blocks: None,
     }
 }
 

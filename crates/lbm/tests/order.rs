@@ -84,6 +84,7 @@ fn error(n: usize, d: f64, sigma_a: f64, wall: Wall, moment: f64, velocities: Ve
             max_iterations: 20_000,
             ..Stopping::default()
         },
+        blocks: None,
     };
     let m = march(&problem, &settings).unwrap();
     let residual = m.residuals.last().copied().unwrap_or(1.0);
