@@ -53,6 +53,16 @@ pub struct Tolerance {
     /// its CPU twin, where the tolerance is the f32-against-f64 difference.
     #[serde(default)]
     pub twin: Option<String>,
+    /// Solve on `factor` times the scene's cells per axis (the medium resampled, as the
+    /// pareto sweep refines), against a twin solved on the same cells: the convergence
+    /// checks too slow for the default test run, run by `cargo xtask crosscheck
+    /// --refined` (skipped otherwise, and said so).
+    #[serde(default = "one")]
+    pub factor: usize,
+}
+
+fn one() -> usize {
+    1
 }
 
 /// What a harness entry requires of its run.
@@ -384,8 +394,14 @@ impl Outcome {
     }
 }
 
-/// Runs every entry of the suite's tolerance table.
+/// Runs every entry of the suite's tolerance table but the refined ones
+/// ([`Tolerance::factor`]), which are reported as skipped.
 pub fn run(suite: &Path, cache: Option<&Path>) -> Result<Vec<Outcome>, Error> {
+    run_with(suite, cache, false)
+}
+
+/// Runs every entry of the suite's tolerance table, the refined ones too if `refined`.
+pub fn run_with(suite: &Path, cache: Option<&Path>, refined: bool) -> Result<Vec<Outcome>, Error> {
     let (scenes, tolerances) = load_suite(suite)?;
     let registry = crate::registry();
     let mut outcomes = Vec::new();
@@ -401,10 +417,35 @@ pub fn run(suite: &Path, cache: Option<&Path>) -> Result<Vec<Outcome>, Error> {
             })?;
         let solver = registry.build(&entry.solver, &entry.params)?;
         let capabilities = solver.capabilities();
+        if entry.factor == 0 || (entry.factor > 1 && entry.twin.is_none()) {
+            return Err(Error::Invalid(format!(
+                "tolerances.toml: {} on {}: factor {} (a refined check needs factor ≥ 2 and a twin solved on the same cells)",
+                entry.solver, entry.scene, entry.factor
+            )));
+        }
+        if entry.factor > 1 && !refined {
+            outcomes.push(Outcome {
+                solver: entry.solver.clone(),
+                scene: entry.scene.clone(),
+                result: CheckResult::Skipped(format!(
+                    "a refined check ({}x cells per axis): `cargo xtask crosscheck --refined` runs it",
+                    entry.factor
+                )),
+                tolerance: entry,
+            });
+            continue;
+        }
+        let fine;
+        let problem = if entry.factor == 1 {
+            &scene.built.problem
+        } else {
+            fine = crate::pareto::refined(scene, entry.factor)?;
+            &fine
+        };
         let start = Instant::now();
-        let solved = match solver.admits(&scene.built.problem) {
+        let solved = match solver.admits(problem) {
             Err(e) => Err(e),
-            Ok(()) => solver.solve(&scene.built.problem, &SolveOptions::default()),
+            Ok(()) => solver.solve(problem, &SolveOptions::default()),
         };
         let seconds = start.elapsed().as_secs_f64();
         let result = match solved {
@@ -418,7 +459,7 @@ pub fn run(suite: &Path, cache: Option<&Path>) -> Result<Vec<Outcome>, Error> {
                     Some(twin) => {
                         let solution = registry
                             .build(twin, &Params::default())?
-                            .solve(&scene.built.problem, &SolveOptions::default())?;
+                            .solve(problem, &SolveOptions::default())?;
                         Reference {
                             fluence: solution.fluence,
                             mask: None,

@@ -50,7 +50,7 @@ pub struct Point {
 /// The same medium on `factor` times as many cells per axis: every grid resampled
 /// trilinearly at the finer cell centres, so that refining converges to the scene's own
 /// (trilinear) medium instead of revealing new detail of a procedural volume.
-fn refined(scene: &SuiteScene, factor: usize) -> Result<Problem, Error> {
+pub(crate) fn refined(scene: &SuiteScene, factor: usize) -> Result<Problem, Error> {
     let p = &scene.built.problem;
     let fine = p.geometry().dims().map(|n| n * factor);
     let up = |g: &Grid| {
@@ -318,6 +318,17 @@ pub fn runs() -> Vec<Run> {
         tolerance: Some(1e-4),
         ..Run::new("gpu-ftcs-p1", String::new(), 1, "tolerance 1e-4".into())
     });
+    for &tolerance in &[1e-3, 1e-6] {
+        runs.push(Run {
+            tolerance: Some(tolerance),
+            ..Run::new(
+                "gpu-lbm",
+                String::new(),
+                1,
+                format!("d3q7 trt, tolerance {tolerance:.0e}"),
+            )
+        });
+    }
     // Monte Carlo: paths (8 batches).
     for particles in [1000, 4000, 16000, 64000] {
         runs.push(Run::new(

@@ -14,6 +14,9 @@
 //! - `gpu-ftcs-p1`, one step: φ, E_x, E_y, E_z, q read and φ′ written (24), φ, E read and
 //!   E′ written (28) = 52 bytes;
 //! - `gpu-convection-diffusion`, one light's pass: σ_t 4 + ρ 4 + ρ′ 4 = 12 bytes;
+//! - `gpu-lbm` (D3Q7, the point light inside, so no first moment), one pull step: the
+//!   populations read and written (7 × 8) + D/h, κ_a, q₀ (12) + ρ read and written (8)
+//!   = 76 bytes;
 //! - `gpu-direct`, one light: σ_t 4 + the transmittance 4 = 8 bytes (the march itself
 //!   reads O(N) values per cell from cache: it is bound by arithmetic, not bandwidth).
 //!
@@ -57,7 +60,7 @@ pub(crate) fn run(sizes: &[usize]) -> Result<(), String> {
         scattering
             .0
             .insert("scattering".into(), ParamValue::Float(0.0));
-        let cases: [(&str, &Problem, Params, SolveOptions, f64); 4] = [
+        let cases: [(&str, &Problem, Params, SolveOptions, f64); 5] = [
             (
                 "gpu-ftcs-diffusion",
                 &problems.point,
@@ -71,6 +74,13 @@ pub(crate) fn run(sizes: &[usize]) -> Result<(), String> {
                 Params::default(),
                 fixed(0.0),
                 52.0,
+            ),
+            (
+                "gpu-lbm",
+                &problems.point,
+                Params::default(),
+                fixed(0.0),
+                76.0,
             ),
             (
                 "gpu-convection-diffusion",

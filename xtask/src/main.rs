@@ -6,7 +6,8 @@
 //! - `doc`: `cargo doc --workspace --no-deps` with rustdoc warnings denied.
 //! - `tidy`: the repository's own checks (`tests/tidy.rs`): crate docs present, no stray
 //!   `dbg!`/`todo!`, every crate listed in ARCHITECTURE.md.
-//! - `crosscheck`: every solver on every suite scene against its reference; prints the
+//! - `crosscheck [--refined]`: every solver on every suite scene against its reference
+//!   (with `--refined`, the convergence checks on refined grids too); prints the
 //!   table and writes `docs/validation.md`. References are cached in
 //!   `target/crosscheck-cache/`.
 //!
@@ -62,7 +63,7 @@ mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] | bench-lbm [N] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck [--refined] | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] | bench-lbm [N] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -70,7 +71,8 @@ fn main() -> ExitCode {
         return fuzz(std::env::args().skip(2).collect());
     }
     if command.as_deref() == Some("crosscheck") {
-        return crosscheck();
+        let refined = std::env::args().any(|a| a == "--refined");
+        return crosscheck(refined);
     }
     if command.as_deref() == Some("mitsuba") {
         let spp = std::env::args()
@@ -264,15 +266,16 @@ fn main() -> ExitCode {
 }
 
 /// Runs the cross-check harness and writes `docs/validation.md`.
-fn crosscheck() -> ExitCode {
+fn crosscheck(refined: bool) -> ExitCode {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     if std::env::var_os("LUCENT_DATA").is_none() {
         eprintln!("xtask: LUCENT_DATA not set; the suite's CT scene reads ../shared/data/volumes");
     }
     let started = std::time::Instant::now();
-    let outcomes = match lucent::crosscheck::run(
+    let outcomes = match lucent::crosscheck::run_with(
         &root.join("examples/scenes/suite"),
         Some(&root.join("target/crosscheck-cache")),
+        refined,
     ) {
         Ok(o) => o,
         Err(e) => {
@@ -280,7 +283,12 @@ fn crosscheck() -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let markdown = lucent::crosscheck::validation_markdown(&outcomes, "cargo xtask crosscheck");
+    let command = if refined {
+        "cargo xtask crosscheck --refined"
+    } else {
+        "cargo xtask crosscheck"
+    };
+    let markdown = lucent::crosscheck::validation_markdown(&outcomes, command);
     eprint!("{markdown}");
     eprintln!(
         "xtask: crosscheck took {:.1} s",

@@ -8,6 +8,7 @@
 //! | `gpu-ftcs-diffusion` | `ftcs-diffusion` | FTCS steps on the assembled CSR system, in correction form |
 //! | `gpu-ftcs-p1` | `ftcs-p1` | P1 FTCS steps (φ and E ping-pong) |
 //! | `gpu-convection-diffusion` | `convection-diffusion` (characteristic model) | layer sweeps per light, red–black Gauss–Seidel scattering |
+//! | `gpu-lbm` | `lbm` | Lattice-Boltzmann pull steps, one dispatch per step |
 //!
 //! The device is the process's shared [`GpuContext`]; no adapter is a
 //! [`SolveError::Device`] with `unavailable` set, raised after the capability check (so a
@@ -21,6 +22,7 @@ use lucent_core::{
 use lucent_diffusion::DiffusionSolver;
 use lucent_explicit::{ExplicitSolver, FtcsDiffusionParams, Lattice, P1Params};
 use lucent_gpu::{GpuContext, GpuError};
+use lucent_lbm::{LbmParams, LbmSolver};
 
 use crate::params::GpuConvectionParams;
 
@@ -37,6 +39,7 @@ enum Backend {
     FtcsDiffusion(FtcsDiffusionParams),
     P1(P1Params),
     Convection(GpuConvectionParams),
+    Lbm(LbmParams),
 }
 
 /// A device error as a solve error of `solver`.
@@ -110,18 +113,34 @@ impl GpuSolver {
         resolved: |p| resolved_params::<GpuConvectionParams>(p, "gpu-convection-diffusion"),
     };
 
+    /// `gpu-lbm` ([`LbmParams`]).
+    pub const GPU_LBM: SolverEntry = SolverEntry {
+        name: "gpu-lbm",
+        summary: "lbm on the GPU: the same lattice, collision and walls, one dispatch per pull step, one buffer per link",
+        build: |p| {
+            Ok(Box::new(GpuSolver {
+                name: "gpu-lbm",
+                backend: Backend::Lbm(p.parse("gpu-lbm")?),
+            }))
+        },
+        params: param_docs::<LbmParams>,
+        resolved: |p| resolved_params::<LbmParams>(p, "gpu-lbm"),
+    };
+
     /// Every GPU entry.
-    pub const ENTRIES: [SolverEntry; 4] = [
+    pub const ENTRIES: [SolverEntry; 5] = [
         Self::GPU_DIRECT,
         Self::GPU_FTCS_DIFFUSION,
         Self::GPU_FTCS_P1,
         Self::GPU_CONVECTION_DIFFUSION,
+        Self::GPU_LBM,
     ];
 
     /// The CPU twin, for its capabilities and its stability checks.
     fn twin(&self) -> Box<dyn Solver> {
         let built = match &self.backend {
             Backend::Direct(d) => return Box::new(*d),
+            Backend::Lbm(p) => return Box::new(LbmSolver::new(*p)),
             Backend::FtcsDiffusion(_) => return Box::new(DiffusionSolver::custom(self.name)),
             Backend::P1(_) => (ExplicitSolver::FTCS_P1.build)(&Params::default()),
             Backend::Convection(p) => {
@@ -154,6 +173,11 @@ impl Solver for GpuSolver {
             Backend::FtcsDiffusion(_) => crate::ftcs::memory_bytes(problem),
             Backend::P1(_) => crate::p1::memory_bytes(problem),
             Backend::Convection(_) => crate::convection::memory_bytes(problem),
+            Backend::Lbm(p) => {
+                problem.geometry().voxel_count() as u64
+                    * crate::lbm::bytes_per_cell(&LbmSolver::new(*p))
+                    * problem.channels() as u64
+            }
         };
         if needed > options.memory_budget {
             return Err(SolveError::OverBudget {
@@ -194,6 +218,14 @@ impl Solver for GpuSolver {
             Backend::P1(_) => {
                 device(self.name)?;
                 driver::solve_per_channel(self, self, problem, options).map(|(s, _)| s)
+            }
+            Backend::Lbm(params) => {
+                device(self.name)?;
+                let method = crate::lbm::GpuLbm {
+                    cpu: LbmSolver::new(*params),
+                    name: self.name,
+                };
+                driver::solve_per_channel(self, &method, problem, options).map(|(s, _)| s)
             }
             Backend::Convection(params) => {
                 let gpu = device(self.name)?;

@@ -122,6 +122,10 @@ impl GpuContext {
             max_storage_buffer_binding_size: offered.max_storage_buffer_binding_size,
             max_buffer_size: offered.max_buffer_size,
             max_storage_buffers_per_shader_stage: offered.max_storage_buffers_per_shader_stage,
+            // All buffers a stage binds (storage + uniform): `gpu-lbm`'s D3Q19 step binds
+            // 25 storage buffers and one uniform block.
+            max_buffers_and_acceleration_structures_per_shader_stage: offered
+                .max_buffers_and_acceleration_structures_per_shader_stage,
             max_compute_workgroups_per_dimension: offered.max_compute_workgroups_per_dimension,
             max_compute_invocations_per_workgroup: 256,
             max_compute_workgroup_size_x: 256,

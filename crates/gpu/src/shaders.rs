@@ -42,6 +42,18 @@ pub const P1_FLUX: &str = kernel!("p1_flux.wgsl");
 pub const CONVECTION: &str = kernel!("convection.wgsl");
 /// `gpu-convection-diffusion`: red–black Gauss–Seidel of the implicit scattering step.
 pub const SCATTER: &str = kernel!("scatter.wgsl");
+/// `gpu-lbm` on the D3Q7 lattice: one pull step (`lbm_d3q7.wgsl` + `lbm.wgsl`).
+pub const LBM_D3Q7: &str = concat!(
+    include_str!("../../../shaders/common.wgsl"),
+    include_str!("../../../shaders/lbm_d3q7.wgsl"),
+    include_str!("../../../shaders/lbm.wgsl")
+);
+/// `gpu-lbm` on the D3Q19 lattice: one pull step (`lbm_d3q19.wgsl` + `lbm.wgsl`).
+pub const LBM_D3Q19: &str = concat!(
+    include_str!("../../../shaders/common.wgsl"),
+    include_str!("../../../shaders/lbm_d3q19.wgsl"),
+    include_str!("../../../shaders/lbm.wgsl")
+);
 /// The largest change between two fields (stopping rules of passes).
 pub const MAX_CHANGE: &str = kernel!("max_change.wgsl");
 /// lucent-render's ray march on the device: one invocation per pixel.
@@ -59,6 +71,8 @@ pub const ALL: &[(&str, &str)] = &[
     ("p1_flux.wgsl", P1_FLUX),
     ("convection.wgsl", CONVECTION),
     ("scatter.wgsl", SCATTER),
+    ("lbm_d3q7.wgsl + lbm.wgsl", LBM_D3Q7),
+    ("lbm_d3q19.wgsl + lbm.wgsl", LBM_D3Q19),
     ("max_change.wgsl", MAX_CHANGE),
     ("render.wgsl", RENDER),
 ];

@@ -17,3 +17,26 @@ pub enum LbmError {
         value: f64,
     },
 }
+
+impl LbmError {
+    /// The error as `solver`'s solve error: a stability limit as
+    /// [`SolveError::Unstable`], anything else as an invalid problem.
+    pub fn into_solve_error(self, solver: &str) -> lucent_core::SolveError {
+        match self {
+            LbmError::Unstable {
+                parameter,
+                limit,
+                value,
+            } => lucent_core::SolveError::Unstable {
+                solver: solver.into(),
+                parameter: parameter.into(),
+                limit,
+                requested: value,
+            },
+            LbmError::Invalid(reason) => lucent_core::SolveError::InvalidParameter {
+                name: "problem".into(),
+                reason,
+            },
+        }
+    }
+}

@@ -55,8 +55,8 @@ mod solver;
 pub use error::LbmError;
 pub use lattice::{Links, Velocities};
 pub use march::{
-    Absorption, Blocks, Bookkeeping, Collision, LatticeProblem, MarchSettings, Marched, Streaming,
-    Wall, march,
+    Absorption, Blocks, Bookkeeping, Collision, LatticeProblem, Ledger, MarchSettings, Marched,
+    Streaming, Wall, check, held_and_pending, march,
 };
 pub use params::LbmParams;
 pub use solver::{LbmSolver, wall};

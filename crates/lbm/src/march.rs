@@ -168,6 +168,87 @@ impl Bookkeeping {
     }
 }
 
+/// The energy books and the residual of a march, step by step: what the CPU lattice and
+/// its device twin (`gpu-lbm`) share, so both stop by one rule.
+///
+/// The residual of a step is the larger of the relative change of the fluence,
+/// ‖ρ′ − ρ‖/‖ρ′‖, and the energy imbalance per step (the mean of the last two steps'
+/// emitted, absorbed and escaped light: the AA pattern answers an even step's walls in
+/// the odd step after it, so one step's escape alone alternates).
+#[derive(Debug, Clone)]
+pub struct Ledger {
+    book: Bookkeeping,
+    previous: [f64; 3],
+    steps: usize,
+    emitted_per_step: f64,
+    shines: bool,
+}
+
+impl Ledger {
+    /// The books of a march of `problem` from zero.
+    pub fn new(problem: &LatticeProblem, settings: &MarchSettings) -> Self {
+        let collider = Collider::new(settings);
+        // Emitted per step: Σ_i s_i over the cells (the first moment's part sums to 0).
+        let w_sum: f64 = collider.source_w.iter().map(|&w| f64::from(w)).sum();
+        // One iteration of a blockwise march advances every cell `steps_per_visit` steps.
+        let steps_per_iteration = settings.blocks.map_or(1, |b| b.steps_per_visit) as f64;
+        let emitted_per_step: f64 =
+            problem.source.iter().map(|&s| f64::from(s)).sum::<f64>() * w_sum * steps_per_iteration;
+        // Before any light has reached a cell the relative change is undefined: not
+        // converged, unless nothing shines at all (the zero field is the solution).
+        let shines = emitted_per_step != 0.0
+            || matches!(problem.wall, Wall::Dirichlet { value } if value != 0.0)
+            || matches!(problem.wall, Wall::Neumann { flux } if flux != 0.0);
+        Self {
+            book: Bookkeeping::default(),
+            previous: [0.0; 3],
+            steps: 0,
+            emitted_per_step,
+            shines,
+        }
+    }
+
+    /// Steps recorded.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    /// Records one step's absorbed and escaped light and its Σ(ρ′ − ρ)² and Σρ′² (f64
+    /// sums over the cells); returns the step's (relative, absolute) residual for
+    /// [`History::record_step`]: the relative one is the larger of the change and the
+    /// imbalance (the change alone stalls near 2e-7, f32 rounding, while the lattice
+    /// still fills slowly; the imbalance says how far from steady it is in energy).
+    pub fn step(&mut self, absorbed: f64, escaped: f64, change: f64, size: f64) -> (f64, f64) {
+        self.steps += 1;
+        self.book.emitted += self.emitted_per_step;
+        self.book.absorbed += absorbed;
+        self.book.escaped += escaped;
+        let last = [self.emitted_per_step, absorbed, escaped];
+        self.book.rates = if self.steps == 1 {
+            last
+        } else {
+            std::array::from_fn(|i| 0.5 * (self.previous[i] + last[i]))
+        };
+        self.previous = last;
+        let imbalance = self.book.steady_imbalance();
+        if size > 0.0 {
+            ((change / size).sqrt().max(imbalance), change.sqrt())
+        } else if self.shines {
+            (1.0, f64::MAX)
+        } else {
+            (0.0, 0.0)
+        }
+    }
+
+    /// The books at the end: `held` what the lattice holds, `pending` the escape its walls
+    /// have not yet answered.
+    pub fn finish(mut self, held: f64, pending: f64) -> Bookkeeping {
+        self.book.held = held;
+        self.book.escaped += pending;
+        self.book
+    }
+}
+
 /// A marched lattice.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Marched {
@@ -514,9 +595,9 @@ impl Collider {
     }
 }
 
-/// Checks a problem and the settings: coefficients finite and in range, the stability
-/// limits.
-pub(crate) fn check(problem: &LatticeProblem, settings: &MarchSettings) -> Result<(), LbmError> {
+/// Checks a problem against the settings before a march (every [`march`] does): sizes,
+/// finite sources, coefficients in range and within the stability limits.
+pub fn check(problem: &LatticeProblem, settings: &MarchSettings) -> Result<(), LbmError> {
     let n: usize = problem.dims.iter().product();
     if n == 0 {
         return Err(LbmError::Invalid("an empty grid".into()));
@@ -735,7 +816,6 @@ pub fn march(problem: &LatticeProblem, settings: &MarchSettings) -> Result<March
         walls: WallSlots::new(problem.dims, q),
         rho: vec![0.0; n],
     };
-    let mut book = Bookkeeping::default();
     // The zero state's wall answer: the two-array pattern counts it in its first step.
     let mut initial_escape = 0.0f64;
     if settings.streaming == Streaming::InPlace {
@@ -752,19 +832,14 @@ pub fn march(problem: &LatticeProblem, settings: &MarchSettings) -> Result<March
             }
         }
     }
-    // Emitted per step: Σ_i s_i over the cells (the first moment's part sums to 0).
-    let w_sum: f64 = collider.source_w.iter().map(|&w| f64::from(w)).sum();
-    // One iteration of a blockwise march advances every cell `steps_per_visit` steps.
-    let steps_per_iteration = settings.blocks.map_or(1, |b| b.steps_per_visit) as f64;
-    let emitted_per_step: f64 =
-        problem.source.iter().map(|&s| f64::from(s)).sum::<f64>() * w_sum * steps_per_iteration;
+    let mut ledger = Ledger::new(problem, settings);
     let mut history = History::start();
-    let mut step = 0usize;
-    let mut previous = [0.0f64; 3];
     let mut carried = initial_escape;
     let stop_reason = loop {
         let mut sums = match settings.streaming {
-            Streaming::InPlace if step.is_multiple_of(2) => aa_even(problem, &collider, &mut state),
+            Streaming::InPlace if ledger.steps().is_multiple_of(2) => {
+                aa_even(problem, &collider, &mut state)
+            }
             Streaming::InPlace => aa_odd(problem, &collider, &mut state),
             Streaming::TwoArrays => match settings.blocks {
                 None => pull(problem, &collider, &mut state),
@@ -773,56 +848,34 @@ pub fn march(problem: &LatticeProblem, settings: &MarchSettings) -> Result<March
         };
         sums.escaped += carried;
         carried = sums.later;
-        step += 1;
-        book.emitted += emitted_per_step;
-        book.absorbed += sums.absorbed;
-        book.escaped += sums.escaped;
-        // The last two steps' mean: the AA pattern answers the walls of an even step in
-        // the odd step after it, so one step's escape alone alternates.
-        let last = [emitted_per_step, sums.absorbed, sums.escaped];
-        book.rates = if step == 1 {
-            last
-        } else {
-            std::array::from_fn(|i| 0.5 * (previous[i] + last[i]))
-        };
-        previous = last;
         if !sums.finite {
-            break StopReason::DivergedNonFinite { iteration: step };
+            ledger.step(sums.absorbed, sums.escaped, sums.change, sums.size);
+            break StopReason::DivergedNonFinite {
+                iteration: ledger.steps(),
+            };
         }
-        // Before any light has reached a cell the relative change is undefined: not
-        // converged, unless nothing shines at all (the zero field is the solution).
-        let shines = emitted_per_step != 0.0
-            || matches!(problem.wall, Wall::Dirichlet { value } if value != 0.0)
-            || matches!(problem.wall, Wall::Neumann { flux } if flux != 0.0);
-        // The residual is the larger of the step's relative change of the fluence and
-        // the energy imbalance per step, |emitted − absorbed − escaped| over the larger
-        // side: the change alone stalls near 2e-7 (f32 rounding) while the lattice still
-        // fills slowly, the imbalance says how far from steady it is in energy.
-        let [e, a, x] = book.rates;
-        let imbalance = (e - a - x).abs() / e.max(a + x.abs()).max(1e-300);
-        let (relative, absolute) = if sums.size > 0.0 {
-            (
-                (sums.change / sums.size).sqrt().max(imbalance),
-                sums.change.sqrt(),
-            )
-        } else if shines {
-            (1.0, f64::MAX)
-        } else {
-            (0.0, 0.0)
-        };
-        if let Some(stop) = history.record_step(&settings.stopping, step, relative, absolute) {
+        let (relative, absolute) = ledger.step(sums.absorbed, sums.escaped, sums.change, sums.size);
+        if let Some(stop) =
+            history.record_step(&settings.stopping, ledger.steps(), relative, absolute)
+        {
             break stop;
         }
     };
-    let (held, pending) = in_flight(problem, &collider, &state, settings.streaming, step);
-    book.held = held;
-    book.escaped += pending + carried;
+    let step = ledger.steps();
+    let (held, pending) = in_flight(
+        problem,
+        &collider,
+        &state.f,
+        Some(&state.walls),
+        settings.streaming,
+        step,
+    );
     Ok(Marched {
         fluence: state.rho,
         steps: step,
         residuals: history.into_residuals(),
         stop_reason,
-        bookkeeping: book,
+        bookkeeping: ledger.finish(held, pending + carried),
     })
 }
 
@@ -1487,13 +1540,26 @@ fn aa_odd(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> S
         .reduce(StepSums::new, StepSums::plus)
 }
 
+/// What a two-array lattice holds (its post-collision populations `f`, one array per
+/// link) and the escape its walls have not yet answered: the end of a [`Ledger`] for a
+/// march run elsewhere (the device twin's).
+pub fn held_and_pending(
+    problem: &LatticeProblem,
+    settings: &MarchSettings,
+    f: &[Vec<f32>],
+) -> (f64, f64) {
+    let collider = Collider::new(settings);
+    in_flight(problem, &collider, f, None, Streaming::TwoArrays, 0)
+}
+
 /// What the lattice holds after `steps` steps (the populations the next step would
 /// collide) and the escape still pending (outgoing populations the walls have not yet
 /// answered: the rule is applied to them here).
 fn in_flight(
     problem: &LatticeProblem,
     collider: &Collider,
-    state: &State,
+    f: &[Vec<f32>],
+    walls: Option<&WallSlots>,
     streaming: Streaming,
     steps: usize,
 ) -> (f64, f64) {
@@ -1504,31 +1570,38 @@ fn in_flight(
     let opposite = &collider.links.opposite;
     let (mut held, mut pending) = (0.0f64, 0.0f64);
     let (mut outgoing, mut incoming) = (vec![0.0f32; q], vec![0.0f32; q]);
-    let f = &state.f;
     for z in 0..nz {
         for y in 0..ny {
             for x in 0..nx {
                 let at = [x, y, z];
                 let local = x + nx * y;
                 let c = local + nx * ny * z;
-                let w = state.walls.index[z][local];
+                // The two-array pattern keeps no side slots: every wall cell is answered
+                // from its own outgoing populations.
+                let w = match walls {
+                    Some(walls) => walls.index[z][local],
+                    None if on_wall(at, dims) => 0,
+                    None => u32::MAX,
+                };
                 // The wall's inflow into this cell for the next step.
                 incoming.fill(0.0);
                 let after_even = streaming == Streaming::InPlace && steps % 2 == 1;
                 if w != u32::MAX {
                     let range = w as usize * q..(w as usize + 1) * q;
                     match streaming {
-                        Streaming::InPlace if !after_even => {
-                            incoming.copy_from_slice(&state.walls.incoming[z][range]);
-                        }
                         Streaming::InPlace => {
-                            pending += collider.wall(
-                                problem.wall,
-                                at,
-                                dims,
-                                &state.walls.outgoing[z][range],
-                                &mut incoming,
-                            );
+                            let walls = walls.expect("the AA pattern's side slots");
+                            if after_even {
+                                pending += collider.wall(
+                                    problem.wall,
+                                    at,
+                                    dims,
+                                    &walls.outgoing[z][range],
+                                    &mut incoming,
+                                );
+                            } else {
+                                incoming.copy_from_slice(&walls.incoming[z][range]);
+                            }
                         }
                         Streaming::TwoArrays => {
                             for k in 0..q {

@@ -18,7 +18,6 @@ use lucent_core::{
 use lucent_grid::Grid;
 use lucent_optics::PhaseFunction;
 
-use crate::error::LbmError;
 use crate::march::{Collision, LatticeProblem, MarchSettings, Streaming, Wall, march};
 use crate::params::LbmParams;
 
@@ -26,30 +25,6 @@ use crate::params::LbmParams;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LbmSolver {
     params: LbmParams,
-}
-
-fn invalid(name: &str, reason: impl Into<String>) -> SolveError {
-    SolveError::InvalidParameter {
-        name: name.into(),
-        reason: reason.into(),
-    }
-}
-
-/// A lattice error as a solve error of `lbm`.
-fn lbm_error(e: LbmError) -> SolveError {
-    match e {
-        LbmError::Unstable {
-            parameter,
-            limit,
-            value,
-        } => SolveError::Unstable {
-            solver: "lbm".into(),
-            parameter: parameter.into(),
-            limit,
-            requested: value,
-        },
-        LbmError::Invalid(reason) => invalid("problem", reason),
-    }
 }
 
 /// The wall of a problem's boundary for `collision`, in lattice units: the diffusion
@@ -81,6 +56,11 @@ impl LbmSolver {
         params: param_docs::<LbmParams>,
         resolved: |p| resolved_params::<LbmParams>(p, "lbm"),
     };
+
+    /// The solver with `params`.
+    pub fn new(params: LbmParams) -> Self {
+        Self { params }
+    }
 
     /// Builds from registry parameters.
     pub fn from_params(params: &Params) -> Result<Self, SolveError> {
@@ -151,7 +131,8 @@ impl LbmSolver {
         }
     }
 
-    fn settings(&self, stopping: lucent_core::Stopping) -> MarchSettings {
+    /// The march's settings from the parameters, stopping by `stopping`.
+    pub fn settings(&self, stopping: lucent_core::Stopping) -> MarchSettings {
         MarchSettings {
             velocities: self.params.lattice,
             collision: self.params.collision,
@@ -167,7 +148,7 @@ impl LbmSolver {
 
     /// Bytes per cell: the populations (twice for two arrays), ρ, two coefficients and the
     /// source with its first moment, in f32.
-    fn bytes_per_cell(&self) -> u64 {
+    pub fn bytes_per_cell(&self) -> u64 {
         let q = self.params.lattice.len() as u64;
         let copies = match self.params.streaming {
             Streaming::InPlace => 1,
@@ -236,8 +217,8 @@ impl ChannelMethod for LbmSolver {
     ) -> Result<ChannelSolution<Grid>, SolveError> {
         let geometry = *channel.problem.geometry();
         let lattice = self.lattice_problem(&channel);
-        let marched =
-            march(&lattice, &self.settings(channel.stopping.clone())).map_err(lbm_error)?;
+        let marched = march(&lattice, &self.settings(channel.stopping.clone()))
+            .map_err(|e| e.into_solve_error("lbm"))?;
         let n = geometry.voxel_count() as u64;
         Ok(ChannelSolution {
             fluence: marched.fluence.clone(),
