@@ -610,18 +610,22 @@ where
             let uncollided = if external.is_empty() {
                 None
             } else {
-                // Straight lines through the medium only.
+                // Through the medium only: straight lines, or curved rays where the
+                // problem's refractive index is graded (`Uncollided::curved`).
                 let medium = match problem.embedded() {
                     Some(sdf) => problem.medium().masked(sdf),
                     None => problem.medium().clone(),
                 };
-                let p = Problem::new(
+                let mut p = Problem::new(
                     *problem.geometry(),
                     medium,
                     external,
                     Boundary::Vacuum,
                     None,
                 )?;
+                if let Some(index) = problem.refractive_index() {
+                    p = p.with_refractive_index(index.clone())?;
+                }
                 let mut options = context.options_within(0.0, UNCOLLIDED_SHARE);
                 if let Some(callback) = options.progress.take() {
                     // Its `done` is not the solve's.

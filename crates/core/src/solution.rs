@@ -65,31 +65,34 @@ impl LightTransmittance {
             + f64::from(iso.sample_trilinear(x)) / (4.0 * std::f64::consts::PI)
     }
 
+    /// How light `l` arrives at `x`: its direction of travel and its irradiance per unit
+    /// of its spectrum before attenuation (the straight line's, or the curved ray's where
+    /// `arrivals` has it); `None` where it does not arrive (behind a spot's cone).
+    pub fn arrival(&self, l: usize, x: DVec3) -> Option<(DVec3, f64)> {
+        let light = &self.lights[l];
+        light
+            .arrival(x, self.far, self.min_distance)
+            .map(|(w, irradiance, _)| match self.arrivals.get(l) {
+                Some(curved) => {
+                    let sample = |g: &[Grid; 3]| {
+                        DVec3::from_array(g.each_ref().map(|g| f64::from(g.sample_trilinear(x))))
+                    };
+                    let emission = light
+                        .emission_toward((w + sample(&curved.launch_bend)).normalize_or_zero());
+                    let focusing = f64::from(curved.focusing.sample_trilinear(x));
+                    (
+                        (w + sample(&curved.bend)).normalize_or_zero(),
+                        emission * light.spreading(x, self.min_distance) * focusing,
+                    )
+                }
+                None => (w, irradiance),
+            })
+    }
+
     fn sum(&self, channel: usize, x: DVec3, weight: impl Fn(DVec3) -> f64) -> f64 {
         let mut total = 0.0;
         for (l, (light, grids)) in self.lights.iter().zip(&self.transmittance).enumerate() {
-            let arrival =
-                light
-                    .arrival(x, self.far, self.min_distance)
-                    .map(|(w, irradiance, _)| match self.arrivals.get(l) {
-                        Some(curved) => {
-                            let sample = |g: &[Grid; 3]| {
-                                DVec3::from_array(
-                                    g.each_ref().map(|g| f64::from(g.sample_trilinear(x))),
-                                )
-                            };
-                            let emission = light.emission_toward(
-                                (w + sample(&curved.launch_bend)).normalize_or_zero(),
-                            );
-                            let focusing = f64::from(curved.focusing.sample_trilinear(x));
-                            (
-                                (w + sample(&curved.bend)).normalize_or_zero(),
-                                emission * light.spreading(x, self.min_distance) * focusing,
-                            )
-                        }
-                        None => (w, irradiance),
-                    });
-            if let Some((w, irradiance)) = arrival {
+            if let Some((w, irradiance)) = self.arrival(l, x) {
                 let t = grids[channel.min(grids.len() - 1)].sample_trilinear(x);
                 total += weight(w) * light.spectrum().channel(channel) * irradiance * f64::from(t);
             }

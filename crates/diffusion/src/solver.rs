@@ -187,6 +187,9 @@ impl Solver for DiffusionSolver {
             ],
             output: OutputKind::AngularRadiance,
             fluence: FluenceKind::Total,
+            // Lights outside enter as first-collision sources along curved rays
+            // (`Uncollided::curved`); the scattered light diffuses as in a uniform index.
+            graded_index: true,
             ..Capabilities::default()
         }
     }

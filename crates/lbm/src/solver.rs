@@ -184,6 +184,9 @@ impl Solver for LbmSolver {
             output: OutputKind::AngularRadiance,
             fluence: FluenceKind::Total,
             cubic_cells_only: true,
+            // Lights outside enter as first-collision sources along curved rays
+            // (`Uncollided::curved`); the lattice's scattered light as in a uniform index.
+            graded_index: true,
             ..Capabilities::default()
         }
     }
