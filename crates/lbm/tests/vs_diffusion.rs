@@ -7,8 +7,10 @@
 //! box, both lattices. The bound is 2 % relative L2 at 64³; at 24³ every class here
 //! is within 1.5 %. A one-off run of these cases at 64³ (2026-11-25, before its time ran
 //! out) gave 0.06 % (D3Q7) and 0.15 % (D3Q19) on the blob under the sun, and at most 0.04 %
-//! (D3Q7) on the RGB medium under the sky and the spot; docs/validation.md does not yet
-//! have the suite's runs at 64³.
+//! (D3Q7) on the RGB medium under the sky and the spot. The suite's diffusive scenes on
+//! refined grids (32×32×128, 65×55×95, 72³: 0.01-0.03 %) are in docs/validation.md, from
+//! `cargo xtask crosscheck --refined` (the lattice's O(N²) steps keep them out of the
+//! default test run).
 
 use glam::DVec3;
 use lucent_core::{
