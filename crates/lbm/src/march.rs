@@ -437,9 +437,9 @@ impl Collider {
     /// amount per lane.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    pub(crate) fn relax_lanes<const L: usize>(
+    pub(crate) fn relax_lanes<const L: usize, const Q: usize>(
         &self,
-        f: &[&[f32; L]],
+        f: &[&[f32; L]; Q],
         d: &[f32; L],
         ka: &[f32; L],
         q0: &[f32; L],
@@ -450,7 +450,7 @@ impl Collider {
     ) {
         let cs2 = self.cs2;
         let mut rho = [0.0f32; L];
-        for fk in &f[..self.q] {
+        for fk in f {
             for l in 0..L {
                 rho[l] += fk[l];
             }
@@ -494,25 +494,29 @@ impl Collider {
         // The isotropic source and sink enter the even moments weighted 1 − ω⁺/2; the
         // first moment's odd source is weighted 1 − ω⁻/2, so that it drives the flux
         // 3 c_s² (1/ω⁻ − ½) Q₁ = 3 D Q₁ as P1 has it.
-        let w0 = self.w[0];
+        // The link tables as arrays of the lattice's size: no bounds checks in the loops.
+        let w: [f32; Q] = std::array::from_fn(|k| self.w[k]);
+        let e3: [[f32; 3]; Q] = std::array::from_fn(|k| self.e3[k]);
+        let source_w: [f32; Q] = std::array::from_fn(|k| self.source_w[k]);
+        let w0 = w[0];
         for l in 0..L {
             let half = 1.0 - 0.5 * even[l];
             out[0][l] = f[0][l] - even[l] * (f[0][l] - w0 * r[l]) + half * (w0 * net[l] + kept[l]);
         }
-        for i in (1..self.q).step_by(2) {
+        for i in (1..Q).step_by(2) {
             let j = i + 1;
-            let w = self.w[i];
+            let wi = w[i];
             for l in 0..L {
                 let half = 1.0 - 0.5 * even[l];
                 let plus = 0.5 * (f[i][l] + f[j][l]);
                 let minus = 0.5 * (f[i][l] - f[j][l]);
-                let common = even[l] * (plus - w * r[l]) - half * w * net[l];
+                let common = even[l] * (plus - wi * r[l]) - half * wi * net[l];
                 out[i][l] = f[i][l] - common - odd[l] * minus;
                 out[j][l] = f[j][l] - common + odd[l] * minus;
             }
             if let Some(m) = moment {
-                let (ei, ej) = (self.e3[i], self.e3[j]);
-                let (si, sj) = (self.source_w[i], self.source_w[j]);
+                let (ei, ej) = (e3[i], e3[j]);
+                let (si, sj) = (source_w[i], source_w[j]);
                 for l in 0..L {
                     let odd_half = 1.0 - 0.5 * odd[l];
                     out[i][l] +=
@@ -548,17 +552,33 @@ impl Collider {
                 let mut result = [[0.0f32; 1]; 19];
                 let m = cell.moment.map(|v| [v]);
                 let (mut rho, mut absorbed) = ([0.0f32], [0.0f32]);
-                let lanes: [&[f32; 1]; 19] = std::array::from_fn(|k| &lanes[k]);
-                self.relax_lanes::<1>(
-                    &lanes,
-                    &[cell.first],
-                    &[cell.second],
-                    &[cell.source],
-                    moment.then_some(&m),
-                    &mut result,
-                    &mut rho,
-                    &mut absorbed,
-                );
+                let m = moment.then_some(&m);
+                let (first, second, source) = ([cell.first], [cell.second], [cell.source]);
+                if self.q == 7 {
+                    let lanes: [&[f32; 1]; 7] = std::array::from_fn(|k| &lanes[k]);
+                    self.relax_lanes::<1, 7>(
+                        &lanes,
+                        &first,
+                        &second,
+                        &source,
+                        m,
+                        &mut result,
+                        &mut rho,
+                        &mut absorbed,
+                    );
+                } else {
+                    let lanes: [&[f32; 1]; 19] = std::array::from_fn(|k| &lanes[k]);
+                    self.relax_lanes::<1, 19>(
+                        &lanes,
+                        &first,
+                        &second,
+                        &source,
+                        m,
+                        &mut result,
+                        &mut rho,
+                        &mut absorbed,
+                    );
+                }
                 for (o, v) in out.iter_mut().zip(&result) {
                     *o = v[0];
                 }
@@ -883,6 +903,29 @@ impl StepSums {
         }
     }
 
+    /// Adds a block's step (ρ̂ and the absorbed light per lane; `old` holds the last ρ̂
+    /// and takes the new): the sums run in four independent f64 accumulators (lanes
+    /// l mod 4), so they vectorise and no lane waits on the one before.
+    #[inline(always)]
+    fn block<const L: usize>(&mut self, rho: &[f32; L], old: &mut [f32], absorbed: &[f32; L]) {
+        let (mut change, mut size, mut taken) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
+        let mut finite = true;
+        for l in 0..L {
+            let (r, o) = (f64::from(rho[l]), f64::from(old[l]));
+            let d = r - o;
+            change[l % 4] += d * d;
+            size[l % 4] += r * r;
+            taken[l % 4] += f64::from(absorbed[l]);
+            finite &= rho[l].is_finite();
+        }
+        store(old, rho);
+        let total = |v: [f64; 4]| (v[0] + v[1]) + (v[2] + v[3]);
+        self.change += total(change);
+        self.size += total(size);
+        self.absorbed += total(taken);
+        self.finite &= finite;
+    }
+
     /// Adds one cell's step.
     #[inline]
     fn cell(&mut self, rho: f32, old: &mut f32, absorbed: f32) {
@@ -932,10 +975,14 @@ pub fn march(problem: &LatticeProblem, settings: &MarchSettings) -> Result<March
     let mut carried = initial_escape;
     let stop_reason = loop {
         let mut sums = match settings.streaming {
-            Streaming::InPlace if ledger.steps().is_multiple_of(2) => {
-                aa_even(problem, &collider, &mut state)
-            }
-            Streaming::InPlace => aa_odd(problem, &collider, &mut state),
+            Streaming::InPlace if ledger.steps().is_multiple_of(2) => match q {
+                7 => aa_even::<7>(problem, &collider, &mut state),
+                _ => aa_even::<19>(problem, &collider, &mut state),
+            },
+            Streaming::InPlace => match q {
+                7 => aa_odd::<7>(problem, &collider, &mut state),
+                _ => aa_odd::<19>(problem, &collider, &mut state),
+            },
             Streaming::TwoArrays => match settings.blocks {
                 None => pull(problem, &collider, &mut state),
                 Some(blocks) => blockwise(problem, &collider, &mut state, blocks),
@@ -1008,14 +1055,12 @@ const BIG: usize = 64;
 /// A block's collided populations (the inputs are read in place).
 struct Buffers<const L: usize> {
     fout: [[f32; L]; 19],
-    zero: [f32; L],
 }
 
 impl<const L: usize> Buffers<L> {
     fn new() -> Box<Self> {
         Box::new(Self {
             fout: [[0.0; L]; 19],
-            zero: [0.0; L],
         })
     }
 }
@@ -1041,11 +1086,11 @@ impl BlockBuffers {
 /// from the problem, `fin` collided into `fout`, the sums accounted in cell order.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn relax_block<const L: usize>(
+fn relax_block<const L: usize, const Q: usize>(
     problem: &LatticeProblem,
     collider: &Collider,
     c: usize,
-    fin: &[&[f32; L]; 19],
+    fin: &[&[f32; L]; Q],
     fout: &mut [[f32; L]; 19],
     rho_slab: &mut [f32],
     local: usize,
@@ -1059,7 +1104,7 @@ fn relax_block<const L: usize>(
         [0, 1, 2].map(|a| std::array::from_fn(|l| m[l][a]))
     });
     let (mut rho, mut absorbed) = ([0.0f32; L], [0.0f32; L]);
-    collider.relax_lanes::<L>(
+    collider.relax_lanes::<L, Q>(
         fin,
         block(&problem.first, c),
         block(&problem.second, c),
@@ -1069,26 +1114,16 @@ fn relax_block<const L: usize>(
         &mut rho,
         &mut absorbed,
     );
-    for l in 0..L {
-        sums.cell(rho[l], &mut rho_slab[local + l], absorbed[l]);
-    }
+    sums.block(&rho, &mut rho_slab[local..local + L], &absorbed);
 }
 
-/// References to L populations of each link, `at(k)` giving link k's slice from the
-/// block's first cell (links beyond Q read `zero`): the collision reads the arrays in place.
+/// References to L populations of each of the Q links, `at(k)` giving link k's slice
+/// from the block's first cell: the collision reads the arrays in place.
 #[inline(always)]
-fn lane_refs<'a, const L: usize>(
-    q: usize,
-    zero: &'a [f32; L],
+fn lane_refs<'a, const L: usize, const Q: usize>(
     at: impl Fn(usize) -> &'a [f32],
-) -> [&'a [f32; L]; 19] {
-    std::array::from_fn(|k| {
-        if k < q {
-            at(k)[..L].try_into().expect("a block")
-        } else {
-            zero
-        }
-    })
+) -> [&'a [f32; L]; Q] {
+    std::array::from_fn(|k| at(k)[..L].try_into().expect("a block"))
 }
 
 /// How many cells from x on a row the interior kernels take at once: a block of [`BIG`] or
@@ -1112,7 +1147,7 @@ fn interior_run(x: usize, y: usize, z: usize, dims: [usize; 3]) -> usize {
 /// f_k(x − e_k), collide, and write their own cells of g.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn pull_block<const L: usize>(
+fn pull_block<const L: usize, const Q: usize>(
     problem: &LatticeProblem,
     collider: &Collider,
     f: &[Vec<f32>],
@@ -1124,9 +1159,7 @@ fn pull_block<const L: usize>(
     sums: &mut StepSums,
 ) {
     {
-        let fin = lane_refs(collider.q, &buffers.zero, |k| {
-            &f[k][(c as isize - offsets[k]) as usize..]
-        });
+        let fin = lane_refs::<L, Q>(|k| &f[k][(c as isize - offsets[k]) as usize..]);
         relax_block(
             problem,
             collider,
@@ -1138,15 +1171,18 @@ fn pull_block<const L: usize>(
             sums,
         );
     }
-    for k in 0..collider.q {
-        g[k].as_deref_mut().expect("own chunk")[local..local + L].copy_from_slice(&buffers.fout[k]);
+    for k in 0..Q {
+        store(
+            &mut g[k].as_deref_mut().expect("own chunk")[local..local + L],
+            &buffers.fout[k],
+        );
     }
 }
 
 /// AA even step: L interior cells read their own slots and write f*_k into slot k̄.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn aa_even_block<const L: usize>(
+fn aa_even_block<const L: usize, const Q: usize>(
     problem: &LatticeProblem,
     collider: &Collider,
     f: &mut [Option<&mut [f32]>],
@@ -1157,9 +1193,7 @@ fn aa_even_block<const L: usize>(
 ) {
     let opposite = &collider.links.opposite;
     {
-        let fin = lane_refs(collider.q, &buffers.zero, |k| {
-            &f[k].as_deref().expect("own")[local..]
-        });
+        let fin = lane_refs::<L, Q>(|k| &f[k].as_deref().expect("own")[local..]);
         relax_block(
             problem,
             collider,
@@ -1171,9 +1205,11 @@ fn aa_even_block<const L: usize>(
             sums,
         );
     }
-    for k in 0..collider.q {
-        f[opposite[k]].as_deref_mut().expect("own")[local..local + L]
-            .copy_from_slice(&buffers.fout[k]);
+    for k in 0..Q {
+        store(
+            &mut f[opposite[k]].as_deref_mut().expect("own")[local..local + L],
+            &buffers.fout[k],
+        );
     }
 }
 
@@ -1181,7 +1217,7 @@ fn aa_even_block<const L: usize>(
 /// x + e_k (`offsets`: each link's in-slab offset).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn aa_odd_block<const L: usize>(
+fn aa_odd_block<const L: usize, const Q: usize>(
     problem: &LatticeProblem,
     collider: &Collider,
     slots: &mut [Option<&mut [f32]>],
@@ -1193,7 +1229,7 @@ fn aa_odd_block<const L: usize>(
 ) {
     let opposite = &collider.links.opposite;
     {
-        let fin = lane_refs(collider.q, &buffers.zero, |k| {
+        let fin = lane_refs::<L, Q>(|k| {
             &slots[opposite[k]].as_deref().expect("owned")[(local as isize - offsets[k]) as usize..]
         });
         relax_block(
@@ -1207,9 +1243,29 @@ fn aa_odd_block<const L: usize>(
             sums,
         );
     }
-    for k in 0..collider.q {
+    for k in 0..Q {
         let down = (local as isize + offsets[k]) as usize;
-        slots[k].as_deref_mut().expect("owned")[down..down + L].copy_from_slice(&buffers.fout[k]);
+        store(
+            &mut slots[k].as_deref_mut().expect("owned")[down..down + L],
+            &buffers.fout[k],
+        );
+    }
+}
+
+/// Writes a block's collided populations: in pieces of 16 lanes (64 bytes, a cache line),
+/// which the compiler moves inline, where one copy of a long block becomes a call to
+/// `memmove` per link and block (a tenth of the kernel's time, measured).
+#[inline(always)]
+fn store<const L: usize>(dst: &mut [f32], src: &[f32; L]) {
+    const PIECE: usize = 16;
+    if L.is_multiple_of(PIECE) {
+        for (d, s) in dst.chunks_exact_mut(PIECE).zip(src.chunks_exact(PIECE)) {
+            let d: &mut [f32; PIECE] = d.try_into().expect("a piece");
+            let s: &[f32; PIECE] = s.try_into().expect("a piece");
+            *d = *s;
+        }
+    } else {
+        dst.copy_from_slice(src);
     }
 }
 
@@ -1239,7 +1295,10 @@ fn chunks_by_slab(
 /// arrays swap. Reads are shared, writes are the cell's own: one pass, no conflicts.
 fn pull(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> StepSums {
     let nz = problem.dims[2];
-    let sums = pull_slabs(problem, collider, state, 0..nz);
+    let sums = match collider.q {
+        7 => pull_slabs::<7>(problem, collider, state, 0..nz),
+        _ => pull_slabs::<19>(problem, collider, state, 0..nz),
+    };
     std::mem::swap(&mut state.f, &mut state.g);
     sums
 }
@@ -1258,7 +1317,10 @@ fn blockwise(
     for start in (0..nz).step_by(blocks.slabs) {
         let range = start..(start + blocks.slabs).min(nz);
         for _ in 0..blocks.steps_per_visit {
-            sums = sums.plus(pull_slabs(problem, collider, state, range.clone()));
+            sums = sums.plus(match collider.q {
+                7 => pull_slabs::<7>(problem, collider, state, range.clone()),
+                _ => pull_slabs::<19>(problem, collider, state, range.clone()),
+            });
             let cells = range.start * slab..range.end * slab;
             for (f, g) in state.f.iter_mut().zip(&state.g) {
                 f[cells.clone()].copy_from_slice(&g[cells.clone()]);
@@ -1269,7 +1331,7 @@ fn blockwise(
 }
 
 /// The pull step of the slabs `range`: their cells pull from f and collide into g.
-fn pull_slabs(
+fn pull_slabs<const Q: usize>(
     problem: &LatticeProblem,
     collider: &Collider,
     state: &mut State,
@@ -1309,7 +1371,7 @@ fn pull_slabs(
                     };
                     let cell = (c, x + nx * y);
                     match run {
-                        BIG => pull_block(
+                        BIG => pull_block::<BIG, Q>(
                             problem,
                             collider,
                             f,
@@ -1320,7 +1382,7 @@ fn pull_slabs(
                             &mut buffers.big,
                             &mut sums,
                         ),
-                        LANES => pull_block(
+                        LANES => pull_block::<LANES, Q>(
                             problem,
                             collider,
                             f,
@@ -1331,7 +1393,7 @@ fn pull_slabs(
                             &mut buffers.lanes,
                             &mut sums,
                         ),
-                        1 => pull_block(
+                        1 => pull_block::<1, Q>(
                             problem,
                             collider,
                             f,
@@ -1383,7 +1445,11 @@ fn pull_slabs(
 
 /// AA even step: each cell reads its own slots (the walls' inflow from its side slots),
 /// collides, writes f*_k into slot k̄ (outgoing through a wall into its side slots).
-fn aa_even(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> StepSums {
+fn aa_even<const Q: usize>(
+    problem: &LatticeProblem,
+    collider: &Collider,
+    state: &mut State,
+) -> StepSums {
     let dims = problem.dims;
     let [nx, ny, nz] = dims;
     let q = collider.q;
@@ -1412,7 +1478,7 @@ fn aa_even(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> 
                 };
                 let cell = (local + slab * z, local);
                 match run {
-                    BIG => aa_even_block(
+                    BIG => aa_even_block::<BIG, Q>(
                         problem,
                         collider,
                         f,
@@ -1421,7 +1487,7 @@ fn aa_even(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> 
                         &mut buffers.big,
                         &mut sums,
                     ),
-                    LANES => aa_even_block(
+                    LANES => aa_even_block::<LANES, Q>(
                         problem,
                         collider,
                         f,
@@ -1430,7 +1496,7 @@ fn aa_even(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> 
                         &mut buffers.lanes,
                         &mut sums,
                     ),
-                    1 => aa_even_block(
+                    1 => aa_even_block::<1, Q>(
                         problem,
                         collider,
                         f,
@@ -1490,7 +1556,11 @@ fn aa_even(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> 
 /// pending outgoing populations where x − e_k is outside), collides, and writes f*_k into
 /// slot k of x + e_k (through a wall: the rule's inflow into its side slots). Slab z owns
 /// chunk z + e_kz of link k's array: every slot it reads or writes, and no other slab's.
-fn aa_odd(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> StepSums {
+fn aa_odd<const Q: usize>(
+    problem: &LatticeProblem,
+    collider: &Collider,
+    state: &mut State,
+) -> StepSums {
     let dims = problem.dims;
     let [nx, ny, nz] = dims;
     let q = collider.q;
@@ -1528,7 +1598,7 @@ fn aa_odd(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> S
                     };
                     let cell = (local + slab * z, local);
                     match run {
-                        BIG => aa_odd_block(
+                        BIG => aa_odd_block::<BIG, Q>(
                             problem,
                             collider,
                             slots,
@@ -1538,7 +1608,7 @@ fn aa_odd(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> S
                             &mut buffers.big,
                             &mut sums,
                         ),
-                        LANES => aa_odd_block(
+                        LANES => aa_odd_block::<LANES, Q>(
                             problem,
                             collider,
                             slots,
@@ -1548,7 +1618,7 @@ fn aa_odd(problem: &LatticeProblem, collider: &Collider, state: &mut State) -> S
                             &mut buffers.lanes,
                             &mut sums,
                         ),
-                        1 => aa_odd_block(
+                        1 => aa_odd_block::<1, Q>(
                             problem,
                             collider,
                             slots,
