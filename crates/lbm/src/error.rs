@@ -20,7 +20,7 @@ pub enum LbmError {
 
 impl LbmError {
     /// The error as `solver`'s solve error: a stability limit as
-    /// [`SolveError::Unstable`], anything else as an invalid problem.
+    /// [`lucent_core::SolveError::Unstable`], anything else as an invalid problem.
     pub fn into_solve_error(self, solver: &str) -> lucent_core::SolveError {
         match self {
             LbmError::Unstable {

@@ -41,6 +41,9 @@
 //!   shared first-collision projection, whose flux 3 D Q₁ the lattice reproduces); point
 //!   lights inside put 4πI into their cell.
 //!
+//! The device twin `gpu-lbm` (`lucent-gpu-solvers`) marches the same [`LatticeProblem`]
+//! by the pull pattern on wgpu and stops by the same [`Ledger`].
+//!
 //! Stability: ω± ∈ (0, 2) for every D > 0 by construction; the sink needs σ_a h < 1
 //! ([`LbmError::Unstable`] otherwise: refine the grid or use `diffusion-mg`). Convergence to
 //! the steady state is that of a Jacobi iteration: O((N/ℓ)²) steps for N cells across and
