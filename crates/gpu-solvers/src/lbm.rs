@@ -25,7 +25,8 @@
 //! at the iteration limit, reported as such. Steps run in batches (up to 64 per submit,
 //! sized by the observed rate, as `gpu-ftcs-p1`); a batch that meets the stopping rule
 //! part way is finished, so the fluence returned is up to a batch's steps further on than
-//! the step that met it (nearer the steady state, never further from it).
+//! the step that met it (nearer the steady state, never further from it); every step run is
+//! in the residual history and the iteration count, the stop reason is the first verdict.
 
 use lucent_core::driver::{Channel, ChannelMethod, ChannelSolution, Context, Record};
 use lucent_core::{Angular, History, Problem, SolveError, StopReason, Uncollided};
@@ -281,6 +282,9 @@ pub fn march(
             }
             let [change, size, absorbed, escaped] = totals;
             let (relative, absolute) = ledger.step(absorbed, escaped, change, size);
+            // Every step run is recorded (and reported to the progress callback), the
+            // batch's steps after the one that met the rule too; the first verdict stands.
+            let verdict = history.record_step(stopping, ledger.steps(), relative, absolute);
             if stopped.is_some() {
                 continue;
             }
@@ -291,7 +295,7 @@ pub fn march(
                 continue;
             }
             changes.push(relative);
-            stopped = history.record_step(stopping, ledger.steps(), relative, absolute);
+            stopped = verdict;
         }
         if let Some(reason) = stopped {
             break reason;
