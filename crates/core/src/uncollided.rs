@@ -736,6 +736,13 @@ impl Uncollided {
             kept.iter()
                 .map(|&l| {
                     let grids = &transmittance.transmittance[l];
+                    // The power the light brings into the box: σ_t plays no part in it.
+                    let emitted = uncollided_cells(
+                        &Grid::filled(geometry, 0.0),
+                        &transmittance.lights[l],
+                        cutoff,
+                    )
+                    .map_or(0.0, |straight| straight.emitted);
                     sigma_t
                         .iter()
                         .enumerate()
@@ -772,12 +779,6 @@ impl Uncollided {
                                     }
                                 })
                                 .unzip();
-                            let emitted = uncollided_cells(
-                                &Grid::filled(geometry, 0.0),
-                                &transmittance.lights[l],
-                                cutoff,
-                            )
-                            .map_or(0.0, |straight| straight.emitted);
                             let total: f64 = collided.iter().sum();
                             UncollidedCells {
                                 collided,

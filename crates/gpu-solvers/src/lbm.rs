@@ -300,21 +300,7 @@ pub fn march(
         if let Some(reason) = stopped {
             break reason;
         }
-        // The next batch: the steps the observed rate predicts to the tolerance.
-        let (first, last) = (changes[0], changes[changes.len() - 1]);
-        let rate = if k > 1 && first > 0.0 && last > 0.0 {
-            (last / first).powf(1.0 / (k - 1) as f64)
-        } else {
-            0.0
-        };
-        batch = if rate > 0.0 && rate < 1.0 && last > stopping.relative_tolerance {
-            ((stopping.relative_tolerance / last).ln() / rate.ln())
-                .ceil()
-                .max(1.0) as usize
-        } else {
-            2 * k
-        }
-        .clamp(1, MAX_BATCH);
+        batch = crate::solver::next_batch(&changes, stopping.relative_tolerance, MAX_BATCH);
     };
     let fluence = rho.download(gpu).map_err(err)?;
     // `read` is now the copy the next step would read: the one the last step wrote.

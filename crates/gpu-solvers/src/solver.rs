@@ -51,6 +51,26 @@ pub(crate) fn device_error(solver: &str, e: GpuError) -> SolveError {
     }
 }
 
+/// The next batch of a march recorded in batches (`gpu-ftcs-p1`, `gpu-lbm`), from the
+/// last batch's per-step relative changes: the steps the observed geometric rate predicts
+/// to reach `tolerance`, or twice the last batch where no rate below 1 shows; within
+/// 1..=`most`.
+pub(crate) fn next_batch(changes: &[f64], tolerance: f64, most: usize) -> usize {
+    let k = changes.len();
+    let (first, last) = (changes[0], changes[k - 1]);
+    let rate = if k > 1 && first > 0.0 && last > 0.0 {
+        (last / first).powf(1.0 / (k - 1) as f64)
+    } else {
+        0.0
+    };
+    if rate > 0.0 && rate < 1.0 && last > tolerance {
+        ((tolerance / last).ln() / rate.ln()).ceil().max(1.0) as usize
+    } else {
+        2 * k
+    }
+    .clamp(1, most)
+}
+
 /// The shared device, or why there is none.
 fn device(solver: &str) -> Result<&'static GpuContext, SolveError> {
     GpuContext::shared().map_err(|e| device_error(solver, e))

@@ -82,7 +82,6 @@ fn straight_rays_give_the_face_rules_collisions_to_second_order() {
     let (a, b) = (&curved.cells[0][0], &straight.cells[0][0]);
     let largest = b.collided.iter().fold(0.0f64, |m, v| m.max(*v));
     let w = DVec3::new(0.1, -0.05, 1.0).normalize();
-    let mut worst = 0.0f64;
     for (cell, (x, y)) in a.collided.iter().zip(&b.collided).enumerate() {
         // The direction of travel is the beam's.
         assert!((a.directed[cell] - w * *x).length() < 1e-9 * largest);
@@ -95,7 +94,6 @@ fn straight_rays_give_the_face_rules_collisions_to_second_order() {
         let (i, j) = (cell % N, (cell / N) % N);
         if i >= 2 && j + 2 <= N {
             let e = (x - y).abs() / y;
-            worst = worst.max(e);
             assert!(e < 1e-2, "cell {cell}: {x} vs {y}");
         }
     }
