@@ -1042,9 +1042,15 @@ fn inputs(problem: &LatticeProblem, c: usize) -> CellInputs {
     }
 }
 
-/// Cells per block of the interior kernels: the lane width the relaxation collision is
-/// vectorised over, for the end of a row.
-const LANES: usize = 8;
+/// Cells per short block of the interior kernels: the SSE2 lane width the relaxation
+/// collision is vectorised over, for the end of a row.
+const LANES: usize = 4;
+
+/// Cells per middle block, for the rest of a row after its long blocks: with [`LANES`] and
+/// single cells after it, at most three cells of an interior row take the scalar path
+/// (with 64 and 8 alone, a 128-cell row left six, 5 % of the cells, each several times
+/// the cost of a vectorised one).
+const MID: usize = 16;
 
 /// Cells per long block: most of an interior row at once, so that each link's populations
 /// move as one contiguous burst per row (a few streams at a time for the prefetchers, not
@@ -1068,6 +1074,7 @@ impl<const L: usize> Buffers<L> {
 /// The buffers of every block size a kernel uses.
 struct BlockBuffers {
     big: Box<Buffers<BIG>>,
+    mid: Box<Buffers<MID>>,
     lanes: Box<Buffers<LANES>>,
     one: Box<Buffers<1>>,
 }
@@ -1076,6 +1083,7 @@ impl BlockBuffers {
     fn new() -> Self {
         Self {
             big: Buffers::new(),
+            mid: Buffers::new(),
             lanes: Buffers::new(),
             one: Buffers::new(),
         }
@@ -1126,9 +1134,23 @@ fn lane_refs<'a, const L: usize, const Q: usize>(
     std::array::from_fn(|k| at(k)[..L].try_into().expect("a block"))
 }
 
-/// How many cells from x on a row the interior kernels take at once: a block of [`BIG`] or
-/// [`LANES`] where that many interior cells follow, a single cell where fewer do, none on a
-/// wall.
+/// Runs `kernel::<L, Q>(args…, buffers of L, sums)` for the block of L cells that `run`
+/// ([`interior_run`]) names; nothing for a run of 0 (a wall cell).
+macro_rules! by_run {
+    ($run:expr, $kernel:ident::<$q:ident>($($arg:expr),* ; $buffers:expr, $sums:expr)) => {
+        match $run {
+            BIG => $kernel::<BIG, $q>($($arg),*, &mut $buffers.big, $sums),
+            MID => $kernel::<MID, $q>($($arg),*, &mut $buffers.mid, $sums),
+            LANES => $kernel::<LANES, $q>($($arg),*, &mut $buffers.lanes, $sums),
+            1 => $kernel::<1, $q>($($arg),*, &mut $buffers.one, $sums),
+            _ => {}
+        }
+    };
+}
+
+/// How many cells from x on a row the interior kernels take at once: a block of [`BIG`],
+/// [`MID`] or [`LANES`] where that many interior cells follow, a single cell where fewer do,
+/// none on a wall.
 #[inline]
 fn interior_run(x: usize, y: usize, z: usize, dims: [usize; 3]) -> usize {
     let [nx, ny, nz] = dims;
@@ -1136,6 +1158,8 @@ fn interior_run(x: usize, y: usize, z: usize, dims: [usize; 3]) -> usize {
         0
     } else if x + BIG < nx {
         BIG
+    } else if x + MID < nx {
+        MID
     } else if x + LANES < nx {
         LANES
     } else {
@@ -1370,42 +1394,11 @@ fn pull_slabs<const Q: usize>(
                         0
                     };
                     let cell = (c, x + nx * y);
-                    match run {
-                        BIG => pull_block::<BIG, Q>(
-                            problem,
-                            collider,
-                            f,
-                            &offsets,
-                            g,
-                            cell,
-                            rho_slab,
-                            &mut buffers.big,
-                            &mut sums,
-                        ),
-                        LANES => pull_block::<LANES, Q>(
-                            problem,
-                            collider,
-                            f,
-                            &offsets,
-                            g,
-                            cell,
-                            rho_slab,
-                            &mut buffers.lanes,
-                            &mut sums,
-                        ),
-                        1 => pull_block::<1, Q>(
-                            problem,
-                            collider,
-                            f,
-                            &offsets,
-                            g,
-                            cell,
-                            rho_slab,
-                            &mut buffers.one,
-                            &mut sums,
-                        ),
-                        _ => {}
-                    }
+                    by_run!(
+                        run,
+                        pull_block::<Q>(problem, collider, f, &offsets, g, cell, rho_slab;
+                            buffers, &mut sums)
+                    );
                     if run > 0 {
                         x += run;
                         continue;
@@ -1477,36 +1470,10 @@ fn aa_even<const Q: usize>(
                     0
                 };
                 let cell = (local + slab * z, local);
-                match run {
-                    BIG => aa_even_block::<BIG, Q>(
-                        problem,
-                        collider,
-                        f,
-                        cell,
-                        rho_slab,
-                        &mut buffers.big,
-                        &mut sums,
-                    ),
-                    LANES => aa_even_block::<LANES, Q>(
-                        problem,
-                        collider,
-                        f,
-                        cell,
-                        rho_slab,
-                        &mut buffers.lanes,
-                        &mut sums,
-                    ),
-                    1 => aa_even_block::<1, Q>(
-                        problem,
-                        collider,
-                        f,
-                        cell,
-                        rho_slab,
-                        &mut buffers.one,
-                        &mut sums,
-                    ),
-                    _ => {}
-                }
+                by_run!(
+                    run,
+                    aa_even_block::<Q>(problem, collider, f, cell, rho_slab; buffers, &mut sums)
+                );
                 if run > 0 {
                     local += run;
                     continue;
@@ -1597,39 +1564,11 @@ fn aa_odd<const Q: usize>(
                         0
                     };
                     let cell = (local + slab * z, local);
-                    match run {
-                        BIG => aa_odd_block::<BIG, Q>(
-                            problem,
-                            collider,
-                            slots,
-                            &offsets,
-                            cell,
-                            rho_slab,
-                            &mut buffers.big,
-                            &mut sums,
-                        ),
-                        LANES => aa_odd_block::<LANES, Q>(
-                            problem,
-                            collider,
-                            slots,
-                            &offsets,
-                            cell,
-                            rho_slab,
-                            &mut buffers.lanes,
-                            &mut sums,
-                        ),
-                        1 => aa_odd_block::<1, Q>(
-                            problem,
-                            collider,
-                            slots,
-                            &offsets,
-                            cell,
-                            rho_slab,
-                            &mut buffers.one,
-                            &mut sums,
-                        ),
-                        _ => {}
-                    }
+                    by_run!(
+                        run,
+                        aa_odd_block::<Q>(problem, collider, slots, &offsets, cell, rho_slab;
+                            buffers, &mut sums)
+                    );
                     if run > 0 {
                         x += run;
                         continue;
