@@ -199,6 +199,14 @@ pub(crate) struct StepClosure;
 pub(crate) struct DiamondClosure;
 pub(crate) struct ExponentialClosure;
 
+/// Diamond difference without the fix-up: a linear map of sources and inflows, as a
+/// Krylov method's operator must be (its vectors change sign, and the fix-up would clip
+/// them). Krylov solves use it and a source-iteration step with the fix-up follows.
+pub(crate) struct LinearDiamondClosure;
+
+/// The exponential closure without its clamp of ψ̄ at zero: linear, for Krylov solves.
+pub(crate) struct LinearExponentialClosure;
+
 impl CellClosure for StepClosure {
     #[inline]
     fn solve(dir: &CellDirection, sigma_t: f64, source: f64, inflow: [f64; 3]) -> (f64, [f64; 3]) {
@@ -235,6 +243,41 @@ impl CellClosure for DiamondClosure {
         faces: [&mut [f64]; 3],
     ) -> f64 {
         Self::solve_cell_fast(dirs, sigma_t, row, faces)
+    }
+}
+
+impl CellClosure for LinearDiamondClosure {
+    #[inline]
+    fn solve(dir: &CellDirection, sigma_t: f64, source: f64, inflow: [f64; 3]) -> (f64, [f64; 3]) {
+        let c = dir.c;
+        let num = source + 2.0 * (c[0] * inflow[0] + c[1] * inflow[1] + c[2] * inflow[2]);
+        let psi = num / (sigma_t + 2.0 * (c[0] + c[1] + c[2]));
+        (psi, inflow.map(|v| 2.0 * psi - v))
+    }
+
+    #[inline]
+    fn solve_cell(
+        dirs: &OctantDirections<'_>,
+        sigma_t: f64,
+        row: &mut [f64],
+        faces: [&mut [f64]; 3],
+    ) -> f64 {
+        let [fx, fy, fz] = faces;
+        let n = row.len();
+        let (cx, cy, cz) = (&dirs.c[0][..n], &dirs.c[1][..n], &dirs.c[2][..n]);
+        let (ts, w) = (&dirs.twice_sum[..n], &dirs.weights[..n]);
+        let (fx, fy, fz) = (&mut fx[..n], &mut fy[..n], &mut fz[..n]);
+        let mut phi = 0.0;
+        for d in 0..n {
+            let num = row[d] + 2.0 * (cx[d] * fx[d] + cy[d] * fy[d] + cz[d] * fz[d]);
+            let psi = num / (sigma_t + ts[d]);
+            fx[d] = 2.0 * psi - fx[d];
+            fy[d] = 2.0 * psi - fy[d];
+            fz[d] = 2.0 * psi - fz[d];
+            row[d] = psi;
+            phi += w[d] * psi;
+        }
+        phi
     }
 }
 
@@ -340,39 +383,56 @@ fn fix_up(c: [f64; 3], sigma_t: f64, source: f64, inflow: [f64; 3]) -> (f64, [f6
 impl CellClosure for ExponentialClosure {
     #[inline]
     fn solve(dir: &CellDirection, sigma_t: f64, source: f64, inflow: [f64; 3]) -> (f64, [f64; 3]) {
-        let mut out = [0.0; 3];
-        for a in 0..3 {
-            if dir.c[a] == 0.0 {
-                continue;
-            }
-            let mut v = 0.0;
-            for b in 0..3 {
-                let f = dir.fraction[a][b];
-                if f > 0.0 {
-                    let s = dir.chords[a][b];
-                    let x = sigma_t * s;
-                    v += f * (inflow[b] * (-x).exp() + source * s * phi1(x));
-                }
-            }
-            out[a] = v;
-        }
-        let c = dir.c;
-        let flux: f64 = c[0] + c[1] + c[2];
-        let psi = if sigma_t * dir.width > 1e-6 {
-            let net = c[0] * (out[0] - inflow[0])
-                + c[1] * (out[1] - inflow[1])
-                + c[2] * (out[2] - inflow[2]);
-            // Clamped at zero: it would act only if the approximate attenuation let a
-            // cell send out more than it receives, which the tests have not seen.
-            ((source - net) / sigma_t).max(0.0)
-        } else {
-            let sum = c[0] * (inflow[0] + out[0])
-                + c[1] * (inflow[1] + out[1])
-                + c[2] * (inflow[2] + out[2]);
-            sum / (2.0 * flux)
-        };
-        (psi, out)
+        exponential::<true>(dir, sigma_t, source, inflow)
     }
+}
+
+impl CellClosure for LinearExponentialClosure {
+    #[inline]
+    fn solve(dir: &CellDirection, sigma_t: f64, source: f64, inflow: [f64; 3]) -> (f64, [f64; 3]) {
+        exponential::<false>(dir, sigma_t, source, inflow)
+    }
+}
+
+/// The exponential closure; `CLAMP`: ψ̄ held at zero or above.
+#[inline]
+fn exponential<const CLAMP: bool>(
+    dir: &CellDirection,
+    sigma_t: f64,
+    source: f64,
+    inflow: [f64; 3],
+) -> (f64, [f64; 3]) {
+    let mut out = [0.0; 3];
+    for a in 0..3 {
+        if dir.c[a] == 0.0 {
+            continue;
+        }
+        let mut v = 0.0;
+        for b in 0..3 {
+            let f = dir.fraction[a][b];
+            if f > 0.0 {
+                let s = dir.chords[a][b];
+                let x = sigma_t * s;
+                v += f * (inflow[b] * (-x).exp() + source * s * phi1(x));
+            }
+        }
+        out[a] = v;
+    }
+    let c = dir.c;
+    let flux: f64 = c[0] + c[1] + c[2];
+    let psi = if sigma_t * dir.width > 1e-6 {
+        let net =
+            c[0] * (out[0] - inflow[0]) + c[1] * (out[1] - inflow[1]) + c[2] * (out[2] - inflow[2]);
+        // Clamped at zero: it would act only if the approximate attenuation let a
+        // cell send out more than it receives, which the tests have not seen.
+        let psi = (source - net) / sigma_t;
+        if CLAMP { psi.max(0.0) } else { psi }
+    } else {
+        let sum =
+            c[0] * (inflow[0] + out[0]) + c[1] * (inflow[1] + out[1]) + c[2] * (inflow[2] + out[2]);
+        sum / (2.0 * flux)
+    };
+    (psi, out)
 }
 
 /// The closures by value, for tests and studies outside the sweep.

@@ -72,8 +72,14 @@ impl Dsa {
         Ok(Some(Self { problem, multigrid }))
     }
 
-    /// The correction f for a residual source σ_s(φ^{k+½} − φ^k) per cell (grid order).
-    pub(crate) fn correction(&self, residual: Vec<f32>) -> Result<Vec<f64>, DomError> {
+    /// The correction f for a residual source σ_s(φ^{k+½} − φ^k) per cell (grid order):
+    /// a rough solve to 1e-3 (at most 20 V-cycles), or exactly `cycles` V-cycles from
+    /// zero, which is a linear map of the residual (what a Krylov method needs).
+    pub(crate) fn correction(
+        &self,
+        residual: Vec<f32>,
+        cycles: Option<usize>,
+    ) -> Result<Vec<f64>, DomError> {
         let sources = Sources {
             volumetric: residual,
             ..Sources::default()
@@ -81,10 +87,18 @@ impl Dsa {
         let rhs = self.problem.rhs(&sources)?;
         let mut f = vec![0.0; rhs.len()];
         // A rough solve is enough: the correction only needs to remove the slow modes.
-        let stopping = Stopping {
-            relative_tolerance: 1e-3,
-            max_iterations: 20,
-            ..Stopping::default()
+        let stopping = match cycles {
+            None => Stopping {
+                relative_tolerance: 1e-3,
+                max_iterations: 20,
+                ..Stopping::default()
+            },
+            Some(cycles) => Stopping {
+                relative_tolerance: 0.0,
+                absolute_tolerance: 0.0,
+                max_iterations: cycles,
+                ..Stopping::default()
+            },
         };
         self.multigrid.solve(&rhs, &mut f, &stopping);
         Ok(f)

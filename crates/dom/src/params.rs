@@ -6,7 +6,7 @@ use lucent_core::{SolveError, SolverParams};
 use serde::{Deserialize, Serialize};
 
 use crate::closure::Closure;
-use crate::solve::Acceleration;
+use crate::solve::{Acceleration, Outer};
 
 /// The family of the propagation directions.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -31,6 +31,10 @@ pub struct DomParams {
     pub storage_level: Option<usize>,
     /// Spatial closure of the sweeps.
     pub closure: Closure,
+    /// The outer iteration: GMRES or source iteration.
+    pub outer: Outer,
+    /// GMRES restart length.
+    pub restart: usize,
     /// Acceleration of the source iteration.
     pub acceleration: Acceleration,
     /// Anderson mixing depth (0: off).
@@ -50,6 +54,8 @@ impl Default for DomParams {
             family: Family::LevelSymmetric,
             storage_level: None,
             closure: Closure::Diamond,
+            outer: Outer::SourceIteration,
+            restart: 12,
             acceleration: Acceleration::Dsa,
             anderson: 2,
             block: 16,
@@ -77,6 +83,14 @@ impl SolverParams for DomParams {
             "spatial closure: diamond (second order), step or exponential (positive)",
         ),
         (
+            "outer",
+            "outer iteration: gmres (Krylov, DSA-preconditioned) or source-iteration",
+        ),
+        (
+            "restart",
+            "GMRES restart length, 1 to 64 (each Krylov vector: 4 bytes per cell and storage direction)",
+        ),
+        (
             "acceleration",
             "source-iteration acceleration: dsa (diffusion synthetic) or none",
         ),
@@ -95,6 +109,9 @@ impl SolverParams for DomParams {
         };
         if self.anderson > 16 {
             return Err(bad("anderson", "at most 16"));
+        }
+        if !(1..=64).contains(&self.restart) {
+            return Err(bad("restart", "1 to 64"));
         }
         if !(1..=256).contains(&self.block) {
             return Err(bad("block", "1 to 256 cells"));

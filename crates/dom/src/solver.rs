@@ -37,7 +37,9 @@ use lucent_optics::SphericalQuadrature;
 
 use crate::angular::Ordinates;
 use crate::params::{DomParams, Family};
-use crate::solve::{DomBoundary, DomProblem, DomSettings, PagedWork, SourceIteration, solve};
+use crate::solve::{
+    DomBoundary, DomProblem, DomSettings, Outer, PagedWork, SourceIteration, solve,
+};
 
 /// One channel's record of a [`DomSolver::solve_with_details`] run.
 #[derive(Debug, Clone, PartialEq)]
@@ -88,6 +90,8 @@ impl DomSolver {
             order: p.order.unwrap_or(if octahedral { 2 } else { 8 }),
             storage_level: p.storage_level,
             settings: DomSettings {
+                outer: p.outer,
+                restart: p.restart,
                 closure: p.closure,
                 acceleration: p.acceleration,
                 anderson: p.anderson,
@@ -235,14 +239,20 @@ impl ChannelMethod for DomSolver {
         let m = self
             .ordinates(problem.medium().phase)
             .map_or(0, |o| o.storage().len());
-        let anderson_vectors = 2 * self.settings.anderson + 2;
+        // Beyond the iterate's two: GMRES keeps up to `restart` basis vectors and five
+        // more (right-hand side, solution, the new direction, the image of the last
+        // application, the restart's residual); mixing 2·depth + 2.
+        let extra_vectors = match self.settings.outer {
+            Outer::Gmres => self.settings.restart + 5,
+            Outer::SourceIteration => 2 * self.settings.anderson + 2,
+        };
         let n = problem.geometry().voxel_count();
         // The sweeps' work: in memory, or its page pool.
         let work = match self.settings.paged_work {
             None => self.work_bytes(problem),
             Some(paged) => paged.pool_bytes.min(self.work_bytes(problem)),
         };
-        ((n * m * 4 * (3 + anderson_vectors) + n * 40) as u64 + work) * problem.channels() as u64
+        ((n * m * 4 * (3 + extra_vectors) + n * 40) as u64 + work) * problem.channels() as u64
     }
 
     fn setup(&self, context: &Context<'_>) -> Result<Ordinates, SolveError> {

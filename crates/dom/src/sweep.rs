@@ -196,11 +196,12 @@ pub(crate) struct SweepInput<'a> {
     pub source: Option<CellSource<'a>>,
 }
 
-/// What the fused source fill reads, all in block order: the fixed source and the
-/// in-scattered radiance per cell and storage direction, and σ_s per cell.
+/// What the fused source fill reads, all in block order: the fixed source (`None`: zero,
+/// for the homogeneous sweeps of a Krylov iteration) and the in-scattered radiance per
+/// cell and storage direction, and σ_s per cell.
 #[derive(Clone, Copy)]
 pub(crate) struct CellSource<'a> {
-    pub fixed: &'a [f32],
+    pub fixed: Option<&'a [f32]>,
     pub previous: &'a [f32],
     pub sigma_s: &'a [f32],
     /// Storage directions per cell.
@@ -582,8 +583,18 @@ fn block_sweep<C: CellClosure>(
             let cell = start + local;
             let s = f64::from(source.sigma_s[cell]);
             let at = cell * m + first;
-            for (d, w) in row.iter_mut().enumerate() {
-                *w = f64::from(source.fixed[at + d]) + s * f64::from(source.previous[at + d]);
+            let previous = &source.previous[at..at + nd];
+            match source.fixed {
+                Some(fixed) => {
+                    for ((w, q), j) in row.iter_mut().zip(&fixed[at..at + nd]).zip(previous) {
+                        *w = f64::from(*q) + s * f64::from(*j);
+                    }
+                }
+                None => {
+                    for (w, j) in row.iter_mut().zip(previous) {
+                        *w = s * f64::from(*j);
+                    }
+                }
             }
         }
     }

@@ -1,0 +1,201 @@
+//! The GMRES outer iteration (`Outer::Gmres`) against source iteration: the same answer on
+//! every closure and boundary, and fewer sweeps than DSA alone where the first moments'
+//! error is what is left (albedo 0.95, forward scattering).
+
+use glam::DVec3;
+use lucent_core::Stopping;
+use lucent_dom::angular::Ordinates;
+use lucent_dom::{Closure, DomBoundary, DomProblem, DomSettings, DomSolution, Outer, solve};
+use lucent_grid::GridGeometry;
+use lucent_optics::{Phase, SphericalQuadrature};
+
+/// A unit cube of `cells`³ at albedo 0.95 with HG scattering of mean cosine `g`, glowing
+/// in a ball near its top: homogeneous (σ_t = `sigma`) or a cloud (σ_t swinging ±50 %
+/// inside a sphere of radius 0.4, near vacuum outside it, so the medium touches thin
+/// cells and sharp edges).
+fn scene(
+    cells: usize,
+    sigma: f64,
+    g: f64,
+    cloud: bool,
+    boundary: DomBoundary,
+) -> (DomProblem, Ordinates) {
+    let geometry = GridGeometry::from_bounds([cells; 3], DVec3::ZERO, DVec3::ONE).unwrap();
+    let n = geometry.voxel_count();
+    let ordinates = Ordinates::new(
+        SphericalQuadrature::level_symmetric(6).unwrap(),
+        None,
+        Phase::henyey_greenstein(g).unwrap(),
+    )
+    .unwrap();
+    let m = ordinates.storage().len();
+    let sigma_t: Vec<f32> = (0..n)
+        .map(|c| {
+            let [i, j, k] = geometry.coords(c);
+            let p = geometry.cell_centre(i, j, k);
+            let shape = if cloud {
+                let inside = (p - DVec3::splat(0.5)).length() < 0.4;
+                (1.0 + 0.5 * (7.0 * p.x).sin() * (5.0 * p.y).cos())
+                    * if inside { 1.0 } else { 0.02 }
+            } else {
+                1.0
+            };
+            (sigma * shape) as f32
+        })
+        .collect();
+    let sigma_s = sigma_t
+        .iter()
+        .map(|t| (f64::from(*t) * 0.95) as f32)
+        .collect();
+    let mut fixed = vec![0.0f32; n * m];
+    for c in 0..n {
+        let [i, j, k] = geometry.coords(c);
+        if (geometry.cell_centre(i, j, k) - DVec3::new(0.5, 0.5, 0.8)).length() < 0.15 {
+            fixed[c * m..(c + 1) * m].fill(1.0);
+        }
+    }
+    let problem = DomProblem {
+        geometry,
+        sigma_t,
+        sigma_s,
+        fixed,
+        boundary,
+    };
+    (problem, ordinates)
+}
+
+fn run(
+    problem: &DomProblem,
+    ordinates: &Ordinates,
+    settings: DomSettings,
+    tolerance: f64,
+) -> DomSolution {
+    let stopping = Stopping {
+        relative_tolerance: tolerance,
+        max_iterations: 200,
+        ..Stopping::default()
+    };
+    let s = solve(problem, ordinates, &settings, &stopping).unwrap();
+    assert!(
+        s.convergence.stop_reason.is_converged(),
+        "{settings:?}: {:?}",
+        s.convergence
+    );
+    assert!(s.convergence.dsa_abandoned.is_none(), "{:?}", s.convergence);
+    s
+}
+
+fn relative_l2(a: &[f64], b: &[f64]) -> f64 {
+    let num: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
+    let den: f64 = b.iter().map(|y| y * y).sum();
+    (num / den).sqrt()
+}
+
+fn settings(outer: Outer, closure: Closure, anderson: usize) -> DomSettings {
+    DomSettings {
+        outer,
+        closure,
+        anderson,
+        ..DomSettings::default()
+    }
+}
+
+/// Both iterations converge to the same fixed point: every closure (diamond's fix-up and
+/// the exponential closure's clamp are left out of the Krylov sweeps and settled by the
+/// source-iteration steps after them), vacuum and a reflecting boundary under a sky
+/// (which puts the inflow into the Krylov vectors). Both stop at 1e-8 of the scattering
+/// source; their fluences agree to 1e-6 (an error of tolerance/(1 − ρ) each, ρ ≤ 0.6 with
+/// DSA, and f32 storage of the source at 6e-8; measured 3e-9), and the energy balances to
+/// 1e-6. The reference is source iteration with Anderson mixing: under the reflecting
+/// boundary DSA alone stalls and is dropped. With diamond difference on the cloud the
+/// fix-up acts where the linear sweep's answer goes negative, and the source iteration
+/// after GMRES needs about twenty sweeps more (41 against 25 for source iteration alone).
+#[test]
+fn gmres_converges_to_the_source_iteration_answer() {
+    let boundaries = [
+        DomBoundary::default(),
+        DomBoundary {
+            radiance: 0.3,
+            reflectance: 0.5,
+        },
+    ];
+    for boundary in boundaries {
+        for (closure, cloud) in [
+            (Closure::Step, false),
+            (Closure::Diamond, true),
+            (Closure::Exponential, true),
+        ] {
+            let (problem, ordinates) = scene(12, 12.0, 0.6, cloud, boundary);
+            let si = run(
+                &problem,
+                &ordinates,
+                settings(Outer::SourceIteration, closure, 2),
+                1e-8,
+            );
+            let krylov = run(
+                &problem,
+                &ordinates,
+                settings(Outer::Gmres, closure, 0),
+                1e-8,
+            );
+            let difference = relative_l2(&krylov.fluence, &si.fluence);
+            eprintln!(
+                "{closure:?} cloud {cloud} {boundary:?}: {} sweeps by source iteration, {} by GMRES, fluences {difference:.1e} apart",
+                si.convergence.sweeps, krylov.convergence.sweeps
+            );
+            assert!(difference < 1e-6, "{closure:?} {boundary:?}: {difference}");
+            // Where the boundary returns half the light, DSA (whose Robin condition only
+            // approximates the transport reflection) contracts slowly and source iteration
+            // with Anderson mixing needed 45–49 sweeps; GMRES 23–26 (measured).
+            if boundary.reflectance > 0.0 {
+                assert!(
+                    3 * krylov.convergence.sweeps <= 2 * si.convergence.sweeps,
+                    "{closure:?}: {} against {}",
+                    krylov.convergence.sweeps,
+                    si.convergence.sweeps
+                );
+            }
+            assert!(
+                krylov.balance.relative_imbalance() < 1e-6,
+                "{:?}",
+                krylov.balance
+            );
+        }
+    }
+}
+
+/// Sweeps to 1e-6 at albedo 0.95 on 24³ cells (σ_t h = 0.5) with S6, the step closure
+/// (linear, so the Krylov answer needs one confirming sweep): GMRES(12) with DSA against
+/// source iteration with DSA alone and with Anderson mixing, homogeneous cube and cloud,
+/// g = 0.6 and 0.9. Measured (2026-11-25): cube g = 0.6: 14 / 21 / 14; g = 0.9: 22 / 36 / 23;
+/// cloud g = 0.6: 14 / 19 / 15. The bounds are the measured counts plus two, and GMRES
+/// must beat DSA alone by a quarter. The goal (≤ 12 at g = 0.6) is not reached.
+#[test]
+fn gmres_needs_fewer_sweeps_than_dsa_alone() {
+    for (g, cloud, bound) in [(0.6, false, 16), (0.9, false, 24), (0.6, true, 16)] {
+        let (problem, ordinates) = scene(24, 12.0, g, cloud, DomBoundary::default());
+        let sweeps = |outer, anderson| {
+            run(
+                &problem,
+                &ordinates,
+                settings(outer, Closure::Step, anderson),
+                1e-6,
+            )
+            .convergence
+            .sweeps
+        };
+        let (krylov, dsa, mixed) = (
+            sweeps(Outer::Gmres, 0),
+            sweeps(Outer::SourceIteration, 0),
+            sweeps(Outer::SourceIteration, 2),
+        );
+        eprintln!(
+            "g = {g}, cloud {cloud}: GMRES {krylov}, DSA {dsa}, DSA + Anderson(2) {mixed} sweeps"
+        );
+        assert!(krylov <= bound, "g = {g}, cloud {cloud}: {krylov} sweeps");
+        assert!(
+            4 * krylov <= 3 * dsa,
+            "g = {g}, cloud {cloud}: {krylov} against {dsa}"
+        );
+    }
+}
