@@ -86,6 +86,7 @@
 mod anderson;
 pub mod angular;
 pub mod closure;
+mod delta_m;
 mod dsa;
 mod error;
 mod gmres;
@@ -95,6 +96,7 @@ mod solver;
 pub mod sweep;
 
 pub use closure::Closure;
+pub use delta_m::{DeltaM, legendre_moment};
 pub use error::DomError;
 pub use params::{DomParams, Family};
 pub use solve::{
