@@ -3,7 +3,8 @@
 //! S_ORDER (6: 48 directions), Henyey–Greenstein g = 0.6, albedo 0.95, under a sun: the
 //! the discrete-ordinates benchmark, against Bernabei's 5.3 s per frame at 128³ for three unconverged
 //! iterations on a GTX 580. Prints wall time (with `direct` and set-up), sweeps, sweep
-//! time, time per cell-direction update and the sweeps' GB/s by their minimal traffic.
+//! time, time per cell-direction update and the sweeps' GB/s by their minimal traffic, for
+//! three solves by source iteration (the default) and one by GMRES (`outer = "gmres"`).
 
 use glam::DVec3;
 use lucent::core::{
@@ -70,14 +71,27 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
     );
     println!();
     println!(
-        "| run | wall | sweeps | sweeps alone | ns per cell-direction (sweeps) | sweep GB/s (sources read, radiance written, σ_t, σ_s) | sources + scattering products | DSA | Anderson | rest (direct, first-collision, set-up) | stop |"
+        "| run | outer | wall | sweeps | sweeps alone | ns per cell-direction (sweeps) | sweep GB/s (sources read, radiance written, σ_t, σ_s) | sources + scattering products | DSA | Anderson | Krylov vectors | rest (direct, first-collision, set-up) | stop |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
-    for run in 0..3 {
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    // Source iteration (the default) three times, then GMRES once: the outer iterations
+    // compared on the same problem and machine.
+    for (run, outer) in [
+        "source-iteration",
+        "source-iteration",
+        "source-iteration",
+        "gmres",
+    ]
+    .into_iter()
+    .enumerate()
+    {
         let mut params = Params::default();
         params
             .0
             .insert("order".into(), ParamValue::Int(order as i64));
+        params
+            .0
+            .insert("outer".into(), ParamValue::Text(outer.into()));
         let solver = lucent::dom::DomSolver::from_params(&params).map_err(|e| err(&e))?;
         let t = std::time::Instant::now();
         let (solution, records) = solver
@@ -92,9 +106,14 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
         // fixed source and in-scattered radiance (two f32 reads, 8 B; storage =
         // propagation here), write its f64 radiance (8 B) and read σ_t and σ_s (8 B).
         let gbs = cells * (16.0 * directions as f64 + 8.0) * sweeps / r.sweep_seconds / 1e9;
-        let rest = wall - r.sweep_seconds - r.scatter_seconds - r.dsa_seconds - r.anderson_seconds;
+        let rest = wall
+            - r.sweep_seconds
+            - r.scatter_seconds
+            - r.dsa_seconds
+            - r.anderson_seconds
+            - r.krylov_seconds;
         println!(
-            "| {run} | {wall:.2} s | {} | {:.2} s | {:.2} | {gbs:.1} ({:.0}% of copy) | {:.2} s | {:.2} s | {:.2} s | {rest:.2} s | {:?} |",
+            "| {run} | {outer} | {wall:.2} s | {} | {:.2} s | {:.2} | {gbs:.1} ({:.0}% of copy) | {:.2} s | {:.2} s | {:.2} s | {:.2} s | {rest:.2} s | {:?} |",
             r.sweeps,
             r.sweep_seconds,
             r.sweep_seconds / updates * 1e9,
@@ -102,6 +121,7 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
             r.scatter_seconds,
             r.dsa_seconds,
             r.anderson_seconds,
+            r.krylov_seconds,
             solution.report.stop_reason
         );
     }

@@ -34,8 +34,9 @@
 //!
 //! The basis is stored like the iterate, J in f32 (the solver's storage precision) and
 //! the inflow in f64; every inner product and update is formed in f64. Orthogonalisation
-//! is classical Gram–Schmidt applied twice (CGS2: as stable as modified Gram–Schmidt,
-//! with one pass over the basis for all inner products instead of one per vector). A restart
+//! is classical Gram–Schmidt (one pass over the basis for all inner products instead of
+//! one per vector), repeated where it cancelled (the DGKS criterion), which keeps it as
+//! stable as modified Gram–Schmidt. A restart
 //! starts from the true residual c − (I − M)x, at the cost of one application, so the
 //! drift of the Arnoldi estimate with an f32 basis does not accumulate. Memory: `restart + 1` vectors of J (4 bytes per cell and storage
 //! direction each).
@@ -80,7 +81,7 @@ impl Space {
     }
 
     /// ⟨w, v_i⟩ for every vector of `basis`, in one pass over them.
-    fn dots(&self, w: &Iterate, basis: &[Iterate]) -> Vec<f64> {
+    fn dots(&self, w: &Iterate, basis: &[&Iterate]) -> Vec<f64> {
         let m = self.storage();
         let k = basis.len();
         let chunk = ROWS * m;
@@ -136,7 +137,7 @@ impl Space {
 
     /// ‖v‖.
     pub(crate) fn norm(&self, v: &Iterate) -> f64 {
-        self.dots(v, std::slice::from_ref(v))[0].max(0.0).sqrt()
+        self.dots(v, &[v])[0].max(0.0).sqrt()
     }
 
     /// w ← a·w + Σ_i y_i v_i, in one pass (each entry formed in f64, stored once).
@@ -221,18 +222,37 @@ pub(crate) fn gmres<E>(
             // w = v_j − M v_j
             let mut w = mv;
             space.combine(&mut w, -1.0, &[&basis[j]], &[1.0]);
-            // CGS2: project out the basis twice.
+            // Classical Gram–Schmidt, repeated only where it cancelled (Daniel, Gragg,
+            // Kaufman & Stewart 1976): when the projection removed more than 1 − 1/√2 of
+            // ‖w‖, rounding may have left w short of orthogonal, and a second pass restores
+            // it. The first pass forms ‖w‖² with the coefficients.
             let mut column = vec![0.0f64; j + 2];
-            for _ in 0..2 {
-                let coefficients = space.dots(&w, &basis);
-                let refs: Vec<&Iterate> = basis.iter().collect();
+            let mut norm = 0.0;
+            for pass in 0..2 {
+                let (coefficients, before) = {
+                    let mut vectors: Vec<&Iterate> = basis.iter().collect();
+                    if pass == 0 {
+                        vectors.push(&w);
+                    }
+                    let mut dots = space.dots(&w, &vectors);
+                    let before = if pass == 0 {
+                        dots.pop().unwrap_or(0.0).max(0.0).sqrt()
+                    } else {
+                        norm
+                    };
+                    (dots, before)
+                };
+                let vectors: Vec<&Iterate> = basis.iter().collect();
                 let negated: Vec<f64> = coefficients.iter().map(|v| -v).collect();
-                space.combine(&mut w, 1.0, &refs, &negated);
+                space.combine(&mut w, 1.0, &vectors, &negated);
                 for (col, v) in column.iter_mut().zip(&coefficients) {
                     *col += v;
                 }
+                norm = space.norm(&w);
+                if norm > std::f64::consts::FRAC_1_SQRT_2 * before {
+                    break;
+                }
             }
-            let norm = space.norm(&w);
             column[j + 1] = norm;
             // Apply the previous rotations, then one new one to zero the subdiagonal.
             for (i, &(cs, sn)) in rotations.iter().enumerate() {

@@ -186,6 +186,9 @@ pub struct DomConvergence {
     pub dsa_seconds: f64,
     /// Wall time of the Anderson mixing (s).
     pub anderson_seconds: f64,
+    /// Wall time of GMRES's vector work (orthogonalisation, combinations, copies of the
+    /// iterate) outside the sweeps, products and DSA it calls (s).
+    pub krylov_seconds: f64,
     /// The sweep after which DSA was dropped because it amplified the error (thick
     /// cells), if it was.
     pub dsa_abandoned: Option<usize>,
@@ -270,6 +273,7 @@ struct Timings {
     scatter: f64,
     dsa: f64,
     anderson: f64,
+    krylov: f64,
 }
 
 /// What the iteration has seen: the changes, the measured contraction, and the state of
@@ -877,6 +881,7 @@ impl<'a> SourceIteration<'a> {
         // The right-hand side's sweep counts as the first, with the residual of x = 0.
         let mut residuals = vec![1.0];
         let restart = self.settings.restart;
+        let (before, t) = (self.timings, Instant::now());
         let solved = {
             let this = &mut self;
             gmres(
@@ -892,6 +897,10 @@ impl<'a> SourceIteration<'a> {
                 },
             )?
         };
+        let inside = (self.timings.sweep - before.sweep)
+            + (self.timings.scatter - before.scatter)
+            + (self.timings.dsa - before.dsa);
+        self.timings.krylov += (t.elapsed().as_secs_f64() - inside).max(0.0);
         self.linear = false;
         self.previous.copy_from_slice(&solved.inscattered);
         self.inflow = solved.inflow;
@@ -1044,6 +1053,7 @@ impl<'a> SourceIteration<'a> {
                 scatter_seconds: timings.scatter,
                 dsa_seconds: timings.dsa,
                 anderson_seconds: timings.anderson,
+                krylov_seconds: timings.krylov,
                 dsa_abandoned: monitor.dsa_abandoned,
                 work_paging,
             },
