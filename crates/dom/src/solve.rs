@@ -678,9 +678,9 @@ impl<'a> SourceIteration<'a> {
         let weights = self.ordinates.storage().weights();
         let residual: Vec<f32> = out
             .fluence
-            .iter()
-            .zip(self.previous.chunks(m))
-            .zip(&self.sigma_s)
+            .par_iter()
+            .zip(self.previous.par_chunks(m))
+            .zip(self.sigma_s.par_iter())
             .map(|((new, row), s)| {
                 let old: f64 = row
                     .iter()
@@ -702,13 +702,17 @@ impl<'a> SourceIteration<'a> {
         let applied = f.iter().all(|v| v.is_finite());
         if applied {
             let four_pi = 4.0 * std::f64::consts::PI;
-            for (cell, f) in f.iter().enumerate() {
-                out.fluence[cell] += f;
-                let row = &mut self.inscattered[cell * m..(cell + 1) * m];
-                for (j, iso) in row.iter_mut().zip(&self.isotropic) {
-                    *j = (f64::from(*j) + f * iso / four_pi) as f32;
-                }
-            }
+            let isotropic = &self.isotropic;
+            out.fluence
+                .par_iter_mut()
+                .zip(self.inscattered.par_chunks_mut(m))
+                .zip(f.par_iter())
+                .for_each(|((phi, row), f)| {
+                    *phi += f;
+                    for (j, iso) in row.iter_mut().zip(isotropic) {
+                        *j = (f64::from(*j) + f * iso / four_pi) as f32;
+                    }
+                });
         }
         self.timings.dsa += t.elapsed().as_secs_f64();
         Ok(applied)
