@@ -23,7 +23,9 @@
 //! refinement level, default 2), `family` (`level-symmetric` or `octahedral`),
 //! `storage_level` (store sources on the octahedral set of this level instead of on the
 //! propagation set), `closure` (`diamond`, `step`, `exponential`), `acceleration` (`dsa`
-//! or `none`), `anderson` (mixing depth, 2; 0 off), `block` (wavefront block edge, 16).
+//! or `none`), `anderson` (mixing depth, 2; 0 off), `outer` (`source-iteration`, the
+//! default, or `gmres`), `restart` (GMRES restart length, 12), `block` (wavefront block
+//! edge, 16), `work_pool_mib` (the sweeps' work paged).
 
 use lucent_core::driver::{
     self, Channel, ChannelMethod, ChannelSolution, Coefficients, Context, Record, Route,
