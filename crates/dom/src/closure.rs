@@ -150,6 +150,19 @@ pub(crate) struct OctantDirections<'a> {
 }
 
 impl<'a> OctantDirections<'a> {
+    /// The first `n` directions' c_x, c_y, c_z, 2Σc and weights, as slices of that length,
+    /// so that the lane loops over them index without bounds checks.
+    #[inline]
+    fn lanes(&self, n: usize) -> [&[f64]; 5] {
+        [
+            &self.c[0][..n],
+            &self.c[1][..n],
+            &self.c[2][..n],
+            &self.twice_sum[..n],
+            &self.weights[..n],
+        ]
+    }
+
     pub(crate) fn new(geometry: &'a [CellDirection], weights: &'a [f64]) -> Self {
         let c = [0, 1, 2].map(|a| geometry.iter().map(|g| g.c[a]).collect());
         let twice_sum = geometry
@@ -262,11 +275,9 @@ impl CellClosure for LinearDiamondClosure {
         row: &mut [f64],
         faces: [&mut [f64]; 3],
     ) -> f64 {
-        let [fx, fy, fz] = faces;
         let n = row.len();
-        let (cx, cy, cz) = (&dirs.c[0][..n], &dirs.c[1][..n], &dirs.c[2][..n]);
-        let (ts, w) = (&dirs.twice_sum[..n], &dirs.weights[..n]);
-        let (fx, fy, fz) = (&mut fx[..n], &mut fy[..n], &mut fz[..n]);
+        let [cx, cy, cz, ts, w] = dirs.lanes(n);
+        let [fx, fy, fz] = faces.map(|f| &mut f[..n]);
         let mut phi = 0.0;
         for d in 0..n {
             let num = row[d] + 2.0 * (cx[d] * fx[d] + cy[d] * fy[d] + cz[d] * fz[d]);
@@ -291,11 +302,9 @@ impl DiamondClosure {
         row: &mut [f64],
         faces: [&mut [f64]; 3],
     ) -> f64 {
-        let [fx, fy, fz] = faces;
         let n = row.len();
-        let (cx, cy, cz) = (&dirs.c[0][..n], &dirs.c[1][..n], &dirs.c[2][..n]);
-        let (ts, w) = (&dirs.twice_sum[..n], &dirs.weights[..n]);
-        let (fx, fy, fz) = (&mut fx[..n], &mut fy[..n], &mut fz[..n]);
+        let [cx, cy, cz, ts, w] = dirs.lanes(n);
+        let [fx, fy, fz] = faces.map(|f| &mut f[..n]);
         let mut phi = 0.0;
         let mut negative = false;
         for d in 0..n {

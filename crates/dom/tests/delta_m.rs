@@ -8,45 +8,15 @@ use lucent_dom::{DeltaM, DomBoundary, DomProblem, DomSettings, legendre_moment, 
 use lucent_grid::GridGeometry;
 use lucent_optics::{Phase, SphericalQuadrature};
 
-/// A unit cube of 24³ cells at albedo 0.95, σ_t = 12 (σ_t h = 0.5), glowing in a ball near
-/// its top; with `cloud` the extinction swings ±50 % inside a sphere and is near vacuum
-/// outside it.
+mod common;
+
+use common::{glowing_cube, relative_l2};
+
+/// The tests' scene (`common::glowing_cube`): 24³ cells at albedo 0.95, σ_t = 12
+/// (σ_t h = 0.5), for the storage directions of `ordinates`.
 fn problem(ordinates: &Ordinates, cloud: bool) -> DomProblem {
-    let geometry = GridGeometry::from_bounds([24; 3], DVec3::ZERO, DVec3::ONE).unwrap();
-    let n = geometry.voxel_count();
     let m = ordinates.storage().len();
-    let sigma_t: Vec<f32> = (0..n)
-        .map(|c| {
-            let [i, j, k] = geometry.coords(c);
-            let p = geometry.cell_centre(i, j, k);
-            let shape = if cloud {
-                let inside = (p - DVec3::splat(0.5)).length() < 0.4;
-                (1.0 + 0.5 * (7.0 * p.x).sin() * (5.0 * p.y).cos())
-                    * if inside { 1.0 } else { 0.02 }
-            } else {
-                1.0
-            };
-            (12.0 * shape) as f32
-        })
-        .collect();
-    let sigma_s = sigma_t
-        .iter()
-        .map(|t| (f64::from(*t) * 0.95) as f32)
-        .collect();
-    let mut fixed = vec![0.0f32; n * m];
-    for c in 0..n {
-        let [i, j, k] = geometry.coords(c);
-        if (geometry.cell_centre(i, j, k) - DVec3::new(0.5, 0.5, 0.8)).length() < 0.15 {
-            fixed[c * m..(c + 1) * m].fill(1.0);
-        }
-    }
-    DomProblem {
-        geometry,
-        sigma_t,
-        sigma_s,
-        fixed,
-        boundary: DomBoundary::default(),
-    }
+    glowing_cube(24, 12.0, 0.95, cloud, m, DomBoundary::default())
 }
 
 fn ordinates(order: usize, phase: Phase) -> Ordinates {
@@ -56,12 +26,6 @@ fn ordinates(order: usize, phase: Phase) -> Ordinates {
         phase,
     )
     .unwrap()
-}
-
-fn relative_l2(a: &[f64], b: &[f64]) -> f64 {
-    let num: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
-    let den: f64 = b.iter().map(|y| y * y).sum();
-    (num / den).sqrt()
 }
 
 /// Sweeps to 1e-6 and the error of the fluence against S12 without truncation, for S6

@@ -2,17 +2,17 @@
 //! every closure and boundary, and fewer sweeps than DSA alone where the first moments'
 //! error is what is left (albedo 0.95, forward scattering).
 
-use glam::DVec3;
 use lucent_core::Stopping;
 use lucent_dom::angular::Ordinates;
 use lucent_dom::{Closure, DomBoundary, DomProblem, DomSettings, DomSolution, Outer, solve};
-use lucent_grid::GridGeometry;
 use lucent_optics::{Phase, SphericalQuadrature};
 
-/// A unit cube of `cells`³ at albedo 0.95 with HG scattering of mean cosine `g`, glowing
-/// in a ball near its top: homogeneous (σ_t = `sigma`) or a cloud (σ_t swinging ±50 %
-/// inside a sphere of radius 0.4, near vacuum outside it, so the medium touches thin
-/// cells and sharp edges).
+mod common;
+
+use common::{glowing_cube, relative_l2};
+
+/// The tests' scene (`common::glowing_cube`) at albedo 0.95 with HG scattering of mean
+/// cosine `g`, swept with S6.
 fn scene(
     cells: usize,
     sigma: f64,
@@ -20,8 +20,6 @@ fn scene(
     cloud: bool,
     boundary: DomBoundary,
 ) -> (DomProblem, Ordinates) {
-    let geometry = GridGeometry::from_bounds([cells; 3], DVec3::ZERO, DVec3::ONE).unwrap();
-    let n = geometry.voxel_count();
     let ordinates = Ordinates::new(
         SphericalQuadrature::level_symmetric(6).unwrap(),
         None,
@@ -29,39 +27,10 @@ fn scene(
     )
     .unwrap();
     let m = ordinates.storage().len();
-    let sigma_t: Vec<f32> = (0..n)
-        .map(|c| {
-            let [i, j, k] = geometry.coords(c);
-            let p = geometry.cell_centre(i, j, k);
-            let shape = if cloud {
-                let inside = (p - DVec3::splat(0.5)).length() < 0.4;
-                (1.0 + 0.5 * (7.0 * p.x).sin() * (5.0 * p.y).cos())
-                    * if inside { 1.0 } else { 0.02 }
-            } else {
-                1.0
-            };
-            (sigma * shape) as f32
-        })
-        .collect();
-    let sigma_s = sigma_t
-        .iter()
-        .map(|t| (f64::from(*t) * 0.95) as f32)
-        .collect();
-    let mut fixed = vec![0.0f32; n * m];
-    for c in 0..n {
-        let [i, j, k] = geometry.coords(c);
-        if (geometry.cell_centre(i, j, k) - DVec3::new(0.5, 0.5, 0.8)).length() < 0.15 {
-            fixed[c * m..(c + 1) * m].fill(1.0);
-        }
-    }
-    let problem = DomProblem {
-        geometry,
-        sigma_t,
-        sigma_s,
-        fixed,
-        boundary,
-    };
-    (problem, ordinates)
+    (
+        glowing_cube(cells, sigma, 0.95, cloud, m, boundary),
+        ordinates,
+    )
 }
 
 fn run(
@@ -83,12 +52,6 @@ fn run(
     );
     assert!(s.convergence.dsa_abandoned.is_none(), "{:?}", s.convergence);
     s
-}
-
-fn relative_l2(a: &[f64], b: &[f64]) -> f64 {
-    let num: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
-    let den: f64 = b.iter().map(|y| y * y).sum();
-    (num / den).sqrt()
 }
 
 fn settings(outer: Outer, closure: Closure, anderson: usize) -> DomSettings {

@@ -8,6 +8,8 @@ use lucent_dom::{Acceleration, Closure, DomBoundary, DomProblem, DomSettings, so
 use lucent_grid::GridGeometry;
 use lucent_optics::{Phase, SphericalQuadrature};
 
+mod common;
+
 fn stopping(tolerance: f64, max: usize) -> Stopping {
     Stopping {
         relative_tolerance: tolerance,
@@ -115,7 +117,6 @@ fn a_pure_absorber_is_exact_along_the_axes() {
 
 fn glowing_cube(albedo: f64, cells: usize, sigma: f64) -> (DomProblem, Ordinates) {
     let geometry = GridGeometry::from_bounds([cells; 3], DVec3::ZERO, DVec3::ONE).unwrap();
-    let n = geometry.voxel_count();
     let sigma_t = extinction(&geometry, sigma, 0.4);
     let sigma_s: Vec<f32> = sigma_t
         .iter()
@@ -129,13 +130,7 @@ fn glowing_cube(albedo: f64, cells: usize, sigma: f64) -> (DomProblem, Ordinates
     .unwrap();
     let m = ordinates.storage().len();
     // Emission in a ball in the middle.
-    let mut fixed = vec![0.0f32; n * m];
-    for c in 0..n {
-        let [i, j, k] = geometry.coords(c);
-        if (geometry.cell_centre(i, j, k) - DVec3::splat(0.5)).length() < 0.25 {
-            fixed[c * m..(c + 1) * m].fill(1.0);
-        }
-    }
+    let fixed = common::emission_ball(&geometry, m, DVec3::splat(0.5), 0.25);
     let problem = DomProblem {
         geometry,
         sigma_t,
