@@ -233,19 +233,12 @@ impl CellClosure for StepClosure {
 impl CellClosure for DiamondClosure {
     #[inline]
     fn solve(dir: &CellDirection, sigma_t: f64, source: f64, inflow: [f64; 3]) -> (f64, [f64; 3]) {
-        let c = dir.c;
         // The common case: no outflow goes negative.
-        let num = source + 2.0 * (c[0] * inflow[0] + c[1] * inflow[1] + c[2] * inflow[2]);
-        let psi = num / (sigma_t + 2.0 * (c[0] + c[1] + c[2]));
-        let out = [
-            2.0 * psi - inflow[0],
-            2.0 * psi - inflow[1],
-            2.0 * psi - inflow[2],
-        ];
+        let (psi, out) = LinearDiamondClosure::solve(dir, sigma_t, source, inflow);
         if out[0] >= 0.0 && out[1] >= 0.0 && out[2] >= 0.0 {
             return (psi, out);
         }
-        fix_up(c, sigma_t, source, inflow)
+        fix_up(dir.c, sigma_t, source, inflow)
     }
 
     #[inline]

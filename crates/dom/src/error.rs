@@ -6,6 +6,11 @@ pub enum DomError {
     /// A setting or input is out of its domain.
     #[error("invalid input: {0}")]
     Invalid(String),
+    /// A sweep or its DSA correction produced non-finite values inside the GMRES outer
+    /// iteration (source iteration reports the same as
+    /// `StopReason::DivergedNonFinite` and drops DSA where that is the cause).
+    #[error("not finite: {0}")]
+    NotFinite(String),
     /// An angular set could not be built.
     #[error(transparent)]
     Optics(#[from] lucent_optics::OpticsError),

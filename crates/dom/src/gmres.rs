@@ -189,7 +189,7 @@ pub(crate) fn gmres<E>(
     mut apply: impl FnMut(&Iterate) -> Result<Iterate, E>,
     mut judge: impl FnMut(usize, GmresStep) -> bool,
 ) -> Result<Iterate, E> {
-    let restart = restart.max(1);
+    let restart = restart.max(1); // the callers refuse 0
     let mut x = Iterate::zeros_like(c);
     let c_norm = space.norm(c);
     let mut applications = 0;

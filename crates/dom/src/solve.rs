@@ -346,6 +346,9 @@ impl<'a> SourceIteration<'a> {
         if settings.block == 0 {
             return Err(DomError::Invalid("block size 0".into()));
         }
+        if settings.outer == Outer::Gmres && settings.restart == 0 {
+            return Err(DomError::Invalid("GMRES restart length 0".into()));
+        }
         let g = problem.geometry;
         let dims = g.dims();
         let h = g.spacing().to_array();
@@ -846,8 +849,8 @@ impl<'a> SourceIteration<'a> {
         self.inflow.clone_from(&x.inflow);
         let mut out = self.transport()?;
         if !self.accelerate(&mut out)? || out.fluence.iter().any(|v| !v.is_finite()) {
-            return Err(DomError::Invalid(
-                "the transport sweep or its DSA correction produced non-finite values".into(),
+            return Err(DomError::NotFinite(
+                "the transport sweep or its DSA correction inside GMRES".into(),
             ));
         }
         let inflow = self.reflected_inflow(&out);
@@ -878,7 +881,8 @@ impl<'a> SourceIteration<'a> {
         let cell_weight: Vec<f64> = self.sigma_s.iter().map(|s| f64::from(*s).powi(2)).collect();
         let mean = cell_weight.iter().sum::<f64>() / cells;
         let space = Space {
-            inflow_weight: 4.0 * std::f64::consts::PI * mean.max(f64::MIN_POSITIVE),
+            // Without scattering only the reflected inflow is iterated: weight it as is.
+            inflow_weight: 4.0 * std::f64::consts::PI * if mean > 0.0 { mean } else { 1.0 },
             cell_weight,
             direction_weight: self.ordinates.storage().weights().to_vec(),
         };
@@ -1080,9 +1084,8 @@ enum Verdict {
 const ROWS: usize = 1024;
 
 /// V-cycles of the DSA correction inside GMRES: a fixed count keeps the preconditioned
-/// operator linear. Each cycle reduces the diffusion residual about tenfold on the
-/// suite's grids, so three leave the correction's own error near 1e-3, as the tolerance
-/// of the source iteration's rough solve does.
+/// operator linear. Eight instead of three changed no sweep count of tests/krylov.rs
+/// (measured): the correction's accuracy is not what limits the Krylov iteration.
 const DSA_CYCLES: usize = 3;
 
 /// J = Ψ̄ B for one block, B the (N × M) scattering matrix: `chunks` holds per octant the

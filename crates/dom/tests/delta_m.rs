@@ -82,6 +82,28 @@ fn delta_m_takes_fewer_sweeps_and_is_closer_to_a_finer_quadrature() {
             delta_error <= plain_error,
             "cloud {cloud}: {delta_error} against {plain_error}"
         );
+        // δ-Eddington (f = χ₂ = g² = 0.81, g* = 0.47) for comparison: fewer sweeps still,
+        // a little less accurate than f = χ₆. Measured: cube 9 sweeps at 4.1 %, cloud 10 at
+        // 5.4 %; asserted: fewer sweeps than f = χ₆ and no worse than S6 untruncated.
+        let eddington = DeltaM::new(phase, 2).unwrap();
+        let reduced = ordinates(6, eddington.reduced_phase());
+        let truncated = eddington.apply(&problem(&reduced, cloud));
+        let e = solve(&truncated, &reduced, &settings, &stopping).unwrap();
+        assert!(
+            e.convergence.stop_reason.is_converged(),
+            "{:?}",
+            e.convergence
+        );
+        let e_error = relative_l2(&e.fluence, &reference.fluence);
+        eprintln!(
+            "cloud {cloud}: S6 + delta-Eddington {} sweeps, error {e_error:.2e}",
+            e.convergence.sweeps
+        );
+        assert!(e.convergence.sweeps < delta.convergence.sweeps);
+        assert!(
+            e_error <= plain_error,
+            "cloud {cloud}: {e_error} against {plain_error}"
+        );
     }
 }
 

@@ -430,6 +430,29 @@ impl Collider {
         matches!(self.collision, Collision::Trt | Collision::Bgk)
     }
 
+    /// [`Self::relax_lanes`] for one cell of a Q-link lattice (`f` padded to 19 links).
+    fn relax_one<const Q: usize>(
+        &self,
+        f: &[[f32; 1]; 19],
+        [first, second, source]: [&[f32; 1]; 3],
+        moment: Option<&[[f32; 1]; 3]>,
+        out: &mut [[f32; 1]],
+        rho_out: &mut [f32; 1],
+        absorbed_out: &mut [f32; 1],
+    ) {
+        let f: [&[f32; 1]; Q] = std::array::from_fn(|k| &f[k]);
+        self.relax_lanes::<1, Q>(
+            &f,
+            first,
+            second,
+            source,
+            moment,
+            out,
+            rho_out,
+            absorbed_out,
+        );
+    }
+
     /// The relaxation collision of L cells at once (populations `f[k][lane]`): the one
     /// definition of its arithmetic, for single cells (L = 1) and for the interior's
     /// blocks of [`LANES`] cells, whose lane loops the compiler vectorises. `moment` is
@@ -554,31 +577,20 @@ impl Collider {
                 let (mut rho, mut absorbed) = ([0.0f32], [0.0f32]);
                 let m = moment.then_some(&m);
                 let (first, second, source) = ([cell.first], [cell.second], [cell.source]);
-                if self.q == 7 {
-                    let lanes: [&[f32; 1]; 7] = std::array::from_fn(|k| &lanes[k]);
-                    self.relax_lanes::<1, 7>(
-                        &lanes,
-                        &first,
-                        &second,
-                        &source,
-                        m,
-                        &mut result,
-                        &mut rho,
-                        &mut absorbed,
-                    );
-                } else {
-                    let lanes: [&[f32; 1]; 19] = std::array::from_fn(|k| &lanes[k]);
-                    self.relax_lanes::<1, 19>(
-                        &lanes,
-                        &first,
-                        &second,
-                        &source,
-                        m,
-                        &mut result,
-                        &mut rho,
-                        &mut absorbed,
-                    );
-                }
+                // One cell through the lane kernel of the lattice's own Q.
+                let relax = match self.q {
+                    7 => Self::relax_one::<7>,
+                    _ => Self::relax_one::<19>,
+                };
+                relax(
+                    self,
+                    &lanes,
+                    [&first, &second, &source],
+                    m,
+                    &mut result,
+                    &mut rho,
+                    &mut absorbed,
+                );
                 for (o, v) in out.iter_mut().zip(&result) {
                     *o = v[0];
                 }
