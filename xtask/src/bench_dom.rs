@@ -15,8 +15,8 @@ use lucent_grid::procedural::NoiseCloud;
 
 use crate::bench_diffusion::copy_bandwidth;
 
-/// Runs the benchmark.
-pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
+/// Runs the benchmark (with `gpu`, the device's run instead: [`run_gpu`]).
+pub(crate) fn run(n: usize, order: usize, gpu: bool) -> Result<(), String> {
     let err = |e: &dyn std::fmt::Display| e.to_string();
     let geometry =
         GridGeometry::from_bounds([n; 3], DVec3::ZERO, DVec3::ONE).map_err(|e| err(&e))?;
@@ -70,6 +70,9 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
         t.elapsed().as_secs_f64()
     );
     println!();
+    if gpu {
+        return run_gpu(n, directions, &problem, &options);
+    }
     println!(
         "| run | outer | wall | sweeps | sweeps alone | ns per cell-direction (sweeps) | sweep GB/s (sources read, radiance written, σ_t, σ_s) | sources + scattering products | DSA | Anderson | Krylov vectors | rest (direct, first-collision, set-up) | stop |"
     );
@@ -123,6 +126,99 @@ pub(crate) fn run(n: usize, order: usize) -> Result<(), String> {
             r.anderson_seconds,
             r.krylov_seconds,
             solution.report.stop_reason
+        );
+    }
+    Ok(())
+}
+
+/// `gpu-dom` (source iteration, the default) on the adapter lucent picks, and `dom` on the
+/// host beside it up to 128³ (beyond, the host's work alone would take minutes): wall per
+/// converged solve, sweeps, the device's kernel time (one command buffer per sweep, timed
+/// from submit to completion) per cell-direction and sweep, the transfers of the
+/// in-scattered radiance, the host's DSA and mixing, and the largest difference of the two
+/// fluences over the peak.
+fn run_gpu(
+    n: usize,
+    directions: usize,
+    problem: &Problem,
+    options: &SolveOptions,
+) -> Result<(), String> {
+    let err = |e: &dyn std::fmt::Display| e.to_string();
+    let context = lucent::gpu::GpuContext::shared().map_err(|e| err(&e))?;
+    println!("adapter: {}", context.describe());
+    if context.is_software() {
+        println!("a CPU implementation: this is a correctness run, not a measure of GPU speed");
+    }
+    println!();
+    println!(
+        "| solver | wall | sweeps | transport steps | of which device kernels | ns per cell-direction (kernels) | DSA | Anderson | rest (direct, first-collision, set-up) | stop |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    // Up to 256³ × 48 directions the host holds about 30 GB of iterates.
+    let options = SolveOptions {
+        memory_budget: 96 << 30,
+        ..options.clone()
+    };
+    let cells = (n * n * n) as f64;
+    let mut fluences = Vec::new();
+    let names: &[&str] = if n <= 128 {
+        &["gpu-dom", "dom"]
+    } else {
+        &["gpu-dom"]
+    };
+    for name in names {
+        let mut params = Params::default();
+        params.0.insert("order".into(), ParamValue::Int(6));
+        let solver = lucent::dom::DomSolver::from_params(&params).map_err(|e| err(&e))?;
+        let solver = if *name == "gpu-dom" {
+            let factory: std::sync::Arc<lucent::dom::device::DeviceFactory> =
+                std::sync::Arc::new(move || {
+                    lucent::gpu_solvers::dom_transport()
+                        .map_err(|e| lucent::dom::DomError::Device(e.to_string()))
+                });
+            solver.on_device("gpu-dom", factory)
+        } else {
+            solver
+        };
+        let t = std::time::Instant::now();
+        let (solution, records) = solver
+            .solve_with_details(problem, &options)
+            .map_err(|e| err(&e))?;
+        let wall = t.elapsed().as_secs_f64();
+        let r = &records[0].convergence;
+        let updates = cells * directions as f64 * r.sweeps as f64;
+        let rest = wall - r.sweep_seconds - r.scatter_seconds - r.dsa_seconds - r.anderson_seconds;
+        let kernels = if r.device_seconds > 0.0 {
+            format!("{:.3} s", r.device_seconds)
+        } else {
+            "–".into()
+        };
+        let per_update = if r.device_seconds > 0.0 {
+            r.device_seconds
+        } else {
+            r.sweep_seconds
+        } / updates
+            * 1e9;
+        println!(
+            "| {name} | {wall:.2} s | {} | {:.2} s | {kernels} | {per_update:.3} | {:.2} s | {:.2} s | {rest:.2} s | {:?} |",
+            r.sweeps,
+            r.sweep_seconds + r.scatter_seconds,
+            r.dsa_seconds,
+            r.anderson_seconds,
+            solution.report.stop_reason
+        );
+        fluences.push(solution.fluence(0).data().to_vec());
+    }
+    if let [a, b] = &fluences[..] {
+        let peak = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let worst = a
+            .iter()
+            .zip(b)
+            .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+        println!();
+        println!(
+            "largest difference gpu-dom − dom: {:.2e} of the peak",
+            worst / peak
         );
     }
     Ok(())

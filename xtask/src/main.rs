@@ -30,8 +30,10 @@
 //!   beside the copy bandwidth, and Zhang & Ma's full update for one light.
 //! - `bench-fem [N...]`: Q1 finite elements (matrix-based) against the matrix-free finite
 //!   volumes on the same box: assembly, bytes per unknown, solve time.
-//! - `bench-dom [N] [ORDER]`: a converged discrete-ordinates solve at N³ (128) with S_ORDER
-//!   (6: 48 directions), g = 0.6: wall time, sweeps, time per cell-direction and GB/s.
+//! - `bench-dom [N] [ORDER] [--gpu]`: a converged discrete-ordinates solve at N³ (128) with
+//!   S_ORDER (6: 48 directions), g = 0.6: wall time, sweeps, time per cell-direction and
+//!   GB/s; with `--gpu`, `gpu-dom` (and `dom` beside it up to 128³): the device's kernel
+//!   time per cell-direction and per converged solve.
 //! - `bench-paging [N] [BRICK] [DOM_N]`: an FTCS stencil swept in core and out of core (two
 //!   paged fields, 1/16 of their bricks resident, a backing file) at N³ (256) with B³
 //!   bricks (16): time per sweep against in core, hit rates, bytes moved, LRU against NRU,
@@ -63,7 +65,7 @@ mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck [--refined] | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] | bench-lbm [N] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck [--refined] | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] [--gpu] | bench-lbm [N] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -181,10 +183,11 @@ fn main() -> ExitCode {
         };
     }
     if command.as_deref() == Some("bench-dom") {
+        let gpu = std::env::args().skip(2).any(|a| a == "--gpu");
         let mut args = std::env::args().skip(2).filter_map(|s| s.parse().ok());
         let n = args.next().unwrap_or(128);
         let order = args.next().unwrap_or(6);
-        return match bench_dom::run(n, order) {
+        return match bench_dom::run(n, order, gpu) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("xtask: bench-dom: {e}");

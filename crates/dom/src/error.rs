@@ -21,6 +21,10 @@ pub enum DomError {
     /// backing file that could not be read or written).
     #[error("paging the sweeps' work: {0}")]
     Paging(String),
+    /// The device running the transport steps failed (no adapter, a binding beyond its
+    /// limits, a lost device).
+    #[error("device: {0}")]
+    Device(String),
 }
 
 impl From<lucent_paging::PagingError> for DomError {

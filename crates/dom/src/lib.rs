@@ -87,6 +87,7 @@ mod anderson;
 pub mod angular;
 pub mod closure;
 mod delta_m;
+pub mod device;
 mod dsa;
 mod error;
 mod gmres;

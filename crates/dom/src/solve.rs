@@ -16,6 +16,7 @@ use crate::closure::{
     CellDirection, Closure, DiamondClosure, ExponentialClosure, LinearDiamondClosure,
     LinearExponentialClosure, StepClosure,
 };
+use crate::device::{DeviceTransport, TransportOutput, TransportSetup, TransportStep};
 use crate::dsa::Dsa;
 use crate::error::DomError;
 use crate::gmres::{GmresStep, Iterate, Space, gmres};
@@ -189,6 +190,9 @@ pub struct DomConvergence {
     /// Wall time of GMRES's vector work (orthogonalisation, combinations, copies of the
     /// iterate) outside the sweeps, products and DSA it calls (s).
     pub krylov_seconds: f64,
+    /// Of `sweep_seconds`, the time a device spent in its transport kernels (0 on the
+    /// host): the rest is the transfers of the in-scattered radiance.
+    pub device_seconds: f64,
     /// The sweep after which DSA was dropped because it amplified the error (thick
     /// cells), if it was.
     pub dsa_abandoned: Option<usize>,
@@ -274,6 +278,7 @@ struct Timings {
     dsa: f64,
     anderson: f64,
     krylov: f64,
+    device: f64,
 }
 
 /// What the iteration has seen: the changes, the measured contraction, and the state of
@@ -329,6 +334,8 @@ pub struct SourceIteration<'a> {
     linear: bool,
     dsa: Option<Dsa>,
     anderson: Option<Anderson>,
+    /// Where the transport steps run when not on the host.
+    device: Option<Box<dyn DeviceTransport>>,
     timings: Timings,
     monitor: Monitor,
 }
@@ -340,6 +347,60 @@ impl<'a> SourceIteration<'a> {
         problem: &DomProblem,
         ordinates: &'a Ordinates,
         settings: &'a DomSettings,
+    ) -> Result<Self, DomError> {
+        Self::build(problem, ordinates, settings, false)
+    }
+
+    /// The same iteration with its transport steps on `device` (a GPU: the module
+    /// [`crate::device`]), which receives the iteration's fixed data here. The storage
+    /// directions must be the propagation directions and the work in memory.
+    pub fn on_device(
+        problem: &DomProblem,
+        ordinates: &'a Ordinates,
+        settings: &'a DomSettings,
+        mut device: Box<dyn DeviceTransport>,
+    ) -> Result<Self, DomError> {
+        if ordinates.interpolation().is_some() {
+            return Err(DomError::Invalid(
+                "a device sweeps the storage directions: storage_level is not supported".into(),
+            ));
+        }
+        if settings.paged_work.is_some() {
+            return Err(DomError::Invalid(
+                "a device holds the sweeps' work itself: paged work is not supported".into(),
+            ));
+        }
+        let mut iteration = Self::build(problem, ordinates, settings, true)?;
+        let directions: Vec<[f64; 3]> = ordinates
+            .propagation()
+            .directions()
+            .iter()
+            .map(|d| d.to_array())
+            .collect();
+        let scattering: Vec<f64> = iteration.scattering.iter().copied().collect();
+        let octants: [(usize, usize); 8] = std::array::from_fn(|o| {
+            let d = ordinates.octant(o);
+            (d.first().copied().unwrap_or(0), d.len())
+        });
+        device.prepare(&TransportSetup {
+            layout: &iteration.layout,
+            spacing: iteration.spacing,
+            directions: &directions,
+            weights: ordinates.propagation().weights(),
+            octants,
+            sigma_t: &iteration.sigma_t,
+            scattering: &scattering,
+            closure: settings.closure,
+        })?;
+        iteration.device = Some(device);
+        Ok(iteration)
+    }
+
+    fn build(
+        problem: &DomProblem,
+        ordinates: &'a Ordinates,
+        settings: &'a DomSettings,
+        on_device: bool,
     ) -> Result<Self, DomError> {
         let m = ordinates.storage().len();
         validate(problem, m)?;
@@ -430,6 +491,7 @@ impl<'a> SourceIteration<'a> {
             previous: vec![0.0; layout.cells() * m],
             inscattered: vec![0.0; layout.cells() * m],
             work: match settings.paged_work {
+                None if on_device => Work::Memory(Vec::new()),
                 None => Work::Memory(vec![0.0; layout.cells() * n_dirs]),
                 Some(paged) => {
                     let len = WorkPages::page_len(&layout, ordinates);
@@ -460,6 +522,7 @@ impl<'a> SourceIteration<'a> {
             linear: false,
             dsa,
             anderson,
+            device: None,
             spacing: h,
             layout,
             timings: Timings::default(),
@@ -507,6 +570,11 @@ impl<'a> SourceIteration<'a> {
     /// arithmetic in the same order, so with the same bits. The iteration does not
     /// advance.
     pub fn sweep_only(&mut self) -> Result<SweepOnly, DomError> {
+        if self.device.is_some() {
+            return Err(DomError::Invalid(
+                "sweep_only times the host's sweep: this iteration runs on a device".into(),
+            ));
+        }
         self.source()?;
         let before = self.work_pager_stats();
         let start = Instant::now();
@@ -655,6 +723,9 @@ impl<'a> SourceIteration<'a> {
     /// J = Ψ̄ (w p̄), one product of the (cells × N) radiance with the (N × M) scattering
     /// matrix.
     fn transport(&mut self) -> Result<SweepOutput, DomError> {
+        if self.device.is_some() {
+            return self.transport_on_device();
+        }
         let t = Instant::now();
         // With storage = propagation the source is filled block by block inside the sweep
         // (one pass less over the work); with interpolation, here.
@@ -667,6 +738,50 @@ impl<'a> SourceIteration<'a> {
         self.scatter()?;
         self.timings.scatter += t.elapsed().as_secs_f64();
         Ok(out)
+    }
+
+    /// [`Self::transport`] on the device: the whole step there, counted as sweep time; the
+    /// boundary's powers from its currents and the inflow, as the host's sweep adds them.
+    fn transport_on_device(&mut self) -> Result<SweepOutput, DomError> {
+        let t = Instant::now();
+        let device = self.device.as_mut().expect("called on a device iteration");
+        let step = TransportStep {
+            inscattered: &self.previous,
+            sigma_s: &self.sigma_s,
+            fixed: (!self.homogeneous).then_some(self.fixed.as_slice()),
+            linear: self.linear,
+            inflow: &self.inflow,
+        };
+        let TransportOutput {
+            fluence,
+            outflow,
+            kernel_seconds,
+        } = device.transport(&step, &mut self.inscattered)?;
+        self.timings.sweep += t.elapsed().as_secs_f64();
+        self.timings.device += kernel_seconds;
+        let h = self.spacing;
+        let area = |a: usize| h[(a + 1) % 3] * h[(a + 2) % 3];
+        let directions = self.ordinates.propagation().directions();
+        let weights = self.ordinates.propagation().weights();
+        let (mut inflow_power, mut outflow_power) = (0.0, 0.0);
+        for f in 0..6 {
+            let a = f / 2;
+            // Face 2a is entered by the directions with ω_a > 0, face 2a + 1 by ω_a < 0.
+            let entering: f64 = directions
+                .iter()
+                .zip(weights)
+                .filter(|(d, _)| if f % 2 == 0 { d[a] > 0.0 } else { d[a] < 0.0 })
+                .map(|(d, w)| w * d[a].abs())
+                .sum();
+            inflow_power += entering * area(a) * self.inflow[f].iter().sum::<f64>();
+            outflow_power += area(a) * outflow[f].iter().sum::<f64>();
+        }
+        Ok(SweepOutput {
+            fluence,
+            outflow,
+            inflow_power,
+            outflow_power,
+        })
     }
 
     /// The diffusion synthetic correction of the sweep's fluence and in-scattered
@@ -1062,6 +1177,7 @@ impl<'a> SourceIteration<'a> {
                 dsa_seconds: timings.dsa,
                 anderson_seconds: timings.anderson,
                 krylov_seconds: timings.krylov,
+                device_seconds: timings.device,
                 dsa_abandoned: monitor.dsa_abandoned,
                 work_paging,
             },

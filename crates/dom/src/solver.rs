@@ -37,7 +37,11 @@ use lucent_core::{
 };
 use lucent_optics::SphericalQuadrature;
 
+use std::sync::Arc;
+
+use crate::DomError;
 use crate::angular::Ordinates;
+use crate::device::DeviceFactory;
 use crate::params::{DomParams, Family};
 use crate::solve::{
     DomBoundary, DomProblem, DomSettings, Outer, PagedWork, SourceIteration, solve,
@@ -60,10 +64,28 @@ pub struct DomChannel {
 /// `dom`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DomSolver {
+    name: &'static str,
     octahedral: bool,
     order: usize,
     storage_level: Option<usize>,
     settings: DomSettings,
+    device: Option<Device>,
+}
+
+/// The factory of a device's transport steps, compared by identity.
+#[derive(Clone)]
+struct Device(Arc<DeviceFactory>);
+
+impl std::fmt::Debug for Device {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Device(..)")
+    }
+}
+
+impl PartialEq for Device {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
 }
 
 fn invalid(name: &str, reason: impl Into<String>) -> SolveError {
@@ -88,6 +110,8 @@ impl DomSolver {
         let p: DomParams = p.parse("dom")?;
         let octahedral = p.family == Family::Octahedral;
         let solver = Self {
+            name: "dom",
+            device: None,
             octahedral,
             order: p.order.unwrap_or(if octahedral { 2 } else { 8 }),
             storage_level: p.storage_level,
@@ -106,6 +130,18 @@ impl DomSolver {
         };
         solver.ordinates(lucent_optics::Phase::Isotropic)?;
         Ok(solver)
+    }
+
+    /// This solver under the registry name `name` with its transport steps on the devices
+    /// `factory` makes, one per channel ([`SourceIteration::on_device`]; `gpu-dom`). The
+    /// iteration, its acceleration and its stopping rule stay on the host. Refused at solve
+    /// time: `storage_level` and paged work.
+    pub fn on_device(self, name: &'static str, factory: Arc<DeviceFactory>) -> Self {
+        Self {
+            name,
+            device: Some(Device(factory)),
+            ..self
+        }
     }
 
     /// The angular sets for `phase`.
@@ -129,7 +165,7 @@ impl DomSolver {
 
 impl Solver for DomSolver {
     fn name(&self) -> &str {
-        "dom"
+        self.name
     }
 
     fn capabilities(&self) -> Capabilities {
@@ -196,7 +232,7 @@ impl DomSolver {
     /// what the budget leaves (at most the work itself). `None` when the work is paged
     /// already, fits, or cannot be made to fit.
     fn paged_for_budget(&self, problem: &Problem, budget: u64) -> Option<Self> {
-        if self.settings.paged_work.is_some() {
+        if self.settings.paged_work.is_some() || self.device.is_some() {
             return None;
         }
         // As the driver counts it: the channels' own data and the per-channel fields.
@@ -249,8 +285,9 @@ impl ChannelMethod for DomSolver {
             Outer::SourceIteration => 2 * self.settings.anderson + 2,
         };
         let n = problem.geometry().voxel_count();
-        // The sweeps' work: in memory, or its page pool.
+        // The sweeps' work: in memory, or its page pool (on a device: on the device).
         let work = match self.settings.paged_work {
+            None if self.device.is_some() => 0,
             None => self.work_bytes(problem),
             Some(paged) => paged.pool_bytes.min(self.work_bytes(problem)),
         };
@@ -312,8 +349,21 @@ impl ChannelMethod for DomSolver {
                 reflectance,
             },
         };
-        let solution = solve(&dom, ordinates, &self.settings, &channel.stopping)
-            .map_err(|e| invalid("problem", e.to_string()))?;
+        let solution = match &self.device {
+            None => solve(&dom, ordinates, &self.settings, &channel.stopping),
+            Some(Device(factory)) => factory().and_then(|device| {
+                SourceIteration::on_device(&dom, ordinates, &self.settings, device)?
+                    .run(&channel.stopping)
+            }),
+        }
+        .map_err(|e| match e {
+            DomError::Device(reason) => SolveError::Device {
+                solver: self.name.into(),
+                unavailable: false,
+                reason,
+            },
+            e => invalid("problem", e.to_string()),
+        })?;
         // The whole problem's balance: the sweeps' own (whose fixed source holds the first
         // collisions) plus the lights' uncollided power in, absorbed and out.
         let mut balance = solution.balance;

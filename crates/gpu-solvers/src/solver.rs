@@ -9,6 +9,7 @@
 //! | `gpu-ftcs-p1` | `ftcs-p1` | P1 FTCS steps (φ and E ping-pong) |
 //! | `gpu-convection-diffusion` | `convection-diffusion` (characteristic model) | layer sweeps per light, red–black Gauss–Seidel scattering |
 //! | `gpu-lbm` | `lbm` | Lattice-Boltzmann pull steps, one dispatch per step |
+//! | `gpu-dom` | `dom` | each transport step (source fill, octant sweeps by cell hyperplanes, scattering product); the iteration and DSA on the host |
 //!
 //! The device is the process's shared [`GpuContext`]; no adapter is a
 //! [`SolveError::Device`] with `unavailable` set, raised after the capability check (so a
@@ -20,6 +21,7 @@ use lucent_core::{
     SolveOptions, Solver, SolverEntry, param_docs, resolved_params,
 };
 use lucent_diffusion::DiffusionSolver;
+use lucent_dom::{DomParams, DomSolver};
 use lucent_explicit::{ExplicitSolver, FtcsDiffusionParams, Lattice, P1Params};
 use lucent_gpu::{GpuContext, GpuError};
 use lucent_lbm::{LbmParams, LbmSolver};
@@ -40,6 +42,7 @@ enum Backend {
     P1(P1Params),
     Convection(GpuConvectionParams),
     Lbm(LbmParams),
+    Dom(DomSolver),
 }
 
 /// A device error as a solve error of `solver`.
@@ -147,13 +150,29 @@ impl GpuSolver {
         resolved: |p| resolved_params::<LbmParams>(p, "gpu-lbm"),
     };
 
+    /// `gpu-dom` (`dom`'s parameters but `storage_level` and `work_pool_mib`, which it
+    /// refuses).
+    pub const GPU_DOM: SolverEntry = SolverEntry {
+        name: "gpu-dom",
+        summary: "dom on the GPU: source fill, octant sweeps by cell hyperplanes and scattering product per step; iteration and DSA on the host",
+        build: |p| {
+            Ok(Box::new(GpuSolver {
+                name: "gpu-dom",
+                backend: Backend::Dom(DomSolver::from_params(p)?),
+            }))
+        },
+        params: param_docs::<DomParams>,
+        resolved: |p| resolved_params::<DomParams>(p, "gpu-dom"),
+    };
+
     /// Every GPU entry.
-    pub const ENTRIES: [SolverEntry; 5] = [
+    pub const ENTRIES: [SolverEntry; 6] = [
         Self::GPU_DIRECT,
         Self::GPU_FTCS_DIFFUSION,
         Self::GPU_FTCS_P1,
         Self::GPU_CONVECTION_DIFFUSION,
         Self::GPU_LBM,
+        Self::GPU_DOM,
     ];
 
     /// The CPU twin, for its capabilities and its stability checks.
@@ -161,6 +180,7 @@ impl GpuSolver {
         let built = match &self.backend {
             Backend::Direct(d) => return Box::new(*d),
             Backend::Lbm(p) => return Box::new(LbmSolver::new(*p)),
+            Backend::Dom(d) => return Box::new(d.clone()),
             Backend::FtcsDiffusion(_) => return Box::new(DiffusionSolver::custom(self.name)),
             Backend::P1(_) => (ExplicitSolver::FTCS_P1.build)(&Params::default()),
             Backend::Convection(p) => {
@@ -198,6 +218,8 @@ impl Solver for GpuSolver {
                     * crate::lbm::bytes_per_cell(&LbmSolver::new(*p))
                     * problem.channels() as u64
             }
+            // The host's part is `dom`'s own budget check (its driver's).
+            Backend::Dom(_) => 0,
         };
         if needed > options.memory_budget {
             return Err(SolveError::OverBudget {
@@ -246,6 +268,17 @@ impl Solver for GpuSolver {
                     name: self.name,
                 };
                 driver::solve_per_channel(self, &method, problem, options).map(|(s, _)| s)
+            }
+            Backend::Dom(dom) => {
+                let gpu = device(self.name)?;
+                let factory: std::sync::Arc<lucent_dom::device::DeviceFactory> =
+                    std::sync::Arc::new(move || {
+                        Ok(Box::new(crate::dom::GpuTransport::new(gpu))
+                            as Box<dyn lucent_dom::device::DeviceTransport>)
+                    });
+                dom.clone()
+                    .on_device(self.name, factory)
+                    .solve(problem, options)
             }
             Backend::Convection(params) => {
                 let gpu = device(self.name)?;

@@ -79,6 +79,31 @@ impl Kernel {
         })
     }
 
+    /// A bind group with each `(binding, resource)` pair: for an entry point that uses a
+    /// subset of its module's numbered bindings.
+    pub fn bind_at(
+        &self,
+        context: &GpuContext,
+        resources: &[(u32, wgpu::BindingResource<'_>)],
+    ) -> Result<wgpu::BindGroup, GpuError> {
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = resources
+            .iter()
+            .map(|(binding, r)| wgpu::BindGroupEntry {
+                binding: *binding,
+                resource: r.clone(),
+            })
+            .collect();
+        context.checked(|| {
+            context
+                .device()
+                .create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some(&self.name),
+                    layout: &self.layout,
+                    entries: &entries,
+                })
+        })
+    }
+
     /// Records one dispatch of `groups` workgroups (from [`groups_2d`]) with `bind`.
     pub fn dispatch(
         &self,

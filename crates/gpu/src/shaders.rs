@@ -54,6 +54,8 @@ pub const LBM_D3Q19: &str = concat!(
     include_str!("../../../shaders/lbm_d3q19.wgsl"),
     include_str!("../../../shaders/lbm.wgsl")
 );
+/// `gpu-dom`: one hyperplane of the eight octant sweeps, and the scattering product.
+pub const DOM: &str = kernel!("dom.wgsl");
 /// The largest change between two fields (stopping rules of passes).
 pub const MAX_CHANGE: &str = kernel!("max_change.wgsl");
 /// lucent-render's ray march on the device: one invocation per pixel.
@@ -73,6 +75,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("scatter.wgsl", SCATTER),
     ("lbm_d3q7.wgsl + lbm.wgsl", LBM_D3Q7),
     ("lbm_d3q19.wgsl + lbm.wgsl", LBM_D3Q19),
+    ("dom.wgsl", DOM),
     ("max_change.wgsl", MAX_CHANGE),
     ("render.wgsl", RENDER),
 ];
