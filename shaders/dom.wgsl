@@ -9,8 +9,9 @@
 //
 // `sweep_plane` is one hyperplane i′ + j′ + k′ = p of the cell wavefront of all eight
 // octants at once (i′ counted from each octant's upwind corner): one invocation per
-// (octant, direction, (j′, k′) in the plane's bounding box), those whose i′ falls outside
-// the grid returning at once. A cell's three upwind faces were written by the
+// (octant, (j′, k′) in the plane's bounding box, direction), those whose i′ falls outside
+// the grid returning at once. Directions run fastest, so a cell's invocations read its
+// source and face slots, stored direction-fastest, as contiguous runs. A cell's three upwind faces were written by the
 // previous dispatch, and each face slot — indexed by the cell's two other coordinates, of
 // which the plane fixes the third — is read and then overwritten by one invocation only:
 // no races, and only 3 × (face area) values per direction live on the device. Dispatches in
@@ -49,11 +50,11 @@ struct StepFlags {
 // Grid index → block index.
 @group(0) @binding(4) var<storage, read> order: array<u32>;
 @group(0) @binding(5) var<storage, read> sigma_t: array<f32>;
-// Per direction, the x, y and z face planes (ny nz, nx nz, nx ny slots).
+// The x, y and z face planes (ny nz, nx nz, nx ny slots), per slot all directions.
 @group(0) @binding(6) var<storage, read_write> faces: array<f32>;
 // Incoming radiance per boundary face cell, faces −x, +x, −y, +y, −z, +z in turn.
 @group(0) @binding(7) var<storage, read> inflow: array<f32>;
-// Per direction, w |ω_a| ψ leaving through the downwind face planes (same slots as faces).
+// w |ω_a| ψ leaving through the downwind face planes, laid out as `faces`.
 @group(0) @binding(8) var<storage, read_write> outflow: array<f32>;
 // Scalar flux per cell (block order).
 @group(0) @binding(9) var<storage, read_write> fluence: array<f32>;
@@ -253,11 +254,6 @@ fn plane_offset(axis: u32) -> u32 {
     return dims.y * dims.z + dims.x * dims.z;
 }
 
-fn plane_block() -> u32 {
-    let dims = params.dims.xyz;
-    return dims.y * dims.z + dims.x * dims.z + dims.x * dims.y;
-}
-
 // Offset of boundary face f (2·axis + side) inside `inflow`.
 fn inflow_offset(f: u32) -> u32 {
     let dims = params.dims.xyz;
@@ -276,21 +272,22 @@ fn sweep_plane(
 ) {
     let dims = params.dims.xyz;
     let t = flat_group(wg, params.dims.w) * WG + local;
-    let per_lane = params.bounds.z * params.bounds.w;
-    let lane = t / per_lane;
+    // Directions fastest: the invocations of one cell read and write its octant's
+    // contiguous values and face slots together.
     let widest = params.plane.z;
-    let octant = lane / widest;
+    let d = t % widest;
+    let lane = t / widest;
+    let per_octant = params.bounds.z * params.bounds.w;
+    let octant = lane / per_octant;
     if (octant >= 8u) {
         return;
     }
-    let d = lane - octant * widest;
     let range = octants[octant];
     if (d >= range.y) {
         return;
     }
-    let rest = t - lane * per_lane;
-    // Coordinates counted from the octant's upwind corner, inside the plane's bounding box;
-    // consecutive invocations take consecutive face slots.
+    let rest = lane - octant * per_octant;
+    // Coordinates counted from the octant's upwind corner, inside the plane's bounding box.
     let ry = params.bounds.x + rest % params.bounds.z;
     let rz = params.bounds.y + rest / params.bounds.z;
     let p = params.plane.x;
@@ -303,7 +300,7 @@ fn sweep_plane(
     let b = order[at.x + dims.x * (at.y + dims.y * at.z)];
     let sigma = sigma_t[b];
     let n = range.x + d;
-    let base = n * plane_block();
+    let n_dirs = params.plane.y;
     let upwind_edge = r == vec3<u32>(0u);
     let downwind_edge = r == dims - vec3<u32>(1u);
     var slots: vec3<u32>;
@@ -315,7 +312,7 @@ fn sweep_plane(
             let f = 2u * a + select(0u, 1u, negative[a]);
             incoming[a] = inflow[inflow_offset(f) + slots[a]];
         } else {
-            incoming[a] = faces[base + plane_offset(a) + slots[a]];
+            incoming[a] = faces[(plane_offset(a) + slots[a]) * n_dirs + n];
         }
     }
     let at_cell = b * range.y + d;
@@ -332,7 +329,7 @@ fn sweep_plane(
     let w = g(n, 3u);
     let speed = vec3<f32>(g(n, 22u), g(n, 23u), g(n, 24u));
     for (var a = 0u; a < 3u; a++) {
-        let slot = base + plane_offset(a) + slots[a];
+        let slot = (plane_offset(a) + slots[a]) * n_dirs + n;
         if (downwind_edge[a]) {
             outflow[slot] = w * speed[a] * solved.out[a];
         } else {

@@ -369,18 +369,19 @@ impl DeviceTransport for GpuTransport {
             }
         })
         .map_err(err)?;
-        // The uploads land first; then the kernels alone are timed to their completion.
+        // The uploads land first; then the pass alone is timed: by the device's timestamps
+        // where it has them (its own clock, recording and submission excluded), else from
+        // submit to completion.
         gpu.wait().map_err(err)?;
-        let started = std::time::Instant::now();
-        gpu.submit_pass("gpu-dom transport step", |pass| {
-            for (bind, &groups) in s.sweep_binds.iter().zip(&s.sweep_groups) {
-                s.sweep.dispatch(pass, bind, groups);
-            }
-            s.scatter.dispatch(pass, &s.scatter_bind, s.scatter_groups);
-        })
-        .map_err(err)?;
-        gpu.wait().map_err(err)?;
-        let kernel_seconds = started.elapsed().as_secs_f64();
+        let kernel_seconds = gpu
+            .timed_pass("gpu-dom transport step", |pass| {
+                for (bind, &groups) in s.sweep_binds.iter().zip(&s.sweep_groups) {
+                    s.sweep.dispatch(pass, bind, groups);
+                }
+                s.scatter.dispatch(pass, &s.scatter_bind, s.scatter_groups);
+            })
+            .map_err(err)?
+            .seconds;
         // J′ (in the sources' buffers), the fluence and the currents back through the
         // staging buffers: one submit, one wait.
         let readables: Vec<&Readable> = s.sources.iter().chain([&s.fluence, &s.outflow]).collect();
@@ -440,10 +441,9 @@ impl DeviceTransport for GpuTransport {
         mapped(&s.fluence, &mut |values| {
             fluence = values[..cells].iter().map(|&v| f64::from(v)).collect();
         })?;
-        // Per direction's planes into the boundary faces: octant by octant, as the CPU
+        // Each slot's directions into the boundary faces: octant by octant, as the CPU
         // sweep adds them.
         let areas = [ny * nz, nx * nz, nx * ny];
-        let plane_block: usize = areas.iter().sum();
         let mut outflow: [Vec<f64>; 6] = std::array::from_fn(|f| vec![0.0; areas[f / 2]]);
         mapped(&s.outflow, &mut |values| {
             for (o, &(first, count)) in s.octants.iter().enumerate() {
@@ -452,8 +452,10 @@ impl DeviceTransport for GpuTransport {
                     let face = 2 * a + usize::from(!negative);
                     let offset: usize = areas[..a].iter().sum();
                     for (slot, out) in outflow[face].iter_mut().enumerate() {
-                        let current: f64 = (first..first + count)
-                            .map(|dir| f64::from(values[dir * plane_block + offset + slot]))
+                        let at = (offset + slot) * n;
+                        let current: f64 = values[at + first..at + first + count]
+                            .iter()
+                            .map(|&v| f64::from(v))
                             .sum();
                         *out += current;
                     }
