@@ -318,6 +318,17 @@ pub fn runs() -> Vec<Run> {
         tolerance: Some(1e-4),
         ..Run::new("gpu-ftcs-p1", String::new(), 1, "tolerance 1e-4".into())
     });
+    for order in [4, 8] {
+        runs.push(Run {
+            tolerance: Some(1e-4),
+            ..Run::new(
+                "gpu-dom",
+                format!("order = {order}"),
+                1,
+                format!("S{order} diamond, tolerance 1e-4"),
+            )
+        });
+    }
     for &tolerance in &[1e-3, 1e-6] {
         runs.push(Run {
             tolerance: Some(tolerance),

@@ -38,6 +38,8 @@
 //!   and 36, and half of source iteration's sweeps under a reflecting boundary; with
 //!   diamond difference the fix-up's settling after it costs more than it saves, so source
 //!   iteration with DSA and Anderson mixing stays the default (tests/krylov.rs).
+//! - [`device`]: the seam of a device's transport steps (`gpu-dom` in
+//!   `lucent-gpu-solvers`): the iteration above runs on the host around them.
 //! - Boundaries: vacuum, a uniform incoming radiance (sky), and diffuse reflection of a
 //!   fraction R of the outgoing partial current (Robin-like; R = F_dr for a mismatched
 //!   index, 1 for a reflecting box).

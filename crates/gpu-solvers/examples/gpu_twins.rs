@@ -1,7 +1,7 @@
 //! A GPU backend used alone, beside its CPU twin: Zhang & Ma's illumination of a smoke
 //! blob under an oblique sun, `gpu-convection-diffusion` against `convection-diffusion`,
-//! and the exact uncollided light by `gpu-direct` against `direct`, with the time each
-//! took and how far apart they are.
+//! the exact uncollided light by `gpu-direct` against `direct`, and discrete ordinates
+//! (S4) by `gpu-dom` against `dom`, with the time each took and how far apart they are.
 //!
 //! `cargo run --profile examples -p lucent-gpu-solvers --example gpu_twins [N]`
 //! (N cells per side, default 64; `WGPU_ADAPTER_NAME` picks the adapter).
@@ -45,6 +45,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             GpuSolver::GPU_CONVECTION_DIFFUSION,
             lucent_explicit::ExplicitSolver::CONVECTION_DIFFUSION,
             scattering,
+        ),
+        (
+            GpuSolver::GPU_DOM,
+            lucent_dom::DomSolver::ENTRY,
+            Params(
+                [("order".to_string(), ParamValue::Int(4))]
+                    .into_iter()
+                    .collect(),
+            ),
         ),
     ];
     for (gpu, cpu, params) in pairs {
