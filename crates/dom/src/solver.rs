@@ -107,10 +107,16 @@ impl DomSolver {
 
     /// The solver for registry parameters.
     pub fn from_params(p: &Params) -> Result<Self, SolveError> {
-        let p: DomParams = p.parse("dom")?;
+        Self::from_params_as(p, "dom")
+    }
+
+    /// The solver for registry parameters under the entry name `name` (its errors and
+    /// reports say `name`: `gpu-dom` builds its solver so).
+    pub fn from_params_as(p: &Params, name: &'static str) -> Result<Self, SolveError> {
+        let p: DomParams = p.parse(name)?;
         let octahedral = p.family == Family::Octahedral;
         let solver = Self {
-            name: "dom",
+            name,
             device: None,
             octahedral,
             order: p.order.unwrap_or(if octahedral { 2 } else { 8 }),
@@ -285,9 +291,10 @@ impl ChannelMethod for DomSolver {
             Outer::SourceIteration => 2 * self.settings.anderson + 2,
         };
         let n = problem.geometry().voxel_count();
-        // The sweeps' work: in memory, or its page pool (on a device: on the device).
+        // The sweeps' work: in memory, or its page pool; on a device the work is the
+        // device's, and the host holds the source it uploads (cells × N, f32).
         let work = match self.settings.paged_work {
-            None if self.device.is_some() => 0,
+            None if self.device.is_some() => self.work_bytes(problem) / 2,
             None => self.work_bytes(problem),
             Some(paged) => paged.pool_bytes.min(self.work_bytes(problem)),
         };

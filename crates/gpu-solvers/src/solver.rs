@@ -158,7 +158,7 @@ impl GpuSolver {
         build: |p| {
             Ok(Box::new(GpuSolver {
                 name: "gpu-dom",
-                backend: Backend::Dom(DomSolver::from_params(p)?),
+                backend: Backend::Dom(DomSolver::from_params_as(p, "gpu-dom")?),
             }))
         },
         params: param_docs::<DomParams>,
