@@ -340,7 +340,7 @@ fn sweep_plane(
 
 // J′_m = Σ_n ψ̄_n B_nm, one invocation per cell and storage direction, summed in f32
 // over the N propagation directions into the octant buffer of m (whose source the sweep
-// has read); the invocation of m = 0 also sums the scalar flux Σ_n w_n ψ̄_n.
+// has read); the invocation of m = 0 alone also sums the scalar flux Σ_n w_n ψ̄_n.
 @compute @workgroup_size(256)
 fn scatter(
     @builtin(local_invocation_index) local: u32,
@@ -364,7 +364,9 @@ fn scatter(
             let n = range.x + d;
             let psi = load_psi(o, b * range.y + d);
             sum += psi * scattering[n * n_dirs + m];
-            phi += g(n, 3u) * psi;
+            if (m == 0u) {
+                phi += g(n, 3u) * psi;
+            }
             if (n == m) {
                 out_octant = o;
                 out_index = b * range.y + d;

@@ -71,7 +71,7 @@ pub(crate) fn run(n: usize, order: usize, gpu: bool) -> Result<(), String> {
     );
     println!();
     if gpu {
-        return run_gpu(n, directions, &problem, &options);
+        return run_gpu(n, order, directions, &problem, &options);
     }
     println!(
         "| run | outer | wall | sweeps | sweeps alone | ns per cell-direction (sweeps) | sweep GB/s (sources read, radiance written, σ_t, σ_s) | sources + scattering products | DSA | Anderson | Krylov vectors | rest (direct, first-collision, set-up) | stop |"
@@ -139,6 +139,7 @@ pub(crate) fn run(n: usize, order: usize, gpu: bool) -> Result<(), String> {
 /// fluences over the peak.
 fn run_gpu(
     n: usize,
+    order: usize,
     directions: usize,
     problem: &Problem,
     options: &SolveOptions,
@@ -168,7 +169,9 @@ fn run_gpu(
     };
     for name in names {
         let mut params = Params::default();
-        params.0.insert("order".into(), ParamValue::Int(6));
+        params
+            .0
+            .insert("order".into(), ParamValue::Int(order as i64));
         let solver = lucent::dom::DomSolver::from_params(&params).map_err(|e| err(&e))?;
         let solver = if *name == "gpu-dom" {
             let factory: std::sync::Arc<lucent::dom::device::DeviceFactory> =

@@ -60,23 +60,12 @@ impl Kernel {
         context: &GpuContext,
         resources: &[wgpu::BindingResource<'_>],
     ) -> Result<wgpu::BindGroup, GpuError> {
-        let entries: Vec<wgpu::BindGroupEntry<'_>> = resources
+        let numbered: Vec<(u32, wgpu::BindingResource<'_>)> = resources
             .iter()
             .enumerate()
-            .map(|(i, r)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: r.clone(),
-            })
+            .map(|(i, r)| (i as u32, r.clone()))
             .collect();
-        context.checked(|| {
-            context
-                .device()
-                .create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some(&self.name),
-                    layout: &self.layout,
-                    entries: &entries,
-                })
-        })
+        self.bind_at(context, &numbered)
     }
 
     /// A bind group with each `(binding, resource)` pair: for an entry point that uses a
