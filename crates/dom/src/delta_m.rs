@@ -36,6 +36,7 @@
 //! unscattered light); the in-scattered radiance is that of p* and σ_s′. The error against
 //! the untruncated problem is measured above.
 
+use lucent_core::{Field, Medium};
 use lucent_optics::Phase;
 
 use crate::error::DomError;
@@ -120,6 +121,48 @@ impl DeltaM {
                 .map(|s| ((1.0 - f) * f64::from(*s)) as f32)
                 .collect(),
             ..problem.clone()
+        }
+    }
+
+    /// The medium with σ_t′ = σ_t(1 − fω) and ω′ = ω(1 − f)/(1 − fω) in every cell and
+    /// channel (σ_a unchanged) and the phase function p*: what `dom` solves with
+    /// `truncation` set, lights and boundary unchanged. A grey extinction with an RGB
+    /// albedo becomes an RGB extinction.
+    pub fn medium(&self, medium: &Medium) -> Medium {
+        let f = self.fraction;
+        let channels = medium.sigma_t.len().max(medium.albedo.len());
+        let reduced_albedo = |a: f32| {
+            let a = f64::from(a);
+            (a * (1.0 - f) / (1.0 - f * a)) as f32
+        };
+        let sigma_t = (0..channels)
+            .map(|c| {
+                let mut grid = medium.sigma_t(c).clone();
+                let albedo = medium.albedo(c);
+                for (i, t) in grid.data_mut().iter_mut().enumerate() {
+                    *t = (f64::from(*t) * (1.0 - f * f64::from(albedo.at(i)))) as f32;
+                }
+                grid
+            })
+            .collect();
+        let albedo = medium
+            .albedo
+            .iter()
+            .map(|a| match a {
+                Field::Constant(v) => Field::Constant(reduced_albedo(*v)),
+                Field::Grid(g) => {
+                    let mut g = g.clone();
+                    g.data_mut()
+                        .iter_mut()
+                        .for_each(|v| *v = reduced_albedo(*v));
+                    Field::Grid(g)
+                }
+            })
+            .collect();
+        Medium {
+            sigma_t,
+            albedo,
+            phase: self.reduced,
         }
     }
 }

@@ -19,6 +19,19 @@ pub enum Family {
     Octahedral,
 }
 
+/// A truncation of a forward-peaked phase function ([`crate::DeltaM`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Truncation {
+    /// The phase function as it is.
+    #[default]
+    None,
+    /// Delta-M: f = χ_N of the level-symmetric S_N set (`order` = N).
+    DeltaM,
+    /// Delta-Eddington: f = χ₂ = g² for Henyey–Greenstein, with any direction set.
+    DeltaEddington,
+}
+
 /// The parameters of `dom`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -45,6 +58,8 @@ pub struct DomParams {
     /// temporary file holds the rest); `None`: in memory, or paged by itself when the
     /// memory budget is too small for it in memory.
     pub work_pool_mib: Option<u64>,
+    /// Truncation of a forward-peaked phase function.
+    pub truncation: Truncation,
 }
 
 impl Default for DomParams {
@@ -60,6 +75,7 @@ impl Default for DomParams {
             anderson: 2,
             block: 16,
             work_pool_mib: None,
+            truncation: Truncation::None,
         }
     }
 }
@@ -99,6 +115,10 @@ impl SolverParams for DomParams {
         (
             "work_pool_mib",
             "keep the sweeps' per-direction work (f64, cells × directions) in a page pool of this many MiB over a temporary file (none: in memory, or paged when the memory budget asks for it)",
+        ),
+        (
+            "truncation",
+            "forward peak of the phase function: none, delta-m (the fraction χ_N moved into the uncollided light; level-symmetric sets) or delta-eddington (χ₂)",
         ),
     ];
 

@@ -25,7 +25,22 @@
 //! propagation set), `closure` (`diamond`, `step`, `exponential`), `acceleration` (`dsa`
 //! or `none`), `anderson` (mixing depth, 2; 0 off), `outer` (`source-iteration`, the
 //! default, or `gmres`), `restart` (GMRES restart length, 12), `block` (wavefront block
-//! edge, 16), `work_pool_mib` (the sweeps' work paged).
+//! edge, 16), `work_pool_mib` (the sweeps' work paged), `truncation` (`none`, `delta-m`
+//! or `delta-eddington`).
+//!
+//! With a truncation ([`DeltaM`]: Wiscombe 1977) the whole problem is solved in the
+//! truncated medium, σ_t′ = σ_t(1 − fω), ω′ = ω(1 − f)/(1 − fω), phase p*: the lights'
+//! uncollided light too, so the fraction f of each scattering that barely turns the light
+//! travels with it (as delta-M asks; integrating the uncollided light with σ_t and only the
+//! sweeps with σ_t′ would put the δ back into the sweeps' first-collision source). The
+//! fluence is the total fluence of the truncated problem, which approximates the true
+//! one (the error against an untruncated S12 solution is measured in `tests/delta_m.rs`).
+//! For the renderer, which extinguishes camera rays with σ_t and in-scatters with σ_s, the
+//! lights' exact single scattering keeps the true phase function with the truncated
+//! transmittance (Nakajima & Tanaka's correction of the single-scattered light), and the
+//! ordinates' in-scattered radiance J* stands for the δ part's fL′(ω) too, which the
+//! extra extinction fσ_s of the camera ray removes again: exact where the scattered light
+//! is nearly isotropic (J* = L′), an error of fσ_s(L′ − J*) per length elsewhere.
 
 use lucent_core::driver::{
     self, Channel, ChannelMethod, ChannelSolution, Coefficients, Context, Record, Route,
@@ -39,10 +54,11 @@ use lucent_optics::SphericalQuadrature;
 
 use std::sync::Arc;
 
+use crate::DeltaM;
 use crate::DomError;
 use crate::angular::Ordinates;
 use crate::device::DeviceFactory;
-use crate::params::{DomParams, Family};
+use crate::params::{DomParams, Family, Truncation};
 use crate::solve::{
     DomBoundary, DomProblem, DomSettings, Outer, PagedWork, SourceIteration, solve,
 };
@@ -70,6 +86,7 @@ pub struct DomSolver {
     storage_level: Option<usize>,
     settings: DomSettings,
     device: Option<Device>,
+    truncation: Truncation,
 }
 
 /// The factory of a device's transport steps, compared by identity.
@@ -115,9 +132,18 @@ impl DomSolver {
     pub fn from_params_as(p: &Params, name: &'static str) -> Result<Self, SolveError> {
         let p: DomParams = p.parse(name)?;
         let octahedral = p.family == Family::Octahedral;
+        if octahedral && p.truncation == Truncation::DeltaM {
+            return Err(invalid(
+                "truncation",
+                format!(
+                    "delta-m moves the fraction χ_N of a level-symmetric S_N set; with family = \"octahedral\" use delta-eddington (solver `{name}`)"
+                ),
+            ));
+        }
         let solver = Self {
             name,
             device: None,
+            truncation: p.truncation,
             octahedral,
             order: p.order.unwrap_or(if octahedral { 2 } else { 8 }),
             storage_level: p.storage_level,
@@ -148,6 +174,18 @@ impl DomSolver {
             device: Some(Device(factory)),
             ..self
         }
+    }
+
+    /// The truncation of `phase` this solver applies: `None` without one, or where the
+    /// phase function has no forward peak at the order (f = 0).
+    fn delta_m(&self, phase: lucent_optics::Phase) -> Result<Option<DeltaM>, SolveError> {
+        let order = match self.truncation {
+            Truncation::None => return Ok(None),
+            Truncation::DeltaM => self.order,
+            Truncation::DeltaEddington => 2,
+        };
+        let t = DeltaM::new(phase, order).map_err(|e| invalid("truncation", e.to_string()))?;
+        Ok((t.fraction() > 0.0).then_some(t))
     }
 
     /// The angular sets for `phase`.
@@ -211,6 +249,25 @@ impl DomSolver {
         problem: &Problem,
         options: &SolveOptions,
     ) -> Result<(Solution, Vec<DomChannel>), SolveError> {
+        let phase = problem.medium().phase;
+        let truncated;
+        let problem = match self.delta_m(phase)? {
+            Some(t) => {
+                let mut p = Problem::new(
+                    *problem.geometry(),
+                    t.medium(problem.medium()),
+                    problem.lights().to_vec(),
+                    problem.boundary(),
+                    problem.embedded().cloned(),
+                )?;
+                if let Some(index) = problem.refractive_index() {
+                    p = p.with_refractive_index(index.clone())?;
+                }
+                truncated = p;
+                &truncated
+            }
+            None => problem,
+        };
         // A budget too small for the sweeps' work in memory pages it, if the rest fits.
         let paged;
         let solver = match self.paged_for_budget(problem, options.memory_budget) {
@@ -220,7 +277,15 @@ impl DomSolver {
             }
             None => self,
         };
-        let (solution, extras) = driver::solve_per_channel(solver, solver, problem, options)?;
+        let (mut solution, extras) = driver::solve_per_channel(solver, solver, problem, options)?;
+        // The lights' exact single scattering with the true phase function (see above).
+        if let Some(Angular::Ordinates(OrdinateRadiance {
+            lights: Some(lights),
+            ..
+        })) = &mut solution.angular
+        {
+            lights.phase = phase;
+        }
         Ok((solution, extras.into_iter().map(|(_, r)| r).collect()))
     }
 
@@ -298,7 +363,14 @@ impl ChannelMethod for DomSolver {
             None => self.work_bytes(problem),
             Some(paged) => paged.pool_bytes.min(self.work_bytes(problem)),
         };
-        ((n * m * 4 * (3 + extra_vectors) + n * 40) as u64 + work) * problem.channels() as u64
+        // A truncated problem is a copy of the medium: an extinction and an albedo grid
+        // per channel.
+        let truncated = match self.truncation {
+            Truncation::None => 0,
+            _ => n * 8,
+        };
+        ((n * m * 4 * (3 + extra_vectors) + n * 40 + truncated) as u64 + work)
+            * problem.channels() as u64
     }
 
     fn setup(&self, context: &Context<'_>) -> Result<Ordinates, SolveError> {
