@@ -16,7 +16,8 @@
 // which the plane fixes the third — is read and then overwritten by one invocation only:
 // no races, and only 3 × (face area) values per direction live on the device. Dispatches in
 // one compute pass see each other's writes (WebGPU's usage scopes), so a sweep is one
-// command buffer of nx + ny + nz − 2 dispatches and `scatter`.
+// command buffer of nx + ny + nz − 2 dispatches and `scatter`. `sweep_blocks` is the same
+// wavefront over blocks of cells (below); both run `sweep_cell` on each cell and direction.
 //
 // Per cell and direction the data are split by octant (src0..7, psi0..7: cells × the
 // octant's directions, lucent-dom's block order), so that at 256³ × 48 directions each
@@ -265,36 +266,12 @@ fn inflow_offset(f: u32) -> u32 {
     return offset;
 }
 
-@compute @workgroup_size(256)
-fn sweep_plane(
-    @builtin(local_invocation_index) local: u32,
-    @builtin(workgroup_id) wg: vec3<u32>,
-) {
+// One cell and direction of octant `octant`'s sweep: the cell at `r`, counted from the
+// octant's upwind corner, and the octant's direction d. Its three upwind faces must be
+// final (written by the cells before it in the wavefront, or the box's inflow).
+fn sweep_cell(octant: u32, r: vec3<u32>, d: u32) {
     let dims = params.dims.xyz;
-    let t = flat_group(wg, params.dims.w) * WG + local;
-    // Directions fastest: the invocations of one cell read and write its octant's
-    // contiguous values and face slots together.
-    let widest = params.plane.z;
-    let d = t % widest;
-    let lane = t / widest;
-    let per_octant = params.bounds.z * params.bounds.w;
-    let octant = lane / per_octant;
-    if (octant >= 8u) {
-        return;
-    }
     let range = octants[octant];
-    if (d >= range.y) {
-        return;
-    }
-    let rest = lane - octant * per_octant;
-    // Coordinates counted from the octant's upwind corner, inside the plane's bounding box.
-    let ry = params.bounds.x + rest % params.bounds.z;
-    let rz = params.bounds.y + rest / params.bounds.z;
-    let p = params.plane.x;
-    if (ry + rz > p || p - ry - rz >= dims.x) {
-        return;
-    }
-    let r = vec3<u32>(p - ry - rz, ry, rz);
     let negative = vec3<bool>((octant & 1u) != 0u, (octant & 2u) != 0u, (octant & 4u) != 0u);
     let at = select(r, dims - vec3<u32>(1u) - r, negative);
     let b = order[at.x + dims.x * (at.y + dims.y * at.z)];
@@ -335,6 +312,86 @@ fn sweep_plane(
         } else {
             faces[slot] = solved.out[a];
         }
+    }
+}
+
+@compute @workgroup_size(256)
+fn sweep_plane(
+    @builtin(local_invocation_index) local: u32,
+    @builtin(workgroup_id) wg: vec3<u32>,
+) {
+    let dims = params.dims.xyz;
+    let t = flat_group(wg, params.dims.w) * WG + local;
+    // Directions fastest: the invocations of one cell read and write its octant's
+    // contiguous values and face slots together.
+    let widest = params.plane.z;
+    let d = t % widest;
+    let lane = t / widest;
+    let per_octant = params.bounds.z * params.bounds.w;
+    let octant = lane / per_octant;
+    if (octant >= 8u) {
+        return;
+    }
+    if (d >= octants[octant].y) {
+        return;
+    }
+    let rest = lane - octant * per_octant;
+    // Coordinates counted from the octant's upwind corner, inside the plane's bounding box.
+    let ry = params.bounds.x + rest % params.bounds.z;
+    let rz = params.bounds.y + rest / params.bounds.z;
+    let p = params.plane.x;
+    if (ry + rz > p || p - ry - rz >= dims.x) {
+        return;
+    }
+    sweep_cell(octant, vec3<u32>(p - ry - rz, ry, rz), d);
+}
+
+// The block wavefront: blocks of BLOCK³ cells, counted from each octant's upwind corner,
+// make the hyperplanes I′ + J′ + K′ = P (`params.plane.x`, the (J′, K′) bounding box in
+// `params.bounds`); one workgroup per (octant, block) of the plane runs its block's own
+// 3·BLOCK − 2 cell diagonals in turn, a storage barrier between them (a cell's upwind
+// faces inside the block are written by other invocations of the same workgroup; those
+// on the block's upwind sides by the previous dispatch). Invocations: BLOCK² (j, k)
+// columns of the block, each marching its cells along i, times LANES that share the
+// octant's directions. A sweep is then 3·(n/BLOCK) − 2 dispatches instead of 3n − 2.
+const BLOCK: u32 = 4u;
+const LANES: u32 = 4u;
+
+@compute @workgroup_size(64)
+fn sweep_blocks(
+    @builtin(local_invocation_index) local: u32,
+    @builtin(workgroup_id) wg: vec3<u32>,
+) {
+    let dims = params.dims.xyz;
+    let blocks = (dims + vec3<u32>(BLOCK - 1u)) / BLOCK;
+    let group = flat_group(wg, params.dims.w);
+    let per_octant = params.bounds.z * params.bounds.w;
+    let octant = group / per_octant;
+    let rest = group - min(octant, 7u) * per_octant;
+    let by = params.bounds.x + rest % params.bounds.z;
+    let bz = params.bounds.y + rest / params.bounds.z;
+    let p = params.plane.x;
+    // No early return: every invocation must reach the barriers.
+    let valid = octant < 8u && by + bz <= p && p - by - bz < blocks.x;
+    var count = 0u;
+    if (valid) {
+        count = octants[octant].y;
+    }
+    let corner = vec3<u32>(p - by - bz, by, bz) * BLOCK;
+    let lane = local % LANES;
+    let column = local / LANES;
+    let ly = column % BLOCK;
+    let lz = column / BLOCK;
+    for (var q = 0u; q < 3u * BLOCK - 2u; q++) {
+        if (q >= ly + lz && q - ly - lz < BLOCK) {
+            let r = corner + vec3<u32>(q - ly - lz, ly, lz);
+            if (all(r < dims)) {
+                for (var d = lane; d < count; d += LANES) {
+                    sweep_cell(octant, r, d);
+                }
+            }
+        }
+        storageBarrier();
     }
 }
 

@@ -162,10 +162,11 @@ fn run_gpu(
     };
     let cells = (n * n * n) as f64;
     let mut fluences = Vec::new();
+    // Both wavefronts of the device (blocks and cells, the default), and the host up to 128³.
     let names: &[&str] = if n <= 128 {
-        &["gpu-dom", "dom"]
+        &["gpu-dom (blocks)", "gpu-dom", "dom"]
     } else {
-        &["gpu-dom"]
+        &["gpu-dom (blocks)", "gpu-dom"]
     };
     for name in names {
         let mut params = Params::default();
@@ -173,10 +174,15 @@ fn run_gpu(
             .0
             .insert("order".into(), ParamValue::Int(order as i64));
         let solver = lucent::dom::DomSolver::from_params(&params).map_err(|e| err(&e))?;
-        let solver = if *name == "gpu-dom" {
+        let solver = if name.starts_with("gpu-dom") {
+            let wavefront = if name.contains("blocks") {
+                lucent::gpu_solvers::Wavefront::Blocks
+            } else {
+                lucent::gpu_solvers::Wavefront::Cells
+            };
             let factory: std::sync::Arc<lucent::dom::device::DeviceFactory> =
                 std::sync::Arc::new(move || {
-                    lucent::gpu_solvers::dom_transport()
+                    lucent::gpu_solvers::dom_transport_with(wavefront)
                         .map_err(|e| lucent::dom::DomError::Device(e.to_string()))
                 });
             solver.on_device("gpu-dom", factory)
@@ -212,17 +218,21 @@ fn run_gpu(
         );
         fluences.push(solution.fluence(0).data().to_vec());
     }
-    if let [a, b] = &fluences[..] {
-        let peak = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-        let worst = a
-            .iter()
-            .zip(b)
-            .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+    // Each device run against the last run (the host's, or the first device run's).
+    if let Some((reference, runs)) = fluences.split_last() {
+        let peak = reference.iter().fold(0.0f32, |m, v| m.max(v.abs()));
         println!();
-        println!(
-            "largest difference gpu-dom − dom: {:.2e} of the peak",
-            worst / peak
-        );
+        for (name, a) in names.iter().zip(runs) {
+            let worst = a
+                .iter()
+                .zip(reference)
+                .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+            println!(
+                "largest difference {name} − {}: {:.2e} of the peak",
+                names[runs.len()],
+                worst / peak
+            );
+        }
     }
     Ok(())
 }

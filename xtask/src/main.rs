@@ -32,7 +32,8 @@
 //!   volumes on the same box: assembly, bytes per unknown, solve time.
 //! - `bench-dom [N] [ORDER] [--gpu]`: a converged discrete-ordinates solve at N³ (128) with
 //!   S_ORDER (6: 48 directions), g = 0.6: wall time, sweeps, time per cell-direction and
-//!   GB/s; with `--gpu`, `gpu-dom` (and `dom` beside it up to 128³): the device's kernel
+//!   GB/s; with `--gpu`, `gpu-dom` with its block and its cell wavefront (and `dom` beside
+//!   them up to 128³): the device's kernel
 //!   time per cell-direction and per converged solve.
 //! - `bench-paging [N] [BRICK] [DOM_N]`: an FTCS stencil swept in core and out of core (two
 //!   paged fields, 1/16 of their bricks resident, a backing file) at N³ (256) with B³

@@ -14,11 +14,14 @@
 //! steps, which need J on the host, are the reason for the round trip (the issue allows
 //! the acceleration on the host).
 //!
-//! Cells, not blocks, make the wavefront: each dispatch covers the (octant, direction, j,
-//! k) tuples of the plane's (j, k) bounding box and lets the invocations whose i falls
-//! outside the grid return, so a sweep is 3n − 2 dispatches in one compute pass. Per cell and
-//! direction the arrays are split by octant (eight bindings each), so that 256³ × 48
-//! directions fits the 2 GiB a binding may hold on current drivers.
+//! The wavefront ([`Wavefront`]): single cells by default (`sweep_plane`: each dispatch
+//! covers the (octant, direction, j, k) tuples of a cell hyperplane's (j, k) bounding box,
+//! 3n − 2 dispatches), or blocks of 4³ cells (`sweep_blocks`: one workgroup per octant and
+//! block of a block hyperplane, which runs the block's own cell diagonals between storage
+//! barriers, 3n/4 − 2 dispatches). Either way one compute pass per sweep, and the same
+//! bits. Measured on an H200 (BENCHMARKS.md): blocks 7 % faster at 128³ and 19 % slower
+//! at 256³ — the sweep is bound by each cell-direction's own work, not by launches. Per cell and direction the arrays are split by octant (eight bindings each),
+//! so that 256³ × 48 directions fits the 2 GiB a binding may hold on current drivers.
 //!
 //! Precision: f32 throughout (the CPU sweeps in f64 and stores f32): one transport step
 //! agrees with the CPU's to about 1e-6 relative, and the converged fluence to the stopping
@@ -36,6 +39,8 @@ use rayon::prelude::*;
 
 /// Floats per direction in the geometry buffer (`dom.wgsl`'s GEOMETRY).
 const GEOMETRY: usize = 28;
+/// Invocations of a `sweep_blocks` workgroup (`dom.wgsl`: BLOCK² columns × LANES).
+const BLOCK_INVOCATIONS: u32 = 64;
 /// Storage buffers `sweep_plane` binds (the octants' sources and radiance, eight each,
 /// and seven more).
 const STORAGE_BUFFERS: u32 = 23;
@@ -60,21 +65,54 @@ fn plane_bounds([nx, ny, nz]: [usize; 3], p: usize) -> [usize; 4] {
     [y_lo, z_lo, y_hi + 1 - y_lo, z_hi + 1 - z_lo]
 }
 
+/// What one dispatch of a sweep covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Wavefront {
+    /// A hyperplane of blocks of 4³ cells, each block's diagonals inside one workgroup.
+    Blocks,
+    /// A hyperplane of cells.
+    #[default]
+    Cells,
+}
+
+impl Wavefront {
+    /// Cells along a block's edge.
+    fn edge(self) -> usize {
+        match self {
+            Wavefront::Blocks => 4,
+            Wavefront::Cells => 1,
+        }
+    }
+}
+
 /// A transport device on the process's shared GPU context, for
 /// [`lucent_dom::DomSolver::on_device`] (what `gpu-dom` builds its solver with).
 pub fn dom_transport() -> Result<Box<dyn DeviceTransport>, GpuError> {
-    Ok(Box::new(GpuTransport::new(GpuContext::shared()?)))
+    dom_transport_with(Wavefront::default())
+}
+
+/// [`dom_transport`] with the given wavefront (`cargo xtask bench-dom --gpu` times both).
+pub fn dom_transport_with(wavefront: Wavefront) -> Result<Box<dyn DeviceTransport>, GpuError> {
+    Ok(Box::new(GpuTransport::new(
+        GpuContext::shared()?,
+        wavefront,
+    )))
 }
 
 /// The transport steps of one channel on `gpu`.
 pub(crate) struct GpuTransport {
     gpu: &'static GpuContext,
+    wavefront: Wavefront,
     state: Option<State>,
 }
 
 impl GpuTransport {
-    pub(crate) fn new(gpu: &'static GpuContext) -> Self {
-        Self { gpu, state: None }
+    pub(crate) fn new(gpu: &'static GpuContext, wavefront: Wavefront) -> Self {
+        Self {
+            gpu,
+            wavefront,
+            state: None,
+        }
     }
 }
 
@@ -224,17 +262,30 @@ impl DeviceTransport for GpuTransport {
                 })
             })
             .map_err(err)?;
-        let sweep = gpu
-            .kernel("dom.wgsl", shaders::DOM, "sweep_plane")
-            .map_err(err)?;
+        let (entry, per_group) = match self.wavefront {
+            Wavefront::Blocks => ("sweep_blocks", BLOCK_INVOCATIONS),
+            Wavefront::Cells => ("sweep_plane", WORKGROUP),
+        };
+        let sweep = gpu.kernel("dom.wgsl", shaders::DOM, entry).map_err(err)?;
         let scatter = gpu
             .kernel("dom.wgsl", shaders::DOM, "scatter")
             .map_err(err)?;
-        let planes = nx + ny + nz - 2;
-        let bounds: Vec<[usize; 4]> = (0..planes).map(|p| plane_bounds(dims, p)).collect();
+        // The wavefront's hyperplanes, of cells or of blocks; per plane one invocation per
+        // octant, (j, k) of its bounding box and direction (cells), or one workgroup per
+        // octant and (J, K) (blocks).
+        let edge = self.wavefront.edge();
+        let units = dims.map(|d| d.div_ceil(edge));
+        let planes = units.iter().sum::<usize>() - 2;
+        let bounds: Vec<[usize; 4]> = (0..planes).map(|p| plane_bounds(units, p)).collect();
         let sweep_groups: Vec<[u32; 2]> = bounds
             .iter()
-            .map(|b| groups_2d(gpu, (8 * widest * b[2] * b[3]) as u64, WORKGROUP))
+            .map(|b| {
+                let invocations = match self.wavefront {
+                    Wavefront::Blocks => 8 * b[2] * b[3] * BLOCK_INVOCATIONS as usize,
+                    Wavefront::Cells => 8 * widest * b[2] * b[3],
+                };
+                groups_2d(gpu, invocations as u64, per_group)
+            })
             .collect();
         let scatter_groups = groups_2d(gpu, (cells * n) as u64, WORKGROUP);
         let h = setup.spacing;

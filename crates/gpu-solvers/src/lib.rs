@@ -57,7 +57,7 @@ mod p1;
 mod params;
 mod solver;
 
-pub use dom::dom_transport;
+pub use dom::{Wavefront, dom_transport, dom_transport_with};
 pub use lbm::march as lbm_march;
 pub use params::GpuConvectionParams;
 pub use solver::GpuSolver;

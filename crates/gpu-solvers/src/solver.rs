@@ -273,7 +273,10 @@ impl Solver for GpuSolver {
                 let gpu = device(self.name)?;
                 let factory: std::sync::Arc<lucent_dom::device::DeviceFactory> =
                     std::sync::Arc::new(move || {
-                        Ok(Box::new(crate::dom::GpuTransport::new(gpu))
+                        Ok(Box::new(crate::dom::GpuTransport::new(
+                            gpu,
+                            crate::dom::Wavefront::default(),
+                        ))
                             as Box<dyn lucent_dom::device::DeviceTransport>)
                     });
                 dom.clone()
