@@ -152,9 +152,9 @@ fn run_gpu(
     }
     println!();
     println!(
-        "| solver | wall | sweeps | transport steps | of which device kernels | ns per cell-direction (kernels) | DSA | Anderson | rest (direct, first-collision, set-up) | stop |"
+        "| solver | wall | sweeps | transport steps | of which device kernels | of which scattering products | ns per cell-direction (kernels) | DSA | Anderson | rest (direct, first-collision, set-up) | stop |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     // Up to 256³ × 48 directions the host holds about 30 GB of iterates.
     let options = SolveOptions {
         memory_budget: 96 << 30,
@@ -197,10 +197,13 @@ fn run_gpu(
         let r = &records[0].convergence;
         let updates = cells * directions as f64 * r.sweeps as f64;
         let rest = wall - r.sweep_seconds - r.scatter_seconds - r.dsa_seconds - r.anderson_seconds;
-        let kernels = if r.device_seconds > 0.0 {
-            format!("{:.3} s", r.device_seconds)
+        let (kernels, products) = if r.device_seconds > 0.0 {
+            (
+                format!("{:.3} s", r.device_seconds),
+                format!("{:.3} s", r.device_scatter_seconds),
+            )
         } else {
-            "–".into()
+            ("–".into(), "–".into())
         };
         let per_update = if r.device_seconds > 0.0 {
             r.device_seconds
@@ -209,7 +212,7 @@ fn run_gpu(
         } / updates
             * 1e9;
         println!(
-            "| {name} | {wall:.2} s | {} | {:.2} s | {kernels} | {per_update:.3} | {:.2} s | {:.2} s | {rest:.2} s | {:?} |",
+            "| {name} | {wall:.2} s | {} | {:.2} s | {kernels} | {products} | {per_update:.3} | {:.2} s | {:.2} s | {rest:.2} s | {:?} |",
             r.sweeps,
             r.sweep_seconds + r.scatter_seconds,
             r.dsa_seconds,

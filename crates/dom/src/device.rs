@@ -72,6 +72,9 @@ pub struct TransportOutput {
     /// Seconds the device spent in the step's kernels (from submitting them to their
     /// completion, transfers excluded); 0 where the device does not say.
     pub kernel_seconds: f64,
+    /// Of `kernel_seconds`, the scattering product's (J′ and the scalar flux); the rest is
+    /// the sweeps'.
+    pub scatter_seconds: f64,
 }
 
 /// A transport step on a device.

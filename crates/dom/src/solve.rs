@@ -193,6 +193,8 @@ pub struct DomConvergence {
     /// Of `sweep_seconds`, the time a device spent in its transport kernels (0 on the
     /// host): the rest is the transfers of the in-scattered radiance.
     pub device_seconds: f64,
+    /// Of `device_seconds`, the device's scattering products (0 on the host).
+    pub device_scatter_seconds: f64,
     /// The sweep after which DSA was dropped because it amplified the error (thick
     /// cells), if it was.
     pub dsa_abandoned: Option<usize>,
@@ -279,6 +281,7 @@ struct Timings {
     anderson: f64,
     krylov: f64,
     device: f64,
+    device_scatter: f64,
 }
 
 /// What the iteration has seen: the changes, the measured contraction, and the state of
@@ -756,9 +759,11 @@ impl<'a> SourceIteration<'a> {
             fluence,
             outflow,
             kernel_seconds,
+            scatter_seconds,
         } = device.transport(&step, &mut self.inscattered)?;
         self.timings.sweep += t.elapsed().as_secs_f64();
         self.timings.device += kernel_seconds;
+        self.timings.device_scatter += scatter_seconds;
         let h = self.spacing;
         let area = |a: usize| h[(a + 1) % 3] * h[(a + 2) % 3];
         let directions = self.ordinates.propagation().directions();
@@ -1178,6 +1183,7 @@ impl<'a> SourceIteration<'a> {
                 anderson_seconds: timings.anderson,
                 krylov_seconds: timings.krylov,
                 device_seconds: timings.device,
+                device_scatter_seconds: timings.device_scatter,
                 dsa_abandoned: monitor.dsa_abandoned,
                 work_paging,
             },

@@ -1,10 +1,10 @@
 //! `gpu-dom`: `dom` with its transport steps on the device. The iteration — source
 //! iteration with DSA and Anderson mixing, or GMRES, their stopping rules and safeguards —
 //! runs on the host unchanged (`lucent_dom::SourceIteration::on_device`); each transport
-//! step's sweeps and scattering product run in `shaders/dom.wgsl` as one command buffer:
-//! nx + ny + nz − 2 dispatches of `sweep_plane`, each one cell hyperplane of all eight
-//! octants and all their directions at once (one invocation per octant, direction and
-//! cell), then `scatter` (J′ and the scalar flux).
+//! step's sweeps and scattering product run in `shaders/dom.wgsl`, two compute passes
+//! timed apart: nx + ny + nz − 2 dispatches of `sweep_plane`, each one cell hyperplane of
+//! all eight octants and all their directions at once (one invocation per octant,
+//! direction and cell), then `scatter` (J′ and the scalar flux).
 //!
 //! What stays on the device between steps: σ_t, the radiance ψ̄ per cell and direction,
 //! and 3 face planes per direction (the sweep's in-flight faces). What moves per step: the
@@ -424,11 +424,19 @@ impl DeviceTransport for GpuTransport {
         // where it has them (its own clock, recording and submission excluded), else from
         // submit to completion.
         gpu.wait().map_err(err)?;
-        let kernel_seconds = gpu
-            .timed_pass("gpu-dom transport step", |pass| {
+        // The sweeps and the scattering product in two passes, timed apart (the second
+        // submit costs one more wait per step, against the host's fill and transfers of
+        // the whole radiance).
+        let sweep_seconds = gpu
+            .timed_pass("gpu-dom sweeps", |pass| {
                 for (bind, &groups) in s.sweep_binds.iter().zip(&s.sweep_groups) {
                     s.sweep.dispatch(pass, bind, groups);
                 }
+            })
+            .map_err(err)?
+            .seconds;
+        let scatter_seconds = gpu
+            .timed_pass("gpu-dom scattering product", |pass| {
                 s.scatter.dispatch(pass, &s.scatter_bind, s.scatter_groups);
             })
             .map_err(err)?
@@ -519,7 +527,8 @@ impl DeviceTransport for GpuTransport {
         Ok(TransportOutput {
             fluence,
             outflow,
-            kernel_seconds,
+            kernel_seconds: sweep_seconds + scatter_seconds,
+            scatter_seconds,
         })
     }
 }
