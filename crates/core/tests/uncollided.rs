@@ -306,3 +306,59 @@ fn a_light_on_a_corner_or_a_face_shares_its_power_by_symmetry() {
     );
     assert!((a - b).abs() < 1e-6 * a, "{a} {b}");
 }
+
+#[test]
+fn a_sun_on_optically_thick_cells_collides_where_it_enters() {
+    // A sun on a homogeneous cube of 16³ cells at σ_t h = 0.5 to 50 (thick media on a
+    // coarse grid: marble, skin, milk), from above and obliquely. The Gauss points alone
+    // caught 61 % of the sun's power at σ_t h = 10 and 0.06 % at 50 (the light collides
+    // before it reaches them), and 90 % at 2 under the oblique sun, which enters the side
+    // cells through their sides. Cells from σ_t h = 3/2 take face fluxes, which telescope:
+    // the books close to round-off, and under the vertical sun each top cell collides
+    // exactly what enters it less what leaves through its floor, h²(1 − e^{−σ_t h})
+    // (transmittance constant on both faces). Thinner cells keep their Gauss points:
+    // measured 1.4e-5 to 4.5e-3 at σ_t h = 0.5 and 2.2e-4 to 3.0e-2 at 1 (the most grazing
+    // sun), asserted at 5e-3 and 3.5e-2.
+    let n = 16;
+    let g = GridGeometry::new([n; 3], DVec3::splat(1.0 / n as f64), DVec3::ZERO).unwrap();
+    let h = g.spacing().x;
+    let directions = [
+        DVec3::new(0.0, 0.0, -1.0),
+        DVec3::new(0.3, 0.2, -0.93).normalize(),
+        DVec3::new(0.7, 0.1, -0.2).normalize(),
+    ];
+    for (sigma_h, tolerance) in [
+        (0.5, 5e-3),
+        (1.0, 3.5e-2),
+        (1.5, 1e-12),
+        (2.0, 1e-12),
+        (10.0, 1e-12),
+        (50.0, 1e-12),
+    ] {
+        let grid = Grid::filled(g, (sigma_h / h) as f32);
+        for d in directions {
+            let sun = Light::Directional {
+                direction: d,
+                irradiance: Spectrum::Grey(1.0),
+            };
+            let cells = uncollided_cells(&grid, &sun, 50.0).unwrap();
+            let projected = d.x.abs() + d.y.abs() + d.z.abs();
+            assert!((cells.emitted - projected).abs() < 1e-9 * projected);
+            assert!(
+                cells.relative_imbalance() < tolerance,
+                "σ_t h = {sigma_h}, {d:?}: {}",
+                cells.relative_imbalance()
+            );
+            if d.z == -1.0 && sigma_h >= 1.5 {
+                let exact = h * h * (1.0 - (-sigma_h).exp());
+                for (i, j) in [(0, 0), (5, 9), (15, 15)] {
+                    let got = cells.collided[g.index(i, j, n - 1)];
+                    assert!(
+                        (got - exact).abs() < 1e-9 * exact,
+                        "σ_t h = {sigma_h}, top cell ({i}, {j}): {got} against {exact}"
+                    );
+                }
+            }
+        }
+    }
+}

@@ -73,14 +73,14 @@ pub struct DomChannel {
     /// reflection as `inflow`, Σ σ_a φ V over the returned fluence as `absorbed`, the swept
     /// and the uncollided light leaving the box as `outflow`. It closes to the iteration's
     /// tolerance plus the uncollided cell integrals' accuracy: 1e-5 of a point light's
-    /// power near it (face fluxes); elsewhere, and for a sun, the 2×2×2 Gauss cell rule's
-    /// error, of order (σ_t ℓ)⁴/4320 per cell with ℓ the cell's chord along the light
-    /// (large where a light enters a thick cell through its side), and the difference
-    /// between the rays' trilinear σ_t and the cell's constant one where σ_t jumps.
-    /// Measured (`tests/delta_m.rs` and variants of it, a sun at 24³): 1.4e-5 on a
-    /// homogeneous cube at σ_t h = 0.5 under a vertical sun, 1.8e-3 under an oblique one,
-    /// 7.5e-3 and 1.6e-2 on a sharp-edged cloud (σ_t h ≤ 0.75, oblique and vertical),
-    /// 9.5e-2 on a homogeneous cube at σ_t h = 2 under the oblique sun.
+    /// power near it, round-off in cells from σ_t h = 3/2 (face fluxes); elsewhere, and
+    /// for a sun, the 2×2×2 Gauss cell rule's error, of order (σ_t ℓ)⁴/4320 per cell with
+    /// ℓ the distance over which the light changes across the cell (large where it enters
+    /// a cell through its side), and the difference between the rays' trilinear σ_t and
+    /// the cell's constant one where σ_t jumps. Measured (`tests/delta_m.rs` and variants
+    /// of it, a sun at 24³): 1.4e-5 on a homogeneous cube at σ_t h = 0.5 under a vertical
+    /// sun, 1.8e-3 under an oblique one, 7.5e-3 and 1.6e-2 on a sharp-edged cloud (σ_t h ≤
+    /// 0.75, oblique and vertical).
     pub balance: crate::DomBalance,
 }
 
