@@ -18,10 +18,12 @@
 //! covers the (octant, direction, j, k) tuples of a cell hyperplane's (j, k) bounding box,
 //! 3n − 2 dispatches), or blocks of 4³ cells (`sweep_blocks`: one workgroup per octant and
 //! block of a block hyperplane, which runs the block's own cell diagonals between storage
-//! barriers, 3n/4 − 2 dispatches). Either way one compute pass per sweep, and the same
-//! bits. Measured on an H200 (BENCHMARKS.md): blocks 7 % faster at 128³ and 19 % slower
-//! at 256³ — the sweep is bound by each cell-direction's own work, not by launches. Per cell and direction the arrays are split by octant (eight bindings each),
-//! so that 256³ × 48 directions fits the 2 GiB a binding may hold on current drivers.
+//! barriers, 3n/4 − 2 dispatches). Either way one compute pass per sweep (the scattering
+//! product another), and the same bits. Measured on an H200 (BENCHMARKS.md): blocks 7 %
+//! faster at 128³ and 19 % slower at 256³ — the sweep is bound by each cell-direction's
+//! own work, not by launches. Per
+//! cell and direction the arrays are split by octant (eight bindings each), so that
+//! 256³ × 48 directions fits the 2 GiB a binding may hold on current drivers.
 //!
 //! Precision: f32 throughout (the CPU sweeps in f64 and stores f32): one transport step
 //! agrees with the CPU's to about 1e-6 relative, and the converged fluence to the stopping
