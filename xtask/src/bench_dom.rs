@@ -4,7 +4,9 @@
 //! the discrete-ordinates benchmark, against Bernabei's 5.3 s per frame at 128³ for three unconverged
 //! iterations on a GTX 580. Prints wall time (with `direct` and set-up), sweeps, sweep
 //! time, time per cell-direction update and the sweeps' GB/s by their minimal traffic, for
-//! three solves by source iteration (the default) and one by GMRES (`outer = "gmres"`).
+//! three solves by source iteration with DSA (the default), one by GMRES with DSA
+//! (`outer = "gmres"`), and one by each with TSA (`acceleration = "tsa"`, whose S2
+//! sweeps are counted apart and timed with the acceleration).
 
 use glam::DVec3;
 use lucent::core::{
@@ -74,16 +76,18 @@ pub(crate) fn run(n: usize, order: usize, gpu: bool) -> Result<(), String> {
         return run_gpu(n, order, directions, &problem, &options);
     }
     println!(
-        "| run | outer | wall | sweeps | sweeps alone | ns per cell-direction (sweeps) | sweep GB/s (sources read, radiance written, σ_t, σ_s) | sources + scattering products | DSA | Anderson | Krylov vectors | rest (direct, first-collision, set-up) | stop |"
+        "| run | outer | acceleration | wall | sweeps (+ S2 sweeps) | sweeps alone | ns per cell-direction (sweeps) | sweep GB/s (sources read, radiance written, σ_t, σ_s) | sources + scattering products | DSA or TSA | Anderson | Krylov vectors | rest (direct, first-collision, set-up) | stop |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     // Source iteration (the default) three times, then GMRES once: the outer iterations
     // compared on the same problem and machine.
-    for (run, outer) in [
-        "source-iteration",
-        "source-iteration",
-        "source-iteration",
-        "gmres",
+    for (run, (outer, acceleration)) in [
+        ("source-iteration", "dsa"),
+        ("source-iteration", "dsa"),
+        ("source-iteration", "dsa"),
+        ("gmres", "dsa"),
+        ("source-iteration", "tsa"),
+        ("gmres", "tsa"),
     ]
     .into_iter()
     .enumerate()
@@ -95,6 +99,9 @@ pub(crate) fn run(n: usize, order: usize, gpu: bool) -> Result<(), String> {
         params
             .0
             .insert("outer".into(), ParamValue::Text(outer.into()));
+        params
+            .0
+            .insert("acceleration".into(), ParamValue::Text(acceleration.into()));
         let solver = lucent::dom::DomSolver::from_params(&params).map_err(|e| err(&e))?;
         let t = std::time::Instant::now();
         let (solution, records) = solver
@@ -116,8 +123,13 @@ pub(crate) fn run(n: usize, order: usize, gpu: bool) -> Result<(), String> {
             - r.anderson_seconds
             - r.krylov_seconds;
         println!(
-            "| {run} | {outer} | {wall:.2} s | {} | {:.2} s | {:.2} | {gbs:.1} ({:.0}% of copy) | {:.2} s | {:.2} s | {:.2} s | {:.2} s | {rest:.2} s | {:?} |",
+            "| {run} | {outer} | {acceleration} | {wall:.2} s | {}{} | {:.2} s | {:.2} | {gbs:.1} ({:.0}% of copy) | {:.2} s | {:.2} s | {:.2} s | {:.2} s | {rest:.2} s | {:?} |",
             r.sweeps,
+            if r.low_order_sweeps > 0 {
+                format!(" (+ {})", r.low_order_sweeps)
+            } else {
+                String::new()
+            },
             r.sweep_seconds,
             r.sweep_seconds / updates * 1e9,
             100.0 * gbs * 1e9 / copy,

@@ -50,6 +50,8 @@ pub struct DomParams {
     pub restart: usize,
     /// Acceleration of the source iteration.
     pub acceleration: Acceleration,
+    /// Sweeps of TSA's S2 problem per correction.
+    pub tsa_sweeps: usize,
     /// Anderson mixing depth (0: off).
     pub anderson: usize,
     /// Wavefront block edge, in cells.
@@ -72,6 +74,7 @@ impl Default for DomParams {
             outer: Outer::SourceIteration,
             restart: 12,
             acceleration: Acceleration::Dsa,
+            tsa_sweeps: 2,
             anderson: 2,
             block: 16,
             work_pool_mib: None,
@@ -108,7 +111,11 @@ impl SolverParams for DomParams {
         ),
         (
             "acceleration",
-            "source-iteration acceleration: dsa (diffusion synthetic) or none",
+            "acceleration of either outer iteration: dsa (diffusion synthetic: the isotropic error), tsa (S2 transport synthetic: the isotropic and first moments' error, fewer sweeps where the phase function is forward-peaked) or none",
+        ),
+        (
+            "tsa_sweeps",
+            "sweeps of TSA's S2 problem (8 directions, each with a DSA correction) per correction, 1 to 8",
         ),
         ("anderson", "Anderson mixing depth, 0 to 16 (0: off)"),
         ("block", "wavefront block edge in cells, 1 to 256"),
@@ -129,6 +136,9 @@ impl SolverParams for DomParams {
         };
         if self.anderson > 16 {
             return Err(bad("anderson", "at most 16"));
+        }
+        if !(1..=8).contains(&self.tsa_sweeps) {
+            return Err(bad("tsa_sweeps", "1 to 8"));
         }
         if !(1..=64).contains(&self.restart) {
             return Err(bad("restart", "1 to 64"));

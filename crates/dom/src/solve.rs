@@ -2,6 +2,7 @@
 //! radiance, optionally accelerate with diffusion, until the scattering source stops
 //! changing.
 
+use std::borrow::Cow;
 use std::time::Instant;
 
 use lucent_core::StopReason;
@@ -64,6 +65,14 @@ pub enum Acceleration {
     /// Diffusion synthetic acceleration with `lucent-diffusion`'s multigrid.
     #[default]
     Dsa,
+    /// Transport synthetic acceleration of the isotropic and first moments: after each
+    /// sweep the error is estimated by an S2 problem (the eight level-symmetric S2
+    /// directions, the same phase function matched to its mean cosine g) driven by the
+    /// sweep's residual source projected onto P0 and P1, itself solved by
+    /// `tsa_sweeps` DSA-accelerated sweeps from zero (a fixed linear map, so a valid
+    /// GMRES preconditioner). DSA corrects the isotropic error only, and the first
+    /// moments' error is left to contract by about ωg per sweep; S2 carries a current.
+    Tsa,
 }
 
 /// The outer iteration on the scattering source.
@@ -95,6 +104,9 @@ pub struct DomSettings {
     pub closure: Closure,
     /// Acceleration.
     pub acceleration: Acceleration,
+    /// Sweeps of the S2 problem per application of [`Acceleration::Tsa`], from zero (each
+    /// 8 directions and a DSA correction of three V-cycles).
+    pub tsa_sweeps: usize,
     /// Anderson mixing depth on top of the (accelerated) iteration; 0 turns it off. It
     /// starts only once the iteration contracts by more than 0.3 per sweep, and then costs
     /// 2·depth + 2 vectors of the stored in-scattered radiance (f32).
@@ -124,6 +136,7 @@ impl Default for DomSettings {
             restart: 12,
             closure: Closure::default(),
             acceleration: Acceleration::default(),
+            tsa_sweeps: 2,
             anderson: 2,
             block: 16,
             paged_work: None,
@@ -183,7 +196,7 @@ pub struct DomConvergence {
     pub sweep_seconds: f64,
     /// Wall time of the source interpolation and scattering products (s).
     pub scatter_seconds: f64,
-    /// Wall time of the DSA solves (s).
+    /// Wall time of the DSA solves, or with TSA of its S2 problems (s).
     pub dsa_seconds: f64,
     /// Wall time of the Anderson mixing (s).
     pub anderson_seconds: f64,
@@ -195,9 +208,12 @@ pub struct DomConvergence {
     pub device_seconds: f64,
     /// Of `device_seconds`, the device's scattering products (0 on the host).
     pub device_scatter_seconds: f64,
-    /// The sweep after which DSA was dropped because it amplified the error (thick
-    /// cells), if it was.
+    /// The sweep after which DSA (or TSA) was dropped because it amplified the error
+    /// (thick cells), if it was.
     pub dsa_abandoned: Option<usize>,
+    /// Sweeps of the S2 problem of [`Acceleration::Tsa`] (8 directions each), not
+    /// counted in `sweeps`.
+    pub low_order_sweeps: usize,
     /// What the pager of the sweeps' work did, when the work was paged.
     pub work_paging: Option<lucent_paging::PagerStats>,
 }
@@ -297,6 +313,7 @@ struct Monitor {
     contractions: Vec<f64>,
     mixing: bool,
     dsa_abandoned: Option<usize>,
+    low_order_sweeps: usize,
 }
 
 /// Source iteration on one channel, as a value whose steps are separate: `transport`
@@ -305,8 +322,9 @@ struct Monitor {
 /// acceleration replaces), the change of the source, and Anderson mixing. [`Self::run`]
 /// is the loop that joins them with the stopping rule and the safeguards.
 pub struct SourceIteration<'a> {
-    ordinates: &'a Ordinates,
-    settings: &'a DomSettings,
+    /// Borrowed from the caller; owned by the low-order iteration of TSA.
+    ordinates: Cow<'a, Ordinates>,
+    settings: DomSettings,
     boundary: DomBoundary,
     layout: Layout,
     spacing: [f64; 3],
@@ -336,6 +354,11 @@ pub struct SourceIteration<'a> {
     /// Sweep with the closure's linear form (no positivity fix-up): the Krylov phase.
     linear: bool,
     dsa: Option<Dsa>,
+    /// DSA as a fixed number of V-cycles from zero (a linear map, inside GMRES and TSA),
+    /// or `None`: to its tolerance.
+    fixed_dsa_cycles: Option<usize>,
+    /// The S2 iteration of [`Acceleration::Tsa`] (whose own `dsa` corrects it).
+    tsa: Option<Box<SourceIteration<'static>>>,
     anderson: Option<Anderson>,
     /// Where the transport steps run when not on the host.
     device: Option<Box<dyn DeviceTransport>>,
@@ -351,7 +374,7 @@ impl<'a> SourceIteration<'a> {
         ordinates: &'a Ordinates,
         settings: &'a DomSettings,
     ) -> Result<Self, DomError> {
-        Self::build(problem, ordinates, settings, false)
+        Self::build(problem, Cow::Borrowed(ordinates), settings, false)
     }
 
     /// The same iteration with its transport steps on `device` (a GPU: the module
@@ -373,7 +396,7 @@ impl<'a> SourceIteration<'a> {
                 "a device holds the sweeps' work itself: paged work is not supported".into(),
             ));
         }
-        let mut iteration = Self::build(problem, ordinates, settings, true)?;
+        let mut iteration = Self::build(problem, Cow::Borrowed(ordinates), settings, true)?;
         let directions: Vec<[f64; 3]> = ordinates
             .propagation()
             .directions()
@@ -401,14 +424,19 @@ impl<'a> SourceIteration<'a> {
 
     fn build(
         problem: &DomProblem,
-        ordinates: &'a Ordinates,
-        settings: &'a DomSettings,
+        ordinates: Cow<'a, Ordinates>,
+        settings: &DomSettings,
         on_device: bool,
     ) -> Result<Self, DomError> {
         let m = ordinates.storage().len();
         validate(problem, m)?;
         if settings.block == 0 {
             return Err(DomError::Invalid("block size 0".into()));
+        }
+        if settings.acceleration == Acceleration::Tsa && settings.tsa_sweeps == 0 {
+            return Err(DomError::Invalid(
+                "TSA with 0 sweeps of its S2 problem".into(),
+            ));
         }
         if settings.outer == Outer::Gmres && settings.restart == 0 {
             return Err(DomError::Invalid("GMRES restart length 0".into()));
@@ -427,6 +455,12 @@ impl<'a> SourceIteration<'a> {
                 ordinates.effective_g(),
                 boundary.reflectance,
             )?,
+            _ => None,
+        };
+        let tsa = match settings.acceleration {
+            Acceleration::Tsa if scatters => {
+                Some(Box::new(Self::low_order(problem, &ordinates, settings)?))
+            }
             _ => None,
         };
         let n_dirs = ordinates.propagation().len();
@@ -457,8 +491,7 @@ impl<'a> SourceIteration<'a> {
             )
         });
         Ok(Self {
-            ordinates,
-            settings,
+            settings: *settings,
             boundary,
             geometry: ordinates
                 .propagation()
@@ -497,7 +530,7 @@ impl<'a> SourceIteration<'a> {
                 None if on_device => Work::Memory(Vec::new()),
                 None => Work::Memory(vec![0.0; layout.cells() * n_dirs]),
                 Some(paged) => {
-                    let len = WorkPages::page_len(&layout, ordinates);
+                    let len = WorkPages::page_len(&layout, &ordinates);
                     let store = lucent_paging::FileStore::create()?;
                     let pager = lucent_paging::Pager::new(
                         Box::new(store),
@@ -512,7 +545,7 @@ impl<'a> SourceIteration<'a> {
                     )?;
                     Work::Paged(WorkPages::new(
                         &layout,
-                        ordinates,
+                        &ordinates,
                         std::sync::Arc::new(pager),
                     )?)
                 }
@@ -524,6 +557,8 @@ impl<'a> SourceIteration<'a> {
             homogeneous: false,
             linear: false,
             dsa,
+            fixed_dsa_cycles: (settings.outer == Outer::Gmres).then_some(DSA_CYCLES),
+            tsa,
             anderson,
             device: None,
             spacing: h,
@@ -533,11 +568,51 @@ impl<'a> SourceIteration<'a> {
                 best_change: f64::INFINITY,
                 ..Monitor::default()
             },
+            // Last: the fields above read it.
+            ordinates,
         })
     }
 
     fn storage(&self) -> usize {
         self.ordinates.storage().len()
+    }
+
+    /// The S2 iteration of [`Acceleration::Tsa`] for `problem`: the same cells, the
+    /// phase function of `ordinates` on the eight S2 directions, the boundary's
+    /// reflectance without its sky, DSA with a fixed number of V-cycles, the closure's
+    /// linear form.
+    fn low_order(
+        problem: &DomProblem,
+        ordinates: &Ordinates,
+        settings: &DomSettings,
+    ) -> Result<SourceIteration<'static>, DomError> {
+        let s2 = Ordinates::new(
+            lucent_optics::SphericalQuadrature::level_symmetric(2)?,
+            None,
+            *ordinates.phase(),
+        )?;
+        let problem = DomProblem {
+            geometry: problem.geometry,
+            sigma_t: problem.sigma_t.clone(),
+            sigma_s: problem.sigma_s.clone(),
+            fixed: vec![0.0; problem.geometry.voxel_count() * s2.storage().len()],
+            boundary: DomBoundary {
+                radiance: 0.0,
+                reflectance: problem.boundary.reflectance,
+            },
+        };
+        let settings = DomSettings {
+            // Never run: only stepped. `Gmres` makes its DSA a fixed number of V-cycles.
+            outer: Outer::Gmres,
+            acceleration: Acceleration::Dsa,
+            anderson: 0,
+            paged_work: None,
+            ..*settings
+        };
+        let mut low = SourceIteration::build(&problem, Cow::Owned(s2), &settings, false)?;
+        low.linear = true;
+        low.fixed_dsa_cycles = Some(DSA_CYCLES);
+        Ok(low)
     }
 
     /// Bytes of the per-direction work of the sweeps (cells × propagation directions,
@@ -548,7 +623,7 @@ impl<'a> SourceIteration<'a> {
 
     /// Bytes of one page of paged work: one block's cells times one octant's directions.
     pub fn work_page_bytes(&self) -> u64 {
-        WorkPages::page_len(&self.layout, self.ordinates) as u64 * 8
+        WorkPages::page_len(&self.layout, &self.ordinates) as u64 * 8
     }
 
     /// The fewest pages a pool of paged work may hold: the scattering product reads a
@@ -641,7 +716,7 @@ impl<'a> SourceIteration<'a> {
     fn sweep(&mut self) -> Result<SweepOutput, DomError> {
         let input = SweepInput {
             layout: &self.layout,
-            ordinates: self.ordinates,
+            ordinates: &self.ordinates,
             geometry: &self.geometry,
             sigma_t: &self.sigma_t,
             inflow: &self.inflow,
@@ -793,6 +868,9 @@ impl<'a> SourceIteration<'a> {
     /// radiance, from σ_s(φ^{k+½} − φ^k) with φ^k = Σ_m w_m J_m of the source just swept;
     /// `false` when it could not be applied (a non-finite correction).
     fn accelerate(&mut self, out: &mut SweepOutput) -> Result<bool, DomError> {
+        if self.tsa.is_some() {
+            return self.accelerate_transport(out);
+        }
         let Some(solver) = &self.dsa else {
             return Ok(true);
         };
@@ -817,7 +895,7 @@ impl<'a> SourceIteration<'a> {
             let layout = &self.layout;
             // Inside GMRES the correction must be a fixed linear map: a fixed number of
             // V-cycles from zero, not a tolerance.
-            let cycles = (self.settings.outer == Outer::Gmres).then_some(DSA_CYCLES);
+            let cycles = self.fixed_dsa_cycles;
             layout.to_blocks(&solver.correction(layout.to_grid(&residual, 1), cycles)?, 1)
         } else {
             vec![f64::NAN]
@@ -839,6 +917,78 @@ impl<'a> SourceIteration<'a> {
         }
         self.timings.dsa += t.elapsed().as_secs_f64();
         Ok(applied)
+    }
+
+    /// The transport synthetic correction ([`Acceleration::Tsa`]). The sweep solved
+    /// L ψ^{k+½} = q + σ_s J^k; the exact ψ solves L ψ = q + σ_s S ψ, so the error
+    /// e = ψ − ψ^{k+½} solves (L − σ_s S) e = σ_s (J^{k+½} − J^k), the new in-scattered
+    /// radiance minus the one swept. Its right-hand side's isotropic and first moments,
+    /// r₀ = Σ w ΔJ and r₁ = Σ w ω ΔJ per cell, become the S2 problem's source
+    /// σ_s (r₀ + 3 ω·r₁)/4π (exact on S2, whose Σ w ω ωᵀ is 4π/3 I), `tsa_sweeps`
+    /// accelerated S2 sweeps from zero estimate e, and the fluence gains its scalar flux
+    /// e₀ and every storage direction of J the P1 expansion (c₀ + 3 ω·c₁)/4π of the S2
+    /// in-scattered radiance (the moments of S e). `false` when the correction is not
+    /// finite.
+    fn accelerate_transport(&mut self, out: &mut SweepOutput) -> Result<bool, DomError> {
+        let t = Instant::now();
+        let four_pi = 4.0 * std::f64::consts::PI;
+        let m = self.storage();
+        let set = self.ordinates.storage();
+        let (dirs, weights) = (set.directions(), set.weights());
+        let low = self.tsa.as_mut().expect("called with TSA");
+        let lm = low.storage();
+        let low_set = low.ordinates.storage().clone();
+        let (low_dirs, low_weights) = (low_set.directions(), low_set.weights());
+        low.fixed
+            .par_chunks_mut(lm)
+            .zip(self.inscattered.par_chunks(m))
+            .zip(self.previous.par_chunks(m))
+            .zip(self.sigma_s.par_iter())
+            .for_each(|(((q, new), old), s)| {
+                let (mut r0, mut r1) = (0.0, glam::DVec3::ZERO);
+                for k in 0..m {
+                    let d = weights[k] * (f64::from(new[k]) - f64::from(old[k]));
+                    r0 += d;
+                    r1 += d * dirs[k];
+                }
+                let s = f64::from(*s) / four_pi;
+                for (q, w) in q.iter_mut().zip(low_dirs) {
+                    *q = (s * (r0 + 3.0 * r1.dot(*w))) as f32;
+                }
+            });
+        low.previous.fill(0.0);
+        low.inflow.iter_mut().for_each(|f| f.fill(0.0));
+        let mut error = Vec::new();
+        for _ in 0..self.settings.tsa_sweeps {
+            let mut step = low.transport()?;
+            if !low.accelerate(&mut step)? || step.fluence.iter().any(|v| !v.is_finite()) {
+                self.timings.dsa += t.elapsed().as_secs_f64();
+                return Ok(false);
+            }
+            low.inflow = low.reflected_inflow(&step);
+            std::mem::swap(&mut low.previous, &mut low.inscattered);
+            error = step.fluence;
+            self.monitor.low_order_sweeps += 1;
+        }
+        out.fluence
+            .par_iter_mut()
+            .zip(self.inscattered.par_chunks_mut(m))
+            .zip(low.previous.par_chunks(lm))
+            .zip(error.par_iter())
+            .for_each(|(((phi, row), low_row), e0)| {
+                *phi += e0;
+                let (mut c0, mut c1) = (0.0, glam::DVec3::ZERO);
+                for ((j, w), d) in low_row.iter().zip(low_weights).zip(low_dirs) {
+                    let wj = w * f64::from(*j);
+                    c0 += wj;
+                    c1 += wj * *d;
+                }
+                for (j, d) in row.iter_mut().zip(dirs) {
+                    *j = (f64::from(*j) + (c0 + 3.0 * c1.dot(*d)) / four_pi) as f32;
+                }
+            });
+        self.timings.dsa += t.elapsed().as_secs_f64();
+        Ok(true)
     }
 
     /// The scattering source's change, ‖σ_s ΔJ‖/‖σ_s J‖ over cells and storage
@@ -899,6 +1049,7 @@ impl<'a> SourceIteration<'a> {
     /// mixed).
     fn drop_dsa(&mut self, iteration: usize) {
         self.dsa = None;
+        self.tsa = None;
         self.monitor.dsa_abandoned = Some(iteration);
         self.previous.fill(0.0);
         if let Some(a) = self.anderson.as_mut() {
@@ -1185,6 +1336,7 @@ impl<'a> SourceIteration<'a> {
                 device_seconds: timings.device,
                 device_scatter_seconds: timings.device_scatter,
                 dsa_abandoned: monitor.dsa_abandoned,
+                low_order_sweeps: monitor.low_order_sweeps,
                 work_paging,
             },
             balance: DomBalance {

@@ -22,8 +22,8 @@
 //! Parameters: `order` (level-symmetric S_N, default 8; with `family = "octahedral"` the
 //! refinement level, default 2), `family` (`level-symmetric` or `octahedral`),
 //! `storage_level` (store sources on the octahedral set of this level instead of on the
-//! propagation set), `closure` (`diamond`, `step`, `exponential`), `acceleration` (`dsa`
-//! or `none`), `anderson` (mixing depth, 2; 0 off), `outer` (`source-iteration`, the
+//! propagation set), `closure` (`diamond`, `step`, `exponential`), `acceleration` (`dsa`,
+//! `tsa` or `none`), `tsa_sweeps` (TSA's S2 sweeps per correction, 2), `anderson` (mixing depth, 2; 0 off), `outer` (`source-iteration`, the
 //! default, or `gmres`), `restart` (GMRES restart length, 12), `block` (wavefront block
 //! edge, 16), `work_pool_mib` (the sweeps' work paged), `truncation` (`none`, `delta-m`
 //! or `delta-eddington`).
@@ -159,6 +159,7 @@ impl DomSolver {
                 restart: p.restart,
                 closure: p.closure,
                 acceleration: p.acceleration,
+                tsa_sweeps: p.tsa_sweeps,
                 anderson: p.anderson,
                 block: p.block,
                 paged_work: p.work_pool_mib.map(|mib| PagedWork {

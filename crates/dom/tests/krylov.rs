@@ -4,7 +4,9 @@
 
 use lucent_core::Stopping;
 use lucent_dom::angular::Ordinates;
-use lucent_dom::{Closure, DomBoundary, DomProblem, DomSettings, DomSolution, Outer, solve};
+use lucent_dom::{
+    Acceleration, Closure, DeltaM, DomBoundary, DomProblem, DomSettings, DomSolution, Outer, solve,
+};
 use lucent_optics::{Phase, SphericalQuadrature};
 
 mod common;
@@ -132,7 +134,8 @@ fn gmres_converges_to_the_source_iteration_answer() {
 /// source iteration with DSA alone and with Anderson mixing, homogeneous cube and cloud,
 /// g = 0.6 and 0.9. Measured (2026-11-25): cube g = 0.6: 14 / 21 / 14; g = 0.9: 22 / 36 / 23;
 /// cloud g = 0.6: 14 / 19 / 15. The bounds are the measured counts plus two, and GMRES
-/// must beat DSA alone by a quarter. The goal (≤ 12 at g = 0.6) is not reached.
+/// must beat DSA alone by a quarter. DSA leaves the first moments' error: the 12 sweeps
+/// at g = 0.6 take TSA (`tsa_reaches_g_0_6_in_twelve_sweeps`).
 #[test]
 fn gmres_needs_fewer_sweeps_than_dsa_alone() {
     for (g, cloud, bound) in [(0.6, false, 16), (0.9, false, 24), (0.6, true, 16)] {
@@ -250,4 +253,175 @@ fn gmres_iterates_the_reflected_inflow_of_a_non_scattering_box() {
         "{:?}",
         krylov.balance
     );
+}
+
+fn tsa(outer: Outer, sweeps: usize) -> DomSettings {
+    DomSettings {
+        acceleration: Acceleration::Tsa,
+        tsa_sweeps: sweeps,
+        ..settings(outer, Closure::Step, 0)
+    }
+}
+
+/// The goal: 1e-6 at albedo 0.95 and g = 0.6 in at most 12 sweeps, on the 24³
+/// cube and cloud of `gmres_needs_fewer_sweeps_than_dsa_alone` (where DSA alone needs 21
+/// and 19, GMRES with DSA 14). TSA corrects the first moments' error that DSA leaves.
+/// Measured (2026-11-26), sweeps (S2 sweeps): GMRES with TSA 10 (20) on both, source
+/// iteration with TSA 11 (22) on both; GMRES with DSA 14. Asserted: at most 12, two S2
+/// sweeps per sweep (8 directions each against 48), and the fluence of GMRES with DSA to
+/// 3e-6 (each stops at 1e-6 of the source change, an error up to 1e-6/(1 − ρ) with
+/// ρ ≤ 0.3 measured for both; measured 1.2e-7 to 3.1e-7).
+#[test]
+fn tsa_reaches_g_0_6_in_twelve_sweeps() {
+    for cloud in [false, true] {
+        let (problem, ordinates) = scene(24, 12.0, 0.6, cloud, DomBoundary::default());
+        let reference = run(
+            &problem,
+            &ordinates,
+            settings(Outer::Gmres, Closure::Step, 0),
+            1e-6,
+        );
+        for outer in [Outer::Gmres, Outer::SourceIteration] {
+            let s = run(&problem, &ordinates, tsa(outer, 2), 1e-6);
+            let c = &s.convergence;
+            let difference = relative_l2(&s.fluence, &reference.fluence);
+            eprintln!(
+                "g = 0.6, cloud {cloud}, {outer:?} with TSA: {} sweeps ({} of S2), GMRES with DSA {}; fluences {difference:.1e} apart",
+                c.sweeps, c.low_order_sweeps, reference.convergence.sweeps
+            );
+            assert!(
+                c.sweeps <= 12,
+                "cloud {cloud}, {outer:?}: {} sweeps",
+                c.sweeps
+            );
+            assert!(c.low_order_sweeps <= 2 * c.sweeps, "{c:?}");
+            assert!(difference < 3e-6, "cloud {cloud}, {outer:?}: {difference}");
+        }
+    }
+}
+
+/// TSA's fixed point is the transport answer wherever DSA's is: under a sky with a
+/// boundary that returns half the light (the S2 problem reflects with the same R), and
+/// with sources stored on fewer directions than are swept (octahedral level 1, 32
+/// directions, under S8's 80, where the projection onto P0 and P1 and the correction use
+/// the storage set). Both outer iterations with TSA against source iteration with DSA and
+/// Anderson mixing, all to 1e-8: fluences to 1e-6 (as in
+/// `gmres_converges_to_the_source_iteration_answer`) and energy balances to 1e-6.
+/// Measured (2026-11-26): 3e-9 to 6e-9 apart; reflecting, GMRES with TSA 17 sweeps and
+/// source iteration with TSA (unmixed) 45 against 37; stored, 14 and 17 against 23.
+#[test]
+fn tsa_converges_to_the_transport_answer_under_reflection_and_on_stored_directions() {
+    let reflecting = DomBoundary {
+        radiance: 0.3,
+        reflectance: 0.5,
+    };
+    let stored = Ordinates::new(
+        SphericalQuadrature::level_symmetric(8).unwrap(),
+        Some(SphericalQuadrature::octahedral(1).unwrap()),
+        Phase::henyey_greenstein(0.6).unwrap(),
+    )
+    .unwrap();
+    let m = stored.storage().len();
+    let cases = [
+        ("reflecting", scene(12, 12.0, 0.6, true, reflecting)),
+        (
+            "stored on 32 directions",
+            (
+                glowing_cube(12, 12.0, 0.95, true, m, DomBoundary::default()),
+                stored,
+            ),
+        ),
+    ];
+    for (name, (problem, ordinates)) in cases {
+        let reference = run(
+            &problem,
+            &ordinates,
+            settings(Outer::SourceIteration, Closure::Step, 2),
+            1e-8,
+        );
+        for outer in [Outer::Gmres, Outer::SourceIteration] {
+            let s = run(&problem, &ordinates, tsa(outer, 2), 1e-8);
+            let difference = relative_l2(&s.fluence, &reference.fluence);
+            eprintln!(
+                "{name}, {outer:?} with TSA: {} sweeps ({} of S2) against {}; fluences {difference:.1e} apart",
+                s.convergence.sweeps, s.convergence.low_order_sweeps, reference.convergence.sweeps
+            );
+            assert!(difference < 1e-6, "{name}, {outer:?}: {difference}");
+            assert!(
+                s.balance.relative_imbalance() < 1e-6,
+                "{name}, {outer:?}: {:?}",
+                s.balance
+            );
+        }
+    }
+}
+
+/// At g = 0.9 the error left after DSA is mostly in the second and higher moments
+/// (contracting by about ωg² = 0.77 per sweep), which S2 cannot carry: TSA saves little,
+/// and delta-M is what removes them (the forward peak moved into the uncollided light,
+/// g* = 0.787 on S6). GMRES to 1e-6 on the 24³ cube and cloud. Measured (2026-11-26),
+/// sweeps with DSA / with TSA: cube 22 / 22 without truncation, 14 / 12 with delta-M;
+/// cloud 20 / 20, 13 / 12. Asserted: with delta-M and TSA at most 13 and at most 0.65 of
+/// the untruncated DSA count; without truncation TSA within one sweep of DSA (the
+/// statement that it does not help there, which a better low-order operator would change).
+#[test]
+fn at_g_0_9_delta_m_removes_what_tsa_cannot() {
+    for cloud in [false, true] {
+        let phase = Phase::henyey_greenstein(0.9).unwrap();
+        let truncation = DeltaM::new(phase, 6).unwrap();
+        let ordinates = |phase| {
+            Ordinates::new(
+                SphericalQuadrature::level_symmetric(6).unwrap(),
+                None,
+                phase,
+            )
+            .unwrap()
+        };
+        let (full, reduced) = (ordinates(phase), ordinates(truncation.reduced_phase()));
+        let problem = glowing_cube(24, 12.0, 0.95, cloud, 48, DomBoundary::default());
+        let truncated = truncation.apply(&problem);
+        let sweeps = |problem: &DomProblem, ordinates: &Ordinates, s| {
+            run(problem, ordinates, s, 1e-6).convergence.sweeps
+        };
+        let dsa_settings = settings(Outer::Gmres, Closure::Step, 0);
+        let counts = [
+            sweeps(&problem, &full, dsa_settings),
+            sweeps(&problem, &full, tsa(Outer::Gmres, 2)),
+            sweeps(&truncated, &reduced, dsa_settings),
+            sweeps(&truncated, &reduced, tsa(Outer::Gmres, 2)),
+        ];
+        eprintln!(
+            "g = 0.9, cloud {cloud}: GMRES sweeps with DSA / TSA {} / {}, with delta-M {} / {}",
+            counts[0], counts[1], counts[2], counts[3]
+        );
+        assert!(counts[3] <= 13, "cloud {cloud}: {counts:?}");
+        assert!(
+            20 * counts[3] <= 13 * counts[0],
+            "cloud {cloud}: {counts:?}"
+        );
+        assert!(counts[1] + 1 >= counts[0], "cloud {cloud}: {counts:?}");
+    }
+}
+
+/// `acceleration = "tsa"` and `tsa_sweeps` through the registry: accepted with a count of
+/// 1 to 8, refused outside it with an error naming the key (0 sweeps would correct
+/// nothing, and more than 8 cost more than the S6 sweep they accelerate).
+#[test]
+fn the_registry_takes_tsa_and_bounds_its_sweeps() {
+    use lucent_core::{ParamValue, Params, SolveError};
+    let params = |sweeps: i64| {
+        let mut p = Params::default();
+        p.0.insert("acceleration".into(), ParamValue::Text("tsa".into()));
+        p.0.insert("tsa_sweeps".into(), ParamValue::Int(sweeps));
+        p
+    };
+    for sweeps in [1, 8] {
+        assert!(lucent_dom::DomSolver::from_params(&params(sweeps)).is_ok());
+    }
+    for sweeps in [0, 9] {
+        match lucent_dom::DomSolver::from_params(&params(sweeps)) {
+            Err(SolveError::InvalidParameter { name, .. }) => assert_eq!(name, "tsa_sweeps"),
+            other => panic!("tsa_sweeps = {sweeps}: {:?}", other.map(|_| ())),
+        }
+    }
 }
