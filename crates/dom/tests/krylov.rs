@@ -425,3 +425,91 @@ fn the_registry_takes_tsa_and_bounds_its_sweeps() {
         }
     }
 }
+
+/// TSA in optically thick cells, where DSA with lucent-diffusion's operator stops working
+/// (`inconsistent_dsa_fails_in_thick_cells_and_mixing_recovers`): a homogeneous 16³ cube
+/// at albedo 0.99, S4, g = 0.6, glowing everywhere, to 1e-6, no mixing. Measured
+/// (2026-11-26): diamond at σ_t h = 2, source iteration with TSA 14 sweeps where with DSA
+/// alone DSA is dropped and 150 sweeps do not converge, GMRES with TSA 12 (with DSA 23);
+/// exponential at σ_t h = 4, source iteration with TSA 11 (DSA 17), GMRES 9 (DSA 12). At
+/// σ_t h = 8 GMRES with TSA needed 142 sweeps against 14 with DSA (the S2 problem's own
+/// DSA amplifies there), so TSA refuses cells thicker than 4, naming itself. Asserted:
+/// the measured counts plus two, and the fluence of GMRES with DSA to 1e-5 (each stops at
+/// 1e-6 of the source change with ρ up to 0.6 measured for DSA: errors up to 2.5e-6
+/// each, and f32 storage at albedo 0.99 amplifies rounding up to 100 times).
+#[test]
+fn tsa_works_in_thick_cells_up_to_four_mean_free_paths_and_refuses_thicker() {
+    use glam::DVec3;
+    use lucent_grid::GridGeometry;
+    let cube = |sigma: f32, m: usize| {
+        let geometry = GridGeometry::from_bounds([16; 3], DVec3::ZERO, DVec3::ONE).unwrap();
+        let n = geometry.voxel_count();
+        DomProblem {
+            geometry,
+            sigma_t: vec![sigma; n],
+            sigma_s: vec![sigma * 0.99; n],
+            fixed: vec![1.0; n * m],
+            boundary: DomBoundary::default(),
+        }
+    };
+    let ordinates = Ordinates::new(
+        SphericalQuadrature::level_symmetric(4).unwrap(),
+        None,
+        Phase::henyey_greenstein(0.6).unwrap(),
+    )
+    .unwrap();
+    let m = ordinates.storage().len();
+    let with = |closure, outer, acceleration| DomSettings {
+        closure,
+        outer,
+        acceleration,
+        anderson: 0,
+        ..DomSettings::default()
+    };
+    for (closure, sigma, si_most, gmres_most) in [
+        (Closure::Diamond, 32.0, 16, 14),
+        (Closure::Exponential, 64.0, 13, 11),
+    ] {
+        let problem = cube(sigma, m);
+        let reference = run(
+            &problem,
+            &ordinates,
+            with(closure, Outer::Gmres, Acceleration::Dsa),
+            1e-6,
+        );
+        for (outer, most) in [
+            (Outer::SourceIteration, si_most),
+            (Outer::Gmres, gmres_most),
+        ] {
+            let s = run(
+                &problem,
+                &ordinates,
+                with(closure, outer, Acceleration::Tsa),
+                1e-6,
+            );
+            let difference = relative_l2(&s.fluence, &reference.fluence);
+            eprintln!(
+                "{closure:?}, σ_t h = {}: {outer:?} with TSA {} sweeps, GMRES with DSA {}; {difference:.1e} apart",
+                sigma / 16.0,
+                s.convergence.sweeps,
+                reference.convergence.sweeps
+            );
+            assert!(
+                s.convergence.sweeps <= most,
+                "{closure:?} {outer:?}: {:?}",
+                s.convergence
+            );
+            assert!(difference < 1e-5, "{closure:?} {outer:?}: {difference}");
+        }
+    }
+    let refused = solve(
+        &cube(128.0, m),
+        &ordinates,
+        &with(Closure::Exponential, Outer::Gmres, Acceleration::Tsa),
+        &Stopping::default(),
+    );
+    match refused {
+        Err(lucent_dom::DomError::Invalid(why)) => assert!(why.contains("tsa"), "{why}"),
+        other => panic!("σ_t h = 8 with TSA: {:?}", other.map(|s| s.convergence)),
+    }
+}

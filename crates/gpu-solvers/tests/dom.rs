@@ -142,8 +142,8 @@ fn one_device_transport_step_is_the_host_step_for_every_closure() {
     }
 }
 
-/// Converged to 1e-6 with the default iteration (DSA and Anderson mixing on the host)
-/// and with GMRES (whose Krylov phase runs the linear closures on the device): the
+/// Converged to 1e-6 with the default iteration (DSA and Anderson mixing on the host),
+/// with TSA instead of DSA, and with GMRES (whose Krylov phase runs the linear closures on the device): the
 /// device's rounding (≤ 1.1e-7 a step, previous test) enters each step's source and is
 /// damped by the iteration like any other error, so the two iterates stay that close and
 /// the stopping rule, which sees changes of 1e-6, stops both on the same sweep or one
@@ -158,7 +158,7 @@ fn gpu_dom_converges_with_dom_for_every_closure_and_outer_iteration() {
         relative_tolerance: 1e-6,
         ..SolveOptions::default()
     };
-    for (dims, channels, boundary, sky, closure, outer) in [
+    for (dims, channels, boundary, sky, closure, outer, acceleration) in [
         (
             [13, 9, 11],
             1,
@@ -166,8 +166,17 @@ fn gpu_dom_converges_with_dom_for_every_closure_and_outer_iteration() {
             false,
             "diamond",
             "source-iteration",
+            "dsa",
         ),
-        ([13, 9, 11], 1, Boundary::Vacuum, false, "step", "gmres"),
+        (
+            [13, 9, 11],
+            1,
+            Boundary::Vacuum,
+            false,
+            "step",
+            "gmres",
+            "dsa",
+        ),
         (
             [7, 12, 10],
             3,
@@ -175,6 +184,7 @@ fn gpu_dom_converges_with_dom_for_every_closure_and_outer_iteration() {
             true,
             "exponential",
             "gmres",
+            "dsa",
         ),
         (
             [7, 12, 10],
@@ -183,6 +193,27 @@ fn gpu_dom_converges_with_dom_for_every_closure_and_outer_iteration() {
             true,
             "diamond",
             "gmres",
+            "dsa",
+        ),
+        // TSA on the host around the device's steps: its S2 problems read the device's
+        // in-scattered radiance and correct it before the next upload.
+        (
+            [13, 9, 11],
+            1,
+            Boundary::Vacuum,
+            false,
+            "diamond",
+            "source-iteration",
+            "tsa",
+        ),
+        (
+            [7, 12, 10],
+            1,
+            Boundary::Robin { eta: 1.4 },
+            true,
+            "step",
+            "gmres",
+            "tsa",
         ),
     ] {
         let problem = problem(dims, channels, boundary, sky);
@@ -190,6 +221,7 @@ fn gpu_dom_converges_with_dom_for_every_closure_and_outer_iteration() {
             ("order", ParamValue::Int(4)),
             ("closure", text(closure)),
             ("outer", text(outer)),
+            ("acceleration", text(acceleration)),
         ]);
         let cpu = solve("dom", &p, &problem, &options);
         let gpu = solve("gpu-dom", &p, &problem, &options);
@@ -205,8 +237,10 @@ fn gpu_dom_converges_with_dom_for_every_closure_and_outer_iteration() {
             "{closure} {outer}: {a} against {b} sweeps"
         );
         let d = relative(&gpu, &cpu);
-        eprintln!("{dims:?} {closure} {outer}: {a} sweeps (dom {b}), difference {d:.2e}");
-        assert!(d < 1e-6, "{dims:?} {closure} {outer}: {d}");
+        eprintln!(
+            "{dims:?} {closure} {outer} {acceleration}: {a} sweeps (dom {b}), difference {d:.2e}"
+        );
+        assert!(d < 1e-6, "{dims:?} {closure} {outer} {acceleration}: {d}");
     }
 }
 
