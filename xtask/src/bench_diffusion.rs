@@ -133,9 +133,12 @@ fn export(
 }
 
 /// Runs the benchmark.
-pub(crate) fn run(sizes: &[usize], root: &Path) -> Result<(), String> {
+pub(crate) fn run(sizes: &[usize], root: &Path, gpu: bool) -> Result<(), String> {
     println!("# cargo xtask bench-diffusion");
     println!();
+    if gpu {
+        return run_gpu(sizes);
+    }
     let threads = rayon::current_num_threads();
     println!(
         "{threads} threads; copy: a 256 MiB f32 copy on all threads (bytes read + written), \
@@ -217,6 +220,66 @@ pub(crate) fn run(sizes: &[usize], root: &Path) -> Result<(), String> {
             ));
         }
         print!("{n}³: {}", String::from_utf8_lossy(&out.stdout));
+    }
+    Ok(())
+}
+
+/// With `--gpu`: one V(2,2) cycle from zero on the device (`DeviceMultigrid`, the
+/// hierarchy uploaded once) against the host's same cycle, per size: milliseconds per
+/// cycle (best of 5 after one warm-up; the device's includes writing b, reading the
+/// coarsest level back and solving it on the host, and reading x back), and the largest
+/// difference of the two over the host's peak.
+fn run_gpu(sizes: &[usize]) -> Result<(), String> {
+    let err = |e: &dyn std::fmt::Display| e.to_string();
+    let context = lucent::gpu::GpuContext::shared().map_err(|e| err(&e))?;
+    println!("adapter: {}", context.describe());
+    if context.is_software() {
+        println!("a CPU implementation: this is a correctness run, not a measure of GPU speed");
+    }
+    println!();
+    println!(
+        "| n³ | levels | host cycle ms ({} threads) | device cycle ms (with transfers) | bytes per cycle (compulsory) | device GB/s by them | difference / peak |",
+        rayon::current_num_threads()
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for &n in sizes {
+        let (problem, _) = sphere(n)?;
+        let host = Multigrid::build(&problem, MultigridSettings::default()).map_err(|e| err(&e))?;
+        let cells = host.fine_cells();
+        let b: Vec<f32> = (0..cells).map(|i| 1.0 + (i % 7) as f32 * 1e-3).collect();
+        let mut expected = Vec::new();
+        let host_ms = best_of(5, || {
+            expected = host.cycle_from_zero(&b).unwrap_or_default();
+        }) * 1e3;
+        let mut device =
+            lucent::gpu_solvers::DeviceMultigrid::new(context, &host).map_err(|e| err(&e))?;
+        let mut got = device.cycle_from_zero(&b).map_err(|e| err(&e))?;
+        let mut failed = None;
+        let device_ms = best_of(5, || match device.cycle_from_zero(&b) {
+            Ok(x) => got = x,
+            Err(e) => failed = Some(e.to_string()),
+        }) * 1e3;
+        if let Some(e) = failed {
+            return Err(e);
+        }
+        let peak = expected.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let difference = got
+            .iter()
+            .zip(&expected)
+            .fold(0.0f32, |m, (a, e)| m.max((a - e).abs()))
+            / peak;
+        // Per level and cell: 8 colour passes (V(2,2)) reading the three couplings, the
+        // extra and inverse diagonals, b and x (28 bytes) and writing half the x (2 bytes);
+        // the restriction reading the same but the inverse diagonal (24) and writing an
+        // eighth of a value; the prolongation reading the inverse diagonal and x and
+        // writing x (12). Coarse levels add about a seventh.
+        let bytes = cells as f64 * (8.0 * 30.0 + 24.5 + 12.0) * 8.0 / 7.0;
+        println!(
+            "| {n}³ | {} | {host_ms:.2} | {device_ms:.2} | {:.0} MB | {:.0} | {difference:.1e} |",
+            host.depth(),
+            bytes / 1e6,
+            bytes / (device_ms * 1e-3) / 1e9,
+        );
     }
     Ok(())
 }

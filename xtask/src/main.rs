@@ -22,7 +22,8 @@
 //!
 //! - `bench-diffusion [N...]`: lucent-diffusion's multigrid on the marble sphere at N³
 //!   (64, 128, 256): time to 1e-8, one smoothing sweep's GB/s beside the copy bandwidth
-//!   measured in the same run, and pyamg and scipy CG on the same exported matrix.
+//!   measured in the same run, and pyamg and scipy CG on the same exported matrix. With
+//!   `--gpu`: one V-cycle on the device (`DeviceMultigrid`) against the host's same cycle.
 //! - `bench-gpu [N...]`: every GPU backend at N³ (default 64, 128): seconds per step,
 //!   cell updates per second and GB/s by byte count, with the adapter's name; on a CPU
 //!   implementation (lavapipe) a correctness run only.
@@ -66,7 +67,7 @@ mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck [--refined] | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] [--gpu] | bench-lbm [N] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck [--refined] | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] [--gpu] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] [--gpu] | bench-lbm [N] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -215,7 +216,8 @@ fn main() -> ExitCode {
             sizes = vec![64, 128, 256];
         }
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        return match bench_diffusion::run(&sizes, &root) {
+        let gpu = std::env::args().any(|a| a == "--gpu");
+        return match bench_diffusion::run(&sizes, &root, gpu) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("xtask: bench-diffusion: {e}");

@@ -78,7 +78,9 @@ mod solver;
 pub use error::DiffusionError;
 pub use geometry::{CellGeometry, Discretisation, Patch, Side};
 pub use krylov::optimal_sor_factor;
-pub use multigrid::{Convergence, Cycle, Multigrid, MultigridSettings, Prolongation, Smoother};
+pub use multigrid::{
+    Convergence, Cycle, LevelOperator, Multigrid, MultigridSettings, Prolongation, Smoother,
+};
 pub use params::{
     CgParams, CycleParam, DiscretisationParam, JacobiParams, MultigridParams, SmootherParam,
     SorParams,

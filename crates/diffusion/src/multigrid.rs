@@ -126,6 +126,22 @@ impl Convergence {
 /// One vector per level.
 type Work = Vec<Vec<f32>>;
 
+/// One level's operator as the cycles read it, for a device that runs the same cycle
+/// (`gpu-diffusion-mg`): the matrix-free form of the `level` module,
+/// (A x)_i = (e_i + Σ_f c_f) x_i − Σ_f c_f x_{j(f)}, with each cell storing the coupling
+/// through its low face on each axis (0 on the box).
+#[derive(Debug, Clone, Copy)]
+pub struct LevelOperator<'a> {
+    /// Cells per axis (x fastest).
+    pub dims: [usize; 3],
+    /// Coupling through each cell's low x, y and z face.
+    pub couplings: [&'a [f32]; 3],
+    /// The diagonal's part that is not a face coupling (absorption, boundary patches).
+    pub extra: &'a [f32],
+    /// 1/d_i, or 0 outside the medium.
+    pub inv_diag: &'a [f32],
+}
+
 /// The level hierarchy with its work vectors.
 #[derive(Debug, Clone)]
 pub struct Multigrid {
@@ -169,6 +185,48 @@ impl Multigrid {
             problem.boundaries(),
             settings,
         ))
+    }
+
+    /// The levels' operators, finest first.
+    pub fn levels(&self) -> Vec<LevelOperator<'_>> {
+        self.levels
+            .iter()
+            .map(|l| LevelOperator {
+                dims: l.dims,
+                couplings: [&l.couplings[0], &l.couplings[1], &l.couplings[2]],
+                extra: &l.extra,
+                inv_diag: &l.inv_diag,
+            })
+            .collect()
+    }
+
+    /// The cycle, smoother, sweeps and prolongation the hierarchy runs.
+    pub fn settings(&self) -> &MultigridSettings {
+        &self.settings
+    }
+
+    /// The coarsest level's solve inside a cycle, for `b` on that level: x from zero by
+    /// Jacobi-preconditioned CG in f64 to 1e-10.
+    pub fn solve_coarsest(&self, b: &[f32]) -> Vec<f32> {
+        let mut x = vec![0.0f32; b.len()];
+        self.coarsest(b, &mut x);
+        x
+    }
+
+    /// One cycle of the settings from x = 0 for A x = `b` on the finest level, in f32: the
+    /// preconditioner the solves apply, and what a device's cycle must reproduce.
+    pub fn cycle_from_zero(&self, b: &[f32]) -> Result<Vec<f32>, DiffusionError> {
+        let n = self.fine_cells();
+        if b.len() != n {
+            return Err(DiffusionError::Invalid(format!(
+                "a right-hand side of {} values for {n} cells",
+                b.len()
+            )));
+        }
+        let (mut bw, mut x, mut s) = self.work();
+        bw[0].copy_from_slice(b);
+        self.cycle(0, self.settings.cycle, &mut bw, &mut x, &mut s);
+        Ok(std::mem::take(&mut x[0]))
     }
 
     /// Cells of the finest level (the length of its vectors).

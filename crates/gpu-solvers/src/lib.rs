@@ -53,11 +53,13 @@ mod direct;
 mod dom;
 mod ftcs;
 mod lbm;
+mod multigrid;
 mod p1;
 mod params;
 mod solver;
 
 pub use dom::{Wavefront, dom_transport, dom_transport_with};
 pub use lbm::march as lbm_march;
+pub use multigrid::DeviceMultigrid;
 pub use params::GpuConvectionParams;
 pub use solver::GpuSolver;

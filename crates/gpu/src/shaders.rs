@@ -56,6 +56,9 @@ pub const LBM_D3Q19: &str = concat!(
 );
 /// `gpu-dom`: one hyperplane of the eight octant sweeps, and the scattering product.
 pub const DOM: &str = kernel!("dom.wgsl");
+/// `gpu-diffusion-mg`: a multigrid level's red–black smoothing colour, fused residual and
+/// restriction, and prolongation.
+pub const MULTIGRID: &str = kernel!("multigrid.wgsl");
 /// The largest change between two fields (stopping rules of passes).
 pub const MAX_CHANGE: &str = kernel!("max_change.wgsl");
 /// lucent-render's ray march on the device: one invocation per pixel.
@@ -76,6 +79,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("lbm_d3q7.wgsl + lbm.wgsl", LBM_D3Q7),
     ("lbm_d3q19.wgsl + lbm.wgsl", LBM_D3Q19),
     ("dom.wgsl", DOM),
+    ("multigrid.wgsl", MULTIGRID),
     ("max_change.wgsl", MAX_CHANGE),
     ("render.wgsl", RENDER),
 ];
