@@ -422,10 +422,50 @@ impl Multigrid {
     /// Solves A φ = b to the stopping rule: f64 solution and residual, f32 cycles on the
     /// correction. `phi` holds the initial guess (ignored when full multigrid is on).
     pub fn solve(&self, rhs: &[f64], phi: &mut [f64], stopping: &Stopping) -> Convergence {
+        let cycle = self.settings.cycle;
+        let solved = self.iterate(rhs, phi, stopping, true, |(b, x, s)| {
+            x[0].fill(0.0);
+            self.cycle(0, cycle, b, x, s);
+            Ok::<(), std::convert::Infallible>(())
+        });
+        match solved {
+            Ok(convergence) => convergence,
+            Err(never) => match never {},
+        }
+    }
+
+    /// [`Multigrid::solve`] with each cycle run by `cycle`, which maps the fine level's
+    /// right-hand side (the f32 residual) to the correction from zero — a device's cycle
+    /// ([`Multigrid::cycle_from_zero`] on the host). The f64 solution, residual and
+    /// stopping rule stay here; full multigrid is not run (it would run on the host), so
+    /// `phi` is the initial guess. An error of `cycle` stops the solve and is returned.
+    pub fn solve_with<E>(
+        &self,
+        rhs: &[f64],
+        phi: &mut [f64],
+        stopping: &Stopping,
+        mut cycle: impl FnMut(&[f32]) -> Result<Vec<f32>, E>,
+    ) -> Result<Convergence, E> {
+        self.iterate(rhs, phi, stopping, false, |(b, x, _)| {
+            x[0] = cycle(&b[0])?;
+            Ok(())
+        })
+    }
+
+    /// The outer iteration of the solves: `cycle` reads the fine right-hand side from
+    /// `b[0]` and leaves the correction in `x[0]`.
+    fn iterate<E>(
+        &self,
+        rhs: &[f64],
+        phi: &mut [f64],
+        stopping: &Stopping,
+        full_multigrid: bool,
+        mut cycle: impl FnMut((&mut Work, &mut Work, &mut Work)) -> Result<(), E>,
+    ) -> Result<Convergence, E> {
         let started = std::time::Instant::now();
         let fine = self.fine();
         let (mut b, mut x, mut s) = self.work();
-        if self.settings.full_multigrid {
+        if full_multigrid && self.settings.full_multigrid {
             self.full_multigrid(rhs, &mut b, &mut x, &mut s);
             phi.par_iter_mut()
                 .zip(x[0].par_iter())
@@ -447,10 +487,10 @@ impl Multigrid {
             if let Some(reason) = stopping.verdict(iteration, norm / b_norm, norm, initial, started)
             {
                 if !reason.is_converged() {
-                    return Convergence {
+                    return Ok(Convergence {
                         residuals,
                         stop_reason: reason,
-                    };
+                    });
                 }
                 norm = fine.residual(rhs, phi, &mut r);
                 *residuals.last_mut().unwrap_or(&mut 0.0) = norm / b_norm;
@@ -458,17 +498,16 @@ impl Multigrid {
                     .verdict(iteration, norm / b_norm, norm, initial, started)
                     .filter(|r| r.is_converged())
                 {
-                    return Convergence {
+                    return Ok(Convergence {
                         residuals,
                         stop_reason,
-                    };
+                    });
                 }
                 b[0].par_iter_mut()
                     .zip(r.par_iter())
                     .for_each(|(b, r)| *b = *r as f32);
             }
-            x[0].fill(0.0);
-            self.cycle(0, self.settings.cycle, &mut b, &mut x, &mut s);
+            cycle((&mut b, &mut x, &mut s))?;
             norm = fine.correct(&x[0], phi, &mut r, &mut b[0]);
             residuals.push(norm / b_norm);
         }

@@ -7,7 +7,8 @@
 //! Per cycle: one command buffer down (pre-smoothing colours, then the fused residual and
 //! restriction, level by level), the coarsest level's right-hand side read back and solved
 //! on the host by the host's own coarsest solve (a few hundred cells: CG in f64), one
-//! command buffer up (prolongation, post-smoothing). The host's f64 outer iteration
+//! command buffer up (prolongation, post-smoothing); each pass timed by the device's
+//! timestamps where it has them ([`DeviceMultigrid::last_kernel_seconds`]). The host's f64 outer iteration
 //! (residual, correction, stopping rule) stays where it is: a device cycle is a
 //! preconditioner application, so 1e-8 is reached by the same iterative refinement as on
 //! the host.
@@ -16,7 +17,9 @@
 //! F cycles, the Jacobi smoother and trilinear prolongation.
 
 use lucent_diffusion::{Cycle, Multigrid, Prolongation, Smoother};
-use lucent_gpu::{DeviceField, GpuContext, GpuError, Kernel, UniformSlots, WORKGROUP, groups_2d};
+use lucent_gpu::{
+    DeviceField, GpuContext, GpuError, Kernel, TimingSource, UniformSlots, WORKGROUP, groups_2d,
+};
 
 /// The uniform block of `shaders/multigrid.wgsl`.
 #[repr(C)]
@@ -58,6 +61,7 @@ pub struct DeviceMultigrid<'a> {
     prolong: Kernel,
     pre_sweeps: usize,
     post_sweeps: usize,
+    kernels: Option<f64>,
     _uniforms: UniformSlots,
 }
 
@@ -210,6 +214,7 @@ impl<'a> DeviceMultigrid<'a> {
             prolong,
             pre_sweeps: settings.pre_sweeps,
             post_sweeps: settings.post_sweeps,
+            kernels: None,
             _uniforms: uniforms,
         })
     }
@@ -217,6 +222,19 @@ impl<'a> DeviceMultigrid<'a> {
     /// Cells of the finest level.
     pub fn fine_cells(&self) -> usize {
         self.levels[0].cells
+    }
+
+    /// Solves A φ = `rhs` to `stopping` with the device's cycles: the host's outer
+    /// iteration ([`Multigrid::solve_with`]: f64 solution and residual, the stopping rule),
+    /// from `phi` as the initial guess.
+    pub fn solve(
+        &mut self,
+        rhs: &[f64],
+        phi: &mut [f64],
+        stopping: &lucent_core::Stopping,
+    ) -> Result<lucent_diffusion::Convergence, GpuError> {
+        let host = self.host;
+        host.solve_with(rhs, phi, stopping, |b| self.cycle_from_zero(b))
     }
 
     /// One V-cycle from x = 0 for A x = `b` on the finest level: the device's
@@ -232,40 +250,35 @@ impl<'a> DeviceMultigrid<'a> {
         }
         self.levels[0].b.write(gpu, b, false)?;
         let last = self.levels.len() - 1;
-        // Down: every x from zero, pre-smoothing (red first), residual restricted.
+        // Every x from zero, then down: pre-smoothing (red first), residual restricted.
         gpu.checked(|| {
             let mut encoder =
                 gpu.device()
                     .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                        label: Some("gpu-diffusion-mg down"),
+                        label: Some("gpu-diffusion-mg clear"),
                     });
             for level in &self.levels {
                 encoder.clear_buffer(level.x.buffer(), 0, None);
             }
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("gpu-diffusion-mg down"),
-                    timestamp_writes: None,
-                });
-                for level in &self.levels[..last] {
-                    for _ in 0..self.pre_sweeps {
-                        for colour in [0, 1] {
-                            self.smooth
-                                .dispatch(&mut pass, &level.smooth[colour], level.groups);
-                        }
-                    }
-                    let restrict = level.restrict.as_ref().expect("a level above the coarsest");
-                    self.restrict
-                        .dispatch(&mut pass, restrict, level.coarse_groups);
-                }
-            }
             gpu.queue().submit([encoder.finish()]);
+        })?;
+        let down = gpu.timed_pass("gpu-diffusion-mg down", |pass| {
+            for level in &self.levels[..last] {
+                for _ in 0..self.pre_sweeps {
+                    for colour in [0, 1] {
+                        self.smooth
+                            .dispatch(pass, &level.smooth[colour], level.groups);
+                    }
+                }
+                let restrict = level.restrict.as_ref().expect("a level above the coarsest");
+                self.restrict.dispatch(pass, restrict, level.coarse_groups);
+            }
         })?;
         let coarse_b = self.levels[last].b.download(gpu)?;
         let coarse_x = self.host.solve_coarsest(&coarse_b);
         self.levels[last].x.write(gpu, &coarse_x, false)?;
         // Up: prolongation, post-smoothing (black first, as the host's).
-        gpu.submit_pass("gpu-diffusion-mg up", |pass| {
+        let up = gpu.timed_pass("gpu-diffusion-mg up", |pass| {
             for level in self.levels[..last].iter().rev() {
                 let prolong = level.prolong.as_ref().expect("a level above the coarsest");
                 self.prolong.dispatch(pass, prolong, level.groups);
@@ -277,7 +290,15 @@ impl<'a> DeviceMultigrid<'a> {
                 }
             }
         })?;
+        self.kernels =
+            (down.source == TimingSource::Timestamps).then_some(down.seconds + up.seconds);
         self.levels[0].x.download(gpu)
+    }
+
+    /// The last cycle's kernels alone by the device's timestamps (both passes; without the
+    /// transfers and the host's coarsest solve), where the adapter has timestamps.
+    pub fn last_kernel_seconds(&self) -> Option<f64> {
+        self.kernels
     }
 }
 

@@ -116,3 +116,70 @@ fn other_cycles_are_refused() {
         Ok(_) => panic!("a W-cycle hierarchy was accepted"),
     }
 }
+
+/// Solved to 1e-8 (relative residual) with the device's cycles inside the host's f64
+/// outer iteration, against the host's own cycles from the same start (no full
+/// multigrid): each correction differs by f32 rounding only (previous test), which the
+/// outer iteration removes like any other error of a correction, so both stop on the
+/// same cycle or one apart, at fluences within 1e-6 of each other (each within the
+/// tolerance's 1e-8 of the residual times the operator's condition; measured 3e-15 to
+/// 5e-15: both converge to the same f64 solution), and the device's solution balances its
+/// sources as the host's does.
+#[test]
+fn device_cycles_solve_to_the_host_answer() {
+    use lucent_diffusion::Sources;
+    let Some(gpu) = context_or_skip("device_cycles_solve_to_the_host_answer") else {
+        return;
+    };
+    let stopping = lucent_core::Stopping {
+        relative_tolerance: 1e-8,
+        max_iterations: 60,
+        ..Default::default()
+    };
+    for (dims, contrast) in [([24, 19, 21], 1.0), ([33, 20, 17], 1e3)] {
+        let problem = problem(dims, true, contrast);
+        let sources = Sources {
+            points: vec![(DVec3::new(0.45, 0.5, 0.55), 1.0)],
+            ..Sources::default()
+        };
+        let rhs = problem.rhs(&sources).unwrap();
+        let host = Multigrid::build(
+            &problem,
+            MultigridSettings {
+                full_multigrid: false,
+                ..MultigridSettings::default()
+            },
+        )
+        .unwrap();
+        let mut expected = vec![0.0; rhs.len()];
+        let on_host = host.solve(&rhs, &mut expected, &stopping);
+        let mut device = DeviceMultigrid::new(&gpu, &host).unwrap();
+        let mut got = vec![0.0; rhs.len()];
+        let on_device = device.solve(&rhs, &mut got, &stopping).unwrap();
+        let scale = expected.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let difference = got
+            .iter()
+            .zip(&expected)
+            .fold(0.0f64, |m, (a, e)| m.max((a - e).abs()))
+            / scale;
+        eprintln!(
+            "{dims:?} contrast {contrast}: {} cycles on the device, {} on the host; {difference:.1e} apart",
+            on_device.iterations(),
+            on_host.iterations()
+        );
+        assert!(
+            on_device.stop_reason.is_converged(),
+            "{:?}",
+            on_device.stop_reason
+        );
+        assert!(
+            on_device.iterations().abs_diff(on_host.iterations()) <= 1,
+            "{} against {}",
+            on_device.iterations(),
+            on_host.iterations()
+        );
+        assert!(difference < 1e-6, "{dims:?}: {difference}");
+        let balance = problem.balance(&sources, &got);
+        assert!(balance.relative_imbalance() < 1e-6, "{balance:?}");
+    }
+}
