@@ -128,7 +128,7 @@ impl SolverParams for MultigridParams {
 
 impl MultigridParams {
     /// The multigrid settings these ask for.
-    pub(crate) fn settings(&self) -> MultigridSettings {
+    pub fn settings(&self) -> MultigridSettings {
         MultigridSettings {
             cycle: match self.cycle {
                 CycleParam::V => Cycle::V,

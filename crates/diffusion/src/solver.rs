@@ -250,7 +250,7 @@ impl DiffusionSolver {
     ) -> Result<Solution, SolveError> {
         let method = Channels {
             stage: match self.name() {
-                "diffusion-mg" => "V-cycle",
+                "diffusion-mg" | "gpu-diffusion-mg" => "V-cycle",
                 "diffusion-mgcg" | "diffusion-cg" => "CG iteration",
                 "diffusion-sor" => "SOR sweep",
                 name if name.contains("ftcs") => "time step",

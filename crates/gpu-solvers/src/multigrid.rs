@@ -16,7 +16,13 @@
 //! What the host's cycle offers and this one does not is refused, not approximated: W and
 //! F cycles, the Jacobi smoother and trilinear prolongation.
 
-use lucent_diffusion::{Cycle, Multigrid, Prolongation, Smoother};
+use std::time::Instant;
+
+use lucent_core::{Problem, Stopping};
+use lucent_diffusion::{
+    Cycle, DiffusionError, DiffusionProblem, DiffusionSolution, Multigrid, MultigridSettings,
+    Prolongation, Smoother, Sources,
+};
 use lucent_gpu::{
     DeviceField, GpuContext, GpuError, Kernel, TimingSource, UniformSlots, WORKGROUP, groups_2d,
 };
@@ -231,7 +237,7 @@ impl<'a> DeviceMultigrid<'a> {
         &mut self,
         rhs: &[f64],
         phi: &mut [f64],
-        stopping: &lucent_core::Stopping,
+        stopping: &Stopping,
     ) -> Result<lucent_diffusion::Convergence, GpuError> {
         let host = self.host;
         host.solve_with(rhs, phi, stopping, |b| self.cycle_from_zero(b))
@@ -320,4 +326,44 @@ fn bindings<'f>(
     e.push((7, x.binding()));
     e.extend(coarse.map(|c| (8, c.binding())));
     e
+}
+
+/// Host bytes of `gpu-diffusion-mg` per solve: `diffusion-mg`'s own (the hierarchy the
+/// device's is uploaded from, the f64 vectors, the cut-cell geometry: 112 bytes per cell
+/// and channel) and the f32 right-hand side and correction each cycle hands over (8).
+pub(crate) fn memory_bytes(problem: &Problem) -> u64 {
+    problem.geometry().voxel_count() as u64 * (112 + 8) * problem.channels() as u64
+}
+
+/// One channel's steady diffusion by device cycles: the host builds the hierarchy as
+/// `diffusion-mg` does, [`DeviceMultigrid`] uploads it and runs the cycles, the host's
+/// outer iteration stops at `stop` (from zero: full multigrid would run on the host).
+pub(crate) fn steady(
+    gpu: &GpuContext,
+    problem: &DiffusionProblem,
+    sources: &Sources,
+    stop: &Stopping,
+    settings: MultigridSettings,
+) -> Result<DiffusionSolution, DiffusionError> {
+    let device_error = |e: GpuError| DiffusionError::Invalid(format!("GPU: {e}"));
+    let started = Instant::now();
+    let rhs = problem.rhs(sources)?;
+    let host = Multigrid::build(problem, settings)?;
+    let mut device = DeviceMultigrid::new(gpu, &host).map_err(device_error)?;
+    let setup_seconds = started.elapsed().as_secs_f64();
+    let solving = Instant::now();
+    let mut fluence = vec![0.0; rhs.len()];
+    let convergence = device
+        .solve(&rhs, &mut fluence, stop)
+        .map_err(device_error)?;
+    let solve_seconds = solving.elapsed().as_secs_f64();
+    Ok(DiffusionSolution {
+        balance: problem.balance(sources, &fluence),
+        convergence,
+        setup_seconds,
+        solve_seconds,
+        levels: host.depth(),
+        memory_bytes: host.memory_bytes() + fluence.len() as u64 * 32,
+        fluence,
+    })
 }

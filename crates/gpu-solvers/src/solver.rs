@@ -9,6 +9,7 @@
 //! | `gpu-ftcs-p1` | `ftcs-p1` | P1 FTCS steps (φ and E ping-pong) |
 //! | `gpu-convection-diffusion` | `convection-diffusion` (characteristic model) | layer sweeps per light, red–black Gauss–Seidel scattering |
 //! | `gpu-lbm` | `lbm` | Lattice-Boltzmann pull steps, one dispatch per step |
+//! | `gpu-diffusion-mg` | `diffusion-mg` | V-cycles (red–black colours, fused residual and restriction, prolongation), the coarsest level and the f64 outer iteration on the host |
 //! | `gpu-dom` | `dom` | each transport step (source fill, octant sweeps by cell hyperplanes, scattering product); the iteration and DSA on the host |
 //!
 //! The device is the process's shared [`GpuContext`]; no adapter is a
@@ -20,7 +21,10 @@ use lucent_core::{
     Capabilities, DirectSolver, Light, ParamValue, Params, Problem, Solution, SolveError,
     SolveOptions, Solver, SolverEntry, param_docs, resolved_params,
 };
-use lucent_diffusion::DiffusionSolver;
+use lucent_diffusion::{
+    CycleParam, DiffusionSolver, DiscretisationParam, MultigridParams, MultigridSettings,
+    SmootherParam,
+};
 use lucent_dom::{DomParams, DomSolver};
 use lucent_explicit::{ExplicitSolver, FtcsDiffusionParams, Lattice, P1Params};
 use lucent_gpu::{GpuContext, GpuError};
@@ -43,6 +47,7 @@ enum Backend {
     Convection(GpuConvectionParams),
     Lbm(LbmParams),
     Dom(DomSolver),
+    DiffusionMg(MultigridParams),
 }
 
 /// A device error as a solve error of `solver`.
@@ -165,14 +170,47 @@ impl GpuSolver {
         resolved: |p| resolved_params::<DomParams>(p, "gpu-dom"),
     };
 
+    /// `gpu-diffusion-mg` (`diffusion-mg`'s [`MultigridParams`]; V-cycles with red–black
+    /// Gauss–Seidel on the embedded boundary, others refused naming the parameter;
+    /// `full_multigrid` is not run: the solve starts from zero).
+    pub const GPU_DIFFUSION_MG: SolverEntry = SolverEntry {
+        name: "gpu-diffusion-mg",
+        summary: "diffusion-mg on the GPU: V-cycles on the device, the coarsest level and the f64 outer iteration on the host",
+        build: |p| {
+            let params: MultigridParams = p.parse("gpu-diffusion-mg")?;
+            let refuse = |name: &str, reason: &str| {
+                Err(SolveError::InvalidParameter {
+                    name: name.into(),
+                    reason: format!("gpu-diffusion-mg runs {reason}"),
+                })
+            };
+            if params.cycle != CycleParam::V {
+                return refuse("cycle", "V-cycles only");
+            }
+            if params.smoother != SmootherParam::GaussSeidel {
+                return refuse("smoother", "red–black Gauss–Seidel only");
+            }
+            if params.discretisation != DiscretisationParam::Embedded {
+                return refuse("discretisation", "the embedded boundary only");
+            }
+            Ok(Box::new(GpuSolver {
+                name: "gpu-diffusion-mg",
+                backend: Backend::DiffusionMg(params),
+            }))
+        },
+        params: param_docs::<MultigridParams>,
+        resolved: |p| resolved_params::<MultigridParams>(p, "gpu-diffusion-mg"),
+    };
+
     /// Every GPU entry.
-    pub const ENTRIES: [SolverEntry; 6] = [
+    pub const ENTRIES: [SolverEntry; 7] = [
         Self::GPU_DIRECT,
         Self::GPU_FTCS_DIFFUSION,
         Self::GPU_FTCS_P1,
         Self::GPU_CONVECTION_DIFFUSION,
         Self::GPU_LBM,
         Self::GPU_DOM,
+        Self::GPU_DIFFUSION_MG,
     ];
 
     /// The CPU twin, for its capabilities and its stability checks.
@@ -181,7 +219,9 @@ impl GpuSolver {
             Backend::Direct(d) => return Box::new(*d),
             Backend::Lbm(p) => return Box::new(LbmSolver::new(*p)),
             Backend::Dom(d) => return Box::new(d.clone()),
-            Backend::FtcsDiffusion(_) => return Box::new(DiffusionSolver::custom(self.name)),
+            Backend::FtcsDiffusion(_) | Backend::DiffusionMg(_) => {
+                return Box::new(DiffusionSolver::custom(self.name));
+            }
             Backend::P1(_) => (ExplicitSolver::FTCS_P1.build)(&Params::default()),
             Backend::Convection(p) => {
                 let mut params = Params::default();
@@ -220,6 +260,7 @@ impl Solver for GpuSolver {
             }
             // The host's part is `dom`'s own budget check (its driver's).
             Backend::Dom(_) => 0,
+            Backend::DiffusionMg(_) => crate::multigrid::memory_bytes(problem),
         };
         if needed > options.memory_budget {
             return Err(SolveError::OverBudget {
@@ -282,6 +323,20 @@ impl Solver for GpuSolver {
                 dom.clone()
                     .on_device(self.name, factory)
                     .solve(problem, options)
+            }
+            Backend::DiffusionMg(params) => {
+                let gpu = device(self.name)?;
+                let memory = crate::multigrid::memory_bytes(problem);
+                let settings = MultigridSettings {
+                    full_multigrid: false,
+                    ..params.settings()
+                };
+                DiffusionSolver::custom(self.name).solve_with(
+                    problem,
+                    options,
+                    memory,
+                    &|d, s, stop| crate::multigrid::steady(gpu, d, s, stop, settings),
+                )
             }
             Backend::Convection(params) => {
                 let gpu = device(self.name)?;
