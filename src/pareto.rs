@@ -306,6 +306,17 @@ pub fn runs() -> Vec<Run> {
             )
         });
     }
+    for &tolerance in &[1e-4, 1e-8] {
+        runs.push(Run {
+            tolerance: Some(tolerance),
+            ..Run::new(
+                "gpu-diffusion-mg",
+                String::new(),
+                1,
+                format!("tolerance {tolerance:.0e}"),
+            )
+        });
+    }
     for factor in [1, 2] {
         runs.push(Run::new(
             "gpu-convection-diffusion",
