@@ -89,7 +89,12 @@ fn smooth_colour(
     if (((i + j + k) & 1u) != lv.coarse.w) {
         return;
     }
-    x[g] += residual_at(i, j, k, g) * inv_diag[g];
+    // Cells outside the medium (d = 0) are not unknowns: nothing to read or write.
+    let d = inv_diag[g];
+    if (d == 0.0) {
+        return;
+    }
+    x[g] += residual_at(i, j, k, g) * d;
 }
 
 @compute @workgroup_size(256)
@@ -113,7 +118,11 @@ fn restrict_residual(
     for (var k = 2u * kc; k < min(2u * kc + 2u, nz); k++) {
         for (var j = 2u * jc; j < min(2u * jc + 2u, ny); j++) {
             for (var i = 2u * ic; i < min(2u * ic + 2u, nx); i++) {
-                sum += residual_at(i, j, k, i + nx * (j + ny * k));
+                // Only cells in the medium pass their residual down (as on the host).
+                let g = i + nx * (j + ny * k);
+                if (inv_diag[g] != 0.0) {
+                    sum += residual_at(i, j, k, g);
+                }
             }
         }
     }

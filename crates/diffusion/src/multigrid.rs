@@ -234,6 +234,12 @@ impl Multigrid {
         self.fine().len()
     }
 
+    /// Cells of the finest level that the sweeps visit: each row's span between its first
+    /// and last cell in the medium (cells outside it are not unknowns).
+    pub fn swept_cells(&self) -> usize {
+        self.fine().swept_cells()
+    }
+
     /// Bytes one smoothing sweep must move at the least: per cell, three face couplings,
     /// the diagonal's extra part, the inverse diagonal and b read once (4 bytes each) and x
     /// read and written once. Cache misses on neighbours come on top.
@@ -477,6 +483,8 @@ impl Multigrid {
         let b_norm = norm2(rhs).max(f64::MIN_POSITIVE);
         let mut r = vec![0.0; rhs.len()];
         let mut norm = fine.residual(rhs, phi, &mut r);
+        // The residual outside the medium's spans, which no correction changes.
+        let outside = fine.outside_sum_sq(&r);
         b[0].par_iter_mut()
             .zip(r.par_iter())
             .for_each(|(b, r)| *b = *r as f32);
@@ -508,7 +516,7 @@ impl Multigrid {
                     .for_each(|(b, r)| *b = *r as f32);
             }
             cycle((&mut b, &mut x, &mut s))?;
-            norm = fine.correct(&x[0], phi, &mut r, &mut b[0]);
+            norm = (fine.correct(&x[0], phi, &mut r, &mut b[0]) + outside).sqrt();
             residuals.push(norm / b_norm);
         }
     }

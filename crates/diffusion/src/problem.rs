@@ -649,14 +649,14 @@ pub(crate) fn finish_level(
         .map(|&d| if d > 0.0 { (1.0 / d) as f32 } else { 0.0 })
         .collect();
     LevelData {
-        level: Level {
+        level: Level::new(
             dims,
             spacing,
             couplings,
-            diag: diag32,
-            extra: extra.iter().map(|&e| e as f32).collect(),
+            diag32,
+            extra.iter().map(|&e| e as f32).collect(),
             inv_diag,
-        },
+        ),
         absorption,
         patches,
     }

@@ -38,7 +38,7 @@ struct LevelParams {
 /// The bindings each entry point of `shaders/multigrid.wgsl` reads (wgpu derives each
 /// pipeline's layout from what its entry point uses).
 const SMOOTH: [u32; 8] = [0, 1, 2, 3, 4, 5, 6, 7];
-const RESTRICT: [u32; 8] = [0, 1, 2, 3, 4, 6, 7, 8];
+const RESTRICT: [u32; 9] = [0, 1, 2, 3, 4, 5, 6, 7, 8];
 const PROLONG: [u32; 4] = [0, 5, 7, 8];
 
 /// One level's operator and vectors on the device.
