@@ -21,6 +21,31 @@ pub(crate) fn conjugate_gradient(
     b: &[f64],
     x: &mut [f64],
     stopping: &Stopping,
+    precondition: impl FnMut(&[f64], &mut [f64]),
+) -> Convergence {
+    preconditioned_cg(level, b, x, stopping, false, precondition)
+}
+
+/// [`conjugate_gradient`] for a preconditioner that is not a fixed linear map (a K-cycle):
+/// flexible CG, whose β = zₖ₊₁ᵀ(rₖ₊₁ − rₖ)/zₖᵀrₖ (Polak–Ribière) equals the usual one when
+/// the preconditioner is linear and keeps the directions conjugate when it is not (Notay
+/// 2000).
+pub(crate) fn flexible_conjugate_gradient(
+    level: &Level,
+    b: &[f64],
+    x: &mut [f64],
+    stopping: &Stopping,
+    precondition: impl FnMut(&[f64], &mut [f64]),
+) -> Convergence {
+    preconditioned_cg(level, b, x, stopping, true, precondition)
+}
+
+fn preconditioned_cg(
+    level: &Level,
+    b: &[f64],
+    x: &mut [f64],
+    stopping: &Stopping,
+    flexible: bool,
     mut precondition: impl FnMut(&[f64], &mut [f64]),
 ) -> Convergence {
     let started = std::time::Instant::now();
@@ -55,6 +80,7 @@ pub(crate) fn conjugate_gradient(
             };
         }
         let alpha = rz / pap;
+        let previous = flexible.then(|| r.clone());
         x.par_iter_mut()
             .zip(p.par_iter())
             .for_each(|(x, p)| *x += alpha * p);
@@ -65,7 +91,10 @@ pub(crate) fn conjugate_gradient(
         residuals.push(norm / b_norm);
         precondition(&r, &mut z);
         let rz_new = dot(&r, &z);
-        let beta = rz_new / rz;
+        let beta = match &previous {
+            Some(previous) => (rz_new - dot(previous, &z)) / rz,
+            None => rz_new / rz,
+        };
         rz = rz_new;
         p.par_iter_mut()
             .zip(z.par_iter())

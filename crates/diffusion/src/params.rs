@@ -46,6 +46,8 @@ pub enum CycleParam {
     W,
     /// F-cycle.
     F,
+    /// K-cycle (flexible CG on each coarse level), for jumps of D.
+    K,
 }
 
 /// The multigrid smoother.
@@ -98,7 +100,10 @@ const DISCRETISATION: (&str, &str) = (
 
 impl SolverParams for MultigridParams {
     const MEANINGS: &'static [(&'static str, &'static str)] = &[
-        ("cycle", "multigrid cycle: v, w or f"),
+        (
+            "cycle",
+            "multigrid cycle: v, w, f or k (two flexible-CG steps per coarse level: for jumps of D, best under diffusion-mgcg)",
+        ),
         (
             "pre_sweeps",
             "smoothing sweeps before the coarse correction",
@@ -134,6 +139,7 @@ impl MultigridParams {
                 CycleParam::V => Cycle::V,
                 CycleParam::W => Cycle::W,
                 CycleParam::F => Cycle::F,
+                CycleParam::K => Cycle::K,
             },
             smoother: match self.smoother {
                 SmootherParam::GaussSeidel => Smoother::RedBlackGaussSeidel,

@@ -76,9 +76,18 @@ pub fn solve(
                 mg.solve(&rhs, &mut phi, stopping)
             } else {
                 let mut work = mg.preconditioner_work();
-                krylov::conjugate_gradient(mg.fine(), &rhs, &mut phi, stopping, |r, z| {
-                    mg.precondition(&mut work, r, z)
-                })
+                let precondition = |r: &[f64], z: &mut [f64]| mg.precondition(&mut work, r, z);
+                if settings.cycle == crate::multigrid::Cycle::K {
+                    krylov::flexible_conjugate_gradient(
+                        mg.fine(),
+                        &rhs,
+                        &mut phi,
+                        stopping,
+                        precondition,
+                    )
+                } else {
+                    krylov::conjugate_gradient(mg.fine(), &rhs, &mut phi, stopping, precondition)
+                }
             };
             (
                 convergence,

@@ -103,17 +103,19 @@ fn other_cycles_are_refused() {
         return;
     };
     let problem = problem([8, 8, 8], false, 1.0);
-    let host = Multigrid::build(
-        &problem,
-        MultigridSettings {
-            cycle: Cycle::W,
-            ..MultigridSettings::default()
-        },
-    )
-    .unwrap();
-    match DeviceMultigrid::new(&gpu, &host) {
-        Err(e) => assert!(e.to_string().contains("W cycle"), "{e}"),
-        Ok(_) => panic!("a W-cycle hierarchy was accepted"),
+    for cycle in [Cycle::W, Cycle::F, Cycle::K] {
+        let host = Multigrid::build(
+            &problem,
+            MultigridSettings {
+                cycle,
+                ..MultigridSettings::default()
+            },
+        )
+        .unwrap();
+        match DeviceMultigrid::new(&gpu, &host) {
+            Err(e) => assert!(e.to_string().contains(&format!("{cycle:?} cycle")), "{e}"),
+            Ok(_) => panic!("a {cycle:?}-cycle hierarchy was accepted"),
+        }
     }
 }
 

@@ -281,6 +281,7 @@ fn gpu_diffusion_mg_solves_as_diffusion_mg() {
     }
     for (key, value) in [
         ("cycle", "w"),
+        ("cycle", "k"),
         ("smoother", "jacobi"),
         ("discretisation", "staircase"),
     ] {
