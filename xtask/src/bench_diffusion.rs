@@ -2,7 +2,9 @@
 //! (Mertens T7: R = 10 mm, point source, Robin A = 2.341, embedded boundary) at N³ (64,
 //! 128 and 256 by default), against the machine's copy bandwidth measured in the same run,
 //! and side by side with pyamg (Ruge–Stüben AMG + CG) and scipy CG on the same matrix,
-//! exported as NumPy arrays, when `python3 -c "import pyamg, scipy"` works.
+//! exported as NumPy arrays, when `python3 -c "import pyamg, scipy"` works; then, when the
+//! adapter is a real GPU, the device's V-cycles (`DeviceMultigrid`) at the same sizes, all
+//! in one run.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -132,13 +134,48 @@ fn export(
     write_npy(&dir.join("lucent.npy"), "<f8", &f64_bytes(ours), rows)
 }
 
-/// Runs the benchmark.
-pub(crate) fn run(sizes: &[usize], root: &Path, gpu: bool) -> Result<(), String> {
+/// Runs the benchmark: lucent's CPU multigrid, then pyamg and scipy on the same matrices
+/// (up to 128³), then the device's (`DeviceMultigrid`) when the adapter is a real GPU, all
+/// in one run. `gpu_only` (`--gpu`) runs just the device table, on any adapter (on a CPU
+/// implementation, for correctness).
+pub(crate) fn run(sizes: &[usize], root: &Path, gpu_only: bool) -> Result<(), String> {
     println!("# cargo xtask bench-diffusion");
     println!();
-    if gpu {
+    if gpu_only {
         return run_gpu(sizes);
     }
+    let solves = run_cpu(sizes, root)?;
+    for (n, dir, lucent) in solves {
+        let Some(dir) = dir else { continue };
+        python_row(root, n, &dir, lucent)?;
+    }
+    println!();
+    match lucent::gpu::GpuContext::shared() {
+        Ok(context) if !context.is_software() => run_gpu(sizes),
+        Ok(context) => {
+            println!(
+                "GPU: the adapter ({}) is a CPU implementation; not timed (`--gpu` runs the device table for correctness)",
+                context.describe()
+            );
+            Ok(())
+        }
+        Err(e) => {
+            println!("GPU: no adapter ({e})");
+            Ok(())
+        }
+    }
+}
+
+/// lucent's setup and solve seconds at one size.
+#[derive(Clone, Copy)]
+struct Timing {
+    setup: f64,
+    solve: f64,
+}
+
+/// The CPU table; returns per size where its system was exported for pyamg (when Python
+/// has pyamg and scipy, up to 128³) and lucent's timing.
+fn run_cpu(sizes: &[usize], root: &Path) -> Result<Vec<(usize, Option<PathBuf>, Timing)>, String> {
     let threads = rayon::current_num_threads();
     println!(
         "{threads} threads; copy: a 256 MiB f32 copy on all threads (bytes read + written), \
@@ -154,7 +191,7 @@ pub(crate) fn run(sizes: &[usize], root: &Path, gpu: bool) -> Result<(), String>
         .args(["-c", "import pyamg, scipy"])
         .status()
         .is_ok_and(|s| s.success());
-    let mut exports: Vec<(usize, PathBuf)> = Vec::new();
+    let mut solves = Vec::new();
     for &n in sizes {
         let (problem, sources) = sphere(n)?;
         let stopping = Stopping::default();
@@ -198,31 +235,56 @@ pub(crate) fn run(sizes: &[usize], root: &Path, gpu: bool) -> Result<(), String>
             serial / 1e9,
             100.0 * gbs * 1e9 / parallel,
         );
-        if python && n <= 128 {
+        let dir = if python && n <= 128 {
             let dir = root.join(format!("target/bench-diffusion/sphere{n}"));
             export(&dir, &problem, &sources, &best.fluence)?;
-            exports.push((n, dir));
-        }
+            Some(dir)
+        } else {
+            None
+        };
+        let timing = Timing {
+            setup: best.setup_seconds,
+            solve: best.solve_seconds,
+        };
+        solves.push((n, dir, timing));
     }
     println!();
     if !python {
         println!("pyamg/scipy: not run (`pip install pyamg scipy` to compare)");
-        return Ok(());
     }
+    Ok(solves)
+}
+
+/// pyamg and scipy on the exported system at n³, and pyamg's set-up + solve over lucent's
+/// solve (the issue's ratio) and over lucent's set-up + solve.
+fn python_row(root: &Path, n: usize, dir: &Path, lucent: Timing) -> Result<(), String> {
     let script = root.join("xtask/src/pyamg_bench.py");
-    for (n, dir) in exports {
-        let out = Command::new("python3")
-            .arg(&script)
-            .arg(&dir)
-            .output()
-            .map_err(|e| e.to_string())?;
-        if !out.status.success() {
-            return Err(format!(
-                "pyamg_bench.py at {n}³: {}",
-                String::from_utf8_lossy(&out.stderr)
-            ));
-        }
-        print!("{n}³: {}", String::from_utf8_lossy(&out.stdout));
+    let out = Command::new("python3")
+        .arg(&script)
+        .arg(dir)
+        .output()
+        .map_err(|e| e.to_string())?;
+    if !out.status.success() {
+        return Err(format!(
+            "pyamg_bench.py at {n}³: {}",
+            String::from_utf8_lossy(&out.stderr)
+        ));
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    print!("{n}³: {text}");
+    // The pyamg line's "total T s".
+    let pyamg_total = text
+        .lines()
+        .find(|l| l.contains("pyamg") && l.contains("total "))
+        .and_then(|l| l.split("total ").nth(1))
+        .and_then(|t| t.split(' ').next())
+        .and_then(|t| t.parse::<f64>().ok());
+    if let Some(total) = pyamg_total {
+        println!(
+            "  pyamg's set-up + solve over lucent's solve: {:.0}×; over lucent's set-up + solve: {:.0}×",
+            total / lucent.solve,
+            total / (lucent.setup + lucent.solve)
+        );
     }
     Ok(())
 }

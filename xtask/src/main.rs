@@ -22,8 +22,9 @@
 //!
 //! - `bench-diffusion [N...]`: lucent-diffusion's multigrid on the marble sphere at N³
 //!   (64, 128, 256): time to 1e-8, one smoothing sweep's GB/s beside the copy bandwidth
-//!   measured in the same run, and pyamg and scipy CG on the same exported matrix. With
-//!   `--gpu`: one V-cycle on the device (`DeviceMultigrid`) against the host's same cycle.
+//!   measured in the same run, pyamg and scipy CG on the same exported matrix, and on a real
+//!   GPU the device's V-cycles (`DeviceMultigrid`), all in one run. With `--gpu`: only the
+//!   device table, on any adapter (lavapipe: for correctness).
 //! - `bench-gpu [N...]`: every GPU backend at N³ (default 64, 128): seconds per step,
 //!   cell updates per second and GB/s by byte count, with the adapter's name; on a CPU
 //!   implementation (lavapipe) a correctness run only.
