@@ -5,13 +5,17 @@
 
 use rayon::prelude::*;
 
-use crate::level::{Level, norm2};
+use crate::level::{Level, PARALLEL_MIN_CELLS, norm2};
 use lucent_core::Stopping;
 
 use crate::multigrid::Convergence;
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.par_iter().zip(b.par_iter()).map(|(a, b)| a * b).sum()
+    a.par_iter()
+        .zip(b.par_iter())
+        .with_min_len(PARALLEL_MIN_CELLS)
+        .map(|(a, b)| a * b)
+        .sum()
 }
 
 /// Preconditioned conjugate gradients for the symmetric positive definite A x = b;
@@ -83,9 +87,11 @@ fn preconditioned_cg(
         let previous = flexible.then(|| r.clone());
         x.par_iter_mut()
             .zip(p.par_iter())
+            .with_min_len(PARALLEL_MIN_CELLS)
             .for_each(|(x, p)| *x += alpha * p);
         r.par_iter_mut()
             .zip(ap.par_iter())
+            .with_min_len(PARALLEL_MIN_CELLS)
             .for_each(|(r, ap)| *r -= alpha * ap);
         norm = norm2(&r);
         residuals.push(norm / b_norm);
@@ -98,6 +104,7 @@ fn preconditioned_cg(
         rz = rz_new;
         p.par_iter_mut()
             .zip(z.par_iter())
+            .with_min_len(PARALLEL_MIN_CELLS)
             .for_each(|(p, z)| *p = z + beta * *p);
     }
 }

@@ -113,6 +113,11 @@ impl Level {
         self.dims[0] * self.dims[1]
     }
 
+    /// Slabs per task of the parallel loops over slabs (at least [`PARALLEL_MIN_CELLS`]).
+    fn slabs_per_task(&self) -> usize {
+        PARALLEL_MIN_CELLS.div_ceil(self.slab().max(1))
+    }
+
     /// Σ_f c_f (x_i − x_{j(f)}) in f64 for cell g = (i, j, k) of slab-local index l, with
     /// the slab's own values in `x` and the slabs below and above: the flux form, which
     /// keeps the tiny absorption term from drowning in a rounded diagonal.
@@ -242,6 +247,7 @@ impl Level {
         then: impl Fn(usize, &mut [f64]) -> f64 + Sync,
     ) -> f64 {
         y.par_chunks_mut(self.slab())
+            .with_min_len(self.slabs_per_task())
             .enumerate()
             .map(|(k, y)| {
                 self.apply_slab(k, x, y);
@@ -293,6 +299,7 @@ impl Level {
         phi.par_chunks_mut(slab)
             .zip(r.par_chunks_mut(slab))
             .zip(b.par_chunks_mut(slab))
+            .with_min_len(self.slabs_per_task())
             .enumerate()
             .map_init(
                 || vec![0.0f64; slab],
@@ -427,7 +434,9 @@ impl Level {
     /// thread where the level is deep enough; one chunk on shallow levels.
     fn sweep_chunks(&self) -> Vec<(usize, usize)> {
         let [nx, ny, nz] = self.dims;
-        let wanted = (2 * rayon::current_num_threads()).min(nz / 4);
+        let wanted = (2 * rayon::current_num_threads())
+            .min(nz / 4)
+            .min(self.len() / PARALLEL_MIN_CELLS);
         if wanted < 2 {
             return vec![(0, nz)];
         }
@@ -685,11 +694,15 @@ impl Level {
                 others[k] = Some(&*s);
             }
         }
-        chosen.into_par_iter().for_each(|(k, s)| {
-            let below = if k > 0 { others[k - 1] } else { None };
-            let above = others.get(k + 1).copied().flatten();
-            f(k, s, below, above);
-        });
+        let per_task = self.slabs_per_task();
+        chosen
+            .into_par_iter()
+            .with_min_len(per_task)
+            .for_each(|(k, s)| {
+                let below = if k > 0 { others[k - 1] } else { None };
+                let above = others.get(k + 1).copied().flatten();
+                f(k, s, below, above);
+            });
     }
 
     /// One weighted Jacobi sweep x ← x + ω D⁻¹(b − A x), using `scratch` (len n).
@@ -728,6 +741,7 @@ impl Level {
         let [cx, cy, _] = coarse.dims;
         let slab = nx * ny;
         out.par_chunks_mut(cx * cy)
+            .with_min_len(coarse.slabs_per_task())
             .enumerate()
             .for_each(|(kc, out)| {
                 out.fill(0.0);
@@ -784,18 +798,21 @@ impl Level {
     pub(crate) fn prolong_add(&self, coarse: &Level, xc: &[f32], x: &mut [f32]) {
         let [nx, ny, _] = self.dims;
         let [cx, cy, _] = coarse.dims;
-        x.par_chunks_mut(nx * ny).enumerate().for_each(|(k, xs)| {
-            let base = (k / 2) * cx * cy;
-            for j in 0..ny {
-                let row = base + (j / 2) * cx;
-                let (lo, hi) = self.span(j, k);
-                for i in lo..hi {
-                    if self.inv_diag[k * nx * ny + i + nx * j] != 0.0 {
-                        xs[i + nx * j] += xc[row + i / 2];
+        x.par_chunks_mut(nx * ny)
+            .with_min_len(self.slabs_per_task())
+            .enumerate()
+            .for_each(|(k, xs)| {
+                let base = (k / 2) * cx * cy;
+                for j in 0..ny {
+                    let row = base + (j / 2) * cx;
+                    let (lo, hi) = self.span(j, k);
+                    for i in lo..hi {
+                        if self.inv_diag[k * nx * ny + i + nx * j] != 0.0 {
+                            xs[i + nx * j] += xc[row + i / 2];
+                        }
                     }
                 }
-            }
-        });
+            });
     }
 
     /// x_fine += trilinear interpolation of the coarse correction: each child takes 27/64 of
@@ -805,55 +822,58 @@ impl Level {
     pub(crate) fn prolong_trilinear_add(&self, coarse: &Level, xc: &[f32], x: &mut [f32]) {
         let [nx, ny, _] = self.dims;
         let [cx, cy, cz] = coarse.dims;
-        x.par_chunks_mut(nx * ny).enumerate().for_each(|(k, xs)| {
-            let kc = k / 2;
-            let kn = if k % 2 == 0 {
-                kc.checked_sub(1)
-            } else {
-                Some(kc + 1).filter(|&v| v < cz)
-            };
-            for j in 0..ny {
-                let jc = j / 2;
-                let jn = if j % 2 == 0 {
-                    jc.checked_sub(1)
+        x.par_chunks_mut(nx * ny)
+            .with_min_len(self.slabs_per_task())
+            .enumerate()
+            .for_each(|(k, xs)| {
+                let kc = k / 2;
+                let kn = if k % 2 == 0 {
+                    kc.checked_sub(1)
                 } else {
-                    Some(jc + 1).filter(|&v| v < cy)
+                    Some(kc + 1).filter(|&v| v < cz)
                 };
-                let (lo, hi) = self.span(j, k);
-                for i in lo..hi {
-                    let l = i + nx * j;
-                    if self.inv_diag[k * nx * ny + l] == 0.0 {
-                        continue;
-                    }
-                    let ic = i / 2;
-                    let inb = if i % 2 == 0 {
-                        ic.checked_sub(1)
+                for j in 0..ny {
+                    let jc = j / 2;
+                    let jn = if j % 2 == 0 {
+                        jc.checked_sub(1)
                     } else {
-                        Some(ic + 1).filter(|&v| v < cx)
+                        Some(jc + 1).filter(|&v| v < cy)
                     };
-                    let (mut sum, mut weight) = (0.0f32, 0.0f32);
-                    for (kk, wk) in [(Some(kc), 0.75f32), (kn, 0.25)] {
-                        let Some(kk) = kk else { continue };
-                        for (jj, wj) in [(Some(jc), 0.75f32), (jn, 0.25)] {
-                            let Some(jj) = jj else { continue };
-                            let row = cx * (jj + cy * kk);
-                            for (ii, wi) in [(Some(ic), 0.75f32), (inb, 0.25)] {
-                                let Some(ii) = ii else { continue };
-                                let c = row + ii;
-                                if coarse.inv_diag[c] != 0.0 {
-                                    let w = wk * wj * wi;
-                                    sum += w * xc[c];
-                                    weight += w;
+                    let (lo, hi) = self.span(j, k);
+                    for i in lo..hi {
+                        let l = i + nx * j;
+                        if self.inv_diag[k * nx * ny + l] == 0.0 {
+                            continue;
+                        }
+                        let ic = i / 2;
+                        let inb = if i % 2 == 0 {
+                            ic.checked_sub(1)
+                        } else {
+                            Some(ic + 1).filter(|&v| v < cx)
+                        };
+                        let (mut sum, mut weight) = (0.0f32, 0.0f32);
+                        for (kk, wk) in [(Some(kc), 0.75f32), (kn, 0.25)] {
+                            let Some(kk) = kk else { continue };
+                            for (jj, wj) in [(Some(jc), 0.75f32), (jn, 0.25)] {
+                                let Some(jj) = jj else { continue };
+                                let row = cx * (jj + cy * kk);
+                                for (ii, wi) in [(Some(ic), 0.75f32), (inb, 0.25)] {
+                                    let Some(ii) = ii else { continue };
+                                    let c = row + ii;
+                                    if coarse.inv_diag[c] != 0.0 {
+                                        let w = wk * wj * wi;
+                                        sum += w * xc[c];
+                                        weight += w;
+                                    }
                                 }
                             }
                         }
-                    }
-                    if weight > 0.0 {
-                        xs[l] += sum / weight;
+                        if weight > 0.0 {
+                            xs[l] += sum / weight;
+                        }
                     }
                 }
-            }
-        });
+            });
     }
 
     /// Dims and spacing of the next coarser level.
@@ -890,6 +910,10 @@ fn on_slab_of_run<T>(
     f(this, lo, hi)
 }
 
+/// Below this many cells a parallel loop runs as one task: on the coarse levels rayon's
+/// hand-offs would cost more than the work.
+pub(crate) const PARALLEL_MIN_CELLS: usize = 16 * 1024;
+
 /// Cells per block of the vectorised row kernels.
 const BLOCK: usize = 64;
 
@@ -924,6 +948,7 @@ impl Real for f64 {}
 /// Σ x² in f64.
 pub(crate) fn norm2<T: Copy + Into<f64> + Sync>(x: &[T]) -> f64 {
     x.par_iter()
+        .with_min_len(PARALLEL_MIN_CELLS)
         .map(|&v| {
             let v: f64 = v.into();
             v * v
@@ -988,8 +1013,10 @@ mod tests {
             level_in([70, 9, 11], ball),
             level_in([3, 5, 6], |[i, j, k]| (i + 2 * j + k) % 4 != 0),
             level_in([9, 6, 5], |[_, j, k]| j % 3 != 1 && k != 2),
-            // Deep enough for several chunks, uneven work per slab, and empty slabs.
+            // Uneven work per slab and empty slabs; the second large enough for several
+            // chunks of the parallel sweep.
             level_in([9, 7, 41], |[i, j, k]| k % 13 != 5 && (i + j) * 3 < k + 9),
+            level_in([37, 29, 45], |[i, j, k]| k % 13 != 5 && (i + j) < 2 * k + 9),
         ]
     }
 
@@ -1014,6 +1041,10 @@ mod tests {
 
     #[test]
     fn the_wavefront_sweep_equals_red_then_black() {
+        assert!(
+            media().iter().any(|lv| lv.sweep_chunks().len() >= 2),
+            "no medium runs the sweep in parallel chunks"
+        );
         for lv in media() {
             let b: Vec<f32> = (0..lv.len())
                 .map(|g| {
