@@ -794,6 +794,32 @@ impl Level {
             });
     }
 
+    /// The coarse right-hand side Σ_children b: [`Level::restrict_residual`] for x = 0,
+    /// without reading the operator (full multigrid's first pass down the levels).
+    pub(crate) fn restrict(&self, b: &[f32], coarse: &Level, out: &mut [f32]) {
+        let [nx, ny, nz] = self.dims;
+        let [cx, cy, _] = coarse.dims;
+        let slab = nx * ny;
+        out.par_chunks_mut(cx * cy)
+            .with_min_len(coarse.slabs_per_task())
+            .enumerate()
+            .for_each(|(kc, out)| {
+                out.fill(0.0);
+                for k in 2 * kc..(2 * kc + 2).min(nz) {
+                    for j in 0..ny {
+                        let row = (j / 2) * cx;
+                        let (lo, hi) = self.span(j, k);
+                        let g = k * slab + nx * j;
+                        for i in lo..hi {
+                            if self.inv_diag[g + i] != 0.0 {
+                                out[row + i / 2] += b[g + i];
+                            }
+                        }
+                    }
+                }
+            });
+    }
+
     /// x_fine += x_coarse of the parent (piecewise-constant prolongation).
     pub(crate) fn prolong_add(&self, coarse: &Level, xc: &[f32], x: &mut [f32]) {
         let [nx, ny, _] = self.dims;
@@ -1192,6 +1218,13 @@ mod tests {
                     "{a} vs {e}"
                 );
             }
+            // With x = 0 the residual is b: the plain restriction gives the same sums, in the
+            // same order.
+            let mut residual = vec![0.0f32; coarse.len()];
+            let mut plain = vec![1.0f32; coarse.len()];
+            lv.restrict_residual(&b, &vec![0.0; n], &coarse, &mut residual);
+            lv.restrict(&b, &coarse, &mut plain);
+            assert_eq!(residual, plain);
         }
     }
 }

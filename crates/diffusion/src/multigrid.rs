@@ -492,9 +492,8 @@ impl Multigrid {
             .zip(rhs.par_iter())
             .for_each(|(b, r)| *b = *r as f32);
         for l in 0..self.levels.len() - 1 {
-            let zeros = vec![0.0f32; self.levels[l].len()];
             let (bf, bc) = b.split_at_mut(l + 1);
-            self.levels[l].restrict_residual(&bf[l], &zeros, &self.levels[l + 1], &mut bc[0]);
+            self.levels[l].restrict(&bf[l], &self.levels[l + 1], &mut bc[0]);
         }
         let last = self.levels.len() - 1;
         x[last].fill(0.0);
