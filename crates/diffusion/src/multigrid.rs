@@ -19,6 +19,8 @@
 //! Cells on the box and the rows next to it take the general path.
 
 use lucent_core::{StopReason, Stopping};
+use std::sync::Mutex;
+
 use rayon::prelude::*;
 
 use crate::error::DiffusionError;
@@ -157,10 +159,34 @@ pub struct LevelOperator<'a> {
 }
 
 /// The level hierarchy with its work vectors.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct Multigrid {
     levels: Vec<Level>,
     settings: MultigridSettings,
+    /// The solves' work vectors, allocated and first touched when the hierarchy is built
+    /// and kept between solves (a solve borrows them; a second solve running at the same
+    /// time allocates its own): a repeated solve — DSA runs one per transport iteration —
+    /// allocates nothing, and the set-up, not the solve, pays the page faults (about 60 MB
+    /// at 128³).
+    work: Mutex<SolveWork>,
+}
+
+/// What [`Multigrid::solve`] works in: the cycles' vectors per level and the f64 residual.
+#[derive(Debug, Default)]
+struct SolveWork {
+    levels: Option<(Work, Work, Work)>,
+    residual: Vec<f64>,
+}
+
+impl Clone for Multigrid {
+    /// The same hierarchy; its work vectors are allocated by its first solve.
+    fn clone(&self) -> Self {
+        Self {
+            levels: self.levels.clone(),
+            settings: self.settings,
+            work: Mutex::default(),
+        }
+    }
 }
 
 impl Multigrid {
@@ -181,10 +207,24 @@ impl Multigrid {
             let next = coarsen(last, boundaries);
             data.push(next);
         }
-        Self {
+        let mut multigrid = Self {
             levels: data.into_iter().map(|d| d.level).collect(),
             settings,
+            work: Mutex::default(),
+        };
+        let (mut b, mut x, mut s) = multigrid.work();
+        let mut residual = vec![0.0; multigrid.fine_cells()];
+        // Touch every page now (a zeroed allocation is mapped lazily, and a fill with zeros
+        // after it may be elided).
+        for v in b.iter_mut().chain(&mut x).chain(&mut s) {
+            std::hint::black_box(&mut v[..]).fill(0.0);
         }
+        std::hint::black_box(&mut residual[..]).fill(0.0);
+        multigrid.work = Mutex::new(SolveWork {
+            levels: Some((b, x, s)),
+            residual,
+        });
+        multigrid
     }
 
     /// The hierarchy `solve` builds for `problem`: reusable for many right-hand sides
@@ -549,13 +589,50 @@ impl Multigrid {
         phi: &mut [f64],
         stopping: &Stopping,
         full_multigrid: bool,
-        mut cycle: impl FnMut((&mut Work, &mut Work, &mut Work)) -> Result<(), E>,
+        cycle: impl FnMut((&mut Work, &mut Work, &mut Work)) -> Result<(), E>,
     ) -> Result<Convergence, E> {
         let started = std::time::Instant::now();
+        let mut work = self
+            .work
+            .try_lock()
+            .map(|mut w| std::mem::take(&mut *w))
+            .unwrap_or_default();
+        let (mut b, mut x, mut s) = work.levels.take().unwrap_or_else(|| self.work());
+        let mut r = std::mem::take(&mut work.residual);
+        r.resize(rhs.len(), 0.0);
+        let result = self.iterate_in(
+            rhs,
+            phi,
+            stopping,
+            full_multigrid,
+            (&mut b, &mut x, &mut s, &mut r),
+            started,
+            cycle,
+        );
+        if let Ok(mut w) = self.work.try_lock() {
+            *w = SolveWork {
+                levels: Some((b, x, s)),
+                residual: r,
+            };
+        }
+        result
+    }
+
+    /// [`Multigrid::iterate`] in the given work vectors.
+    #[allow(clippy::type_complexity, clippy::too_many_arguments)]
+    fn iterate_in<E>(
+        &self,
+        rhs: &[f64],
+        phi: &mut [f64],
+        stopping: &Stopping,
+        full_multigrid: bool,
+        (b, x, s, r): (&mut Work, &mut Work, &mut Work, &mut Vec<f64>),
+        started: std::time::Instant,
+        mut cycle: impl FnMut((&mut Work, &mut Work, &mut Work)) -> Result<(), E>,
+    ) -> Result<Convergence, E> {
         let fine = self.fine();
-        let (mut b, mut x, mut s) = self.work();
         if full_multigrid && self.settings.full_multigrid {
-            self.full_multigrid(rhs, &mut b, &mut x, &mut s);
+            self.full_multigrid(rhs, b, x, s);
             phi.par_iter_mut()
                 .zip(x[0].par_iter())
                 .for_each(|(p, x)| *p = f64::from(*x));
@@ -564,10 +641,9 @@ impl Multigrid {
         // updated residual drifts from b − Aφ only by rounding, and convergence is
         // confirmed on the true one.
         let b_norm = norm2(rhs).max(f64::MIN_POSITIVE);
-        let mut r = vec![0.0; rhs.len()];
-        let mut norm = fine.residual(rhs, phi, &mut r);
+        let mut norm = fine.residual(rhs, phi, r);
         // The residual outside the medium's spans, which no correction changes.
-        let outside = fine.outside_sum_sq(&r);
+        let outside = fine.outside_sum_sq(r);
         b[0].par_iter_mut()
             .zip(r.par_iter())
             .for_each(|(b, r)| *b = *r as f32);
@@ -583,7 +659,7 @@ impl Multigrid {
                         stop_reason: reason,
                     });
                 }
-                norm = fine.residual(rhs, phi, &mut r);
+                norm = fine.residual(rhs, phi, r);
                 *residuals.last_mut().unwrap_or(&mut 0.0) = norm / b_norm;
                 if let Some(stop_reason) = stopping
                     .verdict(iteration, norm / b_norm, norm, initial, started)
@@ -598,8 +674,8 @@ impl Multigrid {
                     .zip(r.par_iter())
                     .for_each(|(b, r)| *b = *r as f32);
             }
-            cycle((&mut b, &mut x, &mut s))?;
-            norm = (fine.correct(&x[0], phi, &mut r, &mut b[0]) + outside).sqrt();
+            cycle((b, x, s))?;
+            norm = (fine.correct(&x[0], phi, r, &mut b[0]) + outside).sqrt();
             residuals.push(norm / b_norm);
         }
     }
