@@ -231,8 +231,10 @@ impl<'a> DeviceMultigrid<'a> {
     }
 
     /// Solves A φ = `rhs` to `stopping` with the device's cycles: the host's outer
-    /// iteration ([`Multigrid::solve_with`]: f64 solution and residual, the stopping rule),
-    /// from `phi` as the initial guess.
+    /// iteration ([`Multigrid::solve_with`]: f64 solution and residual, the stopping rule).
+    /// When the hierarchy's settings ask for full multigrid (`diffusion-mg`'s default), φ
+    /// starts from the device's [`DeviceMultigrid::full_multigrid`], as the host's solve
+    /// does; otherwise from `phi` as given.
     pub fn solve(
         &mut self,
         rhs: &[f64],
@@ -240,36 +242,108 @@ impl<'a> DeviceMultigrid<'a> {
         stopping: &Stopping,
     ) -> Result<lucent_diffusion::Convergence, GpuError> {
         let host = self.host;
+        if host.settings().full_multigrid {
+            let start = self.full_multigrid(rhs)?;
+            for (p, x) in phi.iter_mut().zip(start) {
+                *p = f64::from(x);
+            }
+        }
         host.solve_with(rhs, phi, stopping, |b| self.cycle_from_zero(b))
     }
 
-    /// One V-cycle from x = 0 for A x = `b` on the finest level: the device's
-    /// [`Multigrid::cycle_from_zero`].
-    pub fn cycle_from_zero(&mut self, b: &[f32]) -> Result<Vec<f32>, GpuError> {
+    /// Full multigrid on the device, the host's nested iteration: `rhs` (in f32) summed
+    /// down every level, the coarsest solved (on the host, as in a cycle), then on each
+    /// finer level the prolonged coarse solution improved by one V-cycle from that level.
+    /// Returns the finest level's solution.
+    pub fn full_multigrid(&mut self, rhs: &[f64]) -> Result<Vec<f32>, GpuError> {
         let gpu = self.gpu;
-        if b.len() != self.fine_cells() {
+        self.check_len(rhs.len())?;
+        let b: Vec<f32> = rhs.iter().map(|&v| v as f32).collect();
+        self.levels[0].b.write(gpu, &b, false)?;
+        let last = self.levels.len() - 1;
+        self.clear_x(0)?;
+        // With every x zero the restricted residual is the sum of the children's b.
+        let down = gpu.timed_pass("gpu-diffusion-mg restrict", |pass| {
+            for level in &self.levels[..last] {
+                let restrict = level.restrict.as_ref().expect("a level above the coarsest");
+                self.restrict.dispatch(pass, restrict, level.coarse_groups);
+            }
+        })?;
+        self.solve_coarsest_level()?;
+        let mut kernels = down.seconds;
+        let timed = down.source == TimingSource::Timestamps;
+        for top in (0..last).rev() {
+            let level = &self.levels[top];
+            let prolong = level.prolong.as_ref().expect("a level above the coarsest");
+            let up = gpu.timed_pass("gpu-diffusion-mg prolong", |pass| {
+                self.prolong.dispatch(pass, prolong, level.groups);
+            })?;
+            kernels += up.seconds + self.cycle(top)?;
+        }
+        self.kernels = timed.then_some(kernels);
+        self.levels[0].x.download(gpu)
+    }
+
+    fn check_len(&self, len: usize) -> Result<(), GpuError> {
+        if len != self.fine_cells() {
             return Err(GpuError::Device(format!(
-                "gpu-diffusion-mg: a right-hand side of {} values for {} cells",
-                b.len(),
+                "gpu-diffusion-mg: a right-hand side of {len} values for {} cells",
                 self.fine_cells()
             )));
         }
-        self.levels[0].b.write(gpu, b, false)?;
-        let last = self.levels.len() - 1;
-        // Every x from zero, then down: pre-smoothing (red first), residual restricted.
+        Ok(())
+    }
+
+    /// Sets x to zero on the levels from `from` down.
+    fn clear_x(&self, from: usize) -> Result<(), GpuError> {
+        let gpu = self.gpu;
         gpu.checked(|| {
             let mut encoder =
                 gpu.device()
                     .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                         label: Some("gpu-diffusion-mg clear"),
                     });
-            for level in &self.levels {
+            for level in &self.levels[from..] {
                 encoder.clear_buffer(level.x.buffer(), 0, None);
             }
             gpu.queue().submit([encoder.finish()]);
-        })?;
+        })
+    }
+
+    /// The coarsest level's solve inside a cycle: its b down, the host's solve, x up.
+    fn solve_coarsest_level(&self) -> Result<(), GpuError> {
+        let gpu = self.gpu;
+        let last = self.levels.len() - 1;
+        let coarse_b = self.levels[last].b.download(gpu)?;
+        let coarse_x = self.host.solve_coarsest(&coarse_b);
+        self.levels[last].x.write(gpu, &coarse_x, false)
+    }
+
+    /// One V-cycle from x = 0 for A x = `b` on the finest level: the device's
+    /// [`Multigrid::cycle_from_zero`].
+    pub fn cycle_from_zero(&mut self, b: &[f32]) -> Result<Vec<f32>, GpuError> {
+        let gpu = self.gpu;
+        self.check_len(b.len())?;
+        self.levels[0].b.write(gpu, b, false)?;
+        self.clear_x(0)?;
+        let kernels = self.cycle(0)?;
+        self.kernels = Some(kernels).filter(|k| k.is_finite());
+        self.levels[0].x.download(gpu)
+    }
+
+    /// One V-cycle on level `top` for its b, from its x as it stands (the levels below
+    /// start from zero). Returns the kernels' seconds by timestamps (NaN without them).
+    fn cycle(&mut self, top: usize) -> Result<f64, GpuError> {
+        let gpu = self.gpu;
+        let last = self.levels.len() - 1;
+        if top == last {
+            self.solve_coarsest_level()?;
+            return Ok(0.0);
+        }
+        self.clear_x(top + 1)?;
+        // Down: pre-smoothing (red first), residual restricted.
         let down = gpu.timed_pass("gpu-diffusion-mg down", |pass| {
-            for level in &self.levels[..last] {
+            for level in &self.levels[top..last] {
                 for _ in 0..self.pre_sweeps {
                     for colour in [0, 1] {
                         self.smooth
@@ -280,12 +354,10 @@ impl<'a> DeviceMultigrid<'a> {
                 self.restrict.dispatch(pass, restrict, level.coarse_groups);
             }
         })?;
-        let coarse_b = self.levels[last].b.download(gpu)?;
-        let coarse_x = self.host.solve_coarsest(&coarse_b);
-        self.levels[last].x.write(gpu, &coarse_x, false)?;
+        self.solve_coarsest_level()?;
         // Up: prolongation, post-smoothing (black first, as the host's).
         let up = gpu.timed_pass("gpu-diffusion-mg up", |pass| {
-            for level in self.levels[..last].iter().rev() {
+            for level in self.levels[top..last].iter().rev() {
                 let prolong = level.prolong.as_ref().expect("a level above the coarsest");
                 self.prolong.dispatch(pass, prolong, level.groups);
                 for _ in 0..self.post_sweeps {
@@ -296,9 +368,11 @@ impl<'a> DeviceMultigrid<'a> {
                 }
             }
         })?;
-        self.kernels =
-            (down.source == TimingSource::Timestamps).then_some(down.seconds + up.seconds);
-        self.levels[0].x.download(gpu)
+        Ok(if down.source == TimingSource::Timestamps {
+            down.seconds + up.seconds
+        } else {
+            f64::NAN
+        })
     }
 
     /// The last cycle's kernels alone by the device's timestamps (both passes; without the
@@ -336,8 +410,8 @@ pub(crate) fn memory_bytes(problem: &Problem) -> u64 {
 }
 
 /// One channel's steady diffusion by device cycles: the host builds the hierarchy as
-/// `diffusion-mg` does, [`DeviceMultigrid`] uploads it and runs the cycles, the host's
-/// outer iteration stops at `stop` (from zero: full multigrid would run on the host).
+/// `diffusion-mg` does, [`DeviceMultigrid`] uploads it and runs full multigrid (when the
+/// settings ask) and the cycles, the host's outer iteration stops at `stop`.
 pub(crate) fn steady(
     gpu: &GpuContext,
     problem: &DiffusionProblem,

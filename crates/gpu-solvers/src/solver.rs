@@ -22,8 +22,7 @@ use lucent_core::{
     SolveOptions, Solver, SolverEntry, param_docs, resolved_params,
 };
 use lucent_diffusion::{
-    CycleParam, DiffusionSolver, DiscretisationParam, MultigridParams, MultigridSettings,
-    SmootherParam,
+    CycleParam, DiffusionSolver, DiscretisationParam, MultigridParams, SmootherParam,
 };
 use lucent_dom::{DomParams, DomSolver};
 use lucent_explicit::{ExplicitSolver, FtcsDiffusionParams, Lattice, P1Params};
@@ -171,8 +170,8 @@ impl GpuSolver {
     };
 
     /// `gpu-diffusion-mg` (`diffusion-mg`'s [`MultigridParams`]; V-cycles with red–black
-    /// Gauss–Seidel on the embedded boundary, others refused naming the parameter;
-    /// `full_multigrid` is not run: the solve starts from zero).
+    /// Gauss–Seidel on the embedded boundary, others refused naming the parameter; full
+    /// multigrid first on the device when `full_multigrid` is on, as `diffusion-mg`).
     pub const GPU_DIFFUSION_MG: SolverEntry = SolverEntry {
         name: "gpu-diffusion-mg",
         summary: "diffusion-mg on the GPU: V-cycles on the device, the coarsest level and the f64 outer iteration on the host",
@@ -327,10 +326,7 @@ impl Solver for GpuSolver {
             Backend::DiffusionMg(params) => {
                 let gpu = device(self.name)?;
                 let memory = crate::multigrid::memory_bytes(problem);
-                let settings = MultigridSettings {
-                    full_multigrid: false,
-                    ..params.settings()
-                };
+                let settings = params.settings();
                 DiffusionSolver::custom(self.name).solve_with(
                     problem,
                     options,

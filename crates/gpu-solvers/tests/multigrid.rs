@@ -119,6 +119,51 @@ fn other_cycles_are_refused() {
     }
 }
 
+/// Full multigrid on the device against the host's (the nested iteration `diffusion-mg`
+/// starts from by default): the right-hand side summed down, the coarsest solved, and one
+/// V-cycle per level on the way up, in f32 on both sides. As for one cycle, only rounding
+/// differs (about one cycle's worth per level): asserted to 1e-5 of the host's peak, where
+/// a level skipped or a cycle started from the wrong guess is of the order of the values.
+/// The host's start is its solve stopped before any cycle.
+#[test]
+fn device_full_multigrid_is_the_hosts() {
+    use lucent_diffusion::Sources;
+    let Some(gpu) = context_or_skip("device_full_multigrid_is_the_hosts") else {
+        return;
+    };
+    let before_any_cycle = lucent_core::Stopping {
+        max_iterations: 0,
+        ..Default::default()
+    };
+    for (dims, sphere, contrast) in [
+        ([16, 16, 16], false, 1.0),
+        ([33, 20, 17], true, 1e3),
+        ([40, 40, 40], true, 10.0),
+    ] {
+        let problem = problem(dims, sphere, contrast);
+        let sources = Sources {
+            points: vec![(DVec3::new(0.45, 0.5, 0.55), 1.0)],
+            ..Sources::default()
+        };
+        let rhs = problem.rhs(&sources).unwrap();
+        let host = Multigrid::build(&problem, MultigridSettings::default()).unwrap();
+        let mut expected = vec![0.0; rhs.len()];
+        let stopped = host.solve(&rhs, &mut expected, &before_any_cycle);
+        assert_eq!(stopped.iterations(), 0);
+        let mut device = DeviceMultigrid::new(&gpu, &host).unwrap();
+        let got = device.full_multigrid(&rhs).unwrap();
+        let scale = expected.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let difference = got
+            .iter()
+            .zip(&expected)
+            .fold(0.0f64, |m, (a, e)| m.max((f64::from(*a) - e).abs()))
+            / scale;
+        eprintln!("{dims:?}: full multigrid {difference:.2e} of {scale:.3e} apart");
+        assert!(scale > 0.0);
+        assert!(difference < 1e-5, "{dims:?}: {difference}");
+    }
+}
+
 /// Solved to 1e-8 (relative residual) with the device's cycles inside the host's f64
 /// outer iteration, against the host's own cycles from the same start (no full
 /// multigrid): each correction differs by f32 rounding only (previous test), which the
