@@ -242,6 +242,14 @@ impl<'a> DeviceMultigrid<'a> {
         stopping: &Stopping,
     ) -> Result<lucent_diffusion::Convergence, GpuError> {
         let host = self.host;
+        self.check_len(rhs.len())?;
+        if phi.len() != rhs.len() {
+            return Err(GpuError::Device(format!(
+                "gpu-diffusion-mg: a solution of {} values for {} cells",
+                phi.len(),
+                rhs.len()
+            )));
+        }
         if host.settings().full_multigrid {
             let start = self.full_multigrid(rhs)?;
             for (p, x) in phi.iter_mut().zip(start) {

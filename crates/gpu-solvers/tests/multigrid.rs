@@ -96,7 +96,8 @@ fn the_device_cycle_is_the_host_cycle() {
     }
 }
 
-/// What the device cycle does not run is refused with the reason.
+/// What the device cycle does not run is refused with the reason, and vectors of the wrong
+/// length with a typed error.
 #[test]
 fn other_cycles_are_refused() {
     let Some(gpu) = context_or_skip("other_cycles_are_refused") else {
@@ -117,6 +118,23 @@ fn other_cycles_are_refused() {
             Ok(_) => panic!("a {cycle:?}-cycle hierarchy was accepted"),
         }
     }
+    // Vectors of the wrong length are a typed error, not a panic, on every entry.
+    let host = Multigrid::build(&problem, MultigridSettings::default()).unwrap();
+    let mut device = DeviceMultigrid::new(&gpu, &host).unwrap();
+    let n = host.fine_cells();
+    let stopping = lucent_core::Stopping::default();
+    assert!(device.cycle_from_zero(&vec![1.0; n - 1]).is_err());
+    assert!(device.full_multigrid(&vec![1.0; n + 1]).is_err());
+    assert!(
+        device
+            .solve(&vec![1.0; n - 1], &mut vec![0.0; n - 1], &stopping)
+            .is_err()
+    );
+    assert!(
+        device
+            .solve(&vec![1.0; n], &mut vec![0.0; n - 1], &stopping)
+            .is_err()
+    );
 }
 
 /// Full multigrid on the device against the host's (the nested iteration `diffusion-mg`
