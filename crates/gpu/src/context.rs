@@ -38,6 +38,10 @@ pub struct GpuContext {
     info: wgpu::AdapterInfo,
     limits: wgpu::Limits,
     timestamps: bool,
+    f64: bool,
+    /// The query set, resolve buffer and readback of timed passes, made on first use and
+    /// kept (a timed pass per cycle of an iteration should not allocate).
+    pub(crate) timing: std::sync::Mutex<Option<crate::timing::TimingObjects>>,
     /// Compiled kernels by (file, entry point): a pipeline is compiled once per device.
     kernels: std::sync::Mutex<
         std::collections::HashMap<(String, String), std::sync::Arc<crate::kernel::Kernel>>,
@@ -132,11 +136,13 @@ impl GpuContext {
             ..wgpu::Limits::downlevel_defaults()
         };
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let features = if timestamps {
-            wgpu::Features::TIMESTAMP_QUERY
-        } else {
-            wgpu::Features::empty()
-        };
+        // f64 in shaders (Vulkan's shaderFloat64: NVIDIA, AMD, Intel and lavapipe have
+        // it, Metal does not): the kernels that must keep an f64 solution and residual
+        // on the device ask for it, and fall back to the host where it is missing.
+        let f64 = adapter.features().contains(wgpu::Features::SHADER_F64);
+        let mut features = wgpu::Features::empty();
+        features.set(wgpu::Features::TIMESTAMP_QUERY, timestamps);
+        features.set(wgpu::Features::SHADER_F64, f64);
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("lucent"),
             required_features: features,
@@ -150,6 +156,8 @@ impl GpuContext {
             info,
             limits,
             timestamps,
+            f64,
+            timing: Default::default(),
             kernels: Default::default(),
         })
     }
@@ -218,6 +226,11 @@ impl GpuContext {
         self.timestamps
     }
 
+    /// Whether kernels may use f64 (the device was created with `SHADER_F64`).
+    pub fn has_f64(&self) -> bool {
+        self.f64
+    }
+
     /// Whether the adapter is a CPU implementation (lavapipe, WARP): good for correctness,
     /// never for quoting GPU speed.
     pub fn is_software(&self) -> bool {
@@ -227,7 +240,7 @@ impl GpuContext {
     /// One line for people: the adapter, its API and the limits in use.
     pub fn describe(&self) -> String {
         format!(
-            "{} ({:?}, {:?}{}): storage bindings up to {} MiB, {} storage buffers per stage, timestamps {}",
+            "{} ({:?}, {:?}{}): storage bindings up to {} MiB, {} storage buffers per stage, timestamps {}, f64 {}",
             self.info.name,
             self.info.backend,
             self.info.device_type,
@@ -238,7 +251,8 @@ impl GpuContext {
             },
             self.limits.max_storage_buffer_binding_size >> 20,
             self.limits.max_storage_buffers_per_shader_stage,
-            if self.timestamps { "yes" } else { "no" }
+            if self.timestamps { "yes" } else { "no" },
+            if self.f64 { "yes" } else { "no" }
         )
     }
 

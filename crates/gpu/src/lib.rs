@@ -14,6 +14,15 @@
 //!   beyond the adapter's binding limit with the limit's name
 //!   ([`GpuError::OverBudget`]). lavapipe binds at most 128 MiB: a 256³ f32 grid (64 MiB)
 //!   fits, 512³ (512 MiB) is refused with the reason.
+//! - [`DeviceField64`]: one f64 vector on the device, for kernels that keep a solution or a
+//!   residual in double precision; only on a device with f64 in shaders
+//!   ([`GpuContext::has_f64`]: Vulkan's `shaderFloat64`, which NVIDIA, AMD, Intel and
+//!   lavapipe have; the context asks for it where the adapter offers it).
+//! - [`Transfers`]: staging kept for moving large vectors up and down in chunks of at most
+//!   [`TRANSFER_CHUNK_BYTES`], copied into and out of mapped memory by several threads;
+//!   [`Readback`]: a small staging buffer an iteration copies a norm or timestamps into
+//!   inside its own command buffer. `GpuContext::timed_commands` runs one command buffer
+//!   (clears, one timed compute pass, copies) with one submit and one wait.
 //! - [`DeviceMedium`]: a problem's σ_t and albedo per channel, uploaded once for every
 //!   backend.
 //! - [`BrickAtlas`]: a paged field (`lucent-paging`) on the device: its stored bricks
@@ -62,7 +71,9 @@ mod timing;
 pub use atlas::{BrickAtlas, CONSTANT_BRICK};
 pub use context::{GpuContext, GpuOptions, context_or_skip};
 pub use error::GpuError;
-pub use field::{DeviceField, DeviceIndices};
+pub use field::{
+    DeviceField, DeviceField64, DeviceIndices, Readback, TRANSFER_CHUNK_BYTES, Transfers,
+};
 pub use kernel::{Kernel, UniformSlots, WORKGROUP, groups_2d};
 pub use medium::DeviceMedium;
 pub use reduce::Reducer;

@@ -59,13 +59,18 @@ pub const DOM: &str = kernel!("dom.wgsl");
 /// `gpu-diffusion-mg`: a multigrid level's red–black smoothing colour, fused residual and
 /// restriction, and prolongation.
 pub const MULTIGRID: &str = kernel!("multigrid.wgsl");
+/// `gpu-diffusion-mg`'s outer iteration in f64 (residual, correction, norm) and the
+/// coarsest level's dense solve: only for a device with `SHADER_F64`
+/// ([`crate::GpuContext::has_f64`]).
+pub const MULTIGRID_F64: &str = kernel!("multigrid_f64.wgsl");
 /// The largest change between two fields (stopping rules of passes).
 pub const MAX_CHANGE: &str = kernel!("max_change.wgsl");
 /// lucent-render's ray march on the device: one invocation per pixel.
 pub const RENDER: &str = kernel!("render.wgsl");
 
 /// Every shader with its file names (`a + b` where a kernel joins several files), for
-/// validation (`common.wgsl` inside every kernel).
+/// validation (`common.wgsl` inside every kernel). Those whose name ends in `_f64.wgsl`
+/// need naga's `FLOAT64` capability (wgpu's `SHADER_F64`).
 pub const ALL: &[(&str, &str)] = &[
     ("common.wgsl", COMMON),
     ("reduce.wgsl", REDUCE),
@@ -80,6 +85,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("lbm_d3q19.wgsl + lbm.wgsl", LBM_D3Q19),
     ("dom.wgsl", DOM),
     ("multigrid.wgsl", MULTIGRID),
+    ("multigrid_f64.wgsl", MULTIGRID_F64),
     ("max_change.wgsl", MAX_CHANGE),
     ("render.wgsl", RENDER),
 ];

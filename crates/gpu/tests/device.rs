@@ -2,7 +2,9 @@
 //! CPU's f64, limits and bad input. Without an adapter these skip with the reason, except
 //! under `CI=true`, where they fail.
 
-use lucent_gpu::{DeviceField, GpuContext, GpuError, Reducer, context_or_skip};
+use lucent_gpu::{
+    DeviceField, DeviceField64, GpuContext, GpuError, Reducer, Transfers, context_or_skip,
+};
 use rand::{Rng, SeedableRng};
 
 #[test]
@@ -32,6 +34,62 @@ fn a_field_goes_up_and_comes_back_bit_for_bit() {
         let values: Vec<f32> = (0..len).map(|_| rng.random_range(-1e3f32..1e3)).collect();
         let field = DeviceField::upload(&context, "values", &values, false).unwrap();
         assert_eq!(field.download(&context).unwrap(), values, "len {len}");
+    }
+}
+
+/// Through kept staging in chunks (chunk sizes that do and do not divide the field, one
+/// larger than it, chunks large enough to be copied by several threads): f32 and f64 fields up and back bit for bit, a wrong length and a value
+/// that is not finite refused with a typed error.
+#[test]
+fn staged_transfers_are_bit_for_bit_across_chunks() {
+    let Some(context) = context_or_skip("staged_transfers_are_bit_for_bit_across_chunks") else {
+        return;
+    };
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+    // The last chunks are copied by several threads (from 4 MiB on).
+    for (len, chunk) in [
+        (1000, 256),
+        (1000, 4000),
+        (777, 100),
+        (5, 1 << 20),
+        (3_000_001, 5 << 20),
+    ] {
+        let transfers = Transfers::with_chunk(&context, chunk).unwrap();
+        let values: Vec<f32> = (0..len).map(|_| rng.random_range(-1e3..1e3)).collect();
+        let field = DeviceField::zeros(&context, "f32", len).unwrap();
+        field
+            .write_staged(&context, &values, false, &transfers)
+            .unwrap();
+        let mut back = vec![0.0f32; len];
+        field
+            .download_into(&context, &mut back, &transfers)
+            .unwrap();
+        assert_eq!(back, values, "f32, {len} values in chunks of {chunk} bytes");
+        let values: Vec<f64> = (0..len).map(|_| rng.random_range(-1e3..1e3)).collect();
+        let field = DeviceField64::zeros(&context, "f64", len).unwrap();
+        field.write_staged(&context, &values, &transfers).unwrap();
+        let mut back = vec![0.0f64; len];
+        field
+            .download_into(&context, &mut back, &transfers)
+            .unwrap();
+        assert_eq!(back, values, "f64, {len} values in chunks of {chunk} bytes");
+        assert_eq!(field.download(&context).unwrap(), values);
+        let mut bad = values.clone();
+        bad[len / 2] = f64::INFINITY;
+        assert!(matches!(
+            field.write_staged(&context, &bad, &transfers),
+            Err(GpuError::BadInput { index, .. }) if index == len / 2
+        ));
+        assert!(
+            field
+                .write_staged(&context, &values[1..], &transfers)
+                .is_err()
+        );
+        assert!(
+            field
+                .download_into(&context, &mut back[1..], &transfers)
+                .is_err()
+        );
     }
 }
 
