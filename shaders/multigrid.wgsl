@@ -10,7 +10,8 @@
 // `smooth_colour` is one colour of red–black Gauss–Seidel in the host's residual form
 // x_i += (b_i + Σ c x_j − (e_i + Σ c) x_i)/d_i, its sums in the host's order;
 // `restrict_residual` is the coarse right-hand side Σ_children (b − A x), one invocation
-// per coarse cell summing its up to eight children in the host's order (no atomics);
+// per coarse cell summing its up to eight children in the host's order (no atomics), and
+// zeroes the coarse solution the coarse cycle starts from;
 // `prolong` adds each coarse cell's correction to its children in the medium
 // (piecewise-constant prolongation). One invocation per cell; cells x fastest.
 
@@ -33,6 +34,9 @@ struct LevelParams {
 // The coarse level's right-hand side (`restrict_residual` writes it) or its solution
 // (`prolong` reads it).
 @group(0) @binding(8) var<storage, read_write> coarse: array<f32>;
+// The coarse level's solution, which `restrict_residual` sets to zero: the coarse cycle
+// that follows starts from it, so a cycle needs no clearing pass below its top level.
+@group(0) @binding(9) var<storage, read_write> coarse_x: array<f32>;
 
 // b − A x at cell (i, j, k), index g.
 fn residual_at(i: u32, j: u32, k: u32, g: u32) -> f32 {
@@ -77,18 +81,24 @@ fn smooth_colour(
     @builtin(local_invocation_index) local: u32,
     @builtin(workgroup_id) wg: vec3<u32>,
 ) {
+    // One invocation per cell of the colour: invocation t takes the (t mod h)-th cell of
+    // that colour in row t / h (h = ⌈nx/2⌉ per row), so no invocation idles on the other
+    // colour and neighbouring invocations read neighbouring memory.
     let nx = lv.dims.x;
     let ny = lv.dims.y;
-    let g = flat_group(wg, lv.dims.w) * WG + local;
-    if (g >= nx * ny * lv.dims.z) {
+    let half = (nx + 1u) / 2u;
+    let t = flat_group(wg, lv.dims.w) * WG + local;
+    if (t >= half * ny * lv.dims.z) {
         return;
     }
-    let i = g % nx;
-    let j = (g / nx) % ny;
-    let k = g / (nx * ny);
-    if (((i + j + k) & 1u) != lv.coarse.w) {
+    let row = t / half;
+    let j = row % ny;
+    let k = row / ny;
+    let i = 2u * (t % half) + ((lv.coarse.w + j + k) & 1u);
+    if (i >= nx) {
         return;
     }
+    let g = i + nx * row;
     // Cells outside the medium (d = 0) are not unknowns: nothing to read or write.
     let d = inv_diag[g];
     if (d == 0.0) {
@@ -127,6 +137,7 @@ fn restrict_residual(
         }
     }
     coarse[gc] = sum;
+    coarse_x[gc] = 0.0;
 }
 
 @compute @workgroup_size(256)

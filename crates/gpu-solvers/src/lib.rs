@@ -11,7 +11,7 @@
 //! | `gpu-ftcs-diffusion` | V dφ/dτ = b − Aφ (diffusion-mg's system) | FTCS on CSR in correction form, f64 residual on the host | cΔt ≤ 2V / max_i Σ_j \|a_ij\| |
 //! | `gpu-ftcs-p1` | (1/c)∂φ/∂t = −∇·E − σ_aφ + q, (1/c)∂E/∂t = −∇φ/3 − σ_t′E | FTCS, φ and E ping-pong | (1−K_φ)(1−K_E) + r² ≤ 1 (staggered 4r²) |
 //! | `gpu-convection-diffusion` | u·∇ρ = −σ_t ρ per light, then (1 − σ̂_s t ∇²)L = ρ | short-characteristic layer sweeps, red–black Gauss–Seidel | always (no time step) |
-//! | `gpu-diffusion-mg` | −∇·(D∇φ) + σ_a φ = q (`diffusion-mg`'s embedded-boundary system) | V-cycles: red–black colours, fused residual and restriction, prolongation; the coarsest level and the f64 outer iteration on the host | always (a fixed-point iteration on an M-matrix) |
+//! | `gpu-diffusion-mg` | −∇·(D∇φ) + σ_a φ = q (`diffusion-mg`'s embedded-boundary system) | full multigrid and V-cycles: red–black colours, fused residual and restriction, prolongation, the coarsest level by its dense inverse; the f64 outer iteration on the device where it has f64 (else on the host) | always (a fixed-point iteration on an M-matrix) |
 //! | `gpu-dom` | ω·∇ψ + σ_t ψ = σ_s Σ p ψ′ + Q (`dom`'s discrete ordinates) | source fill, eight octant sweeps by cell hyperplanes, scattering product; DSA, Anderson, GMRES on the host | always (implicit sweeps) |
 //! | `gpu-lbm` | f_k(x + e_k, t + 1) = C(f(x, t))_k, ρ = Σ f_k (`lbm`'s lattice) | pull steps between two copies, one dispatch per step, one buffer per link | ω± ∈ (0, 2) by construction; σ_a h < 1 |
 //!
@@ -61,6 +61,6 @@ mod solver;
 
 pub use dom::{Wavefront, dom_transport, dom_transport_with};
 pub use lbm::march as lbm_march;
-pub use multigrid::DeviceMultigrid;
+pub use multigrid::{DENSE_COARSEST_MAX, DeviceMultigrid, KernelTiming, OuterIteration};
 pub use params::GpuConvectionParams;
 pub use solver::GpuSolver;
