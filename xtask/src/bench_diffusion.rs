@@ -290,12 +290,15 @@ fn python_row(root: &Path, n: usize, dir: &Path, lucent: Timing) -> Result<(), S
     Ok(())
 }
 
-/// With `--gpu`: one V(2,2) cycle from zero on the device (`DeviceMultigrid`, the
-/// hierarchy uploaded once) against the host's same cycle, per size: milliseconds per
-/// cycle (best of 5 after one warm-up; the device's includes writing b, reading the
-/// coarsest level back and solving it on the host, and reading x back), and the largest
-/// difference of the two over the host's peak.
+/// With `--gpu`, per size: one V(2,2) cycle from zero on the device (`DeviceMultigrid`,
+/// the hierarchy uploaded once) against the host's same cycle (milliseconds, best of 5
+/// after a warm-up; the device's includes writing b and reading x back; the largest
+/// difference over the host's peak); the solve to 1e-8 (full multigrid, then cycles) with
+/// the outer iteration on the device (best of 3; its kernels alone by timestamps) and on
+/// the host, and the host's own solve; then each kernel on the finest level alone
+/// (timestamps, 20 dispatches) with its compulsory bytes and GB/s.
 fn run_gpu(sizes: &[usize]) -> Result<(), String> {
+    use lucent::gpu_solvers::{DeviceMultigrid, OuterIteration};
     let err = |e: &dyn std::fmt::Display| e.to_string();
     let context = lucent::gpu::GpuContext::shared().map_err(|e| err(&e))?;
     println!("adapter: {}", context.describe());
@@ -304,10 +307,11 @@ fn run_gpu(sizes: &[usize]) -> Result<(), String> {
     }
     println!();
     println!(
-        "| n³ | levels | host cycle ms ({} threads) | device cycle ms (with transfers) | of which kernels ms (timestamps) | bytes per cycle (compulsory) | GB/s by them in the kernels | difference / peak | to 1e-8 on the device (FMG + cycles): cycles, ms (best of 3) | on the host (FMG + cycles): cycles, ms |",
+        "| n³ | levels | coarsest on the device | host cycle ms ({} threads) | device cycle ms (b up, x down) | of which kernels ms | cycle difference / peak | device solve, outer iteration on the device: cycles, ms (kernels ms by timestamps; rhs up and φ down ms) | outer iteration on the host: cycles, ms | host solve: cycles, ms | solutions apart / peak |",
         rayon::current_num_threads()
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut kernel_rows = Vec::new();
     for &n in sizes {
         let (problem, sources) = sphere(n)?;
         // diffusion-mg's defaults: full multigrid first (on the device for the device's
@@ -321,8 +325,7 @@ fn run_gpu(sizes: &[usize]) -> Result<(), String> {
         let host_ms = best_of(5, || {
             expected = host.cycle_from_zero(&b).unwrap_or_default();
         }) * 1e3;
-        let mut device =
-            lucent::gpu_solvers::DeviceMultigrid::new(context, &host).map_err(|e| err(&e))?;
+        let mut device = DeviceMultigrid::new(context, &host).map_err(|e| err(&e))?;
         let mut got = device.cycle_from_zero(&b).map_err(|e| err(&e))?;
         let mut failed = None;
         let mut kernels = f64::INFINITY;
@@ -333,42 +336,98 @@ fn run_gpu(sizes: &[usize]) -> Result<(), String> {
             }
             Err(e) => failed = Some(e.to_string()),
         }) * 1e3;
-        let mut device_cycles = 0;
-        let device_solve_ms = best_of(3, || {
-            let mut phi = vec![0.0; cells];
-            match device.solve(&rhs, &mut phi, &stopping) {
-                Ok(c) => device_cycles = c.iterations(),
-                Err(e) => failed = Some(e.to_string()),
-            }
-        }) * 1e3;
-        if let Some(e) = failed {
-            return Err(e);
-        }
-        let mut host_cycles = 0;
-        let host_solve_ms = best_of(1, || {
-            let mut phi = vec![0.0; cells];
-            host_cycles = host.solve(&rhs, &mut phi, &stopping).iterations();
-        }) * 1e3;
         let peak = expected.iter().fold(0.0f32, |m, v| m.max(v.abs()));
         let difference = got
             .iter()
             .zip(&expected)
             .fold(0.0f32, |m, (a, e)| m.max((a - e).abs()))
             / peak;
-        // Per level and cell: 8 colour passes (V(2,2)) reading the three couplings, the
-        // extra and inverse diagonals, b and x (28 bytes) and writing half the x (2 bytes);
-        // the restriction reading the same (28) and writing an eighth of a value; the
-        // prolongation reading the inverse diagonal and x and writing x (12). Coarse levels
-        // add about a seventh. (Counted over the whole box: cells outside the medium are
-        // skipped after reading their inverse diagonal, so the real traffic is lower.)
-        let bytes = cells as f64 * (8.0 * 30.0 + 28.5 + 12.0) * 8.0 / 7.0;
+        // The solve with the outer iteration where the device puts it (on the device
+        // where it has f64), then on the host.
+        let mut solve = |outer: OuterIteration, runs: usize| {
+            let mut phi = vec![0.0; cells];
+            let mut row = String::from("–");
+            if device.set_outer_iteration(outer).is_err() {
+                return (row, phi);
+            }
+            let mut cycles = 0;
+            let mut solve_kernels = f64::INFINITY;
+            let mut transfers = f64::INFINITY;
+            let ms = best_of(runs, || {
+                phi.fill(0.0);
+                match device.solve(&rhs, &mut phi, &stopping) {
+                    Ok(c) => {
+                        cycles = c.iterations();
+                        solve_kernels =
+                            solve_kernels.min(device.last_kernel_seconds().unwrap_or(f64::NAN));
+                        transfers =
+                            transfers.min(device.last_transfer_seconds().unwrap_or(f64::NAN));
+                    }
+                    Err(e) => failed = Some(e.to_string()),
+                }
+            }) * 1e3;
+            row = match outer {
+                OuterIteration::Device => format!(
+                    "{cycles}, {ms:.1} ({:.1}; transfers {:.1})",
+                    solve_kernels * 1e3,
+                    transfers * 1e3
+                ),
+                OuterIteration::Host => format!("{cycles}, {ms:.1}"),
+            };
+            (row, phi)
+        };
+        let (on_device, phi) = solve(OuterIteration::Device, 3);
+        let (on_host_outer, _) = solve(OuterIteration::Host, 1);
+        if let Some(e) = failed {
+            return Err(e);
+        }
+        let mut host_cycles = 0;
+        let mut host_phi = vec![0.0; cells];
+        let host_solve_ms = best_of(1, || {
+            host_phi.fill(0.0);
+            host_cycles = host.solve(&rhs, &mut host_phi, &stopping).iterations();
+        }) * 1e3;
+        let host_peak = host_phi.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let apart = phi
+            .iter()
+            .zip(&host_phi)
+            .fold(0.0f64, |m, (a, e)| m.max((a - e).abs()))
+            / host_peak;
         println!(
-            "| {n}³ | {} | {host_ms:.2} | {device_ms:.2} | {:.2} | {:.0} MB | {:.0} | {difference:.1e} | {device_cycles}, {device_solve_ms:.1} | {host_cycles}, {host_solve_ms:.1} |",
+            "| {n}³ | {} | {} | {host_ms:.2} | {device_ms:.2} | {:.2} | {difference:.1e} | {on_device} | {on_host_outer} | {host_cycles}, {host_solve_ms:.1} | {apart:.1e} |",
             host.depth(),
+            if device.coarsest_on_device() {
+                "yes"
+            } else {
+                "no"
+            },
             kernels * 1e3,
-            bytes / 1e6,
-            bytes / kernels / 1e9,
         );
+        if let Some(timings) = device.time_fine_kernels(20).map_err(|e| err(&e))? {
+            for t in timings {
+                kernel_rows.push(format!(
+                    "| {n}³ | {} | {:.3} | {:.3} | {:.0} MB | {:.0} | {:.0} |",
+                    t.name,
+                    t.seconds * 1e3,
+                    t.wall_seconds * 1e3,
+                    t.bytes / 1e6,
+                    t.bytes / t.seconds / 1e9,
+                    t.bytes / t.wall_seconds / 1e9
+                ));
+            }
+        }
+    }
+    if !kernel_rows.is_empty() {
+        println!();
+        println!("each kernel on the finest level alone (20 dispatches in one pass, timestamps):");
+        println!();
+        println!(
+            "| n³ | kernel | ms per dispatch (timestamps) | ms per dispatch (host clock, submit and wait included) | compulsory bytes | GB/s by them (timestamps) | GB/s (host clock) |"
+        );
+        println!("|---|---|---|---|---|---|---|");
+        for row in kernel_rows {
+            println!("{row}");
+        }
     }
     Ok(())
 }
