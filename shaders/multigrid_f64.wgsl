@@ -19,7 +19,8 @@
 struct OuterParams {
     // nx, ny, nz, groups_x of the dispatch
     dims: vec4<u32>,
-    // x: partials to add (`outer_sum`), or unknowns of the coarsest level (`coarsest_dense`)
+    // x: partials to add (`outer_sum`), or unknowns of the coarsest level (`coarsest_dense`);
+    // y: which value of `norm` the sum goes to
     count: vec4<u32>,
 }
 
@@ -186,7 +187,7 @@ fn outer_start(
     }
 }
 
-// norm[0] = Σ partials, in a fixed order (one workgroup: strided sums, then the tree),
+// norm[count.y] = Σ partials, in a fixed order (one workgroup: strided sums, then the tree),
 // so a solve's residual history does not depend on scheduling.
 @compute @workgroup_size(256)
 fn outer_sum(@builtin(local_invocation_index) local: u32) {
@@ -196,7 +197,7 @@ fn outer_sum(@builtin(local_invocation_index) local: u32) {
     }
     let total = workgroup_sum64(local, s);
     if (local == 0u) {
-        norm[0] = total;
+        norm[op.count.y] = total;
     }
 }
 

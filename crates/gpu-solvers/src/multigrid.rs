@@ -74,7 +74,10 @@ struct Outer {
     correct: (std::sync::Arc<Kernel>, wgpu::BindGroup),
     start: (std::sync::Arc<Kernel>, wgpu::BindGroup),
     load: (std::sync::Arc<Kernel>, wgpu::BindGroup),
+    /// Σ partials into the norm buffer's first value.
     sum: (std::sync::Arc<Kernel>, wgpu::BindGroup),
+    /// The same into its second value.
+    sum_second: (std::sync::Arc<Kernel>, wgpu::BindGroup),
     groups: [u32; 2],
     readback: Readback,
     _vectors: [DeviceField64; 2],
@@ -443,29 +446,60 @@ impl<'a> DeviceMultigrid<'a> {
         }
         outer.rhs.write_staged(gpu, rhs, &self.transfers)?;
         let mut transfers = started.elapsed().as_secs_f64();
-        // b = rhs in f32 (full multigrid's right-hand side) and ‖rhs‖, on the device.
-        let load = gpu.timed_commands(
-            "gpu-diffusion-mg load",
-            |_| {},
-            |pass| {
-                outer.load.0.dispatch(pass, &outer.load.1, outer.groups);
-                outer.sum.0.dispatch(pass, &outer.sum.1, [1, 1]);
-            },
-            |encoder| outer.readback.record(encoder, outer.norm.buffer(), 0, 0, 8),
-        )?;
-        let b_norm = outer.read_norm(gpu)?.max(f64::MIN_POSITIVE);
-        let mut kernels = load.seconds;
-        if self.host.settings().full_multigrid {
-            kernels += self.full_multigrid_in_place(None)?;
-            let outer = self.outer.as_ref().expect("the device's outer iteration");
-            kernels += gpu
-                .timed_pass("gpu-diffusion-mg start", |pass| {
+        let full_multigrid = self.host.settings().full_multigrid;
+        let (b_norm, mut norm, mut kernels) = if full_multigrid && self.dense.is_some() {
+            // One command buffer: b and ‖rhs‖, full multigrid, φ from it, its residual.
+            let timing = gpu.timed_commands(
+                "gpu-diffusion-mg start",
+                |encoder| self.record_clear(encoder, 0),
+                |pass| {
+                    outer.load.0.dispatch(pass, &outer.load.1, outer.groups);
+                    outer
+                        .sum_second
+                        .0
+                        .dispatch(pass, &outer.sum_second.1, [1, 1]);
+                    self.record_full_multigrid(pass);
                     outer.start.0.dispatch(pass, &outer.start.1, outer.groups);
-                })?
-                .seconds;
-        }
-        let (mut norm, seconds) = self.outer_residual()?;
-        kernels += seconds;
+                    outer
+                        .residual
+                        .0
+                        .dispatch(pass, &outer.residual.1, outer.groups);
+                    outer.sum.0.dispatch(pass, &outer.sum.1, [1, 1]);
+                },
+                |encoder| {
+                    outer
+                        .readback
+                        .record(encoder, outer.norm.buffer(), 0, 0, 16)
+                },
+            )?;
+            let [norm, b_norm] = outer.read_norms(gpu)?;
+            (b_norm, norm, timing.seconds)
+        } else {
+            // b = rhs in f32 (full multigrid's right-hand side) and ‖rhs‖.
+            let load = gpu.timed_commands(
+                "gpu-diffusion-mg load",
+                |_| {},
+                |pass| {
+                    outer.load.0.dispatch(pass, &outer.load.1, outer.groups);
+                    outer.sum.0.dispatch(pass, &outer.sum.1, [1, 1]);
+                },
+                |encoder| outer.readback.record(encoder, outer.norm.buffer(), 0, 0, 8),
+            )?;
+            let b_norm = outer.read_norms(gpu)?[0];
+            let mut kernels = load.seconds;
+            if full_multigrid {
+                kernels += self.full_multigrid_in_place(None)?;
+                let outer = self.outer.as_ref().expect("the device's outer iteration");
+                kernels += gpu
+                    .timed_pass("gpu-diffusion-mg start", |pass| {
+                        outer.start.0.dispatch(pass, &outer.start.1, outer.groups);
+                    })?
+                    .seconds;
+            }
+            let (norm, seconds) = self.outer_residual()?;
+            (b_norm, norm, kernels + seconds)
+        };
+        let b_norm = b_norm.max(f64::MIN_POSITIVE);
         let mut residuals = vec![norm / b_norm];
         let initial = residuals[0];
         let stop = loop {
@@ -736,28 +770,10 @@ impl<'a> DeviceMultigrid<'a> {
         }
         let down = |pass: &mut wgpu::ComputePass<'_>| {
             before(pass);
-            for level in &self.levels[top..last] {
-                for _ in 0..self.pre_sweeps {
-                    for colour in [0, 1] {
-                        self.smooth
-                            .dispatch(pass, &level.smooth[colour], level.colour_groups);
-                    }
-                }
-                let restrict = level.restrict.as_ref().expect("a level above the coarsest");
-                self.restrict.dispatch(pass, restrict, level.coarse_groups);
-            }
+            self.record_down(pass, top);
         };
         let up = |pass: &mut wgpu::ComputePass<'_>| {
-            for level in self.levels[top..last].iter().rev() {
-                let prolong = level.prolong.as_ref().expect("a level above the coarsest");
-                self.prolong.dispatch(pass, prolong, level.groups);
-                for _ in 0..self.post_sweeps {
-                    for colour in [1, 0] {
-                        self.smooth
-                            .dispatch(pass, &level.smooth[colour], level.colour_groups);
-                    }
-                }
-            }
+            self.record_up(pass, top);
             then(pass);
         };
         if self.dense.is_some() {
@@ -777,6 +793,57 @@ impl<'a> DeviceMultigrid<'a> {
         self.solve_coarsest_level()?;
         let timing_up = gpu.timed_commands("gpu-diffusion-mg up", |_| {}, up, after)?;
         Ok(seconds(timing_down) + seconds(timing_up))
+    }
+
+    /// Records a cycle's way down from level `top`: pre-smoothing (red first) and the
+    /// restricted residual, level by level to the coarsest.
+    fn record_down(&self, pass: &mut wgpu::ComputePass<'_>, top: usize) {
+        let last = self.levels.len() - 1;
+        for level in &self.levels[top..last] {
+            for _ in 0..self.pre_sweeps {
+                for colour in [0, 1] {
+                    self.smooth
+                        .dispatch(pass, &level.smooth[colour], level.colour_groups);
+                }
+            }
+            let restrict = level.restrict.as_ref().expect("a level above the coarsest");
+            self.restrict.dispatch(pass, restrict, level.coarse_groups);
+        }
+    }
+
+    /// Records a cycle's way up to level `top`: prolongation and post-smoothing (black
+    /// first, as the host's), level by level from the coarsest.
+    fn record_up(&self, pass: &mut wgpu::ComputePass<'_>, top: usize) {
+        let last = self.levels.len() - 1;
+        for level in self.levels[top..last].iter().rev() {
+            let prolong = level.prolong.as_ref().expect("a level above the coarsest");
+            self.prolong.dispatch(pass, prolong, level.groups);
+            for _ in 0..self.post_sweeps {
+                for colour in [1, 0] {
+                    self.smooth
+                        .dispatch(pass, &level.smooth[colour], level.colour_groups);
+                }
+            }
+        }
+    }
+
+    /// Records the whole of full multigrid for the finest level's b into one pass (the
+    /// finest x must be zero): the coarsest level must be solved on the device.
+    fn record_full_multigrid(&self, pass: &mut wgpu::ComputePass<'_>) {
+        let last = self.levels.len() - 1;
+        for level in &self.levels[..last] {
+            let restrict = level.restrict.as_ref().expect("a level above the coarsest");
+            self.restrict.dispatch(pass, restrict, level.coarse_groups);
+        }
+        self.record_dense_coarsest(pass);
+        for top in (0..last).rev() {
+            let level = &self.levels[top];
+            let prolong = level.prolong.as_ref().expect("a level above the coarsest");
+            self.prolong.dispatch(pass, prolong, level.groups);
+            self.record_down(pass, top);
+            self.record_dense_coarsest(pass);
+            self.record_up(pass, top);
+        }
     }
 
     /// Each kernel of a cycle and of the outer iteration on the finest level, for
@@ -881,9 +948,15 @@ impl<'a> DeviceMultigrid<'a> {
 impl Outer {
     /// ‖r‖₂ from the readback the last command buffer filled.
     fn read_norm(&self, gpu: &GpuContext) -> Result<f64, GpuError> {
+        Ok(self.read_norms(gpu)?[0])
+    }
+
+    /// The square roots of both sums in the readback (the second as of the last command
+    /// buffer that copied it).
+    fn read_norms(&self, gpu: &GpuContext) -> Result<[f64; 2], GpuError> {
         let bytes = self.readback.read(gpu)?;
         let squares: Vec<f64> = bytemuck::pod_collect_to_vec(&bytes);
-        Ok(squares[0].sqrt())
+        Ok([squares[0].sqrt(), squares[1].sqrt()])
     }
 }
 
@@ -896,24 +969,27 @@ fn outer_iteration(
     let cells = fine.cells;
     let groups = groups_2d(gpu, cells as u64, WORKGROUP);
     let partials = groups[0] as usize * groups[1] as usize;
+    // Slot 0 for every kernel (sums into the norm's first value), slot 1 for the sum
+    // into its second.
+    let dims = [
+        op.dims[0] as u32,
+        op.dims[1] as u32,
+        op.dims[2] as u32,
+        groups[0],
+    ];
     let uniforms = UniformSlots::new(
         gpu,
         "gpu-diffusion-mg outer",
-        &[OuterParams {
-            dims: [
-                op.dims[0] as u32,
-                op.dims[1] as u32,
-                op.dims[2] as u32,
-                groups[0],
-            ],
-            count: [partials as u32, 0, 0, 0],
-        }],
+        &[0, 1].map(|to| OuterParams {
+            dims,
+            count: [partials as u32, to, 0, 0],
+        }),
     )?;
     let rhs = DeviceField64::zeros(gpu, "gpu-diffusion-mg f64 right-hand side", cells)?;
     let phi = DeviceField64::zeros(gpu, "gpu-diffusion-mg f64 solution", cells)?;
     let r = DeviceField64::zeros(gpu, "gpu-diffusion-mg f64 residual", cells)?;
     let sums = DeviceField64::zeros(gpu, "gpu-diffusion-mg residual partials", partials)?;
-    let norm = DeviceField64::zeros(gpu, "gpu-diffusion-mg residual norm", 1)?;
+    let norm = DeviceField64::zeros(gpu, "gpu-diffusion-mg residual norms", 2)?;
     let all = || {
         let mut e = vec![(0u32, uniforms.slot(0))];
         for (i, f) in fine.operator[..4].iter().enumerate() {
@@ -947,8 +1023,24 @@ fn outer_iteration(
         start: bound("outer_start", &OUTER_START)?,
         load: bound("outer_load", &OUTER_LOAD)?,
         sum: bound("outer_sum", &OUTER_SUM)?,
+        sum_second: {
+            let k = gpu.kernel(
+                "multigrid_f64.wgsl",
+                lucent_gpu::shaders::MULTIGRID_F64,
+                "outer_sum",
+            )?;
+            let bind = k.bind_at(
+                gpu,
+                &[
+                    (0, uniforms.slot(1)),
+                    (10, sums.binding()),
+                    (11, norm.binding()),
+                ],
+            )?;
+            (k, bind)
+        },
         groups,
-        readback: Readback::new(gpu, "gpu-diffusion-mg residual norm", 8)?,
+        readback: Readback::new(gpu, "gpu-diffusion-mg residual norm", 16)?,
         rhs,
         phi,
         norm,
