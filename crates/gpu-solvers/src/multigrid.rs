@@ -1220,9 +1220,10 @@ fn bindings<'f>(
     e
 }
 
-/// Host bytes of `gpu-diffusion-mg` per solve: `diffusion-mg`'s own (the hierarchy the
-/// device's is uploaded from, the f64 vectors, the cut-cell geometry: 112 bytes per cell
-/// and channel) and the f32 right-hand side and correction each cycle hands over (8).
+/// Host bytes of `gpu-diffusion-mg` per solve, an upper bound: `diffusion-mg`'s own (the
+/// hierarchy the device's is uploaded from, the f64 vectors, the cut-cell geometry: 112
+/// bytes per cell and channel) and the f32 right-hand side and correction each cycle hands
+/// over when the outer iteration runs on the host (8).
 pub(crate) fn memory_bytes(problem: &Problem) -> u64 {
     problem.geometry().voxel_count() as u64 * (112 + 8) * problem.channels() as u64
 }

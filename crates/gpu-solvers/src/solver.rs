@@ -9,7 +9,7 @@
 //! | `gpu-ftcs-p1` | `ftcs-p1` | P1 FTCS steps (φ and E ping-pong) |
 //! | `gpu-convection-diffusion` | `convection-diffusion` (characteristic model) | layer sweeps per light, red–black Gauss–Seidel scattering |
 //! | `gpu-lbm` | `lbm` | Lattice-Boltzmann pull steps, one dispatch per step |
-//! | `gpu-diffusion-mg` | `diffusion-mg` | V-cycles (red–black colours, fused residual and restriction, prolongation), the coarsest level and the f64 outer iteration on the host |
+//! | `gpu-diffusion-mg` | `diffusion-mg` | full multigrid and V-cycles (red–black colours, fused residual and restriction, prolongation, the coarsest level by its dense inverse); the f64 outer iteration on the device where it has f64, else on the host |
 //! | `gpu-dom` | `dom` | each transport step (source fill, octant sweeps by cell hyperplanes, scattering product); the iteration and DSA on the host |
 //!
 //! The device is the process's shared [`GpuContext`]; no adapter is a
@@ -174,7 +174,7 @@ impl GpuSolver {
     /// multigrid first on the device when `full_multigrid` is on, as `diffusion-mg`).
     pub const GPU_DIFFUSION_MG: SolverEntry = SolverEntry {
         name: "gpu-diffusion-mg",
-        summary: "diffusion-mg on the GPU: V-cycles on the device, the coarsest level and the f64 outer iteration on the host",
+        summary: "diffusion-mg on the GPU: full multigrid, V-cycles and (where the device has f64) the f64 outer iteration on the device",
         build: |p| {
             let params: MultigridParams = p.parse("gpu-diffusion-mg")?;
             let refuse = |name: &str, reason: &str| {
