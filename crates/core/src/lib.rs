@@ -70,6 +70,7 @@ mod paged;
 mod paged_collisions;
 mod problem;
 mod refractive;
+pub mod regime;
 mod registry;
 mod singular;
 mod solution;
