@@ -303,14 +303,15 @@ impl DeviceField64 {
 pub const TRANSFER_CHUNK_BYTES: u64 = 32 << 20;
 
 /// Kept staging for moving large vectors between host and device in chunks of at most
-/// [`TRANSFER_CHUNK_BYTES`]: one buffer mapped for writing, one for reading, allocated
-/// once. A transfer then neither allocates staging memory nor faults its pages in, as
+/// [`TRANSFER_CHUNK_BYTES`]: two buffers mapped for writing and two for reading, allocated
+/// once and used in turn, so the host copies one chunk while the device moves the other.
+/// A transfer then neither allocates staging memory nor faults its pages in, as
 /// `Queue::write_buffer` and a staging buffer made per download do each time (64 MiB each
 /// way took 150 ms on an H200's host that way, under 1 GB/s).
 #[derive(Debug)]
 pub struct Transfers {
-    up: wgpu::Buffer,
-    down: wgpu::Buffer,
+    up: [wgpu::Buffer; 2],
+    down: [wgpu::Buffer; 2],
     chunk: u64,
 }
 
@@ -321,10 +322,10 @@ impl Transfers {
         Self::with_chunk(context, largest.min(TRANSFER_CHUNK_BYTES))
     }
 
-    /// Staging of `chunk` bytes (rounded up to a multiple of 4; tests use small ones to
+    /// Staging of `chunk` bytes (rounded up to a multiple of 8; tests use small ones to
     /// cross chunk boundaries).
     pub fn with_chunk(context: &GpuContext, chunk: u64) -> Result<Self, GpuError> {
-        let chunk = chunk.max(4).next_multiple_of(4);
+        let chunk = chunk.max(8).next_multiple_of(8);
         let buffer = |label, usage| {
             context.checked(|| {
                 context.device().create_buffer(&wgpu::BufferDescriptor {
@@ -335,57 +336,67 @@ impl Transfers {
                 })
             })
         };
+        let up = wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC;
+        let down = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
         Ok(Self {
-            up: buffer(
-                "lucent upload staging",
-                wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
-            )?,
-            down: buffer(
-                "lucent download staging",
-                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            )?,
+            up: [
+                buffer("lucent upload staging", up)?,
+                buffer("lucent upload staging", up)?,
+            ],
+            down: [
+                buffer("lucent download staging", down)?,
+                buffer("lucent download staging", down)?,
+            ],
             chunk,
         })
     }
 
-    /// Copies `bytes` (a multiple of 4) to the start of `to`, chunk by chunk; done when it
-    /// returns.
+    /// Copies `bytes` (a multiple of 4) to the start of `to`, chunk by chunk through the
+    /// two upload buffers in turn (chunk i + 1 is copied into one while the device copies
+    /// chunk i out of the other); done when it returns.
     fn write(&self, context: &GpuContext, to: &wgpu::Buffer, bytes: &[u8]) -> Result<(), GpuError> {
+        let mut last: [Option<wgpu::SubmissionIndex>; 2] = [None, None];
         for (i, piece) in bytes.chunks(self.chunk as usize).enumerate() {
-            let len = piece.len() as u64;
-            map(
+            let (staging, len) = (&self.up[i % 2], piece.len() as u64);
+            map_after(
                 context,
-                &self.up,
+                staging,
                 len,
                 wgpu::MapMode::Write,
+                last[i % 2].take(),
                 "upload staging",
             )?;
-            let copied = copy_in_parallel(&self.up, piece);
-            self.up.unmap();
+            let copied = copy_in_parallel(staging, piece);
+            staging.unmap();
             copied.map_err(|e| GpuError::Device(format!("upload staging: {e}")))?;
-            context.checked(|| {
+            last[i % 2] = Some(context.checked(|| {
                 let mut encoder =
                     context
                         .device()
                         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                             label: Some("lucent upload"),
                         });
-                encoder.copy_buffer_to_buffer(&self.up, 0, to, i as u64 * self.chunk, len);
-                context.queue().submit([encoder.finish()]);
-            })?;
+                encoder.copy_buffer_to_buffer(staging, 0, to, i as u64 * self.chunk, len);
+                context.queue().submit([encoder.finish()])
+            })?);
         }
         context.wait()
     }
 
-    /// Copies the start of `from` into `out` (a multiple of 4 bytes), chunk by chunk.
+    /// Copies the start of `from` into `out` (a multiple of 4 bytes), chunk by chunk
+    /// through the two download buffers in turn (the device copies chunk i + 1 into one
+    /// while the host copies chunk i out of the other).
     fn read(
         &self,
         context: &GpuContext,
         from: &wgpu::Buffer,
         out: &mut [u8],
     ) -> Result<(), GpuError> {
-        for (i, piece) in out.chunks_mut(self.chunk as usize).enumerate() {
-            let len = piece.len() as u64;
+        let chunk = self.chunk as usize;
+        let total = out.len();
+        let pieces = total.div_ceil(chunk);
+        let fetch = |i: usize| -> Result<wgpu::SubmissionIndex, GpuError> {
+            let len = (total - i * chunk).min(chunk) as u64;
             context.checked(|| {
                 let mut encoder =
                     context
@@ -393,26 +404,77 @@ impl Transfers {
                         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                             label: Some("lucent download"),
                         });
-                encoder.copy_buffer_to_buffer(from, i as u64 * self.chunk, &self.down, 0, len);
-                context.queue().submit([encoder.finish()]);
-            })?;
-            map(
+                encoder.copy_buffer_to_buffer(from, (i * chunk) as u64, &self.down[i % 2], 0, len);
+                context.queue().submit([encoder.finish()])
+            })
+        };
+        let mut pending: [Option<wgpu::SubmissionIndex>; 2] = [None, None];
+        for i in 0..pieces.min(2) {
+            pending[i % 2] = Some(fetch(i)?);
+        }
+        for (i, piece) in out.chunks_mut(chunk).enumerate() {
+            let (staging, len) = (&self.down[i % 2], piece.len() as u64);
+            map_after(
                 context,
-                &self.down,
+                staging,
                 len,
                 wgpu::MapMode::Read,
+                pending[i % 2].take(),
                 "download staging",
             )?;
-            let copied = self
-                .down
+            let copied = staging
                 .slice(..len)
                 .get_mapped_range()
                 .map(|view| copy_out_in_parallel(&view, piece));
-            self.down.unmap();
+            staging.unmap();
             copied.map_err(|e| GpuError::Device(format!("download staging: {e}")))?;
+            if i + 2 < pieces {
+                pending[i % 2] = Some(fetch(i + 2)?);
+            }
         }
         Ok(())
     }
+}
+
+/// Maps the first `bytes` of `buffer` for `mode` once submission `after` (its last use)
+/// has finished, without waiting for later submissions.
+fn map_after(
+    context: &GpuContext,
+    buffer: &wgpu::Buffer,
+    bytes: u64,
+    mode: wgpu::MapMode,
+    after: Option<wgpu::SubmissionIndex>,
+    what: &str,
+) -> Result<(), GpuError> {
+    let (sender, receiver) = std::sync::mpsc::channel();
+    buffer.slice(..bytes).map_async(mode, move |result| {
+        let _ = sender.send(result);
+    });
+    let poll = |kind| {
+        context
+            .device()
+            .poll(kind)
+            .map(|_| ())
+            .map_err(|e| GpuError::Device(format!("{what}: {e}")))
+    };
+    match after {
+        Some(index) => poll(wgpu::PollType::Wait {
+            submission_index: Some(index),
+            timeout: None,
+        })?,
+        None => poll(wgpu::PollType::Poll)?,
+    }
+    let result = match receiver.try_recv() {
+        Ok(result) => result,
+        // Not resolved by that poll: wait for everything (correct, only slower).
+        Err(_) => {
+            context.wait()?;
+            receiver
+                .recv()
+                .map_err(|e| GpuError::Device(format!("{what}: {e}")))?
+        }
+    };
+    result.map_err(|e| GpuError::Device(format!("{what}: {e}")))
 }
 
 /// Bytes below which a staging copy stays on one thread.
