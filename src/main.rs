@@ -977,6 +977,14 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
         .map_err(io_err)?;
     }
     writeln!(out, "  phase     {}", medium.phase).map_err(io_err)?;
+    for c in 0..distinct {
+        let label = if distinct > 1 {
+            format!("regime {}", ["R", "G", "B"].get(c).copied().unwrap_or("?"))
+        } else {
+            "regime".to_owned()
+        };
+        writeln!(out, "  {label:<10}{}", regime_line(p, c)).map_err(io_err)?;
+    }
     for light in p.lights() {
         writeln!(out, "  light     {light}").map_err(io_err)?;
     }
@@ -1004,6 +1012,41 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
     )
     .map_err(io_err)?;
     Ok(())
+}
+
+/// Transport mean free paths from the box, void and the lights beyond which a region
+/// counts as deep: diffusion's boundary layer (Milne's problem, an extrapolation length of
+/// 0.71 ℓ′) and its error near a source decay within one or two ℓ′.
+const DEEP_MFP: f64 = 3.0;
+
+/// One line of `lucent info` on the regime of channel `c`, from
+/// [`lucent::core::regime::Regime`] over regions of at least 8³ cells (at most 32 per
+/// axis, so the line costs little beside loading the scene).
+fn regime_line(problem: &lucent::core::Problem, c: usize) -> String {
+    use lucent::core::regime::Regime;
+    let largest = problem.geometry().dims().into_iter().max().unwrap_or(1);
+    let regime = Regime::of(problem, c, largest.div_ceil(32).max(8));
+    let summary = regime.summary();
+    let medium: Vec<_> = regime
+        .regions
+        .iter()
+        .filter(|r| r.empty_fraction < 1.0)
+        .collect();
+    let deep = medium
+        .iter()
+        .filter(|r| r.boundary_mfp >= DEEP_MFP && r.source_mfp >= DEEP_MFP)
+        .count();
+    format!(
+        "reduced albedo {} (g {}), regions up to {} transport mean free paths across, on average {} from the box or void, the light {} extinction lengths deep at the most shaded; {}% of the medium's regions at least {} from the box, void and the lights; {}% of all cells void",
+        S(summary.reduced_albedo),
+        S(regime.g),
+        S(summary.thickness_mfp),
+        S(summary.boundary_mfp),
+        S(medium.iter().map(|r| r.light_depth).fold(0.0, f64::max)),
+        S(100.0 * deep as f64 / medium.len().max(1) as f64),
+        S(DEEP_MFP),
+        S(100.0 * summary.empty_fraction),
+    )
 }
 
 #[derive(Debug)]

@@ -177,6 +177,24 @@ fn every_example_scene_is_valid() {
     assert!(count >= 8, "one scene per feature");
 }
 
+/// `lucent info` reports the regime: on the homogeneous slab (σ_t = 3, albedo 0.9,
+/// isotropic: α′ = 0.9, g = 0) the reduced albedo of the closed form; the slab is 0.5 wide,
+/// 1.5 ℓ′, so no region lies 3 ℓ′ from the box.
+#[test]
+fn info_reports_the_regime() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/suite/slab.toml");
+    let out = lucent(&["info", &scene.display().to_string()], Path::new("."));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text
+        .lines()
+        .find(|l| l.trim_start().starts_with("regime"))
+        .unwrap_or_else(|| panic!("no regime line:\n{text}"));
+    assert!(line.contains("reduced albedo 0.9 (g 0)"), "{line}");
+    assert!(line.contains(" 0% of the medium's regions"), "{line}");
+    assert!(line.contains("0% of all cells void"), "{line}");
+}
+
 #[test]
 fn lists_solvers_with_capabilities() {
     let out = lucent(&["solvers"], Path::new("."));

@@ -22,7 +22,7 @@
 //! | `boundary_mfp` | mean over the medium cells of the reduced optical distance to the nearest box face or void cell along the six axis directions | ℓ′ |
 //! | `light_depth` | extinction optical depth from the nearest light to the region's centre (min over lights) | mean free paths |
 //! | `source_mfp` | the same path in ℓ′ | ℓ′ |
-//! | `empty_fraction` | share of cells that are void (σ_t h < [`VOID_DEPTH`]) | – |
+//! | `empty_fraction` | share of cells that are void (σ_t h < [`VOID_DEPTH`]; outside the problem's embedded body σ_t is taken as 0) | – |
 //!
 //! and, over the whole problem, g and the same quantities weighted by region
 //! ([`Regime::summary`]). Paths to point and spot lights and from distant lights are the
@@ -62,7 +62,8 @@ pub struct RegionIndicators {
     pub light_depth: f64,
     /// The same paths in transport mean free paths, ∫σ_t′ ds (capped at 50).
     pub source_mfp: f64,
-    /// Share of the region's cells that are void.
+    /// Share of the region's cells that are void (optically, or outside the problem's
+    /// embedded body).
     pub empty_fraction: f64,
 }
 
@@ -88,7 +89,10 @@ impl Regime {
         let geometry = *problem.geometry();
         let [nx, ny, nz] = geometry.dims();
         let h = geometry.spacing();
-        let medium = problem.medium();
+        // Outside an embedded body (SDF ≥ 0) there is no medium: light crosses it
+        // without interacting, as in the solvers (`Medium::masked`).
+        let masked = problem.embedded().map(|sdf| problem.medium().masked(sdf));
+        let medium = masked.as_ref().unwrap_or(problem.medium());
         let g = medium.phase.mean_cosine();
         let sigma_t = medium.sigma_t(channel);
         let albedo = medium.albedo(channel);

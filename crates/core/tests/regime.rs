@@ -187,3 +187,43 @@ fn void_and_emission_are_boundaries_and_sources() {
     assert!((summary.empty_fraction - 1.0 / 27.0).abs() < 1e-12);
     assert!((summary.reduced_albedo - 1.0).abs() < 1e-12);
 }
+
+/// An embedded body: the cells outside it (SDF ≥ 0) are void, as the solvers treat them
+/// (`Medium::masked`), and its surface is the boundary the distances are measured to.
+#[test]
+fn outside_an_embedded_body_is_void() {
+    let problem = homogeneous([16, 16, 16], 0.1, 4.0, 0.99, 0.0);
+    let centre = DVec3::splat(0.8);
+    let mut sdf = Grid::filled(*problem.geometry(), 0.0);
+    for k in 0..16 {
+        for j in 0..16 {
+            for i in 0..16 {
+                let p = problem.geometry().cell_centre(i, j, k);
+                assert!(sdf.set(i, j, k, ((p - centre).length() - 0.5) as f32));
+            }
+        }
+    }
+    let body = Problem::new(
+        *problem.geometry(),
+        problem.medium().clone(),
+        problem.lights().to_vec(),
+        Boundary::Vacuum,
+        Some(sdf),
+    )
+    .unwrap();
+    let open = Regime::of(&problem, 0, 4);
+    let embedded = Regime::of(&body, 0, 4);
+    // The corner region is outside the sphere: all void.
+    assert_eq!(embedded.region_of([0, 0, 0]).empty_fraction, 1.0);
+    assert_eq!(open.region_of([0, 0, 0]).empty_fraction, 0.0);
+    // The region of cells 8..12 next to the centre is inside but for its far corner
+    // (0.35·√3 = 0.61 from the centre: 7 of its 64 cells are outside); the sphere's
+    // surface (0.5 from the centre) is nearer than the box (0.8): its cells are closer
+    // to a boundary than in the open box, but still deep in the medium.
+    let (inside, box_only) = (embedded.region_of([8, 8, 8]), open.region_of([8, 8, 8]));
+    assert_eq!(inside.empty_fraction, 7.0 / 64.0);
+    assert!(
+        inside.boundary_mfp < box_only.boundary_mfp && inside.boundary_mfp > 0.5,
+        "{inside:?} {box_only:?}"
+    );
+}
