@@ -169,6 +169,17 @@ pub struct Multigrid {
     /// allocates nothing, and the set-up, not the solve, pays the page faults (about 60 MB
     /// at 128³).
     work: Mutex<SolveWork>,
+    /// The K-cycle's vectors per level (the first cycle's correction and A times each
+    /// correction), allocated by its first visit and kept: empty unless the K-cycle runs.
+    krylov: Vec<Mutex<KrylovWork>>,
+}
+
+/// What [`Multigrid::krylov_correction`] works in on one level.
+#[derive(Debug, Default)]
+struct KrylovWork {
+    c1: Vec<f32>,
+    v1: Vec<f64>,
+    v2: Vec<f64>,
 }
 
 /// What [`Multigrid::solve`] works in: the cycles' vectors per level and the f64 residual.
@@ -185,6 +196,7 @@ impl Clone for Multigrid {
             levels: self.levels.clone(),
             settings: self.settings,
             work: Mutex::default(),
+            krylov: self.levels.iter().map(|_| Mutex::default()).collect(),
         }
     }
 }
@@ -207,8 +219,10 @@ impl Multigrid {
             let next = coarsen(last, boundaries);
             data.push(next);
         }
+        let levels: Vec<Level> = data.into_iter().map(|d| d.level).collect();
         let mut multigrid = Self {
-            levels: data.into_iter().map(|d| d.level).collect(),
+            krylov: levels.iter().map(|_| Mutex::default()).collect(),
+            levels,
             settings,
             work: Mutex::default(),
         };
@@ -443,11 +457,20 @@ impl Multigrid {
             return;
         }
         let level = &self.levels[m];
-        let c1 = x[m].clone();
-        let mut v1 = vec![0.0f64; c1.len()];
-        level.apply(&c1, &mut v1);
-        let rho1 = dot32(&c1, &v1);
-        let alpha1 = dot32(&c1, &b[m]);
+        // The level's kept vectors (a solve running beside this one on the same
+        // hierarchy works in its own).
+        let mut own = KrylovWork::default();
+        let mut kept = self.krylov[m].try_lock();
+        let KrylovWork { c1, v1, v2 } = match kept.as_deref_mut() {
+            Ok(work) => work,
+            Err(_) => &mut own,
+        };
+        c1.clear();
+        c1.extend_from_slice(&x[m]);
+        v1.resize(c1.len(), 0.0);
+        level.apply(c1, v1);
+        let rho1 = dot32(c1, v1);
+        let alpha1 = dot32(c1, &b[m]);
         if !(rho1 > 0.0 && rho1.is_finite()) {
             return;
         }
@@ -473,10 +496,10 @@ impl Multigrid {
         x[m].fill(0.0);
         self.cycle(m, Cycle::K, b, x, s);
         let c2 = &x[m];
-        let mut v2 = vec![0.0f64; c2.len()];
-        level.apply(c2, &mut v2);
-        let gamma = dot32(c2, &v1);
-        let beta = dot32(c2, &v2);
+        v2.resize(c2.len(), 0.0);
+        level.apply(c2, v2);
+        let gamma = dot32(c2, v1);
+        let beta = dot32(c2, v2);
         let alpha2 = dot32(c2, &b[m]);
         let rho2 = beta - gamma * gamma / rho1;
         if !(rho2 > 0.0 && rho2.is_finite()) {
