@@ -33,6 +33,7 @@ pub mod crosscheck;
 pub mod fuzzing;
 pub mod pareto;
 pub mod progress;
+pub mod resolution;
 pub mod scene;
 
 use std::path::PathBuf;

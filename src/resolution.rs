@@ -1,0 +1,180 @@
+//! Resolution chosen by need: the coarsest grid on which a solver meets a tolerance, from
+//! solves on the scene's grid and on grids two and four times coarser per axis, and a
+//! Richardson-style estimate of each one's discretisation error.
+//!
+//! With a scheme of order p the fluence on spacing h is φ_h ≈ φ + C h^p, so two levels
+//! differ by φ_{2h} − φ_h ≈ (2^p − 1) C h^p: the error of the finer one is
+//! e_h ≈ ‖φ_{2h} − R φ_h‖ / (2^p − 1) and of the coarser e_{2h} ≈ 2^p e_h (R: the finer
+//! solution box-averaged onto the coarser cells, so that cell averages are compared with
+//! cell averages). Three levels give the observed order
+//! p = log₂(‖φ_{4h} − R φ_{2h}‖ / ‖φ_{2h} − R φ_h‖), used where it lies in [0.5, 4]
+//! (otherwise the solutions are not yet in the asymptotic range and the scheme's nominal
+//! order, [`NOMINAL_ORDER`], is used). Errors are relative to the finer level's ‖φ‖₂.
+//!
+//! The medium, emission and embedded body are resampled onto each coarser grid (the box
+//! average of the trilinear field: the same medium, seen coarser). A level whose grid
+//! would have fewer than [`MIN_CELLS`] cells along an axis is not tried.
+
+use lucent_core::{Light, Problem, SolveOptions, Solver};
+use lucent_grid::Grid;
+use lucent_grid::resample::resample;
+
+use crate::Error;
+
+/// The order assumed where three levels do not show one: second order, the cell-centred
+/// schemes' (diffusion's finite volumes, the explicit schemes, diamond-difference
+/// ordinates away from kinks).
+pub const NOMINAL_ORDER: f64 = 2.0;
+
+/// The fewest cells along an axis a coarser level keeps.
+pub const MIN_CELLS: usize = 4;
+
+/// One level: its grid, the solve's time and the estimated relative error.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Level {
+    /// Coarsening per axis against the problem's grid (1, 2, 4).
+    pub coarsening: usize,
+    /// Cells per axis.
+    pub dims: [usize; 3],
+    /// Wall time of its solve, seconds.
+    pub seconds: f64,
+    /// Estimated relative L2 discretisation error of its fluence (channel 0).
+    pub estimated_error: f64,
+}
+
+/// What [`coarsest_meeting`] found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResolutionChoice {
+    /// The levels solved, finest (the problem's own grid) first.
+    pub levels: Vec<Level>,
+    /// The order the estimates used.
+    pub order: f64,
+    /// Whether it was observed from three levels (else [`NOMINAL_ORDER`]).
+    pub observed: bool,
+    /// Index in `levels` of the coarsest level whose estimate meets the tolerance (the
+    /// finest when none does).
+    pub chosen: usize,
+    /// Whether the chosen level meets the tolerance.
+    pub met: bool,
+}
+
+impl ResolutionChoice {
+    /// Cells per axis the problem's grid would need for the tolerance when even it does
+    /// not meet it: its error scaled by (e/tolerance)^{1/p} (`None` when it is met).
+    pub fn needed_refinement(&self, tolerance: f64) -> Option<f64> {
+        let finest = self.levels.first()?;
+        (!self.met).then(|| (finest.estimated_error / tolerance).powf(1.0 / self.order))
+    }
+}
+
+/// `problem` on a grid of `dims` cells over the same box: the medium, emission and
+/// embedded body resampled.
+pub fn on_grid(problem: &Problem, dims: [usize; 3]) -> Result<Problem, Error> {
+    let medium = problem.medium().resampled(dims)?;
+    let lights = problem
+        .lights()
+        .iter()
+        .map(|l| match l {
+            Light::Emission { grid, scale } => resample(grid, dims).map(|grid| Light::Emission {
+                grid,
+                scale: *scale,
+            }),
+            other => Ok(other.clone()),
+        })
+        .collect::<Result<_, _>>()?;
+    let embedded = problem
+        .embedded()
+        .map(|sdf| resample(sdf, dims))
+        .transpose()?;
+    let geometry = *medium.sigma_t[0].geometry();
+    let coarse = Problem::new(geometry, medium, lights, problem.boundary(), embedded)?;
+    Ok(match problem.refractive_index() {
+        Some(index) => coarse.with_refractive_index(index.clone())?,
+        None => coarse,
+    })
+}
+
+/// Solves `problem` with `solver` on its grid and on grids 2× and 4× coarser per axis
+/// (those with at least [`MIN_CELLS`] cells along every axis), estimates each level's
+/// discretisation error (module docs) and picks the coarsest whose estimate is at most
+/// `tolerance`. The solver's own stopping tolerance should be well below `tolerance`, so
+/// that the differences measured are the discretisation's.
+pub fn coarsest_meeting(
+    problem: &Problem,
+    solver: &dyn Solver,
+    tolerance: f64,
+    options: &SolveOptions,
+) -> Result<ResolutionChoice, Error> {
+    let fine = problem.geometry().dims();
+    let mut solutions: Vec<(usize, Grid, f64)> = Vec::new();
+    for coarsening in [1usize, 2, 4] {
+        let dims = fine.map(|n| n.div_ceil(coarsening));
+        if coarsening > 1 && dims.iter().zip(fine).any(|(&d, n)| d < MIN_CELLS && d < n) {
+            break;
+        }
+        let level = if coarsening == 1 {
+            problem.clone()
+        } else {
+            on_grid(problem, dims)?
+        };
+        let started = std::time::Instant::now();
+        let solution = solver.solve(&level, options)?;
+        let seconds = started.elapsed().as_secs_f64();
+        solutions.push((coarsening, solution.fluence(0).clone(), seconds));
+    }
+    // ‖φ_coarse − R φ_finer‖ / ‖R φ_finer‖ for each neighbouring pair.
+    let mut differences = Vec::new();
+    for pair in solutions.windows(2) {
+        let (finer, coarser) = (&pair[0].1, &pair[1].1);
+        let restricted = resample(finer, coarser.dims())?;
+        let (mut diff, mut norm) = (0.0f64, 0.0f64);
+        for (c, r) in coarser.data().iter().zip(restricted.data()) {
+            diff += (f64::from(*c) - f64::from(*r)).powi(2);
+            norm += f64::from(*r).powi(2);
+        }
+        differences.push(if norm > 0.0 {
+            (diff / norm).sqrt()
+        } else {
+            0.0
+        });
+    }
+    let observed = match differences.as_slice() {
+        [d0, d1, ..] if *d0 > 0.0 && *d1 > 0.0 => Some((d1 / d0).log2()),
+        _ => None,
+    }
+    .filter(|p| (0.5..=4.0).contains(p));
+    let order = observed.unwrap_or(NOMINAL_ORDER);
+    let gain = 2f64.powf(order);
+    let levels: Vec<Level> = solutions
+        .iter()
+        .enumerate()
+        .map(|(i, (coarsening, grid, seconds))| {
+            // The finest level's error from the pair below it; a coarser one's from the
+            // pair it is the coarser of.
+            let estimated_error = match (i, differences.first()) {
+                (0, Some(d)) => d / (gain - 1.0),
+                (0, None) => f64::NAN,
+                (i, _) => differences[i - 1] * gain / (gain - 1.0),
+            };
+            Level {
+                coarsening: *coarsening,
+                dims: grid.dims(),
+                seconds: *seconds,
+                estimated_error,
+            }
+        })
+        .collect();
+    let chosen = levels
+        .iter()
+        .rposition(|l| l.estimated_error <= tolerance)
+        .unwrap_or(0);
+    Ok(ResolutionChoice {
+        met: levels
+            .get(chosen)
+            .is_some_and(|l| l.estimated_error <= tolerance),
+        levels,
+        order,
+        observed: observed.is_some(),
+        chosen,
+    })
+}
