@@ -172,6 +172,18 @@ enum Command {
     },
     /// Print the diffusion optics of the measured materials (Jensen et al. 2001).
     Materials,
+    /// Find the coarsest grid on which the solver meets a discretisation error: it solves
+    /// on the scene's grid and on grids 2× and 4× coarser and estimates each one's error
+    /// from their differences (Richardson, with the order observed from three levels).
+    Resolution {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        #[command(flatten)]
+        solver: SolverArgs,
+        /// The relative L2 discretisation error to meet.
+        #[arg(long = "error", value_name = "RELATIVE", default_value_t = 0.02)]
+        target: f64,
+    },
 }
 
 /// How a job ended, when it ran.
@@ -197,6 +209,11 @@ fn main() -> ExitCode {
         Some(Command::Info { scene, solver }) => {
             info(scene.as_deref(), &solver).map(|()| Ended::Done)
         }
+        Some(Command::Resolution {
+            scene,
+            solver,
+            target,
+        }) => resolution(&scene, &solver, target).map(|()| Ended::Done),
         Some(Command::Materials) => materials_table(&mut io::stdout().lock())
             .map(|()| Ended::Done)
             .map_err(|e| match e {
@@ -1011,6 +1028,80 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
         built.settings.width, built.settings.height, built.camera
     )
     .map_err(io_err)?;
+    Ok(())
+}
+
+/// `lucent resolution`: the levels solved, their estimated errors and the one chosen.
+fn resolution(scene: &Path, args: &SolverArgs, target: f64) -> Result<(), Error> {
+    if !(target > 0.0 && target < 1.0) {
+        return Err(Error::Usage(format!(
+            "--error {target}: a relative error between 0 and 1"
+        )));
+    }
+    let (parsed, built, name) = load(Some(scene), args.budget())?;
+    let chosen = choose_solver(&parsed, args)?;
+    chosen.solver.admits(&built.problem)?;
+    let mut options = args.options(&chosen, meter_free())?;
+    // The iteration's own error must stay far below the discretisation's it measures.
+    options.relative_tolerance = options.relative_tolerance.min(target * 1e-3);
+    options.validate()?;
+    let choice = lucent::resolution::coarsest_meeting(
+        &built.problem,
+        chosen.solver.as_ref(),
+        target,
+        &options,
+    )?;
+    let mut out = io::stdout().lock();
+    let io_err = |e: io::Error| Error::Io {
+        path: "<stdout>".into(),
+        reason: e.to_string(),
+    };
+    writeln!(
+        out,
+        "{name}: `{}` to a relative error of {}",
+        chosen.solver.name(),
+        S(target)
+    )
+    .map_err(io_err)?;
+    for (i, level) in choice.levels.iter().enumerate() {
+        let [nx, ny, nz] = level.dims;
+        writeln!(
+            out,
+            "  {nx} × {ny} × {nz} cells ({}× coarser): estimated error {}, solved in {} s{}",
+            level.coarsening,
+            S(level.estimated_error),
+            S(level.seconds),
+            if i == choice.chosen {
+                "  <- chosen"
+            } else {
+                ""
+            }
+        )
+        .map_err(io_err)?;
+    }
+    writeln!(
+        out,
+        "  order {} ({})",
+        S(choice.order),
+        if choice.observed {
+            "observed from three levels"
+        } else {
+            "nominal: three levels did not show one"
+        }
+    )
+    .map_err(io_err)?;
+    match choice.needed_refinement(target) {
+        None => {
+            let [nx, ny, nz] = choice.levels[choice.chosen].dims;
+            writeln!(out, "chosen: {nx} × {ny} × {nz} cells meet it").map_err(io_err)?;
+        }
+        Some(factor) => writeln!(
+            out,
+            "not met: the scene's grid would need about {}× as many cells per axis",
+            S(factor)
+        )
+        .map_err(io_err)?,
+    }
     Ok(())
 }
 

@@ -195,6 +195,42 @@ fn info_reports_the_regime() {
     assert!(line.contains("0% of all cells void"), "{line}");
 }
 
+/// `lucent resolution` solves the slab (8 × 8 × 32) on its grid and 2× coarser (4× would
+/// leave 2 cells across), estimates both errors with the nominal order, and chooses the
+/// coarser grid for a loose target and reports the refinement needed for a tight one; a
+/// target outside (0, 1) is a usage error.
+#[test]
+fn resolution_reports_levels_and_the_choice() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/suite/slab.toml");
+    let scene = scene.display().to_string();
+    let run = |error: &str| {
+        lucent(
+            &[
+                "resolution",
+                &scene,
+                "--solver",
+                "diffusion-mg",
+                "--error",
+                error,
+            ],
+            Path::new("."),
+        )
+    };
+    let loose = run("0.9");
+    assert!(loose.status.success(), "{}", stderr(&loose));
+    let text = String::from_utf8_lossy(&loose.stdout);
+    assert!(text.contains("8 × 8 × 32 cells (1× coarser)"), "{text}");
+    assert!(text.contains("4 × 4 × 16 cells (2× coarser)"), "{text}");
+    assert!(text.contains("nominal"), "{text}");
+    assert!(text.contains("chosen: 4 × 4 × 16 cells meet it"), "{text}");
+    let tight = run("1e-9");
+    assert!(tight.status.success(), "{}", stderr(&tight));
+    let text = String::from_utf8_lossy(&tight.stdout);
+    assert!(text.contains("not met"), "{text}");
+    let bad = run("-1");
+    assert_eq!(bad.status.code(), Some(2), "{}", stderr(&bad));
+}
+
 #[test]
 fn lists_solvers_with_capabilities() {
     let out = lucent(&["solvers"], Path::new("."));
