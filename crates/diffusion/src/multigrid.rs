@@ -573,6 +573,11 @@ impl Multigrid {
 
     /// Solves A φ = b to the stopping rule: f64 solution and residual, f32 cycles on the
     /// correction. `phi` holds the initial guess (ignored when full multigrid is on).
+    ///
+    /// # Panics
+    /// If `rhs` or `phi` is not [`Multigrid::fine_cells`] long: the hierarchy is built for
+    /// one problem, whose [`DiffusionProblem::rhs`] has that length (the registry's solvers
+    /// and `DeviceMultigrid::solve` check lengths and return typed errors).
     pub fn solve(&self, rhs: &[f64], phi: &mut [f64], stopping: &Stopping) -> Convergence {
         let cycle = self.settings.cycle;
         let solved = self.iterate(rhs, phi, stopping, true, |(b, x, s)| {
@@ -591,6 +596,9 @@ impl Multigrid {
     /// ([`Multigrid::cycle_from_zero`] on the host). The f64 solution, residual and
     /// stopping rule stay here; full multigrid is not run (it would run on the host), so
     /// `phi` is the initial guess. An error of `cycle` stops the solve and is returned.
+    ///
+    /// # Panics
+    /// As [`Multigrid::solve`], on vectors of the wrong length.
     pub fn solve_with<E>(
         &self,
         rhs: &[f64],
@@ -614,6 +622,13 @@ impl Multigrid {
         full_multigrid: bool,
         cycle: impl FnMut((&mut Work, &mut Work, &mut Work)) -> Result<(), E>,
     ) -> Result<Convergence, E> {
+        let n = self.fine_cells();
+        assert!(
+            rhs.len() == n && phi.len() == n,
+            "Multigrid::solve: a right-hand side of {} and a solution of {} values for a hierarchy of {n} cells",
+            rhs.len(),
+            phi.len()
+        );
         let started = std::time::Instant::now();
         let mut work = self
             .work

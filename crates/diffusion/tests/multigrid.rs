@@ -459,3 +459,23 @@ fn the_assembled_matrix_is_the_operator_the_solvers_solve() {
         residual.sqrt() / b_norm
     );
 }
+
+/// A right-hand side or solution of the wrong length is a caller's error the hierarchy
+/// names (the registry's solvers check lengths themselves and return typed errors).
+#[test]
+#[should_panic(
+    expected = "a right-hand side of 511 and a solution of 512 values for a hierarchy of 512 cells"
+)]
+fn vectors_of_the_wrong_length_are_named() {
+    let grid = GridGeometry::from_bounds([8; 3], DVec3::ZERO, DVec3::ONE).unwrap();
+    let problem = DiffusionProblem::new(
+        CellGeometry::full_box(grid),
+        vec![0.1; 512],
+        vec![0.2; 512],
+        Boundaries::uniform(Condition::Robin { a: 2.0 }),
+    )
+    .unwrap();
+    let multigrid =
+        lucent_diffusion::Multigrid::build(&problem, MultigridSettings::default()).unwrap();
+    multigrid.solve(&[1.0; 511], &mut [0.0; 512], &Stopping::default());
+}
