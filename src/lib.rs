@@ -135,6 +135,16 @@ pub enum Error {
     /// From the optics.
     #[error(transparent)]
     Optics(#[from] lucent_optics::OpticsError),
+    /// A solve a job needed stopped without converging, so its result cannot be used.
+    #[error("{what}: the solve {reason}")]
+    Unconverged {
+        /// Which solve.
+        what: String,
+        /// Why it stopped, in words.
+        reason: String,
+        /// Whether it diverged (rather than stopping at a limit).
+        diverged: bool,
+    },
 }
 
 /// A byte count from the command line: a number of bytes (`4096`, `1e9`) or a number with

@@ -175,6 +175,7 @@ enum Command {
     /// Find the coarsest grid on which the solver meets a discretisation error: it solves
     /// on the scene's grid and on grids 2× and 4× coarser and estimates each one's error
     /// from their differences (Richardson, with the order observed from three levels).
+    #[command(after_help = EXIT_STATUS_HELP)]
     Resolution {
         /// Scene file (TOML).
         scene: PathBuf,
@@ -234,6 +235,14 @@ fn main() -> ExitCode {
         Err(e @ Error::Usage(_)) => {
             let _ = writeln!(io::stderr(), "lucent: {e}");
             ExitCode::from(2)
+        }
+        Err(e @ Error::Unconverged { diverged, .. }) => {
+            let _ = writeln!(io::stderr(), "lucent: {e}");
+            ExitCode::from(if diverged {
+                EXIT_DIVERGED
+            } else {
+                EXIT_UNCONVERGED
+            })
         }
         Err(e) => {
             let _ = writeln!(io::stderr(), "lucent: {e}");

@@ -13,7 +13,9 @@
 //!
 //! The medium, emission and embedded body are resampled onto each coarser grid (the box
 //! average of the trilinear field: the same medium, seen coarser). A level whose grid
-//! would have fewer than [`MIN_CELLS`] cells along an axis is not tried.
+//! would have fewer than [`MIN_CELLS`] cells along an axis is not tried; a problem whose
+//! grid leaves no coarser level, or a solve that stops without converging (its
+//! differences would measure the iteration, not the grid), is an error.
 
 use lucent_core::{Light, Problem, SolveOptions, Solver};
 use lucent_grid::Grid;
@@ -120,7 +122,22 @@ pub fn coarsest_meeting(
         let started = std::time::Instant::now();
         let solution = solver.solve(&level, options)?;
         let seconds = started.elapsed().as_secs_f64();
+        let stop = &solution.report.stop_reason;
+        if !stop.is_converged() {
+            let [nx, ny, nz] = dims;
+            return Err(Error::Unconverged {
+                what: format!("`{}` on {nx} × {ny} × {nz} cells", solver.name()),
+                reason: stop.to_string(),
+                diverged: stop.is_diverged(),
+            });
+        }
         solutions.push((coarsening, solution.fluence(0).clone(), seconds));
+    }
+    if solutions.len() < 2 {
+        let [nx, ny, nz] = fine;
+        return Err(Error::Invalid(format!(
+            "{nx} × {ny} × {nz} cells leave no grid 2× coarser with {MIN_CELLS} cells along each axis: no error estimate"
+        )));
     }
     // ‖φ_coarse − R φ_finer‖ / ‖R φ_finer‖ for each neighbouring pair.
     let mut differences = Vec::new();
@@ -151,10 +168,9 @@ pub fn coarsest_meeting(
         .map(|(i, (coarsening, grid, seconds))| {
             // The finest level's error from the pair below it; a coarser one's from the
             // pair it is the coarser of.
-            let estimated_error = match (i, differences.first()) {
-                (0, Some(d)) => d / (gain - 1.0),
-                (0, None) => f64::NAN,
-                (i, _) => differences[i - 1] * gain / (gain - 1.0),
+            let estimated_error = match i {
+                0 => differences[0] / (gain - 1.0),
+                i => differences[i - 1] * gain / (gain - 1.0),
             };
             Level {
                 coarsening: *coarsening,

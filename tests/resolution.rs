@@ -106,3 +106,32 @@ fn estimates_track_the_true_error_and_the_choice_follows_the_tolerance() {
     let picked = coarsest_meeting(&problem, solver.as_ref(), loose, &options).unwrap();
     assert!(picked.met && picked.chosen == 2, "{picked:?}");
 }
+
+/// What gives no estimate is an error, not a NaN: a grid with no coarser level of
+/// `MIN_CELLS` cells across, and a solve stopped by its iteration limit (its differences
+/// would measure the iteration, not the grid).
+#[test]
+fn no_coarser_level_and_unconverged_solves_are_errors() {
+    let solver = lucent::registry()
+        .build("diffusion-mg", &Params::default())
+        .unwrap();
+    let tight = SolveOptions {
+        relative_tolerance: 1e-10,
+        ..SolveOptions::default()
+    };
+    match coarsest_meeting(&cube(6), solver.as_ref(), 0.1, &tight) {
+        Err(lucent::Error::Invalid(reason)) => {
+            assert!(reason.contains("no grid 2× coarser"), "{reason}")
+        }
+        other => panic!("{other:?}"),
+    }
+    let one_cycle = SolveOptions {
+        relative_tolerance: 1e-10,
+        max_iterations: 1,
+        ..SolveOptions::default()
+    };
+    match coarsest_meeting(&cube(16), solver.as_ref(), 0.1, &one_cycle) {
+        Err(lucent::Error::Unconverged { diverged, .. }) => assert!(!diverged),
+        other => panic!("{other:?}"),
+    }
+}

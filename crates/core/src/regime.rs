@@ -195,11 +195,12 @@ impl Regime {
         }
     }
 
-    /// The region holding cell (i, j, k).
-    pub fn region_of(&self, [i, j, k]: [usize; 3]) -> &RegionIndicators {
-        let [rx, ry, _] = self.dims;
+    /// The region holding cell (i, j, k); `None` for a cell outside the grid.
+    pub fn region_of(&self, [i, j, k]: [usize; 3]) -> Option<&RegionIndicators> {
+        let [rx, ry, rz] = self.dims;
         let b = self.block;
-        &self.regions[i / b + rx * (j / b + ry * (k / b))]
+        let [ri, rj, rk] = [i / b, j / b, k / b];
+        (ri < rx && rj < ry && rk < rz).then(|| &self.regions[ri + rx * (rj + ry * rk)])
     }
 
     /// The whole problem's indicators: means over the regions that hold medium, weighted

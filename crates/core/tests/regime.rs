@@ -92,7 +92,7 @@ fn light_paths_are_the_line_integrals_to_the_region_centres() {
     let regime = Regime::of(&problem, 0, 4);
     let reduced = 2.0 * (1.0 - 0.9 * 0.5);
     for rx in 0..4 {
-        let region = regime.region_of([rx * 4, 0, 0]);
+        let region = regime.region_of([rx * 4, 0, 0]).unwrap();
         let x = (rx as f64 * 4.0 + 2.0) * 0.1;
         assert!((region.light_depth - 2.0 * x).abs() < 1e-5, "{region:?}");
         assert!((region.source_mfp - reduced * x).abs() < 1e-5, "{region:?}");
@@ -112,8 +112,10 @@ fn light_paths_are_the_line_integrals_to_the_region_centres() {
     )
     .unwrap();
     let regime = Regime::of(&lights, 0, 4);
-    assert!(regime.region_of([4, 0, 0]).light_depth < 1e-9);
-    assert!((regime.region_of([8, 0, 0]).light_depth - 2.0 * 0.4).abs() < 1e-5);
+    assert!(regime.region_of([4, 0, 0]).unwrap().light_depth < 1e-9);
+    assert!((regime.region_of([8, 0, 0]).unwrap().light_depth - 2.0 * 0.4).abs() < 1e-5);
+    // Outside the grid there is no region.
+    assert!(regime.region_of([16, 0, 0]).is_none());
     // The sky reaches the corner region's centre (0.2 from three faces) through 0.4.
     let sky = Problem::new(
         *lights.geometry(),
@@ -125,7 +127,7 @@ fn light_paths_are_the_line_integrals_to_the_region_centres() {
         None,
     )
     .unwrap();
-    let corner = *Regime::of(&sky, 0, 4).region_of([0, 0, 0]);
+    let corner = *Regime::of(&sky, 0, 4).region_of([0, 0, 0]).unwrap();
     assert!((corner.light_depth - 2.0 * 0.2).abs() < 1e-5, "{corner:?}");
 }
 
@@ -162,13 +164,13 @@ fn void_and_emission_are_boundaries_and_sources() {
     .unwrap();
     // Regions of 4³: the middle one is the cavity.
     let regime = Regime::of(&problem, 0, 4);
-    let cavity = regime.region_of([4, 4, 4]);
+    let cavity = regime.region_of([4, 4, 4]).unwrap();
     assert_eq!(cavity.empty_fraction, 1.0);
     assert_eq!(cavity.sigma_t_reduced, 0.0);
     assert_eq!(cavity.boundary_mfp, 0.0);
     // The region left of the cavity, cells 0..4 in x: each cell's nearest boundary is the
     // box or the cavity, whichever is fewer cells away.
-    let left = regime.region_of([0, 4, 4]);
+    let left = regime.region_of([0, 4, 4]).unwrap();
     let mut sum = 0.0;
     for k in 4..8usize {
         for j in 4..8usize {
@@ -180,8 +182,8 @@ fn void_and_emission_are_boundaries_and_sources() {
     }
     assert!((left.boundary_mfp - sum / 64.0).abs() < 1e-9, "{left:?}");
     // Emission in the last region: a source there, none elsewhere (no light reaches).
-    assert_eq!(regime.region_of([10, 10, 10]).light_depth, 0.0);
-    assert_eq!(regime.region_of([0, 0, 0]).light_depth, 50.0);
+    assert_eq!(regime.region_of([10, 10, 10]).unwrap().light_depth, 0.0);
+    assert_eq!(regime.region_of([0, 0, 0]).unwrap().light_depth, 50.0);
     // The summary: one region of the 27 void, α′ = 1 everywhere.
     let summary = regime.summary();
     assert!((summary.empty_fraction - 1.0 / 27.0).abs() < 1e-12);
@@ -214,13 +216,16 @@ fn outside_an_embedded_body_is_void() {
     let open = Regime::of(&problem, 0, 4);
     let embedded = Regime::of(&body, 0, 4);
     // The corner region is outside the sphere: all void.
-    assert_eq!(embedded.region_of([0, 0, 0]).empty_fraction, 1.0);
-    assert_eq!(open.region_of([0, 0, 0]).empty_fraction, 0.0);
+    assert_eq!(embedded.region_of([0, 0, 0]).unwrap().empty_fraction, 1.0);
+    assert_eq!(open.region_of([0, 0, 0]).unwrap().empty_fraction, 0.0);
     // The region of cells 8..12 next to the centre is inside but for its far corner
     // (0.35·√3 = 0.61 from the centre: 7 of its 64 cells are outside); the sphere's
     // surface (0.5 from the centre) is nearer than the box (0.8): its cells are closer
     // to a boundary than in the open box, but still deep in the medium.
-    let (inside, box_only) = (embedded.region_of([8, 8, 8]), open.region_of([8, 8, 8]));
+    let (inside, box_only) = (
+        embedded.region_of([8, 8, 8]).unwrap(),
+        open.region_of([8, 8, 8]).unwrap(),
+    );
     assert_eq!(inside.empty_fraction, 7.0 / 64.0);
     assert!(
         inside.boundary_mfp < box_only.boundary_mfp && inside.boundary_mfp > 0.5,

@@ -240,14 +240,7 @@ impl DeviceField64 {
 
     /// Replaces the values (same length, finite); the write lands before the next submit.
     pub fn write(&self, context: &GpuContext, values: &[f64]) -> Result<(), GpuError> {
-        if values.len() != self.len {
-            return Err(GpuError::Device(format!(
-                "{}: {} values written to a field of {}",
-                self.what,
-                values.len(),
-                self.len
-            )));
-        }
+        self.check_len(values.len())?;
         check_values64(&self.what, values)?;
         if !values.is_empty() {
             context.checked(|| {
