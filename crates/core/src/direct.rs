@@ -447,6 +447,7 @@ impl DirectSolver {
                 measured_peak_bytes: meter.and_then(|m| m.peak_bytes()),
                 stop_reason: crate::solver::StopReason::Exact,
                 paging: Some(after.since(&before)),
+                choice: None,
             },
             paging: after.since(&before),
         })

@@ -322,6 +322,7 @@ where
             stop_reason: record.stop_reason,
             measured_peak_bytes: meter.and_then(|m| m.peak_bytes()),
             paging: record.paging,
+            choice: None,
         },
     })
 }

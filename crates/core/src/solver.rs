@@ -606,6 +606,10 @@ pub struct SolveReport {
     /// sweeps under a tight memory budget): hits, misses, evictions, bytes moved.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub paging: Option<lucent_paging::PagerStats>,
+    /// What a solver that chooses among others (`auto`) ran and why, in one line; `None`
+    /// for every solver that runs its own method.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub choice: Option<String>,
 }
 
 /// A light-transport solver: one obvious way to be called.

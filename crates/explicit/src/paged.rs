@@ -175,6 +175,7 @@ pub(crate) fn convection(
             measured_peak_bytes: meter.and_then(|m| m.peak_bytes()),
             stop_reason: StopReason::Exact,
             paging: Some(after.since(&before)),
+            choice: None,
         },
         paging: after.since(&before),
     })

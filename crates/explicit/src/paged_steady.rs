@@ -234,6 +234,7 @@ pub(crate) fn solve(
             measured_peak_bytes: meter.and_then(|m| m.peak_bytes()),
             stop_reason: record.stop_reason,
             paging: Some(paging),
+            choice: None,
         },
         paging,
     })

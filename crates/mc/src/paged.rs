@@ -567,6 +567,7 @@ pub(crate) fn solve_paged(
             measured_peak_bytes: meter.and_then(|m| m.peak_bytes()),
             stop_reason,
             paging: Some(paging),
+            choice: None,
         },
         paging,
     })

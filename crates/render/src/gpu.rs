@@ -581,6 +581,7 @@ mod tests {
                 peak_memory_bytes: 0,
                 measured_peak_bytes: None,
                 paging: None,
+                choice: None,
                 stop_reason: StopReason::Exact,
             },
         };

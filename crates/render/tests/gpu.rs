@@ -53,6 +53,7 @@ fn report() -> SolveReport {
         peak_memory_bytes: 0,
         measured_peak_bytes: None,
         paging: None,
+        choice: None,
         stop_reason: StopReason::Exact,
     }
 }

@@ -32,6 +32,7 @@ fn dark_solution(problem: &Problem) -> Solution {
             peak_memory_bytes: 0,
             measured_peak_bytes: None,
             paging: None,
+            choice: None,
             stop_reason: StopReason::Exact,
         },
     }
