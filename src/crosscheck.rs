@@ -686,3 +686,42 @@ surface, r = 1.37–8.63 mm.
 - **Within a transport mean free path of the surface** (the last shell) no Robin condition
   holds: the radiance there is far from linearly anisotropic.
 ";
+
+/// The line that opens `auto`'s section of `docs/validation.md`.
+const AUTO_BEGIN: &str = "<!-- auto: written by cargo xtask pareto -->";
+/// The line that closes it.
+const AUTO_END: &str = "<!-- auto: end -->";
+
+/// `auto`'s section of `docs/validation.md` around `table` (from
+/// [`crate::pareto::auto_markdown`]), between its markers.
+pub fn auto_section(table: &str) -> String {
+    format!(
+        "{AUTO_BEGIN}\n## `auto` against the fastest single solver\n\n\
+         Measured by `cargo xtask pareto` in the same run as each scene's chart \
+         (`docs/pareto/<scene>.svg`, the `auto` curve; data in `docs/pareto/auto_runs.csv`): \
+         `auto` at each tolerance with the table of measurements holding the scene's own rows, \
+         its error against the scene's total-fluence reference, its wall time (the choice \
+         included) over that of the fastest single run of the sweep that meets the \
+         tolerance (each the least of three runs timed in turn, the sweep's own run \
+         counting for the single one), and, \
+         to show how the rule carries to scenes it has not measured, its choice with the \
+         scene's rows left out of the table (the nearest other scene's measurements decide). \
+         \"no (said so)\": the tolerance was reported as unreachable and the closest run \
+         was made.\n\n{table}\n{AUTO_END}\n"
+    )
+}
+
+/// The `auto` section of `text`, markers included, if it has one.
+pub fn auto_section_of(text: &str) -> Option<&str> {
+    let start = text.find(AUTO_BEGIN)?;
+    let end = text[start..].find(AUTO_END)? + start + AUTO_END.len();
+    Some(text[start..end].trim_end())
+}
+
+/// `text` with its `auto` section replaced by `section`, or `section` appended.
+pub fn with_auto_section(text: &str, section: &str) -> String {
+    match auto_section_of(text) {
+        Some(old) => text.replacen(old, section.trim_end(), 1),
+        None => format!("{}\n\n{}\n", text.trim_end(), section.trim_end()),
+    }
+}

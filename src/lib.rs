@@ -17,6 +17,8 @@
 //! | [`lbm`] | `lucent-lbm` | Lattice-Boltzmann lighting: D3Q7/D3Q19, TRT matched to diffusion, AA streaming |
 //! | [`explicit`] | `lucent-explicit` | FTCS, P1, ordinates, Zhang & Ma convection–diffusion, Jacobi, with their stability bounds |
 //! | [`scene`] | (here) | TOML scene files and the built-in default scene |
+//! | [`auto`] | (here) | `auto`: the cheapest solver measured to meet a tolerance, chosen by regime |
+//! | [`resolution`] | (here) | the coarsest grid meeting a tolerance, by Richardson estimates |
 //!
 //! See `ARCHITECTURE.md` at the repository root for the crate map and the data flow
 //! volume → medium → problem → solver → solution → image.
@@ -29,6 +31,7 @@
 //! # Ok::<(), lucent::optics::OpticsError>(())
 //! ```
 
+pub mod auto;
 pub mod crosscheck;
 pub mod fuzzing;
 pub mod pareto;
@@ -69,6 +72,7 @@ pub fn registry() -> lucent_core::Registry {
     for entry in lucent_gpu_solvers::GpuSolver::ENTRIES {
         registry.register(entry);
     }
+    registry.register(auto::AutoSolver::ENTRY);
     registry
 }
 

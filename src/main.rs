@@ -487,7 +487,12 @@ fn run_solver(
     let options = args.options(chosen, meter.solver_callback())?;
     let solution = chosen.solver.solve(&built.problem, &options);
     progress.finish_and_clear();
-    Ok(solution?)
+    let solution = solution?;
+    // A solver that chose another (`auto`) says what it ran and why, in one line.
+    if let Some(choice) = &solution.report.choice {
+        let _ = writeln!(io::stderr(), "lucent: {choice}");
+    }
+    Ok(solution)
 }
 
 /// How a solve that stopped for `reason` ends the job; says so on stderr when it did not

@@ -22,17 +22,22 @@
 //! The knobs live in one table, [`runs`]; a run whose solver does not admit the scene is
 //! skipped.
 //!
-//! `cargo xtask pareto` writes `docs/pareto/<scene>.svg` and `.csv`.
+//! `cargo xtask pareto` writes `docs/pareto/<scene>.svg` and `.csv` (each run's error
+//! against its own reference and against the total fluence), `auto`'s table
+//! (`docs/pareto/auto.csv`, [`crate::auto::Table`]) and `auto`'s own runs on each scene
+//! ([`measure_auto`]: with the scene's rows in the table, and with them left out), whose
+//! table goes into `docs/validation.md`.
 
 use std::path::Path;
 use std::time::Instant;
 
-use lucent_core::{FluenceKind, Light, Params, Problem, SolveOptions};
+use lucent_core::{FluenceKind, Params, Problem, SolveOptions, Solver};
 use lucent_grid::Grid;
-use lucent_grid::resample::{resample, restrict};
+use lucent_grid::resample::restrict;
 
 use crate::Error;
-use crate::crosscheck::{SuiteScene, compare, reference};
+use crate::auto::{AutoSolver, Features, Measured, MeasuredScene, Table, csv_field};
+use crate::crosscheck::{Reference, SuiteScene, compare, reference};
 
 /// One measured point.
 #[derive(Debug, Clone, PartialEq)]
@@ -43,49 +48,24 @@ pub struct Point {
     pub setting: String,
     /// Wall time of the solve, seconds.
     pub seconds: f64,
-    /// Relative L2 error against the reference.
+    /// Relative L2 error against the reference for what the solver computes (uncollided
+    /// or total fluence).
     pub error: f64,
+    /// Relative L2 error against the total fluence (the same as `error` for solvers that
+    /// compute it): what `auto` is asked to meet.
+    pub error_total: f64,
 }
 
 /// The same medium on `factor` times as many cells per axis: every grid resampled
-/// trilinearly at the finer cell centres, so that refining converges to the scene's own
-/// (trilinear) medium instead of revealing new detail of a procedural volume.
+/// trilinearly at the finer cell centres ([`crate::resolution::on_grid`]), so that refining
+/// converges to the scene's own (trilinear) medium instead of revealing new detail of a
+/// procedural volume.
 pub(crate) fn refined(scene: &SuiteScene, factor: usize) -> Result<Problem, Error> {
     let p = &scene.built.problem;
-    let fine = p.geometry().dims().map(|n| n * factor);
-    let up = |g: &Grid| {
-        if factor == 1 {
-            Ok(g.clone())
-        } else {
-            resample(g, fine)
-        }
-    };
-    let medium = if factor == 1 {
-        p.medium().clone()
-    } else {
-        p.medium().resampled(fine)?
-    };
-    let lights = p
-        .lights()
-        .iter()
-        .map(|l| match l {
-            Light::Emission { grid, scale } => up(grid).map(|grid| Light::Emission {
-                grid,
-                scale: *scale,
-            }),
-            other => Ok(other.clone()),
-        })
-        .collect::<Result<_, _>>()?;
-    // The embedded body's SDF too: without it the medium would fill the box.
-    let embedded = p.embedded().map(up).transpose()?;
-    let geometry = *medium.sigma_t[0].geometry();
-    Ok(Problem::new(
-        geometry,
-        medium,
-        lights,
-        p.boundary(),
-        embedded,
-    )?)
+    if factor == 1 {
+        return Ok(p.clone());
+    }
+    crate::resolution::on_grid(p, p.geometry().dims().map(|n| n * factor))
 }
 
 /// One run of the sweep: a solver, its parameters (as a scene's `[solver.params]` would
@@ -363,9 +343,19 @@ pub fn runs() -> Vec<Run> {
     runs
 }
 
+/// A scene's sweep: the points and the total-fluence reference they were measured against.
+#[derive(Debug, Clone)]
+pub struct Sweep {
+    /// One per run the scene admits, in [`runs`] order.
+    pub points: Vec<Point>,
+    /// The total fluence's reference.
+    pub total: Reference,
+}
+
 /// Sweeps every [`runs`] entry the solver admits on `scene`, measuring each against the
-/// reference for what its solver computes (uncollided or total fluence).
-pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Vec<Point>, Error> {
+/// reference for what its solver computes (uncollided or total fluence) and against the
+/// total fluence.
+pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Sweep, Error> {
     let registry = crate::registry();
     let mut points = Vec::new();
     let uncollided = reference(scene, FluenceKind::Uncollided, 0.005, cache)?;
@@ -406,30 +396,328 @@ pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Vec<Point>, Err
                 }
             })
             .collect();
-        let reference = match solver.capabilities().fluence {
-            FluenceKind::Uncollided => &uncollided,
-            FluenceKind::Total => &total,
+        let error_total = compare(&averaged, &total).relative_l2;
+        let error = match solver.capabilities().fluence {
+            FluenceKind::Uncollided => compare(&averaged, &uncollided).relative_l2,
+            FluenceKind::Total => error_total,
         };
         points.push(Point {
             solver: run.label.into(),
             setting: run.setting,
             seconds,
-            error: compare(&averaged, reference).relative_l2,
+            error,
+            error_total,
         });
     }
-    Ok(points)
+    Ok(Sweep { points, total })
+}
+
+/// `scene`'s entry in `auto`'s table: its regime and its measured points.
+pub fn measured_scene(scene: &SuiteScene, points: &[Point]) -> MeasuredScene {
+    let problem = &scene.built.problem;
+    MeasuredScene {
+        name: scene.name.clone(),
+        cells: problem.geometry().voxel_count(),
+        features: Features::of(problem),
+        points: points
+            .iter()
+            .map(|p| Measured {
+                label: p.solver.clone(),
+                setting: p.setting.clone(),
+                seconds: p.seconds,
+                error_total: p.error_total,
+            })
+            .collect(),
+    }
+}
+
+/// The tolerances `cargo xtask pareto` measures `auto` at: the two per cent, and a
+/// looser and a tighter target around it.
+pub const AUTO_TOLERANCES: [f64; 4] = [0.01, 0.02, 0.05, 0.2];
+
+/// One measured run of `auto` on a suite scene.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AutoPoint {
+    /// The suite scene.
+    pub scene: String,
+    /// The tolerance asked for.
+    pub tolerance: f64,
+    /// Whether the table held the scene's own measurements (`false`: left out, so the
+    /// choice came from the other scenes).
+    pub own_rows: bool,
+    /// The nearest scene it chose from.
+    pub nearest: String,
+    /// The run it chose, `label (setting)`.
+    pub chose: String,
+    /// Whether the chosen run was expected to meet the tolerance.
+    pub expected_to_meet: bool,
+    /// Its wall time, the choice included, seconds.
+    pub seconds: f64,
+    /// Its relative L2 error against the total fluence.
+    pub error_total: f64,
+    /// The fastest single run of the same sweep meeting the tolerance, `label (setting)`,
+    /// and its time.
+    pub fastest: Option<(String, f64)>,
+}
+
+/// Runs `auto` on `scene` at each of `tolerances` with `table` (which should hold the
+/// scene's rows from `sweep`) where `own_rows` holds `true`, and with the scene's rows left
+/// out where it holds `false`, each measured against the sweep's total reference; with its
+/// own rows, `auto` and the sweep's fastest single run meeting the tolerance are timed
+/// [`REPEATS`] times in turn and the least time of each is kept (the single run's sweep
+/// time counting as one more).
+pub fn measure_auto(
+    scene: &SuiteScene,
+    table: &Table,
+    sweep: &Sweep,
+    tolerances: &[f64],
+    own_rows: &[bool],
+) -> Result<Vec<AutoPoint>, Error> {
+    let problem = &scene.built.problem;
+    let registry = crate::registry();
+    let all = runs();
+    let mut out = Vec::new();
+    for &tolerance in tolerances {
+        let fastest = sweep
+            .points
+            .iter()
+            .filter(|p| p.error_total <= tolerance)
+            .min_by(|a, b| a.seconds.total_cmp(&b.seconds));
+        // The fastest single run again, as the sweep ran it (its refined problem made
+        // outside the timing), to be timed beside `auto`.
+        let single = match fastest {
+            Some(p) => {
+                let run = all
+                    .iter()
+                    .find(|r| r.label == p.solver && r.setting == p.setting)
+                    .ok_or_else(|| Error::Invalid(format!("no run {}", p.solver)))?;
+                let params: Params = toml::from_str(&run.params)
+                    .map_err(|e| Error::Invalid(format!("pareto parameters: {e}")))?;
+                let solver = registry.build(run.solver, &params)?;
+                let defaults = SolveOptions::default();
+                let options = SolveOptions {
+                    relative_tolerance: run.tolerance.unwrap_or(defaults.relative_tolerance),
+                    max_iterations: run.max_iterations.unwrap_or(defaults.max_iterations),
+                    ..defaults
+                };
+                Some((p, solver, refined(scene, run.factor)?, options))
+            }
+            None => None,
+        };
+        for &own_rows in own_rows {
+            let table = if own_rows {
+                table.clone()
+            } else {
+                table.without(&scene.name)
+            };
+            if table.scenes.is_empty() {
+                continue;
+            }
+            let auto = AutoSolver::with_table(tolerance, table);
+            let choice = match auto.choose(problem, None) {
+                Ok(c) => c,
+                // Left out, the nearest other scene's solvers may all refuse this one.
+                Err(e) if !own_rows => {
+                    eprintln!("pareto: {}: auto without its rows: {e}", scene.name);
+                    continue;
+                }
+                Err(e) => return Err(e.into()),
+            };
+            let options = SolveOptions {
+                time_budget: Some(std::time::Duration::from_secs(120)),
+                ..SolveOptions::default()
+            };
+            // Timed REPEATS times each, `auto` and the fastest single run in turn, and the
+            // least of each taken: on a shared two-core machine a millisecond solve's
+            // single timing varies by tens of per cent.
+            let (mut seconds, mut single_seconds) = (f64::INFINITY, fastest.map(|p| p.seconds));
+            let mut error_total = f64::NAN;
+            let repeats = if own_rows { REPEATS } else { 1 };
+            for _ in 0..repeats {
+                let start = Instant::now();
+                let solution = match auto.solve(problem, &options) {
+                    Err(e) if crate::device_missing(&e) => break,
+                    other => other?,
+                };
+                seconds = seconds.min(start.elapsed().as_secs_f64());
+                error_total = compare(&solution.fluence, &sweep.total).relative_l2;
+                if let (true, Some((_, solver, fine, run_options))) = (own_rows, &single) {
+                    let start = Instant::now();
+                    solver.solve(fine, run_options)?;
+                    let t = start.elapsed().as_secs_f64();
+                    single_seconds = single_seconds.map(|s| s.min(t));
+                }
+            }
+            if !seconds.is_finite() {
+                continue;
+            }
+            out.push(AutoPoint {
+                scene: scene.name.clone(),
+                tolerance,
+                own_rows,
+                nearest: choice.nearest().to_owned(),
+                chose: format!("{} ({})", choice.run.label, choice.run.setting),
+                expected_to_meet: choice.meets,
+                seconds,
+                error_total,
+                fastest: fastest
+                    .zip(single_seconds)
+                    .map(|(p, t)| (format!("{} ({})", p.solver, p.setting), t)),
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// How many times [`measure_auto`] times `auto` and the fastest single run beside it.
+pub const REPEATS: usize = 3;
+
+/// The header of `docs/pareto/auto_runs.csv`.
+pub const AUTO_RUNS_HEADER: &str = "scene,tolerance,own_rows,nearest,chose,expected_to_meet,seconds,error_total,fastest,fastest_seconds";
+
+/// `auto`'s measured runs as CSV.
+pub fn auto_csv(points: &[AutoPoint]) -> String {
+    let mut out = format!("{AUTO_RUNS_HEADER}\n");
+    for p in points {
+        let (fastest, fastest_seconds) = match &p.fastest {
+            Some((f, s)) => (f.as_str(), format!("{s:.6}")),
+            None => ("", String::new()),
+        };
+        out.push_str(&format!(
+            "{},{},{},{},{},{},{:.6},{:.6},{},{}\n",
+            p.scene,
+            p.tolerance,
+            p.own_rows,
+            p.nearest,
+            csv_field(&p.chose),
+            p.expected_to_meet,
+            p.seconds,
+            p.error_total,
+            csv_field(fastest),
+            fastest_seconds
+        ));
+    }
+    out
+}
+
+/// Parses [`auto_csv`]'s output.
+pub fn parse_auto_csv(text: &str) -> Result<Vec<AutoPoint>, String> {
+    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+    if lines.next().map(str::trim) != Some(AUTO_RUNS_HEADER) {
+        return Err("auto_runs.csv: unexpected header".into());
+    }
+    lines
+        .enumerate()
+        .map(|(n, line)| {
+            let f = crate::auto::split_csv(line);
+            let bad = || format!("auto_runs.csv row {}: `{line}`", n + 2);
+            if f.len() != 10 {
+                return Err(bad());
+            }
+            let num = |i: usize| f[i].parse::<f64>().map_err(|_| bad());
+            Ok(AutoPoint {
+                scene: f[0].clone(),
+                tolerance: num(1)?,
+                own_rows: f[2] == "true",
+                nearest: f[3].clone(),
+                chose: f[4].clone(),
+                expected_to_meet: f[5] == "true",
+                seconds: num(6)?,
+                error_total: num(7)?,
+                fastest: if f[8].is_empty() {
+                    None
+                } else {
+                    Some((f[8].clone(), num(9)?))
+                },
+            })
+        })
+        .collect()
+}
+
+/// The markdown table of `auto`'s runs for `docs/validation.md`: per scene and tolerance,
+/// what it chose with the scene's own rows and without them, its error and its time over
+/// the fastest single solver meeting the tolerance in the same sweep.
+pub fn auto_markdown(points: &[AutoPoint]) -> String {
+    let pct = |v: f64| format!("{:.2}%", 100.0 * v);
+    let mut s = String::from(
+        "| scene | tolerance | auto chose | its error | meets | auto time | fastest single meeting it | its time | ratio | left out: chose (nearest) | its error | meets |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for own in points.iter().filter(|p| p.own_rows) {
+        let out = points
+            .iter()
+            .find(|p| !p.own_rows && p.scene == own.scene && p.tolerance == own.tolerance);
+        let (fastest, fastest_time, ratio) = match &own.fastest {
+            Some((f, t)) => (
+                f.clone(),
+                format!("{t:.3} s"),
+                format!("{:.2}", own.seconds / t.max(1e-9)),
+            ),
+            None => ("none meets it".into(), "–".into(), "–".into()),
+        };
+        let meets = |p: &AutoPoint| {
+            if p.error_total <= p.tolerance {
+                "yes".to_owned()
+            } else if p.expected_to_meet {
+                "**no**".to_owned()
+            } else {
+                "no (said so)".to_owned()
+            }
+        };
+        let (out_chose, out_error, out_meets) = match out {
+            Some(o) => (
+                format!("{} ({})", o.chose, o.nearest),
+                pct(o.error_total),
+                meets(o),
+            ),
+            None => ("–".into(), "–".into(), "–".into()),
+        };
+        s.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {:.3} s | {} | {} | {} | {} | {} | {} |\n",
+            own.scene,
+            pct(own.tolerance),
+            own.chose,
+            pct(own.error_total),
+            meets(own),
+            own.seconds,
+            fastest,
+            fastest_time,
+            ratio,
+            out_chose,
+            out_error,
+            out_meets
+        ));
+    }
+    s
 }
 
 /// The points as CSV.
 pub fn csv(points: &[Point]) -> String {
-    let mut out = String::from("solver,setting,seconds,relative_l2\n");
+    let mut out = String::from("solver,setting,seconds,relative_l2,relative_l2_total\n");
     for p in points {
         out.push_str(&format!(
-            "{},{},{:.6},{:.6}\n",
-            p.solver, p.setting, p.seconds, p.error
+            "{},{},{:.6},{:.6},{:.6}\n",
+            p.solver,
+            crate::auto::csv_field(&p.setting),
+            p.seconds,
+            p.error,
+            p.error_total
         ));
     }
     out
+}
+
+/// [`svg`] with `auto`'s runs (with the scene's own rows in its table) as one more curve,
+/// their errors against the total fluence.
+pub fn svg_with_auto(title: &str, points: &[Point], autos: &[AutoPoint]) -> String {
+    let mut all = points.to_vec();
+    all.extend(autos.iter().filter(|a| a.own_rows).map(|a| Point {
+        solver: "auto".into(),
+        setting: format!("tolerance {:.0}%: {}", 100.0 * a.tolerance, a.chose),
+        seconds: a.seconds,
+        error: a.error_total,
+        error_total: a.error_total,
+    }));
+    svg(title, &all)
 }
 
 /// A log-log chart of error against time, one curve per solver, as SVG.
@@ -520,6 +808,7 @@ pub fn svg(title: &str, points: &[Point]) -> String {
         let label = match *solver {
             "direct" => "direct (uncollided)",
             "direct-refractive" => "direct-refractive (uncollided)",
+            "auto" => "auto (total)",
             _ => solver,
         };
         let ly = top + 20.0 + 20.0 * i as f64;
@@ -544,11 +833,23 @@ mod tests {
     #[test]
     fn every_run_builds_its_solver() {
         let registry = crate::registry();
-        for entry in registry.entries() {
+        for entry in registry.entries().iter().filter(|e| e.name != "auto") {
             assert!(
                 runs().iter().any(|r| r.solver == entry.name),
                 "{} has no run",
                 entry.name
+            );
+        }
+        // `auto`'s table names a run by its curve and setting: they must name one run.
+        let all = runs();
+        for (i, a) in all.iter().enumerate() {
+            assert!(
+                !all[..i]
+                    .iter()
+                    .any(|b| b.label == a.label && b.setting == a.setting),
+                "{} ({}) twice",
+                a.label,
+                a.setting
             );
         }
         for run in runs() {

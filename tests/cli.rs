@@ -1447,3 +1447,53 @@ fn a_scene_beyond_the_budget_is_solved_out_of_core_to_the_same_bytes() {
     );
     assert_clean_failure(&out, "bytes per field");
 }
+
+/// `lucent solve --solver auto` says in one line what it chose and why, records it in the
+/// report, and says so when the tolerance cannot be met.
+#[test]
+fn auto_says_what_it_chose_and_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let slab = scene("suite/slab.toml");
+    let solve = |tolerance: &str| {
+        let out = lucent(
+            &[
+                "solve",
+                &slab,
+                "--solver",
+                "auto",
+                "--param",
+                &format!("tolerance={tolerance}"),
+                "-o",
+                "phi.npy",
+                "--quiet",
+            ],
+            d,
+        );
+        assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+        let said: Vec<String> = stderr(&out)
+            .lines()
+            .filter(|l| l.starts_with("lucent: auto"))
+            .map(str::to_owned)
+            .collect();
+        assert_eq!(said.len(), 1, "{}", stderr(&out));
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join("phi.json")).unwrap()).unwrap();
+        assert_eq!(report["solver"], "auto");
+        assert_eq!(
+            format!("lucent: {}", report["report"]["choice"].as_str().unwrap()),
+            said[0]
+        );
+        said[0].clone()
+    };
+    let loose = solve("0.2");
+    assert!(
+        loose.starts_with("lucent: auto chose `") && loose.contains("this suite scene, slab"),
+        "{loose}"
+    );
+    let tight = solve("1e-4");
+    assert!(
+        tight.starts_with("lucent: auto cannot meet 0.01%"),
+        "{tight}"
+    );
+}

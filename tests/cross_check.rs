@@ -100,7 +100,8 @@ fn pareto_sweep_shows_each_solvers_convergence_on_the_slab() {
     let (scenes, _) = lucent::crosscheck::load_suite(&suite).unwrap();
     let slab = scenes.iter().find(|s| s.name == "slab").unwrap();
     let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("crosscheck-cache");
-    let points = lucent::pareto::sweep(slab, Some(&cache)).unwrap();
+    let sweep = lucent::pareto::sweep(slab, Some(&cache)).unwrap();
+    let points = &sweep.points;
     let mc: Vec<f64> = points
         .iter()
         .filter(|p| p.solver == "mc")
@@ -133,13 +134,42 @@ fn pareto_sweep_shows_each_solvers_convergence_on_the_slab() {
     );
     let solvers: std::collections::BTreeSet<&str> =
         points.iter().map(|p| p.solver.as_str()).collect();
-    let svg = lucent::pareto::svg("slab", &points);
+    let svg = lucent::pareto::svg("slab", points);
     assert_eq!(
         svg.matches("<polyline").count(),
         solvers.len(),
         "one curve per solver"
     );
-    assert!(lucent::pareto::csv(&points).lines().count() == points.len() + 1);
+    assert!(lucent::pareto::csv(points).lines().count() == points.len() + 1);
+    // `auto` with the slab's own measurements runs, at each tolerance, the fastest CPU run
+    // of this sweep that met it, and meets it: every run it repeats is deterministic (Monte
+    // Carlo's streams are seeded), so it lands on the sweep's error.
+    let table = lucent::auto::Table {
+        scenes: vec![lucent::pareto::measured_scene(slab, points)],
+    };
+    let autos = lucent::pareto::measure_auto(slab, &table, &sweep, &[0.05, 0.2], &[true]).unwrap();
+    assert_eq!(autos.len(), 2);
+    for a in &autos {
+        let fastest = points
+            .iter()
+            .filter(|p| !p.solver.starts_with("gpu-") && p.error_total <= a.tolerance)
+            .min_by(|x, y| x.seconds.total_cmp(&y.seconds))
+            .expect("something meets it on the slab");
+        assert_eq!(a.chose, format!("{} ({})", fastest.solver, fastest.setting));
+        assert!(a.expected_to_meet);
+        assert!(
+            (a.error_total - fastest.error_total).abs() < 1e-6 && a.error_total <= a.tolerance,
+            "{a:?} against {fastest:?}"
+        );
+    }
+    let markdown = lucent::pareto::auto_markdown(&autos);
+    assert_eq!(markdown.lines().count(), 2 + autos.len(), "{markdown}");
+    assert_eq!(
+        lucent::pareto::parse_auto_csv(&lucent::pareto::auto_csv(&autos))
+            .unwrap()
+            .len(),
+        2
+    );
 }
 
 /// Monte Carlo over analytic diffusion (the harness's reference, Robin condition with the

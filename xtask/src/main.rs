@@ -296,6 +296,12 @@ fn crosscheck(refined: bool) -> ExitCode {
         "cargo xtask crosscheck"
     };
     let markdown = lucent::crosscheck::validation_markdown(&outcomes, command);
+    // auto's section comes from `cargo xtask pareto`: carried over as it is.
+    let previous = std::fs::read_to_string(root.join("docs/validation.md")).unwrap_or_default();
+    let markdown = match lucent::crosscheck::auto_section_of(&previous) {
+        Some(section) => lucent::crosscheck::with_auto_section(&markdown, section),
+        None => markdown,
+    };
     eprint!("{markdown}");
     eprintln!(
         "xtask: crosscheck took {:.1} s",
@@ -312,7 +318,10 @@ fn crosscheck(refined: bool) -> ExitCode {
     }
 }
 
-/// Sweeps every solver on the suite scenes and writes the error-against-time charts.
+/// Sweeps every solver on the suite scenes and writes the error-against-time charts, the
+/// table `auto` chooses from (`docs/pareto/auto.csv`), `auto`'s own runs on each scene
+/// (`docs/pareto/auto_runs.csv`, drawn on the chart too) and their table in
+/// `docs/validation.md`.
 fn pareto(only: Vec<String>) -> ExitCode {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let cache = root.join("target/crosscheck-cache");
@@ -328,41 +337,128 @@ fn pareto(only: Vec<String>) -> ExitCode {
         eprintln!("xtask: cannot create {}: {e}", out.display());
         return ExitCode::FAILURE;
     }
+    let table_path = out.join("auto.csv");
+    let runs_path = out.join("auto_runs.csv");
+    let read = |path: &std::path::Path| std::fs::read_to_string(path).unwrap_or_default();
+    let mut table = lucent::auto::Table::parse(&read(&table_path)).unwrap_or_default();
+    let mut auto_runs = lucent::pareto::parse_auto_csv(&read(&runs_path)).unwrap_or_default();
+    let mut swept = Vec::new();
+    let write = |path: &std::path::Path, text: &str| {
+        std::fs::write(path, text)
+            .map_err(|e| eprintln!("xtask: cannot write {}: {e}", path.display()))
+    };
     for scene in scenes
         .iter()
         .filter(|s| only.is_empty() || only.contains(&s.name))
     {
-        let points = match lucent::pareto::sweep(scene, Some(&cache)) {
+        let sweep = match lucent::pareto::sweep(scene, Some(&cache)) {
             Ok(p) => p,
             Err(e) => {
                 eprintln!("xtask: {}: {e}", scene.name);
                 continue;
             }
         };
+        let points = &sweep.points;
         if points.is_empty() {
             eprintln!("xtask: {}: no solver can run it yet", scene.name);
             continue;
         }
-        for p in &points {
+        for p in points {
             eprintln!(
-                "{:<14} {:<7} {:<32} {:>9.3} s {:>8.3}%",
+                "{:<14} {:<7} {:<32} {:>9.3} s {:>8.3}% (total {:>8.3}%)",
                 scene.name,
                 p.solver,
                 p.setting,
                 p.seconds,
-                100.0 * p.error
+                100.0 * p.error,
+                100.0 * p.error_total
             );
         }
+        table = table.with_scene(lucent::pareto::measured_scene(scene, points));
+        if write(&table_path, &table.to_csv()).is_err() {
+            return ExitCode::FAILURE;
+        }
+        let autos = match lucent::pareto::measure_auto(
+            scene,
+            &table,
+            &sweep,
+            &lucent::pareto::AUTO_TOLERANCES,
+            &[true],
+        ) {
+            Ok(a) => a,
+            Err(e) => {
+                eprintln!("xtask: {}: auto: {e}", scene.name);
+                Vec::new()
+            }
+        };
+        for a in &autos {
+            eprintln!(
+                "{:<14} auto {:>5.1}% {}: {} -> {:.3} s {:.3}% (fastest meeting it: {:?})",
+                scene.name,
+                100.0 * a.tolerance,
+                if a.own_rows { "own rows" } else { "left out" },
+                a.chose,
+                a.seconds,
+                100.0 * a.error_total,
+                a.fastest
+            );
+        }
+        auto_runs.retain(|a| a.scene != scene.name);
+        auto_runs.extend(autos.iter().cloned());
+        if write(&runs_path, &lucent::pareto::auto_csv(&auto_runs)).is_err() {
+            return ExitCode::FAILURE;
+        }
         let title = format!("{}: error against time (dev machine)", scene.name);
-        let svg = lucent::pareto::svg(&title, &points);
-        let csv = lucent::pareto::csv(&points);
+        let svg = lucent::pareto::svg_with_auto(&title, points, &autos);
+        let csv = lucent::pareto::csv(points);
         for (ext, text) in [("svg", svg), ("csv", csv)] {
-            let path = out.join(format!("{}.{ext}", scene.name));
-            if let Err(e) = std::fs::write(&path, text) {
-                eprintln!("xtask: cannot write {}: {e}", path.display());
+            if write(&out.join(format!("{}.{ext}", scene.name)), &text).is_err() {
                 return ExitCode::FAILURE;
             }
         }
+        swept.push((scene, sweep));
+    }
+    // With every scene measured: each scene's choice with its own rows left out.
+    for (scene, sweep) in &swept {
+        match lucent::pareto::measure_auto(
+            scene,
+            &table,
+            sweep,
+            &lucent::pareto::AUTO_TOLERANCES,
+            &[false],
+        ) {
+            Ok(autos) => {
+                for a in &autos {
+                    eprintln!(
+                        "{:<14} auto {:>5.1}% left out: {} (nearest {}) -> {:.3} s {:.3}%",
+                        scene.name,
+                        100.0 * a.tolerance,
+                        a.chose,
+                        a.nearest,
+                        a.seconds,
+                        100.0 * a.error_total
+                    );
+                }
+                auto_runs.retain(|a| a.scene != scene.name || a.own_rows);
+                auto_runs.extend(autos);
+            }
+            Err(e) => eprintln!("xtask: {}: auto, rows left out: {e}", scene.name),
+        }
+    }
+    if write(&runs_path, &lucent::pareto::auto_csv(&auto_runs)).is_err() {
+        return ExitCode::FAILURE;
+    }
+    // auto's table in docs/validation.md, between its markers (the cross-check keeps it).
+    let validation = root.join("docs/validation.md");
+    let text = read(&validation);
+    let section = lucent::crosscheck::auto_section(&lucent::pareto::auto_markdown(&auto_runs));
+    if write(
+        &validation,
+        &lucent::crosscheck::with_auto_section(&text, &section),
+    )
+    .is_err()
+    {
+        return ExitCode::FAILURE;
     }
     ExitCode::SUCCESS
 }
