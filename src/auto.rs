@@ -56,8 +56,8 @@ use std::time::{Duration, Instant};
 
 use lucent_core::regime::Regime;
 use lucent_core::{
-    Capabilities, FluenceKind, Light, OutputKind, Params, Problem, Registry, Solution, SolveError,
-    SolveOptions, Solver, SolverEntry, SolverParams, param_docs, resolved_params,
+    Capabilities, FluenceKind, Light, OutputKind, ParamValue, Params, Problem, Registry, Solution,
+    SolveError, SolveOptions, Solver, SolverEntry, SolverParams, param_docs, resolved_params,
 };
 use lucent_grid::resample::restrict;
 use rayon::prelude::*;
@@ -416,6 +416,9 @@ pub struct Choice {
     pub expected_error: f64,
     /// Its time on the nearest scene scaled to the problem's cell count, seconds.
     pub expected_seconds: f64,
+    /// The problem's cell count over the nearest scene's: Monte Carlo's paths are scaled
+    /// by it where it exceeds 1 ([`Choice::params`]).
+    pub cells_ratio: f64,
     /// Whether it is expected to meet the tolerance; when not, no admitted run within the
     /// time budget was measured to, and this one came closest.
     pub meets: bool,
@@ -449,6 +452,14 @@ impl fmt::Display for Choice {
         } else {
             String::new()
         };
+        let scaled = match self.run.solver == lucent_mc::McSolver::NAME && self.cells_ratio > 1.0 {
+            true => format!(
+                ", its paths scaled ×{:.1} to this problem's cell count",
+                self.cells_ratio
+            ),
+            false => String::new(),
+        };
+        let refused = format!("{scaled}{refused}");
         if self.meets {
             write!(
                 f,
@@ -475,12 +486,34 @@ impl fmt::Display for Choice {
 }
 
 impl Choice {
-    /// The chosen run's parameters.
+    /// The chosen run's parameters, as `auto` runs them: the table's, with a Monte Carlo
+    /// run's paths scaled by [`Choice::cells_ratio`] where the problem has more cells than
+    /// the scene it was measured on. The track-length estimate of a cell's fluence has a
+    /// relative standard error ∝ √(cells / paths) (the track length a path leaves in a cell
+    /// falls with the cell's volume), so keeping the paths per cell keeps the error the
+    /// table measured; the time grows by the same ratio, as the expected time says. Grid
+    /// solvers' knobs (orders, tolerances, refinement factors) carry over unscaled.
     pub fn params(&self) -> Result<Params, SolveError> {
-        toml::from_str(&self.run.params).map_err(|e| SolveError::InvalidParameter {
-            name: "auto".into(),
-            reason: format!("the table's run `{}`: {e}", self.run.params),
-        })
+        let mut params: Params =
+            toml::from_str(&self.run.params).map_err(|e| SolveError::InvalidParameter {
+                name: "auto".into(),
+                reason: format!("the table's run `{}`: {e}", self.run.params),
+            })?;
+        if let Some(paths) = self.scaled_paths(&params) {
+            params.0.insert("particles".into(), ParamValue::Int(paths));
+        }
+        Ok(params)
+    }
+
+    /// A Monte Carlo run's particles per batch scaled to the problem's cells, if scaled.
+    fn scaled_paths(&self, params: &Params) -> Option<i64> {
+        if self.run.solver != lucent_mc::McSolver::NAME || self.cells_ratio <= 1.0 {
+            return None;
+        }
+        match params.0.get("particles") {
+            Some(ParamValue::Int(n)) => Some((*n as f64 * self.cells_ratio).ceil() as i64),
+            _ => None,
+        }
     }
 
     /// The nearest measured scene.
@@ -582,6 +615,7 @@ pub fn choose_without(
         run: run.clone(),
         expected_error: *error,
         expected_seconds: *seconds,
+        cells_ratio: scale,
         meets,
         budget_bound,
         refused,
@@ -753,25 +787,31 @@ impl Solver for AutoSolver {
         options.validate()?;
         let registry = crate::registry();
         // Runs that could not run here (over the memory budget, too much work): the next
-        // choice is made without them, and the line says so.
+        // run expected to meet the tolerance is tried without them, and the line says so.
+        // Once none is left the first refusal is the error: it names what the cheapest
+        // run meeting the tolerance needs. (A choice that already cannot meet it is the
+        // closest run; nothing worse is tried after it.)
         let mut skipped: Vec<(Run, SolveError)> = Vec::new();
         loop {
             let skip: Vec<Run> = skipped.iter().map(|(r, _)| r.clone()).collect();
-            let choice = choose_without(
+            let next = choose_without(
                 problem,
                 self.tolerance,
                 options.time_budget,
                 self.table(),
                 &registry,
                 &skip,
-            )
-            .map_err(|e| match skipped.pop() {
-                // Nothing left to try: the last refusal says why better than "nothing admits".
-                Some((_, last)) => last,
-                None => e,
-            })?;
+            );
+            let choice = match (next, skipped.is_empty()) {
+                (Ok(c), true) => c,
+                (Err(e), true) => return Err(e),
+                (Ok(c), false) if c.meets => c,
+                (_, false) => return Err(skipped.swap_remove(0).1),
+            };
             match run_choice(&choice, problem, options, start) {
-                Err(e @ (SolveError::OverBudget { .. } | SolveError::TooMuchWork { .. })) => {
+                Err(e @ (SolveError::OverBudget { .. } | SolveError::TooMuchWork { .. }))
+                    if choice.meets =>
+                {
                     skipped.push((choice.run.clone(), e));
                 }
                 Err(e) => return Err(e),

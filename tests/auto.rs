@@ -411,3 +411,31 @@ fn a_run_over_the_memory_budget_gives_way_to_the_next() {
         Err(SolveError::OverBudget { .. })
     ));
 }
+
+/// A Monte Carlo run keeps its paths per cell on a problem with more cells than the scene
+/// it was measured on: the error per cell the table measured, at the time it scales to.
+#[test]
+fn monte_carlo_paths_scale_with_the_problems_cells() {
+    let slab = suite_scene("slab");
+    let problem = &slab.built.problem;
+    let mc = run("mc", "8000 paths");
+    let mut table = table_at(&slab, vec![measured(&mc, 0.01, 0.05)]);
+    let cells = problem.geometry().voxel_count();
+    assert_eq!(cells % 8, 0);
+    table.scenes[0].cells = cells / 8;
+    let choice = choose(problem, 0.1, None, &table, &lucent::registry()).unwrap();
+    assert_eq!(choice.cells_ratio, 8.0);
+    assert!((choice.expected_seconds - 0.08).abs() < 1e-12);
+    assert_eq!(
+        choice.params().unwrap().0.get("particles"),
+        Some(&lucent::core::ParamValue::Int(8000))
+    );
+    assert!(choice.to_string().contains("paths scaled ×8.0"), "{choice}");
+    // A smaller problem keeps the measured paths (its error per cell only falls).
+    table.scenes[0].cells = cells * 2;
+    let choice = choose(problem, 0.1, None, &table, &lucent::registry()).unwrap();
+    assert_eq!(
+        choice.params().unwrap().0.get("particles"),
+        Some(&lucent::core::ParamValue::Int(1000))
+    );
+}

@@ -92,7 +92,14 @@ fn every_estimate_bounds_the_measured_peak_and_the_budget_refuses_first() {
             );
         }
         // The same estimate is what the budget is checked against, before allocating.
-        for budget in [1, estimate / 2] {
+        // (`auto` gives way to the next run meeting its tolerance that fits, which its own
+        // test checks; with one byte nothing fits.)
+        let budgets: &[u64] = if name == "auto" {
+            &[1]
+        } else {
+            &[1, estimate / 2]
+        };
+        for &budget in budgets {
             let tight = SolveOptions {
                 memory_budget: budget,
                 ..options.clone()
