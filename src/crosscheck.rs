@@ -100,6 +100,21 @@ pub struct SuiteScene {
 /// Reads every scene of a suite folder (all `*.toml` but `tolerances.toml`) and its
 /// tolerances.
 pub fn load_suite(dir: &Path) -> Result<(Vec<SuiteScene>, Vec<Tolerance>), Error> {
+    let scenes = load_scenes(dir)?;
+    let tolerance_path = dir.join("tolerances.toml");
+    let text = std::fs::read_to_string(&tolerance_path).map_err(|e| Error::Io {
+        path: tolerance_path.clone(),
+        reason: e.to_string(),
+    })?;
+    let file: ToleranceFile = toml::from_str(&text).map_err(|e| Error::Scene {
+        path: tolerance_path.clone(),
+        reason: e.to_string(),
+    })?;
+    Ok((scenes, file.entry))
+}
+
+/// Reads and builds every scene of a folder (all `*.toml` but `tolerances.toml`), by name.
+pub fn load_scenes(dir: &Path) -> Result<Vec<SuiteScene>, Error> {
     let io = |path: &Path, e: std::io::Error| Error::Io {
         path: path.to_owned(),
         reason: e.to_string(),
@@ -133,13 +148,7 @@ pub fn load_suite(dir: &Path) -> Result<(Vec<SuiteScene>, Vec<Tolerance>), Error
             text_hash: hasher.finish(),
         });
     }
-    let tolerance_path = dir.join("tolerances.toml");
-    let text = std::fs::read_to_string(&tolerance_path).map_err(|e| io(&tolerance_path, e))?;
-    let file: ToleranceFile = toml::from_str(&text).map_err(|e| Error::Scene {
-        path: tolerance_path.clone(),
-        reason: e.to_string(),
-    })?;
-    Ok((scenes, file.entry))
+    Ok(scenes)
 }
 
 /// A reference fluence.

@@ -458,6 +458,8 @@ pub struct AutoPoint {
     /// The fastest single run of the same sweep meeting the tolerance, `label (setting)`,
     /// and its time.
     pub fastest: Option<(String, f64)>,
+    /// A scene outside the suite (`examples/scenes/mixed/`), never in the table.
+    pub held_out: bool,
 }
 
 /// Runs `auto` on `scene` at each of `tolerances` with `table` (which should hold the
@@ -532,7 +534,7 @@ pub fn measure_auto(
             // single timing varies by tens of per cent.
             let (mut seconds, mut single_seconds) = (f64::INFINITY, fastest.map(|p| p.seconds));
             let mut error_total = f64::NAN;
-            let repeats = if own_rows { REPEATS } else { 1 };
+            let repeats = REPEATS;
             for _ in 0..repeats {
                 let start = Instant::now();
                 let solution = match auto.solve(problem, &options) {
@@ -541,7 +543,7 @@ pub fn measure_auto(
                 };
                 seconds = seconds.min(start.elapsed().as_secs_f64());
                 error_total = compare(&solution.fluence, &sweep.total).relative_l2;
-                if let (true, Some((_, solver, fine, run_options))) = (own_rows, &single) {
+                if let Some((_, solver, fine, run_options)) = &single {
                     let start = Instant::now();
                     solver.solve(fine, run_options)?;
                     let t = start.elapsed().as_secs_f64();
@@ -563,6 +565,7 @@ pub fn measure_auto(
                 fastest: fastest
                     .zip(single_seconds)
                     .map(|(p, t)| (format!("{} ({})", p.solver, p.setting), t)),
+                held_out: false,
             });
         }
     }
@@ -573,7 +576,7 @@ pub fn measure_auto(
 pub const REPEATS: usize = 3;
 
 /// The header of `docs/pareto/auto_runs.csv`.
-pub const AUTO_RUNS_HEADER: &str = "scene,tolerance,own_rows,nearest,chose,expected_to_meet,seconds,error_total,fastest,fastest_seconds";
+pub const AUTO_RUNS_HEADER: &str = "scene,tolerance,own_rows,nearest,chose,expected_to_meet,seconds,error_total,fastest,fastest_seconds,held_out";
 
 /// `auto`'s measured runs as CSV.
 pub fn auto_csv(points: &[AutoPoint]) -> String {
@@ -584,7 +587,7 @@ pub fn auto_csv(points: &[AutoPoint]) -> String {
             None => ("", String::new()),
         };
         out.push_str(&format!(
-            "{},{},{},{},{},{},{:.6},{:.6},{},{}\n",
+            "{},{},{},{},{},{},{:.6},{:.6},{},{},{}\n",
             p.scene,
             p.tolerance,
             p.own_rows,
@@ -594,7 +597,8 @@ pub fn auto_csv(points: &[AutoPoint]) -> String {
             p.seconds,
             p.error_total,
             csv_field(fastest),
-            fastest_seconds
+            fastest_seconds,
+            p.held_out
         ));
     }
     out
@@ -603,7 +607,9 @@ pub fn auto_csv(points: &[AutoPoint]) -> String {
 /// Parses [`auto_csv`]'s output.
 pub fn parse_auto_csv(text: &str) -> Result<Vec<AutoPoint>, String> {
     let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-    if lines.next().map(str::trim) != Some(AUTO_RUNS_HEADER) {
+    // The header before the `held_out` column is read too (its rows are the suite's).
+    let header = lines.next().map(str::trim);
+    if header != Some(AUTO_RUNS_HEADER) && header != AUTO_RUNS_HEADER.strip_suffix(",held_out") {
         return Err("auto_runs.csv: unexpected header".into());
     }
     lines
@@ -611,7 +617,7 @@ pub fn parse_auto_csv(text: &str) -> Result<Vec<AutoPoint>, String> {
         .map(|(n, line)| {
             let f = crate::auto::split_csv(line);
             let bad = || format!("auto_runs.csv row {}: `{line}`", n + 2);
-            if f.len() != 10 {
+            if f.len() != 10 && f.len() != 11 {
                 return Err(bad());
             }
             let num = |i: usize| f[i].parse::<f64>().map_err(|_| bad());
@@ -629,9 +635,21 @@ pub fn parse_auto_csv(text: &str) -> Result<Vec<AutoPoint>, String> {
                 } else {
                     Some((f[8].clone(), num(9)?))
                 },
+                held_out: f.get(10).is_some_and(|v| v == "true"),
             })
         })
         .collect()
+}
+
+/// Whether an `auto` run met its tolerance, in the tables' words.
+fn verdict(p: &AutoPoint) -> &'static str {
+    if p.error_total <= p.tolerance {
+        "yes"
+    } else if p.expected_to_meet {
+        "**no**"
+    } else {
+        "no (said so)"
+    }
 }
 
 /// The markdown table of `auto`'s runs for `docs/validation.md`: per scene and tolerance,
@@ -642,10 +660,10 @@ pub fn auto_markdown(points: &[AutoPoint]) -> String {
     let mut s = String::from(
         "| scene | tolerance | auto chose | its error | meets | auto time | fastest single meeting it | its time | ratio | left out: chose (nearest) | its error | meets |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
-    for own in points.iter().filter(|p| p.own_rows) {
-        let out = points
-            .iter()
-            .find(|p| !p.own_rows && p.scene == own.scene && p.tolerance == own.tolerance);
+    for own in points.iter().filter(|p| p.own_rows && !p.held_out) {
+        let out = points.iter().find(|p| {
+            !p.own_rows && !p.held_out && p.scene == own.scene && p.tolerance == own.tolerance
+        });
         let (fastest, fastest_time, ratio) = match &own.fastest {
             Some((f, t)) => (
                 f.clone(),
@@ -654,22 +672,13 @@ pub fn auto_markdown(points: &[AutoPoint]) -> String {
             ),
             None => ("none meets it".into(), "–".into(), "–".into()),
         };
-        let meets = |p: &AutoPoint| {
-            if p.error_total <= p.tolerance {
-                "yes".to_owned()
-            } else if p.expected_to_meet {
-                "**no**".to_owned()
-            } else {
-                "no (said so)".to_owned()
-            }
-        };
         let (out_chose, out_error, out_meets) = match out {
             Some(o) => (
                 format!("{} ({})", o.chose, o.nearest),
                 pct(o.error_total),
-                meets(o),
+                verdict(o),
             ),
-            None => ("–".into(), "–".into(), "–".into()),
+            None => ("–".into(), "–".into(), "–"),
         };
         s.push_str(&format!(
             "| {} | {} | {} | {} | {} | {:.3} s | {} | {} | {} | {} | {} | {} |\n",
@@ -677,7 +686,7 @@ pub fn auto_markdown(points: &[AutoPoint]) -> String {
             pct(own.tolerance),
             own.chose,
             pct(own.error_total),
-            meets(own),
+            verdict(own),
             own.seconds,
             fastest,
             fastest_time,
@@ -686,6 +695,37 @@ pub fn auto_markdown(points: &[AutoPoint]) -> String {
             out_error,
             out_meets
         ));
+    }
+    let held: Vec<&AutoPoint> = points.iter().filter(|p| p.held_out).collect();
+    if !held.is_empty() {
+        s.push_str(
+            "\n### Held-out scenes of mixed regime (`examples/scenes/mixed/`, never in the table)\n\n\
+             | scene | tolerance | auto chose (nearest scene) | its error | meets | auto time | fastest single meeting it | its time | ratio |\n\
+             |---|---|---|---|---|---|---|---|---|\n",
+        );
+        for p in held {
+            let (fastest, fastest_time, ratio) = match &p.fastest {
+                Some((f, t)) => (
+                    f.clone(),
+                    format!("{t:.3} s"),
+                    format!("{:.2}", p.seconds / t.max(1e-9)),
+                ),
+                None => ("none meets it".into(), "–".into(), "–".into()),
+            };
+            s.push_str(&format!(
+                "| {} | {} | {} ({}) | {} | {} | {:.3} s | {} | {} | {} |\n",
+                p.scene,
+                pct(p.tolerance),
+                p.chose,
+                p.nearest,
+                pct(p.error_total),
+                verdict(p),
+                p.seconds,
+                fastest,
+                fastest_time,
+                ratio
+            ));
+        }
     }
     s
 }
@@ -710,13 +750,18 @@ pub fn csv(points: &[Point]) -> String {
 /// their errors against the total fluence.
 pub fn svg_with_auto(title: &str, points: &[Point], autos: &[AutoPoint]) -> String {
     let mut all = points.to_vec();
-    all.extend(autos.iter().filter(|a| a.own_rows).map(|a| Point {
-        solver: "auto".into(),
-        setting: format!("tolerance {:.0}%: {}", 100.0 * a.tolerance, a.chose),
-        seconds: a.seconds,
-        error: a.error_total,
-        error_total: a.error_total,
-    }));
+    all.extend(
+        autos
+            .iter()
+            .filter(|a| a.own_rows || a.held_out)
+            .map(|a| Point {
+                solver: "auto".into(),
+                setting: format!("tolerance {:.0}%: {}", 100.0 * a.tolerance, a.chose),
+                seconds: a.seconds,
+                error: a.error_total,
+                error_total: a.error_total,
+            }),
+    );
     svg(title, &all)
 }
 

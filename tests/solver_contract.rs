@@ -183,11 +183,12 @@ fn every_solver_gives_the_same_result_on_one_and_two_threads() {
     }
 }
 
-/// Every scene file of `examples/scenes/` and `examples/scenes/suite/`, built.
+/// Every scene file of `examples/scenes/`, `examples/scenes/suite/` and
+/// `examples/scenes/mixed/`, built.
 fn example_problems() -> Vec<(String, Problem)> {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes");
     let mut out = Vec::new();
-    for dir in [root.clone(), root.join("suite")] {
+    for dir in [root.clone(), root.join("suite"), root.join("mixed")] {
         let mut paths: Vec<_> = std::fs::read_dir(&dir)
             .unwrap()
             .map(|e| e.unwrap().path())
