@@ -12,8 +12,9 @@
 //! 1. The problem's [`Features`]: its size in transport mean free paths, its absorption
 //!    1 − α′ (reduced albedo α′), the phase function's g, the mean reduced optical distance
 //!    to the box or void, the σ_t′-weighted mean extinction depth from the lights, the void
-//!    share, the boundary's Robin factor A (the refractive mismatch), and whether its lights
-//!    are point-like (a singular source): from [`lucent_core::regime::Regime`], averaged over
+//!    share, the boundary's Robin factor A (the refractive mismatch), whether its lights
+//!    are point-like (a singular source), and the transport mean free paths one cell spans
+//!    (what every grid method's discretisation error grows with): from [`lucent_core::regime::Regime`], averaged over
 //!    channels. These are what decides diffusion's error (its boundary layer, its
 //!    absorption and source limits), the ordinates' ray effects and the share of uncollided
 //!    light.
@@ -70,7 +71,7 @@ use crate::pareto::{Run, runs};
 pub const TABLE_CSV: &str = include_str!("../docs/pareto/auto.csv");
 
 /// The columns of [`TABLE_CSV`].
-pub const TABLE_HEADER: &str = "scene,cells,size_mfp,absorption,g,boundary_mfp,light_depth,empty,robin,point_lights,solver,setting,seconds,error_total";
+pub const TABLE_HEADER: &str = "scene,cells,size_mfp,absorption,g,boundary_mfp,light_depth,empty,robin,point_lights,cell_depth,solver,setting,seconds,error_total";
 
 /// The parameters of `auto`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -127,6 +128,10 @@ pub struct Features {
     pub robin: f64,
     /// Share of the lights that are point or spot lights.
     pub point_lights: f64,
+    /// σ_t′-weighted mean of σ_t′ h (h the largest cell side): how many transport mean
+    /// free paths one cell spans where the light interacts. Grid methods need it below
+    /// about one; Monte Carlo does not care.
+    pub cell_depth: f64,
 }
 
 impl Features {
@@ -141,7 +146,8 @@ impl Features {
             .into_par_iter()
             .map(|c| Regime::of(problem, c, block))
             .collect();
-        let mut sum = [0.0f64; 5];
+        let h = g.spacing().max_element();
+        let mut sum = [0.0f64; 6];
         let mut phase_g = 0.0;
         for regime in &regimes {
             let summary = regime.summary();
@@ -161,6 +167,16 @@ impl Features {
             sum[2] += summary.boundary_mfp;
             sum[3] += depth;
             sum[4] += summary.empty_fraction;
+            sum[5] += if weight > 0.0 {
+                regime
+                    .regions
+                    .iter()
+                    .map(|r| r.sigma_t_reduced * r.sigma_t_reduced * h)
+                    .sum::<f64>()
+                    / weight
+            } else {
+                0.0
+            };
             phase_g += regime.g;
         }
         let n = channels as f64;
@@ -178,12 +194,13 @@ impl Features {
             empty: sum[4] / n,
             robin: problem.boundary().robin_factor().unwrap_or(1.0),
             point_lights: point as f64 / lights.len().max(1) as f64,
+            cell_depth: sum[5] / n,
         }
     }
 
     /// The coordinates distances are measured in: decades of the scale quantities (so a
     /// factor of ten counts one, wherever it lies), the bounded ones as they are.
-    fn coordinates(&self) -> [f64; 8] {
+    fn coordinates(&self) -> [f64; 9] {
         [
             (1.0 + self.size_mfp).log10(),
             self.absorption.max(1e-4).log10(),
@@ -193,6 +210,7 @@ impl Features {
             self.empty,
             self.robin.max(1e-3).log10(),
             self.point_lights,
+            (1.0 + self.cell_depth).log10(),
         ]
     }
 
@@ -283,9 +301,9 @@ impl Table {
         let mut table = Table::default();
         for (n, line) in lines.enumerate() {
             let f = split_csv(line);
-            if f.len() != 14 {
+            if f.len() != 15 {
                 return Err(format!(
-                    "auto table row {}: {} fields, not 14",
+                    "auto table row {}: {} fields, not 15",
                     n + 2,
                     f.len()
                 ));
@@ -306,12 +324,13 @@ impl Table {
                 empty: num(7)?,
                 robin: num(8)?,
                 point_lights: num(9)?,
+                cell_depth: num(10)?,
             };
             let point = Measured {
-                label: f[10].clone(),
-                setting: f[11].clone(),
-                seconds: num(12)?,
-                error_total: num(13)?,
+                label: f[11].clone(),
+                setting: f[12].clone(),
+                seconds: num(13)?,
+                error_total: num(14)?,
             };
             match table.scenes.iter_mut().find(|s| s.name == f[0]) {
                 Some(scene) => scene.points.push(point),
@@ -340,7 +359,7 @@ impl Table {
             let f = &s.features;
             for p in &s.points {
                 out.push_str(&format!(
-                    "{},{},{:.4},{:.5},{:.3},{:.4},{:.4},{:.4},{:.4},{:.3},{},{},{:.6},{:.6}\n",
+                    "{},{},{:.4},{:.5},{:.3},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.6},{:.6}\n",
                     csv_field(&s.name),
                     s.cells,
                     f.size_mfp,
@@ -351,6 +370,7 @@ impl Table {
                     f.empty,
                     f.robin,
                     f.point_lights,
+                    f.cell_depth,
                     csv_field(&p.label),
                     csv_field(&p.setting),
                     p.seconds,
@@ -883,7 +903,7 @@ mod tests {
     fn a_table_round_trips_and_bad_rows_are_named() {
         let table = Table::parse(TABLE_CSV).expect("the committed table parses");
         assert_eq!(Table::parse(&table.to_csv()).unwrap(), table);
-        let bad = format!("{TABLE_HEADER}\ncloud,1,x,0,0,0,0,0,1,0,mc,8000 paths,0.1,0.2\n");
+        let bad = format!("{TABLE_HEADER}\ncloud,1,x,0,0,0,0,0,1,0,0,mc,8000 paths,0.1,0.2\n");
         assert!(Table::parse(&bad).unwrap_err().contains("row 2"));
         assert!(Table::parse("a,b\n").unwrap_err().contains("header"));
     }

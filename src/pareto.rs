@@ -412,6 +412,44 @@ pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Sweep, Error> {
     Ok(Sweep { points, total })
 }
 
+/// A sweep measured before: the points of `docs/pareto/<scene>.csv` in `dir`, with the
+/// scene's total reference (from `cache` where it is there). What `cargo xtask pareto
+/// --reuse` re-runs `auto` against when only `auto` or its features changed.
+pub fn reuse(scene: &SuiteScene, dir: &Path, cache: Option<&Path>) -> Result<Sweep, Error> {
+    let path = dir.join(format!("{}.csv", scene.name));
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::Io {
+        path: path.clone(),
+        reason: e.to_string(),
+    })?;
+    let bad = |line: &str| Error::Io {
+        path: path.clone(),
+        reason: format!("not a pareto row: `{line}`"),
+    };
+    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+    if lines.next() != Some("solver,setting,seconds,relative_l2,relative_l2_total") {
+        return Err(bad("(header)"));
+    }
+    let points = lines
+        .map(|line| {
+            let f = crate::auto::split_csv(line);
+            let num = |i: usize| {
+                f.get(i)
+                    .and_then(|v| v.parse::<f64>().ok())
+                    .ok_or_else(|| bad(line))
+            };
+            Ok(Point {
+                solver: f[0].clone(),
+                setting: f.get(1).cloned().ok_or_else(|| bad(line))?,
+                seconds: num(2)?,
+                error: num(3)?,
+                error_total: num(4)?,
+            })
+        })
+        .collect::<Result<Vec<_>, Error>>()?;
+    let total = reference(scene, FluenceKind::Total, 0.01, cache)?;
+    Ok(Sweep { points, total })
+}
+
 /// `scene`'s entry in `auto`'s table: its regime and its measured points.
 pub fn measured_scene(scene: &SuiteScene, points: &[Point]) -> MeasuredScene {
     let problem = &scene.built.problem;

@@ -457,3 +457,21 @@ fn monte_carlo_paths_scale_with_the_problems_cells() {
         Some(&lucent::core::ParamValue::Int(1000))
     );
 }
+
+/// The cells' optical depth is a feature: on the homogeneous slab (σ_t′ = 3) it is 3h,
+/// and twice that on a grid twice as coarse, where the grid solvers' errors grow.
+#[test]
+fn the_optical_depth_of_a_cell_is_a_feature() {
+    let slab = suite_scene("slab");
+    let problem = &slab.built.problem;
+    let h = problem.geometry().spacing().max_element();
+    let fine = Features::of(problem);
+    assert!((fine.cell_depth - 3.0 * h).abs() < 1e-5 * h, "{fine:?}");
+    let coarse_dims = problem.geometry().dims().map(|n| n / 2);
+    let coarse = Features::of(&lucent::resolution::on_grid(problem, coarse_dims).unwrap());
+    assert!((coarse.cell_depth - 6.0 * h).abs() < 1e-5 * h, "{coarse:?}");
+    assert!(
+        fine.distance(&coarse) > 0.05,
+        "two resolutions are two regimes"
+    );
+}

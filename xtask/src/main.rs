@@ -11,8 +11,9 @@
 //!   table and writes `docs/validation.md`. References are cached in
 //!   `target/crosscheck-cache/`.
 //!
-//! - `pareto [SCENE...]`: error against wall time for every solver on the suite scenes
-//!   (all of them by default), as `docs/pareto/<scene>.svg` and `.csv`.
+//! - `pareto [--reuse] [SCENE...]`: error against wall time for every solver on the suite
+//!   scenes (all of them by default), as `docs/pareto/<scene>.svg` and `.csv`; `auto`'s
+//!   table and its runs (`--reuse`: from the CSVs already there, re-running only `auto`).
 //!
 //! - `mitsuba [SPP]`: the default cloud and `examples/scenes/box_filling.toml` (a medium
 //!   filling a box of odd dimensions) at 256×256 rendered by lucent's Monte Carlo and by
@@ -68,7 +69,7 @@ mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck [--refined] | pareto [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] [--gpu] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] [--gpu] | bench-lbm [N] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck [--refined] | pareto [--reuse] [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] [--gpu] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] [--gpu] | bench-lbm [N] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -227,7 +228,9 @@ fn main() -> ExitCode {
         };
     }
     if command.as_deref() == Some("pareto") {
-        return pareto(std::env::args().skip(2).collect());
+        let args: Vec<String> = std::env::args().skip(2).collect();
+        let reuse = args.iter().any(|a| a == "--reuse");
+        return pareto(args.into_iter().filter(|a| a != "--reuse").collect(), reuse);
     }
     let steps: Vec<Vec<&str>> = match command.as_deref() {
         Some("ci") => vec![
@@ -322,7 +325,11 @@ fn crosscheck(refined: bool) -> ExitCode {
 /// table `auto` chooses from (`docs/pareto/auto.csv`), `auto`'s own runs on each scene
 /// (`docs/pareto/auto_runs.csv`, drawn on the chart too) and their table in
 /// `docs/validation.md`.
-fn pareto(only: Vec<String>) -> ExitCode {
+///
+/// With `--reuse` the solvers are not run again: each scene's points are read from its
+/// `docs/pareto/<scene>.csv` and only the table's features and `auto`'s runs are measured
+/// (for a change to `auto` alone).
+fn pareto(only: Vec<String>, reuse: bool) -> ExitCode {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let cache = root.join("target/crosscheck-cache");
     let out = root.join("docs/pareto");
@@ -351,7 +358,12 @@ fn pareto(only: Vec<String>) -> ExitCode {
         .iter()
         .filter(|s| only.is_empty() || only.contains(&s.name))
     {
-        let sweep = match lucent::pareto::sweep(scene, Some(&cache)) {
+        let measured = if reuse {
+            lucent::pareto::reuse(scene, &out, Some(&cache))
+        } else {
+            lucent::pareto::sweep(scene, Some(&cache))
+        };
+        let sweep = match measured {
             Ok(p) => p,
             Err(e) => {
                 eprintln!("xtask: {}: {e}", scene.name);
@@ -458,7 +470,12 @@ fn pareto(only: Vec<String>) -> ExitCode {
         .iter()
         .filter(|s| only.is_empty() || only.contains(&s.name))
     {
-        let sweep = match lucent::pareto::sweep(scene, Some(&cache)) {
+        let measured = if reuse {
+            lucent::pareto::reuse(scene, &out, Some(&cache))
+        } else {
+            lucent::pareto::sweep(scene, Some(&cache))
+        };
+        let sweep = match measured {
             Ok(p) => p,
             Err(e) => {
                 eprintln!("xtask: {}: {e}", scene.name);
