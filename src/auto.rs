@@ -472,12 +472,13 @@ impl fmt::Display for Choice {
         } else {
             String::new()
         };
-        let scaled = match self.run.solver == lucent_mc::McSolver::NAME && self.cells_ratio > 1.0 {
-            true => format!(
+        let scaled = if self.run.solver == lucent_mc::McSolver::NAME && self.cells_ratio > 1.0 {
+            format!(
                 ", its paths scaled ×{:.1} to this problem's cell count",
                 self.cells_ratio
-            ),
-            false => String::new(),
+            )
+        } else {
+            String::new()
         };
         let refused = format!("{scaled}{refused}");
         if self.meets {
@@ -565,6 +566,20 @@ pub fn choose_without(
     skip: &[Run],
 ) -> Result<Choice, SolveError> {
     let features = Features::of(problem);
+    choose_from(problem, &features, tolerance, budget, table, registry, skip)
+}
+
+/// [`choose_without`] with the problem's features already computed (a solve that tries
+/// several runs computes them once).
+fn choose_from(
+    problem: &Problem,
+    features: &Features,
+    tolerance: f64,
+    budget: Option<Duration>,
+    table: &Table,
+    registry: &Registry,
+    skip: &[Run],
+) -> Result<Choice, SolveError> {
     let mut by_distance: Vec<(f64, &MeasuredScene)> = table
         .scenes
         .iter()
@@ -620,13 +635,20 @@ pub fn choose_without(
         })
         .collect();
     candidates.sort_by(|a, b| a.2.total_cmp(&b.2));
-    let admits = |run: &Run| -> bool {
-        let Ok(params) = toml::from_str::<Params>(&run.params) else {
-            return false;
-        };
-        registry
-            .build(run.solver, &params)
-            .is_ok_and(|s| s.admits(problem).is_ok())
+    // Whether each candidate's solver admits the problem, asked at most once per candidate.
+    let admitted_once: Vec<std::cell::OnceCell<bool>> = candidates
+        .iter()
+        .map(|_| std::cell::OnceCell::new())
+        .collect();
+    let admits = |i: usize| -> bool {
+        *admitted_once[i].get_or_init(|| {
+            let run = &candidates[i].0;
+            toml::from_str::<Params>(&run.params).is_ok_and(|params| {
+                registry
+                    .build(run.solver, &params)
+                    .is_ok_and(|s| s.admits(problem).is_ok())
+            })
+        })
     };
     let fits = |seconds: f64| budget.is_none_or(|b| seconds <= b.as_secs_f64());
     let choice = |(run, error, seconds): &(Run, f64, f64), meets, budget_bound, refused| Choice {
@@ -642,11 +664,11 @@ pub fn choose_without(
     };
     let mut refused = 0;
     let mut budget_bound = false;
-    for c in &candidates {
+    for (i, c) in candidates.iter().enumerate() {
         if c.1 > limit {
             continue;
         }
-        if !admits(&c.0) {
+        if !admits(i) {
             refused += 1;
             continue;
         }
@@ -656,7 +678,12 @@ pub fn choose_without(
         }
         return Ok(choice(c, true, false, refused));
     }
-    let admitted: Vec<&(Run, f64, f64)> = candidates.iter().filter(|c| admits(&c.0)).collect();
+    let admitted: Vec<&(Run, f64, f64)> = candidates
+        .iter()
+        .enumerate()
+        .filter(|&(i, _)| admits(i))
+        .map(|(_, c)| c)
+        .collect();
     let best = admitted
         .iter()
         .filter(|c| fits(c.2))
@@ -812,10 +839,12 @@ impl Solver for AutoSolver {
         // run meeting the tolerance needs. (A choice that already cannot meet it is the
         // closest run; nothing worse is tried after it.)
         let mut skipped: Vec<(Run, SolveError)> = Vec::new();
+        let features = Features::of(problem);
         loop {
             let skip: Vec<Run> = skipped.iter().map(|(r, _)| r.clone()).collect();
-            let next = choose_without(
+            let next = choose_from(
                 problem,
+                &features,
                 self.tolerance,
                 options.time_budget,
                 self.table(),
@@ -867,14 +896,12 @@ fn run_choice(
         1 => None,
         factor => Some(refined(problem, factor)?),
     };
-    let run_options = SolveOptions {
-        relative_tolerance: choice.run.tolerance.unwrap_or(options.relative_tolerance),
-        max_iterations: choice.run.max_iterations.unwrap_or(options.max_iterations),
+    let run_options = choice.run.options(&SolveOptions {
         time_budget: options
             .time_budget
             .map(|b| b.saturating_sub(start.elapsed())),
         ..options.clone()
-    };
+    });
     let mut solution = solver.solve(fine.as_ref().unwrap_or(problem), &run_options)?;
     // Back onto the problem's cells: box averages of the refined cells.
     let mut factor = choice.run.factor;

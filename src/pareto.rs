@@ -103,6 +103,24 @@ impl Run {
     }
 }
 
+impl Run {
+    /// Its solver, built from `registry` with its parameters.
+    pub fn solver(&self, registry: &lucent_core::Registry) -> Result<Box<dyn Solver>, Error> {
+        let params: Params = toml::from_str(&self.params)
+            .map_err(|e| Error::Invalid(format!("pareto parameters `{}`: {e}", self.params)))?;
+        Ok(registry.build(self.solver, &params)?)
+    }
+
+    /// `base` with the run's iteration tolerance and limit where it sets them.
+    pub fn options(&self, base: &SolveOptions) -> SolveOptions {
+        SolveOptions {
+            relative_tolerance: self.tolerance.unwrap_or(base.relative_tolerance),
+            max_iterations: self.max_iterations.unwrap_or(base.max_iterations),
+            ..base.clone()
+        }
+    }
+}
+
 /// Every solver's knobs, in one place: what `cargo xtask pareto` sweeps.
 pub fn runs() -> Vec<Run> {
     let mut runs = Vec::new();
@@ -362,9 +380,7 @@ pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Sweep, Error> {
     let total = reference(scene, FluenceKind::Total, 0.01, cache)?;
     let mut problems: Vec<(usize, Problem)> = Vec::new();
     for run in runs() {
-        let params: Params = toml::from_str(&run.params)
-            .map_err(|e| Error::Invalid(format!("pareto parameters `{}`: {e}", run.params)))?;
-        let solver = registry.build(run.solver, &params)?;
+        let solver = run.solver(&registry)?;
         if !problems.iter().any(|(f, _)| *f == run.factor) {
             problems.push((run.factor, refined(scene, run.factor)?));
         }
@@ -372,13 +388,10 @@ pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Sweep, Error> {
         if solver.admits(problem).is_err() {
             continue;
         }
-        let defaults = SolveOptions::default();
-        let options = SolveOptions {
-            relative_tolerance: run.tolerance.unwrap_or(defaults.relative_tolerance),
-            max_iterations: run.max_iterations.unwrap_or(defaults.max_iterations),
+        let options = run.options(&SolveOptions {
             time_budget: Some(std::time::Duration::from_secs(120)),
-            ..defaults
-        };
+            ..SolveOptions::default()
+        });
         let start = Instant::now();
         let solution = match solver.solve(problem, &options) {
             Err(e) if crate::device_missing(&e) => continue,
@@ -426,7 +439,7 @@ pub fn reuse(scene: &SuiteScene, dir: &Path, cache: Option<&Path>) -> Result<Swe
         reason: format!("not a pareto row: `{line}`"),
     };
     let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-    if lines.next() != Some("solver,setting,seconds,relative_l2,relative_l2_total") {
+    if lines.next() != Some(CSV_HEADER) {
         return Err(bad("(header)"));
     }
     let points = lines
@@ -531,16 +544,13 @@ pub fn measure_auto(
                     .iter()
                     .find(|r| r.label == p.solver && r.setting == p.setting)
                     .ok_or_else(|| Error::Invalid(format!("no run {}", p.solver)))?;
-                let params: Params = toml::from_str(&run.params)
-                    .map_err(|e| Error::Invalid(format!("pareto parameters: {e}")))?;
-                let solver = registry.build(run.solver, &params)?;
-                let defaults = SolveOptions::default();
-                let options = SolveOptions {
-                    relative_tolerance: run.tolerance.unwrap_or(defaults.relative_tolerance),
-                    max_iterations: run.max_iterations.unwrap_or(defaults.max_iterations),
-                    ..defaults
-                };
-                Some((p, solver, refined(scene, run.factor)?, options))
+                let options = run.options(&SolveOptions::default());
+                Some((
+                    p,
+                    run.solver(&registry)?,
+                    refined(scene, run.factor)?,
+                    options,
+                ))
             }
             None => None,
         };
@@ -768,9 +778,12 @@ pub fn auto_markdown(points: &[AutoPoint]) -> String {
     s
 }
 
+/// The header of `docs/pareto/<scene>.csv`.
+pub const CSV_HEADER: &str = "solver,setting,seconds,relative_l2,relative_l2_total";
+
 /// The points as CSV.
 pub fn csv(points: &[Point]) -> String {
-    let mut out = String::from("solver,setting,seconds,relative_l2,relative_l2_total\n");
+    let mut out = format!("{CSV_HEADER}\n");
     for p in points {
         out.push_str(&format!(
             "{},{},{:.6},{:.6},{:.6}\n",

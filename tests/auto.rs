@@ -203,17 +203,26 @@ fn an_unseen_problem_is_decided_by_its_neighbours_with_a_margin() {
 }
 
 /// What `auto` runs is that run, bit for bit: the solver with the table's parameters and
-/// iteration tolerance, on the refined grid restricted back where the run was refined.
+/// iteration tolerance, on the refined grid restricted back where the run was refined. On
+/// a slab under the sun, a medium touching its box on a grid of 13 × 11 × 19 cells, and a
+/// point light inside the medium on 19 × 17 × 15 cells.
 #[test]
 fn auto_runs_exactly_the_chosen_run() {
-    let slab = suite_scene("slab");
-    let problem = &slab.built.problem;
     let registry = lucent::registry();
-    for (label, setting) in [
-        ("direct", "1x cells, 8 sky directions"),
-        ("diffusion-mg", "2x cells, tolerance 1e-8"),
+    let mut checked = 0;
+    for (scene, label, setting) in [
+        ("slab", "direct", "1x cells, 8 sky directions"),
+        ("slab", "diffusion-mg", "2x cells, tolerance 1e-8"),
+        ("touching_faces", "direct", "1x cells, 32 sky directions"),
+        ("touching_faces", "diffusion-mg", "2x cells, tolerance 1e-4"),
+        ("point_inside", "dom", "S4 diamond, tolerance 1e-4"),
+        ("point_inside", "diffusion-cg", "1x cells, tolerance 1e-2"),
     ] {
+        let slab = suite_scene(scene);
+        let problem = &slab.built.problem;
         let chosen = run(label, setting);
+        assert!(admits(&chosen, &slab), "{scene}: {label} refuses it");
+        checked += 1;
         let table = table_at(&slab, vec![measured(&chosen, 0.01, 0.01)]);
         let auto = AutoSolver::with_table(0.05, table);
         let solution = auto.solve(problem, &SolveOptions::default()).unwrap();
@@ -248,10 +257,11 @@ fn auto_runs_exactly_the_chosen_run() {
                     .iter()
                     .zip(b.data())
                     .all(|(x, y)| x.to_bits() == y.to_bits()),
-                "{label}: auto's fluence differs from the run's"
+                "{scene}, {label}: auto's fluence differs from the run's"
             );
         }
     }
+    assert_eq!(checked, 6);
 }
 
 /// A tolerance no measured run meets is said, and the closest run is made; an empty table,

@@ -354,108 +354,108 @@ fn pareto(only: Vec<String>, reuse: bool) -> ExitCode {
         std::fs::write(path, text)
             .map_err(|e| eprintln!("xtask: cannot write {}: {e}", path.display()))
     };
-    for scene in scenes
-        .iter()
-        .filter(|s| only.is_empty() || only.contains(&s.name))
-    {
+    // A scene's points: swept, or read back with `--reuse`; printed.
+    let measure = |scene: &lucent::crosscheck::SuiteScene| {
         let measured = if reuse {
             lucent::pareto::reuse(scene, &out, Some(&cache))
         } else {
             lucent::pareto::sweep(scene, Some(&cache))
         };
-        let sweep = match measured {
-            Ok(p) => p,
+        match measured {
+            Ok(sweep) if sweep.points.is_empty() => {
+                eprintln!("xtask: {}: no solver can run it yet", scene.name);
+                None
+            }
+            Ok(sweep) => {
+                for p in &sweep.points {
+                    eprintln!(
+                        "{:<14} {:<7} {:<32} {:>9.3} s {:>8.3}% (total {:>8.3}%)",
+                        scene.name,
+                        p.solver,
+                        p.setting,
+                        p.seconds,
+                        100.0 * p.error,
+                        100.0 * p.error_total
+                    );
+                }
+                Some(sweep)
+            }
             Err(e) => {
                 eprintln!("xtask: {}: {e}", scene.name);
-                continue;
+                None
             }
-        };
-        let points = &sweep.points;
-        if points.is_empty() {
-            eprintln!("xtask: {}: no solver can run it yet", scene.name);
-            continue;
         }
-        for p in points {
-            eprintln!(
-                "{:<14} {:<7} {:<32} {:>9.3} s {:>8.3}% (total {:>8.3}%)",
-                scene.name,
-                p.solver,
-                p.setting,
-                p.seconds,
-                100.0 * p.error,
-                100.0 * p.error_total
-            );
-        }
-        table = table.with_scene(lucent::pareto::measured_scene(scene, points));
-        if write(&table_path, &table.to_csv()).is_err() {
-            return ExitCode::FAILURE;
-        }
-        let autos = match lucent::pareto::measure_auto(
+    };
+    // `auto` on a scene with its own rows in `table` (`own`) or not; printed.
+    let run_auto = |scene: &lucent::crosscheck::SuiteScene,
+                    table: &lucent::auto::Table,
+                    sweep: &lucent::pareto::Sweep,
+                    own: bool,
+                    what: &str| {
+        let autos = lucent::pareto::measure_auto(
             scene,
-            &table,
-            &sweep,
+            table,
+            sweep,
             &lucent::pareto::AUTO_TOLERANCES,
-            &[true],
-        ) {
-            Ok(a) => a,
-            Err(e) => {
-                eprintln!("xtask: {}: auto: {e}", scene.name);
-                Vec::new()
-            }
-        };
+            &[own],
+        )
+        .unwrap_or_else(|e| {
+            eprintln!("xtask: {}: auto ({what}): {e}", scene.name);
+            Vec::new()
+        });
         for a in &autos {
             eprintln!(
-                "{:<14} auto {:>5.1}% {}: {} -> {:.3} s {:.3}% (fastest meeting it: {:?})",
+                "{:<14} auto {:>5.1}% {what}: {} (nearest {}) -> {:.3} s {:.3}% (fastest meeting it: {:?})",
                 scene.name,
                 100.0 * a.tolerance,
-                if a.own_rows { "own rows" } else { "left out" },
                 a.chose,
+                a.nearest,
                 a.seconds,
                 100.0 * a.error_total,
                 a.fastest
             );
         }
+        autos
+    };
+    // The chart and the points of a scene.
+    let chart = |scene: &lucent::crosscheck::SuiteScene,
+                 title: &str,
+                 sweep: &lucent::pareto::Sweep,
+                 autos: &[lucent::pareto::AutoPoint]| {
+        let svg = lucent::pareto::svg_with_auto(title, &sweep.points, autos);
+        let csv = lucent::pareto::csv(&sweep.points);
+        [("svg", svg), ("csv", csv)]
+            .iter()
+            .try_for_each(|(ext, text)| write(&out.join(format!("{}.{ext}", scene.name)), text))
+    };
+    for scene in scenes
+        .iter()
+        .filter(|s| only.is_empty() || only.contains(&s.name))
+    {
+        let Some(sweep) = measure(scene) else {
+            continue;
+        };
+        table = table.with_scene(lucent::pareto::measured_scene(scene, &sweep.points));
+        if write(&table_path, &table.to_csv()).is_err() {
+            return ExitCode::FAILURE;
+        }
+        let autos = run_auto(scene, &table, &sweep, true, "own rows");
         auto_runs.retain(|a| a.scene != scene.name);
         auto_runs.extend(autos.iter().cloned());
         if write(&runs_path, &lucent::pareto::auto_csv(&auto_runs)).is_err() {
             return ExitCode::FAILURE;
         }
         let title = format!("{}: error against time (dev machine)", scene.name);
-        let svg = lucent::pareto::svg_with_auto(&title, points, &autos);
-        let csv = lucent::pareto::csv(points);
-        for (ext, text) in [("svg", svg), ("csv", csv)] {
-            if write(&out.join(format!("{}.{ext}", scene.name)), &text).is_err() {
-                return ExitCode::FAILURE;
-            }
+        if chart(scene, &title, &sweep, &autos).is_err() {
+            return ExitCode::FAILURE;
         }
         swept.push((scene, sweep));
     }
     // With every scene measured: each scene's choice with its own rows left out.
     for (scene, sweep) in &swept {
-        match lucent::pareto::measure_auto(
-            scene,
-            &table,
-            sweep,
-            &lucent::pareto::AUTO_TOLERANCES,
-            &[false],
-        ) {
-            Ok(autos) => {
-                for a in &autos {
-                    eprintln!(
-                        "{:<14} auto {:>5.1}% left out: {} (nearest {}) -> {:.3} s {:.3}%",
-                        scene.name,
-                        100.0 * a.tolerance,
-                        a.chose,
-                        a.nearest,
-                        a.seconds,
-                        100.0 * a.error_total
-                    );
-                }
-                auto_runs.retain(|a| a.scene != scene.name || a.own_rows);
-                auto_runs.extend(autos);
-            }
-            Err(e) => eprintln!("xtask: {}: auto, rows left out: {e}", scene.name),
-        }
+        let autos = run_auto(scene, &table, sweep, false, "left out");
+        auto_runs.retain(|a| a.scene != scene.name || a.own_rows);
+        auto_runs.extend(autos);
     }
     // Held-out scenes of mixed regime: charted, and `auto` run on them with the whole
     // table, which never holds them.
@@ -470,54 +470,12 @@ fn pareto(only: Vec<String>, reuse: bool) -> ExitCode {
         .iter()
         .filter(|s| only.is_empty() || only.contains(&s.name))
     {
-        let measured = if reuse {
-            lucent::pareto::reuse(scene, &out, Some(&cache))
-        } else {
-            lucent::pareto::sweep(scene, Some(&cache))
+        let Some(sweep) = measure(scene) else {
+            continue;
         };
-        let sweep = match measured {
-            Ok(p) => p,
-            Err(e) => {
-                eprintln!("xtask: {}: {e}", scene.name);
-                continue;
-            }
-        };
-        for p in &sweep.points {
-            eprintln!(
-                "{:<14} {:<7} {:<32} {:>9.3} s {:>8.3}% (total {:>8.3}%)",
-                scene.name,
-                p.solver,
-                p.setting,
-                p.seconds,
-                100.0 * p.error,
-                100.0 * p.error_total
-            );
-        }
-        let mut autos = match lucent::pareto::measure_auto(
-            scene,
-            &table,
-            &sweep,
-            &lucent::pareto::AUTO_TOLERANCES,
-            &[false],
-        ) {
-            Ok(a) => a,
-            Err(e) => {
-                eprintln!("xtask: {}: auto: {e}", scene.name);
-                Vec::new()
-            }
-        };
+        let mut autos = run_auto(scene, &table, &sweep, false, "held out");
         for a in &mut autos {
             a.held_out = true;
-            eprintln!(
-                "{:<14} auto {:>5.1}% held out: {} (nearest {}) -> {:.3} s {:.3}% (fastest meeting it: {:?})",
-                scene.name,
-                100.0 * a.tolerance,
-                a.chose,
-                a.nearest,
-                a.seconds,
-                100.0 * a.error_total,
-                a.fastest
-            );
         }
         auto_runs.retain(|a| a.scene != scene.name);
         auto_runs.extend(autos.iter().cloned());
@@ -525,12 +483,8 @@ fn pareto(only: Vec<String>, reuse: bool) -> ExitCode {
             "{} (held out): error against time (dev machine)",
             scene.name
         );
-        let svg = lucent::pareto::svg_with_auto(&title, &sweep.points, &autos);
-        let csv = lucent::pareto::csv(&sweep.points);
-        for (ext, text) in [("svg", svg), ("csv", csv)] {
-            if write(&out.join(format!("{}.{ext}", scene.name)), &text).is_err() {
-                return ExitCode::FAILURE;
-            }
+        if chart(scene, &title, &sweep, &autos).is_err() {
+            return ExitCode::FAILURE;
         }
     }
     if write(&runs_path, &lucent::pareto::auto_csv(&auto_runs)).is_err() {
