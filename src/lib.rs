@@ -69,6 +69,7 @@ pub fn registry() -> lucent_core::Registry {
     registry.register(lucent_fem::FemDiffusionSolver::ENTRY);
     registry.register(lucent_dom::DomSolver::ENTRY);
     registry.register(lucent_lbm::LbmSolver::ENTRY);
+    registry.register(lucent_hybrid::HybridSolver::ENTRY);
     for entry in lucent_gpu_solvers::GpuSolver::ENTRIES {
         registry.register(entry);
     }
