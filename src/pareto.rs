@@ -191,6 +191,19 @@ pub fn runs() -> Vec<Run> {
             )
         });
     }
+    // The hybrid: uncollided light exact, up to `orders` scattering orders by sweeps of
+    // the S_N set, the rest by multigrid diffusion; the knobs are the orders and the set.
+    for (order, orders) in [(4, 1), (4, 2), (4, 4), (4, 8), (8, 1), (8, 4)] {
+        runs.push(Run {
+            tolerance: Some(1e-4),
+            ..Run::new(
+                "hybrid",
+                format!("order = {order}\norders = {orders}"),
+                1,
+                format!("S{order}, {orders} swept orders, tolerance 1e-4"),
+            )
+        });
+    }
     // Lattice-Boltzmann: both lattices over the resolution and the stopping tolerance
     // (second order in h towards the diffusion model's error), and Geist's collision,
     // first order in h.
@@ -875,6 +888,7 @@ pub fn svg(title: &str, points: &[Point]) -> String {
     ));
     let colours = [
         "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf",
+        "#bcbd22", "#7f7f7f", "#000000", "#aec7e8",
     ];
     let mut solvers: Vec<&str> = points.iter().map(|p| p.solver.as_str()).collect();
     solvers.dedup();

@@ -14,7 +14,7 @@ pub struct HybridParams {
     pub order: usize,
     /// Spatial closure of the sweeps.
     pub closure: Closure,
-    /// Scattering orders carried by transport sweeps before diffusion takes the rest.
+    /// The most scattering orders carried by transport sweeps.
     pub orders: usize,
     /// Wavefront block edge of the sweeps, in cells.
     pub block: usize,
@@ -23,9 +23,9 @@ pub struct HybridParams {
 impl Default for HybridParams {
     fn default() -> Self {
         Self {
-            order: 8,
+            order: 4,
             closure: Closure::Diamond,
-            orders: 1,
+            orders: 4,
             block: 16,
         }
     }
@@ -47,7 +47,7 @@ impl SolverParams for HybridParams {
         ),
         (
             "orders",
-            "scattering orders carried exactly by transport sweeps (1 to 64; 1: single scattering) before multigrid diffusion takes the rest",
+            "the most scattering orders carried by transport sweeps, 1 to 64 (1: single scattering); after the last, or once an order's power is below the solve's tolerance of the first's, multigrid diffusion takes what is left",
         ),
         (
             "block",

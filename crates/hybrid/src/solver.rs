@@ -51,6 +51,11 @@ pub struct HybridChannel {
     /// boundary's (`inflow`), the power that collides in it (`absorbed`: the sweeps do not
     /// scatter, so every collision counts) and what leaves the box.
     pub sweeps: Vec<DomBalance>,
+    /// After each sweep, the power of the next order's source handed to diffusion (W): 0
+    /// but after the last sweep (`orders`, or the first whose scattered power is below the
+    /// solve's relative tolerance of the first order's). The next sweep's source and this
+    /// add up to the scattered part of the sweep's collisions.
+    pub handed: Vec<f64>,
     /// The diffusion part's balance: the power of the source handed to it (the scattered
     /// part of the last sweep's collisions) against what it absorbs and lets escape.
     pub diffusion: lucent_diffusion::Balance,
@@ -313,10 +318,15 @@ impl ChannelMethod for HybridSolver {
         };
         let mut swept = vec![0.0f64; n];
         let mut sweeps = Vec::with_capacity(self.orders);
+        let mut handed = Vec::with_capacity(self.orders);
         let mut sweeps_run = 0;
         let mut unconverged = None;
         let volume = geometry.cell_volume();
-        for _ in 0..self.orders {
+        // The diffusion part's source, gathered order by order.
+        let mut q0 = vec![0.0f64; n];
+        let mut q1 = vec![glam::DVec3::ZERO; n];
+        let mut first_input = 0.0;
+        for order in 1..=self.orders {
             let solution =
                 lucent_dom::solve(&streaming, ordinates, &self.settings, &channel.stopping)
                     .map_err(dom_error)?;
@@ -334,9 +344,13 @@ impl ChannelMethod for HybridSolver {
             for (s, v) in swept.iter_mut().zip(&solution.fluence) {
                 *s += v;
             }
+            if order == 1 {
+                first_input = solution.balance.emitted + solution.balance.inflow;
+            }
             sweeps.push(solution.balance);
             // The next order's source: σ_s times the in-scattered radiance toward each
             // direction (the discrete phase matrix conserves the scattered power).
+            let mut power = 0.0;
             for ((row, inscattered), s) in streaming
                 .fixed
                 .chunks_mut(m)
@@ -346,18 +360,27 @@ impl ChannelMethod for HybridSolver {
                 for (f, i) in row.iter_mut().zip(inscattered) {
                     *f = s * i;
                 }
+                power += moments(set, row).0 * volume;
             }
             // The sky enters once.
             streaming.boundary.radiance = 0.0;
+            // After the last order, or once what is left is below the tolerance of the
+            // first order's power, diffusion takes the rest.
+            let done =
+                order == self.orders || power <= channel.stopping.relative_tolerance * first_input;
+            if done {
+                for (cell, row) in streaming.fixed.chunks(m).enumerate() {
+                    let (zeroth, first) = moments(set, row);
+                    q0[cell] += zeroth;
+                    q1[cell] += first;
+                }
+                handed.push(power);
+                break;
+            }
+            handed.push(0.0);
         }
-        // What is left: the next order's source, in the diffusion approximation.
-        let mut q0 = Vec::with_capacity(n);
-        let mut q1 = Vec::with_capacity(n);
-        for row in streaming.fixed.chunks(m) {
-            let (zeroth, first) = moments(set, row);
-            q0.push(zeroth as f32);
-            q1.push(first.as_vec3().to_array());
-        }
+        let q0: Vec<f32> = q0.iter().map(|&v| v as f32).collect();
+        let q1: Vec<[f32; 3]> = q1.iter().map(|v| v.as_vec3().to_array()).collect();
         let cells = CellGeometry::full_box(geometry);
         let tail = DiffusionProblem::new(
             cells,
@@ -418,7 +441,6 @@ impl ChannelMethod for HybridSolver {
             .zip(&sigma_a)
             .map(|(phi, a)| phi * f64::from(*a) * volume)
             .sum();
-        let first_input = sweeps.first().map_or(0.0, |b| b.emitted + b.inflow);
         let diffused_share = if first_input > 0.0 {
             diffused.balance.emitted / first_input
         } else {
@@ -444,6 +466,7 @@ impl ChannelMethod for HybridSolver {
                 fluence_grid,
                 HybridChannel {
                     sweeps,
+                    handed,
                     diffusion: diffused.balance,
                     cycles,
                     diffused_share,

@@ -93,13 +93,13 @@ fn energy_closes_part_by_part() {
         // σ_t h = 0.5 under a vertical sun: the uncollided integrals close to ~1e-5
         // (lucent_dom::DomChannel).
         let problem = cube(16, 4.0, albedo, g, DVec3::NEG_Z, sky, boundary);
-        for orders in [1, 3] {
+        for orders in [1, 3, 8] {
             let hybrid = HybridSolver::default().with_orders(orders).expect("orders");
             let (_, channels) = hybrid
                 .solve_with_details(&problem, &options(1e-9))
                 .expect("hybrid");
             let c = &channels[0];
-            assert_eq!(c.sweeps.len(), orders);
+            assert!(c.sweeps.len() <= orders);
             for (k, sweep) in c.sweeps.iter().enumerate() {
                 // A sweep that does not reflect is exact arithmetic on f64 work, its
                 // source f32: 1e-6. One that reflects iterates to 1e-9 relative.
@@ -115,16 +115,19 @@ fn energy_closes_part_by_part() {
                 "{boundary:?} albedo {albedo} g {g}: diffusion {:?}",
                 c.diffusion
             );
-            // Each order's source is the scattered part of the last one's collisions.
-            for pair in c.sweeps.windows(2) {
-                let scattered = albedo as f64 * pair[0].absorbed;
+            // The scattered part of each sweep's collisions is the next sweep's source plus
+            // what went to diffusion, and diffusion's source is all that went to it.
+            assert_eq!(c.handed.len(), c.sweeps.len());
+            for (k, sweep) in c.sweeps.iter().enumerate() {
+                let scattered = albedo as f64 * sweep.absorbed;
+                let next = c.sweeps.get(k + 1).map_or(0.0, |s| s.emitted);
                 assert!(
-                    (pair[1].emitted - scattered).abs() <= 1e-5 * scattered,
-                    "{pair:?}"
+                    (next + c.handed[k] - scattered).abs() <= 1e-5 * scattered,
+                    "order {k}: {next} + {} vs {scattered}",
+                    c.handed[k]
                 );
             }
-            let last = c.sweeps.last().expect("a sweep");
-            let handed = albedo as f64 * last.absorbed;
+            let handed: f64 = c.handed.iter().sum();
             assert!(
                 (c.diffusion.emitted - handed).abs() <= 1e-5 * handed,
                 "{:?} vs {handed}",
@@ -222,8 +225,8 @@ proptest! {
         let problem = cube(12, sigma_t, albedo, g, DVec3::new(sx, sy, -1.0), 0.0, Boundary::Vacuum);
         let reference = dom(4).solve(&problem, &options(1e-8)).expect("dom");
         let hybrid = HybridSolver::default()
-            .with_order(4)
-            .expect("order")
+            .with_orders(1)
+            .expect("orders")
             .solve(&problem, &options(1e-8))
             .expect("hybrid");
         let diffusion = lucent_diffusion::DiffusionSolver::custom("diffusion")
@@ -242,6 +245,35 @@ proptest! {
             e_hybrid < bound * e_diffusion,
             "depth {depth} albedo {albedo} g {g}: hybrid {e_hybrid}, diffusion {e_diffusion}"
         );
+    }
+}
+
+/// The sweeps stop once an order's scattered power is below the solve's tolerance of the
+/// first order's, and hand that remainder to diffusion: in a thin medium far fewer than
+/// `orders` sweeps run, over tolerances.
+#[test]
+fn sweeps_stop_at_the_tolerance() {
+    let problem = cube(12, 0.5, 0.6, 0.4, DVec3::NEG_Z, 0.0, Boundary::Vacuum);
+    for tolerance in [1e-3, 1e-6] {
+        let (_, channels) = HybridSolver::default()
+            .with_orders(64)
+            .expect("orders")
+            .solve_with_details(&problem, &options(tolerance))
+            .expect("hybrid");
+        let c = &channels[0];
+        let first = c.sweeps[0].emitted + c.sweeps[0].inflow;
+        let k = c.sweeps.len();
+        // Each order keeps at most albedo × (1 − e^{−τ}) ≈ 0.38 of the last's power: the
+        // tolerance is reached within log(tolerance)/log(0.38) + 1 orders.
+        let bound = (tolerance.ln() / 0.38f64.ln()).ceil() as usize + 1;
+        assert!(
+            k <= bound,
+            "tolerance {tolerance}: {k} sweeps, bound {bound}"
+        );
+        let handed = *c.handed.last().expect("a sweep");
+        assert!(handed <= tolerance * first, "{handed} vs {first}");
+        // Only the last sweep handed anything over.
+        assert!(c.handed[..k - 1].iter().all(|&p| p == 0.0));
     }
 }
 
