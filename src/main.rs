@@ -27,6 +27,7 @@ use lucent::optics::Significant as S;
 use lucent::optics::materials::{JENSEN_2001, LENGTH_UNIT};
 use lucent::optics::{Dielectric, DiffuseFresnel, DiffusionMedium};
 use lucent::progress::Meter;
+use lucent::resolution::AngularFamily;
 use lucent::scene::{BuiltScene, Scene};
 
 /// The solve ran to its end but did not converge (iteration or time limit).
@@ -184,6 +185,10 @@ enum Command {
         /// The relative L2 discretisation error to meet.
         #[arg(long = "error", value_name = "RELATIVE", default_value_t = 0.02)]
         target: f64,
+        /// Choose the fewest directions instead of the coarsest grid (`dom`: octahedral
+        /// sets of 128, 32 and 8 directions; `hybrid`: S8, S4, S2), on the scene's grid.
+        #[arg(long)]
+        directions: bool,
     },
 }
 
@@ -214,7 +219,8 @@ fn main() -> ExitCode {
             scene,
             solver,
             target,
-        }) => resolution(&scene, &solver, target).map(|()| Ended::Done),
+            directions,
+        }) => resolution(&scene, &solver, target, directions).map(|()| Ended::Done),
         Some(Command::Materials) => materials_table(&mut io::stdout().lock())
             .map(|()| Ended::Done)
             .map_err(|e| match e {
@@ -1046,7 +1052,7 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
 }
 
 /// `lucent resolution`: the levels solved, their estimated errors and the one chosen.
-fn resolution(scene: &Path, args: &SolverArgs, target: f64) -> Result<(), Error> {
+fn resolution(scene: &Path, args: &SolverArgs, target: f64, directions: bool) -> Result<(), Error> {
     if !(target > 0.0 && target < 1.0) {
         return Err(Error::Usage(format!(
             "--error {target}: a relative error between 0 and 1"
@@ -1059,17 +1065,79 @@ fn resolution(scene: &Path, args: &SolverArgs, target: f64) -> Result<(), Error>
     // The iteration's own error must stay far below the discretisation's it measures.
     options.relative_tolerance = options.relative_tolerance.min(target * 1e-3);
     options.validate()?;
+    let mut out = io::stdout().lock();
+    let io_err = |e: io::Error| Error::Io {
+        path: "<stdout>".into(),
+        reason: e.to_string(),
+    };
+    if directions {
+        let registry = lucent::registry();
+        let Some(family) = AngularFamily::of(&registry, chosen.solver.name(), &chosen.params)?
+        else {
+            return Err(Error::Usage(format!(
+                "--directions: `{}` has no angular family to choose from (dom, hybrid)",
+                chosen.solver.name()
+            )));
+        };
+        let choice = lucent::resolution::fewest_directions_meeting(
+            &built.problem,
+            &family,
+            target,
+            &options,
+        )?;
+        writeln!(
+            out,
+            "{name}: `{}` to a relative angular error of {}",
+            chosen.solver.name(),
+            S(target)
+        )
+        .map_err(io_err)?;
+        for (i, level) in choice.levels.iter().enumerate() {
+            writeln!(
+                out,
+                "  {} directions ({}): estimated error {}, solved in {} s{}",
+                level.directions,
+                level.setting,
+                S(level.estimated_error),
+                S(level.seconds),
+                if i == choice.chosen {
+                    "  <- chosen"
+                } else {
+                    ""
+                }
+            )
+            .map_err(io_err)?;
+        }
+        writeln!(
+            out,
+            "  order {} in the angular spacing ({})",
+            S(choice.order),
+            if choice.observed {
+                "observed from three levels"
+            } else {
+                "nominal: three levels did not show one"
+            }
+        )
+        .map_err(io_err)?;
+        let level = &choice.levels[choice.chosen];
+        return if choice.met {
+            writeln!(out, "chosen: {} directions meet it", level.directions).map_err(io_err)
+        } else {
+            writeln!(
+                out,
+                "not met: even {} directions are estimated at {}",
+                level.directions,
+                S(level.estimated_error)
+            )
+            .map_err(io_err)
+        };
+    }
     let choice = lucent::resolution::coarsest_meeting(
         &built.problem,
         chosen.solver.as_ref(),
         target,
         &options,
     )?;
-    let mut out = io::stdout().lock();
-    let io_err = |e: io::Error| Error::Io {
-        path: "<stdout>".into(),
-        reason: e.to_string(),
-    };
     writeln!(
         out,
         "{name}: `{}` to a relative error of {}",

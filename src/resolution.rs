@@ -139,10 +139,51 @@ pub fn coarsest_meeting(
             "{nx} × {ny} × {nz} cells leave no grid 2× coarser with {MIN_CELLS} cells along each axis: no error estimate"
         )));
     }
-    // ‖φ_coarse − R φ_finer‖ / ‖R φ_finer‖ for each neighbouring pair.
+    let fluences: Vec<&Grid> = solutions.iter().map(|(_, g, _)| g).collect();
+    let Estimates {
+        order,
+        observed,
+        errors,
+    } = estimates(&fluences)?;
+    let levels: Vec<Level> = solutions
+        .iter()
+        .zip(&errors)
+        .map(|((coarsening, grid, seconds), &estimated_error)| Level {
+            coarsening: *coarsening,
+            dims: grid.dims(),
+            seconds: *seconds,
+            estimated_error,
+        })
+        .collect();
+    let (chosen, met) = coarsest_within(&errors, tolerance);
+    Ok(ResolutionChoice {
+        met,
+        levels,
+        order,
+        observed,
+        chosen,
+    })
+}
+
+/// What the differences between neighbouring levels (finest first) say.
+struct Estimates {
+    /// The order used: observed, or [`NOMINAL_ORDER`].
+    order: f64,
+    /// Whether it was observed.
+    observed: bool,
+    /// Each level's estimated relative error.
+    errors: Vec<f64>,
+}
+
+/// The Richardson-style estimates of the module docs from `fluences`, finest first, each
+/// level's resolution (in space or in angle) half the one before it: the relative
+/// difference of each neighbouring pair (the finer restricted onto the coarser's grid),
+/// the order observed from three levels, and each level's error (the finest's from the
+/// pair below it, a coarser one's from the pair it is the coarser of).
+fn estimates(fluences: &[&Grid]) -> Result<Estimates, Error> {
     let mut differences = Vec::new();
-    for pair in solutions.windows(2) {
-        let (finer, coarser) = (&pair[0].1, &pair[1].1);
+    for pair in fluences.windows(2) {
+        let (finer, coarser) = (pair[0], pair[1]);
         let restricted = resample(finer, coarser.dims())?;
         let (mut diff, mut norm) = (0.0f64, 0.0f64);
         for (c, r) in coarser.data().iter().zip(restricted.data()) {
@@ -162,35 +203,164 @@ pub fn coarsest_meeting(
     .filter(|p| (0.5..=4.0).contains(p));
     let order = observed.unwrap_or(NOMINAL_ORDER);
     let gain = 2f64.powf(order);
-    let levels: Vec<Level> = solutions
-        .iter()
-        .enumerate()
-        .map(|(i, (coarsening, grid, seconds))| {
-            // The finest level's error from the pair below it; a coarser one's from the
-            // pair it is the coarser of.
-            let estimated_error = match i {
-                0 => differences[0] / (gain - 1.0),
-                i => differences[i - 1] * gain / (gain - 1.0),
-            };
-            Level {
-                coarsening: *coarsening,
-                dims: grid.dims(),
-                seconds: *seconds,
-                estimated_error,
-            }
+    let errors = (0..fluences.len())
+        .map(|i| match i {
+            0 => differences[0] / (gain - 1.0),
+            i => differences[i - 1] * gain / (gain - 1.0),
         })
         .collect();
-    let chosen = levels
-        .iter()
-        .rposition(|l| l.estimated_error <= tolerance)
-        .unwrap_or(0);
-    Ok(ResolutionChoice {
-        met: levels
-            .get(chosen)
-            .is_some_and(|l| l.estimated_error <= tolerance),
-        levels,
+    Ok(Estimates {
         order,
         observed: observed.is_some(),
+        errors,
+    })
+}
+
+/// The index of the coarsest level whose error is within `tolerance` (the finest when
+/// none is), and whether it is.
+fn coarsest_within(errors: &[f64], tolerance: f64) -> (usize, bool) {
+    let chosen = errors.iter().rposition(|&e| e <= tolerance).unwrap_or(0);
+    (chosen, errors.get(chosen).is_some_and(|&e| e <= tolerance))
+}
+
+/// One angular level of [`fewest_directions_meeting`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct AngularLevel {
+    /// Propagation directions.
+    pub directions: usize,
+    /// The solver's parameters at this level, in words (`order = 8`).
+    pub setting: String,
+    /// Wall time of its solve, seconds.
+    pub seconds: f64,
+    /// Estimated relative L2 angular error of its fluence (channel 0).
+    pub estimated_error: f64,
+}
+
+/// What [`fewest_directions_meeting`] found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DirectionsChoice {
+    /// The levels solved, most directions first.
+    pub levels: Vec<AngularLevel>,
+    /// The order (in the angular spacing) the estimates used.
+    pub order: f64,
+    /// Whether it was observed from three levels (else [`NOMINAL_ORDER`]).
+    pub observed: bool,
+    /// Index in `levels` of the level with the fewest directions whose estimate meets the
+    /// tolerance (the first when none does).
+    pub chosen: usize,
+    /// Whether the chosen level meets the tolerance.
+    pub met: bool,
+}
+
+/// An angular family of a solver, finest first, each level's angular spacing half the
+/// next one's: the directions of each level and a solver for it.
+pub struct AngularFamily {
+    /// Per level, most directions first: propagation directions, the parameters in words,
+    /// the solver.
+    pub levels: Vec<(usize, String, Box<dyn Solver>)>,
+}
+
+impl AngularFamily {
+    /// The angular family of the registered solver `name` with its parameters `base`
+    /// (TOML): `dom` on the nested octahedral sets of levels 2, 1, 0 (128, 32, 8
+    /// directions), `hybrid` on level-symmetric S8, S4, S2 (80, 24, 8); `None` for a
+    /// solver without discrete directions.
+    pub fn of(
+        registry: &lucent_core::Registry,
+        name: &str,
+        base: &lucent_core::Params,
+    ) -> Result<Option<Self>, Error> {
+        // Per level: the parameters that set it and its propagation directions.
+        let sets: Vec<(String, usize)> = match name {
+            "dom" => [2, 1, 0]
+                .into_iter()
+                .map(|l| {
+                    let directions = lucent_optics::SphericalQuadrature::octahedral(l)
+                        .map_err(|e| Error::Invalid(e.to_string()))?
+                        .len();
+                    Ok((format!("family = \"octahedral\"\norder = {l}"), directions))
+                })
+                .collect::<Result<_, Error>>()?,
+            "hybrid" => [8, 4, 2]
+                .into_iter()
+                .map(|n| (format!("order = {n}"), n * (n + 2)))
+                .collect(),
+            _ => return Ok(None),
+        };
+        let mut levels = Vec::new();
+        for (text, directions) in sets {
+            let set: lucent_core::Params = toml::from_str(&text)
+                .map_err(|e| Error::Invalid(format!("angular level `{text}`: {e}")))?;
+            let mut params = base.clone();
+            params.0.extend(set.0);
+            let solver = registry.build(name, &params)?;
+            levels.push((directions, text.replace('\n', ", "), solver));
+        }
+        Ok(Some(Self { levels }))
+    }
+}
+
+/// Solves `problem` with each level of `family` (most directions first; three levels
+/// show the order), estimates each level's angular error as [`coarsest_meeting`] does
+/// the grid's (the angular spacing halves from level to level: the octahedral sets
+/// quadruple their directions, S_N doubles N), and picks the level with the fewest
+/// directions whose estimate is at most `tolerance`. Ray effects make the angular error
+/// less regular than the grid's: where three levels show no order in [0.5, 4] the
+/// nominal second order is used and the choice says so.
+pub fn fewest_directions_meeting(
+    problem: &Problem,
+    family: &AngularFamily,
+    tolerance: f64,
+    options: &SolveOptions,
+) -> Result<DirectionsChoice, Error> {
+    if family.levels.len() < 2 {
+        return Err(Error::Invalid(
+            "an angular family of fewer than two levels: no error estimate".into(),
+        ));
+    }
+    let mut solved = Vec::new();
+    for (directions, setting, solver) in &family.levels {
+        let started = std::time::Instant::now();
+        let solution = solver.solve(problem, options)?;
+        let seconds = started.elapsed().as_secs_f64();
+        let stop = &solution.report.stop_reason;
+        if !stop.is_converged() {
+            return Err(Error::Unconverged {
+                what: format!("`{}` with {setting}", solver.name()),
+                reason: stop.to_string(),
+                diverged: stop.is_diverged(),
+            });
+        }
+        solved.push((
+            *directions,
+            setting.clone(),
+            seconds,
+            solution.fluence(0).clone(),
+        ));
+    }
+    let fluences: Vec<&Grid> = solved.iter().map(|(.., g)| g).collect();
+    let Estimates {
+        order,
+        observed,
+        errors,
+    } = estimates(&fluences)?;
+    let (chosen, met) = coarsest_within(&errors, tolerance);
+    Ok(DirectionsChoice {
+        levels: solved
+            .into_iter()
+            .zip(&errors)
+            .map(
+                |((directions, setting, seconds, _), &estimated_error)| AngularLevel {
+                    directions,
+                    setting,
+                    seconds,
+                    estimated_error,
+                },
+            )
+            .collect(),
+        order,
+        observed,
         chosen,
+        met,
     })
 }

@@ -231,6 +231,47 @@ fn resolution_reports_levels_and_the_choice() {
     assert_eq!(bad.status.code(), Some(2), "{}", stderr(&bad));
 }
 
+/// `lucent resolution --directions` solves the slab with the hybrid on S8, S4 and S2 and
+/// picks the fewest directions for a loose target (S2's 8) and the most for a tight one
+/// (not met); a solver without directions is a usage error naming the ones with them.
+#[test]
+fn resolution_chooses_the_fewest_directions() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/suite/slab.toml");
+    let scene = scene.display().to_string();
+    let run = |solver: &str, error: &str| {
+        lucent(
+            &[
+                "resolution",
+                &scene,
+                "--solver",
+                solver,
+                "--directions",
+                "--error",
+                error,
+            ],
+            Path::new("."),
+        )
+    };
+    let loose = run("hybrid", "0.9");
+    assert!(loose.status.success(), "{}", stderr(&loose));
+    let text = String::from_utf8_lossy(&loose.stdout);
+    for line in [
+        "80 directions (order = 8)",
+        "24 directions (order = 4)",
+        "8 directions (order = 2)",
+    ] {
+        assert!(text.contains(line), "{line}: {text}");
+    }
+    assert!(text.contains("chosen: 8 directions meet it"), "{text}");
+    let tight = run("hybrid", "1e-9");
+    assert!(tight.status.success(), "{}", stderr(&tight));
+    let text = String::from_utf8_lossy(&tight.stdout);
+    assert!(text.contains("not met: even 80 directions"), "{text}");
+    let none = run("diffusion-mg", "0.1");
+    assert_eq!(none.status.code(), Some(2), "{}", stderr(&none));
+    assert!(stderr(&none).contains("(dom, hybrid)"), "{}", stderr(&none));
+}
+
 #[test]
 fn lists_solvers_with_capabilities() {
     let out = lucent(&["solvers"], Path::new("."));
