@@ -438,24 +438,14 @@ pub fn sweep(scene: &SuiteScene, cache: Option<&Path>) -> Result<Sweep, Error> {
     Ok(Sweep { points, total })
 }
 
-/// A sweep measured before: the points of `docs/pareto/<scene>.csv` in `dir`, with the
-/// scene's total reference (from `cache` where it is there). What `cargo xtask pareto
-/// --reuse` re-runs `auto` against when only `auto` or its features changed.
-pub fn reuse(scene: &SuiteScene, dir: &Path, cache: Option<&Path>) -> Result<Sweep, Error> {
-    let path = dir.join(format!("{}.csv", scene.name));
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::Io {
-        path: path.clone(),
-        reason: e.to_string(),
-    })?;
-    let bad = |line: &str| Error::Io {
-        path: path.clone(),
-        reason: format!("not a pareto row: `{line}`"),
-    };
+/// The points of a pareto CSV ([`csv`]'s format, [`CSV_HEADER`] first).
+pub fn parse_csv(text: &str) -> Result<Vec<Point>, String> {
+    let bad = |line: &str| format!("not a pareto row: `{line}`");
     let mut lines = text.lines().filter(|l| !l.trim().is_empty());
     if lines.next() != Some(CSV_HEADER) {
         return Err(bad("(header)"));
     }
-    let points = lines
+    lines
         .map(|line| {
             let f = crate::auto::split_csv(line);
             let num = |i: usize| {
@@ -471,7 +461,72 @@ pub fn reuse(scene: &SuiteScene, dir: &Path, cache: Option<&Path>) -> Result<Swe
                 error_total: num(4)?,
             })
         })
-        .collect::<Result<Vec<_>, Error>>()?;
+        .collect()
+}
+
+/// The hybrid against every single CPU solver on each scene (name and points): for each
+/// of the hybrid's points, its error of the total fluence and the least error any other
+/// CPU run reached in no more time. A point "beats" them when its error is below that
+/// (or nothing else ran that fast); such a point lies on the scene's error-against-time
+/// front, below every single solver's curve.
+pub fn hybrid_markdown(scenes: &[(String, Vec<Point>)]) -> String {
+    let single =
+        |p: &Point| p.solver != "hybrid" && p.solver != "auto" && !p.solver.starts_with("gpu-");
+    let mut out = String::from(
+        "| scene | hybrid | time (s) | error | best single solver in no more time | its error | hybrid beats it |\n\
+         |---|---|---|---|---|---|---|\n",
+    );
+    let mut summary = Vec::new();
+    for (scene, points) in scenes {
+        let mut hybrid: Vec<&Point> = points.iter().filter(|p| p.solver == "hybrid").collect();
+        if hybrid.is_empty() {
+            continue;
+        }
+        hybrid.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
+        let mut beats = 0;
+        for h in &hybrid {
+            let best = points
+                .iter()
+                .filter(|p| single(p) && p.seconds <= h.seconds)
+                .min_by(|a, b| a.error_total.total_cmp(&b.error_total));
+            let wins = best.is_none_or(|b| h.error_total < b.error_total);
+            beats += usize::from(wins);
+            let (name, error) = match best {
+                Some(b) => (
+                    format!("{} ({})", b.solver, b.setting),
+                    format!("{:.1}%", 100.0 * b.error_total),
+                ),
+                None => ("none ran that fast".into(), "–".into()),
+            };
+            out.push_str(&format!(
+                "| {scene} | {} | {:.3} | {:.1}% | {name} | {error} | {} |\n",
+                h.setting,
+                h.seconds,
+                100.0 * h.error_total,
+                if wins { "yes" } else { "no" }
+            ));
+        }
+        summary.push(format!("{scene}: {beats} of {}", hybrid.len()));
+    }
+    format!(
+        "{out}\nPoints of the hybrid below every single CPU solver's curve: {}.\n",
+        summary.join("; ")
+    )
+}
+
+/// A sweep measured before: the points of `docs/pareto/<scene>.csv` in `dir`, with the
+/// scene's total reference (from `cache` where it is there). What `cargo xtask pareto
+/// --reuse` re-runs `auto` against when only `auto` or its features changed.
+pub fn reuse(scene: &SuiteScene, dir: &Path, cache: Option<&Path>) -> Result<Sweep, Error> {
+    let path = dir.join(format!("{}.csv", scene.name));
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::Io {
+        path: path.clone(),
+        reason: e.to_string(),
+    })?;
+    let points = parse_csv(&text).map_err(|reason| Error::Io {
+        path: path.clone(),
+        reason,
+    })?;
     let total = reference(scene, FluenceKind::Total, 0.01, cache)?;
     Ok(Sweep { points, total })
 }
@@ -937,6 +992,50 @@ pub fn svg(title: &str, points: &[Point]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A hybrid point beats the single solvers when its error is below the least any of
+    /// them reached in no more time (GPU twins and `auto` are not single CPU solvers); the
+    /// CSV round-trips.
+    #[test]
+    fn the_hybrid_table_compares_with_the_best_single_run_in_no_more_time() {
+        let point = |solver: &str, setting: &str, seconds: f64, error: f64| Point {
+            solver: solver.into(),
+            setting: setting.into(),
+            seconds,
+            error,
+            error_total: error,
+        };
+        let points = vec![
+            point("mc", "8000 paths", 0.05, 0.10),
+            point("dom", "S4, diamond", 0.2, 0.02),
+            point("gpu-dom", "S4", 0.01, 0.001),
+            point("auto", "2%", 0.01, 0.001),
+            point("hybrid", "S4, 1 swept orders", 0.1, 0.05),
+            point("hybrid", "S4, 8 swept orders", 0.3, 0.03),
+            point("hybrid", "S2, 1 swept orders", 0.01, 0.5),
+        ];
+        let parsed = parse_csv(&csv(&points)).unwrap();
+        assert_eq!(parsed, points);
+        let table = hybrid_markdown(&[("layers".into(), points)]);
+        let row = |setting: &str| {
+            table
+                .lines()
+                .find(|l| l.contains(setting))
+                .unwrap_or_else(|| panic!("{setting}: {table}"))
+                .to_owned()
+        };
+        // Only mc ran within 0.1 s: 5% beats its 10%.
+        assert!(
+            row("1 swept orders | 0.100").ends_with("| yes |"),
+            "{table}"
+        );
+        assert!(row("1 swept orders | 0.100").contains("mc (8000 paths)"));
+        // dom's 2% in 0.2 s beats 3% in 0.3 s.
+        assert!(row("8 swept orders").ends_with("| no |"), "{table}");
+        // Nothing single ran in 0.01 s (the GPU twin and auto do not count).
+        assert!(row("S2").contains("none ran that fast"), "{table}");
+        assert!(table.contains("layers: 2 of 3"), "{table}");
+    }
 
     /// Every knob in the table is a parameter its solver takes, with a valid value, and
     /// every registered solver is charted.

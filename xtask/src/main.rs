@@ -493,7 +493,27 @@ fn pareto(only: Vec<String>, reuse: bool) -> ExitCode {
     // auto's table in docs/validation.md, between its markers (the cross-check keeps it).
     let validation = root.join("docs/validation.md");
     let text = read(&validation);
-    let section = lucent::crosscheck::auto_section(&lucent::pareto::auto_markdown(&auto_runs));
+    // The hybrid on the held-out scenes of mixed regime, from their charts' points.
+    let mixed: Vec<(String, Vec<lucent::pareto::Point>)> = held_out
+        .iter()
+        .filter_map(|scene| {
+            let text = read(&out.join(format!("{}.csv", scene.name)));
+            lucent::pareto::parse_csv(&text)
+                .ok()
+                .map(|points| (scene.name.clone(), points))
+        })
+        .collect();
+    let body = format!(
+        "{}\n## The hybrid against every single solver on the mixed scenes\n\n\
+         `hybrid` (uncollided light exact, up to K scattering orders by S_N sweeps, the rest \
+         by multigrid diffusion: docs/hybrid.md) on the held-out scenes of mixed regime, \
+         from the same sweep as their charts (`docs/pareto/<scene>.svg`): each of its points \
+         against the least error of the total fluence that any single CPU run reached in no \
+         more time.\n\n{}",
+        lucent::pareto::auto_markdown(&auto_runs),
+        lucent::pareto::hybrid_markdown(&mixed)
+    );
+    let section = lucent::crosscheck::auto_section(&body);
     if write(
         &validation,
         &lucent::crosscheck::with_auto_section(&text, &section),
