@@ -485,3 +485,54 @@ fn the_optical_depth_of_a_cell_is_a_feature() {
         "two resolutions are two regimes"
     );
 }
+
+/// On a problem the table has not measured, where its neighbours promise nothing, `auto`
+/// sizes Monte Carlo by a pilot on the problem itself: it says so, runs the paths the
+/// pilot's standard error asks for, and meets the tolerance against an independent
+/// Monte Carlo reference (another seed, many more paths). On the measured scene itself
+/// the table decides, and no pilot runs.
+#[test]
+fn a_pilot_sizes_monte_carlo_where_the_table_promises_nothing() {
+    let slab = suite_scene("slab");
+    let smoke = suite_scene("thin_smoke");
+    let far = run("diffusion-mg", "1x cells, tolerance 1e-4");
+    // Measured far off on the slab: nothing meets 10% there.
+    let table = table_at(&slab, vec![measured(&far, 0.001, 0.5)]);
+    let auto = AutoSolver::with_table(0.1, table.clone());
+    let problem = &smoke.built.problem;
+    let choice = auto.choose(problem, None).unwrap();
+    assert!(
+        !choice.seen() && !choice.meets && choice.wants_pilot(),
+        "{choice}"
+    );
+    let solution = auto.solve(problem, &SolveOptions::default()).unwrap();
+    let line = solution.report.choice.clone().unwrap();
+    assert!(
+        line.starts_with("auto chose `mc`") && line.contains("a pilot of 8000 paths"),
+        "{line}"
+    );
+    let reference: Params = toml::from_str("particles = 100000\nbatches = 8\nseed = 7").unwrap();
+    let reference = lucent::registry()
+        .build("mc", &reference)
+        .unwrap()
+        .solve(problem, &SolveOptions::default())
+        .unwrap();
+    let (phi, truth) = (&solution.fluence[0], &reference.fluence[0]);
+    let peak = truth.data().iter().fold(0.0f32, |m, v| m.max(*v));
+    let (mut diff, mut norm) = (0.0f64, 0.0f64);
+    for (a, b) in phi.data().iter().zip(truth.data()) {
+        if *b > 1e-3 * peak {
+            diff += (f64::from(*a) - f64::from(*b)).powi(2);
+            norm += f64::from(*b).powi(2);
+        }
+    }
+    // The reference's own error (800 000 paths) is a few tenths of a percent of this.
+    let error = (diff / norm).sqrt();
+    assert!(error <= 0.1, "{error}: {line}");
+    // On the slab itself the table decides, and says it cannot meet 10%.
+    let seen = auto
+        .solve(&slab.built.problem, &SolveOptions::default())
+        .unwrap();
+    let line = seen.report.choice.unwrap();
+    assert!(line.starts_with("auto cannot meet 10.00%"), "{line}");
+}
