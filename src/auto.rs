@@ -151,10 +151,16 @@ impl Features {
         let block = largest.div_ceil(32).max(8);
         let side = g.extent().max_element();
         let channels = problem.channels().max(1);
-        let regimes: Vec<Regime> = (0..channels)
-            .into_par_iter()
-            .map(|c| Regime::of(problem, c, block))
-            .collect();
+        // One channel on this thread: waking the pool costs more than a small grid's
+        // indicators.
+        let regimes: Vec<Regime> = if channels == 1 {
+            vec![Regime::of(problem, 0, block)]
+        } else {
+            (0..channels)
+                .into_par_iter()
+                .map(|c| Regime::of(problem, c, block))
+                .collect()
+        };
         let h = g.spacing().max_element();
         let mut sum = [0.0f64; 6];
         let mut phase_g = 0.0;
@@ -1010,6 +1016,18 @@ impl Solver for AutoSolver {
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
+        self.solve_with_choice(problem, options).map(|(s, _)| s)
+    }
+}
+
+impl AutoSolver {
+    /// [`Solver::solve`], also returning the choice that ran (the table's, or one sized by
+    /// a [`Pilot`]; after a memory-budget fallback, the run that could run).
+    pub fn solve_with_choice(
+        &self,
+        problem: &Problem,
+        options: &SolveOptions,
+    ) -> Result<(Solution, Choice), SolveError> {
         let start = Instant::now();
         options.validate()?;
         let registry = crate::registry();
@@ -1058,7 +1076,7 @@ impl Solver for AutoSolver {
                     solution.report.solver = Self::NAME.into();
                     solution.report.choice = Some(line);
                     solution.report.wall_time_s = start.elapsed().as_secs_f64();
-                    return Ok(solution);
+                    return Ok((solution, choice));
                 }
             }
         }

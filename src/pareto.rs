@@ -632,15 +632,14 @@ pub fn measure_auto(
                 continue;
             }
             let auto = AutoSolver::with_table(tolerance, table);
-            let choice = match auto.choose(problem, None) {
-                Ok(c) => c,
+            if let Err(e) = auto.choose(problem, None) {
                 // Left out, the nearest other scene's solvers may all refuse this one.
-                Err(e) if !own_rows => {
-                    eprintln!("pareto: {}: auto without its rows: {e}", scene.name);
-                    continue;
+                if own_rows {
+                    return Err(e.into());
                 }
-                Err(e) => return Err(e.into()),
-            };
+                eprintln!("pareto: {}: auto without its rows: {e}", scene.name);
+                continue;
+            }
             let options = SolveOptions {
                 time_budget: Some(std::time::Duration::from_secs(120)),
                 ..SolveOptions::default()
@@ -650,14 +649,16 @@ pub fn measure_auto(
             // single timing varies by tens of per cent.
             let (mut seconds, mut single_seconds) = (f64::INFINITY, fastest.map(|p| p.seconds));
             let mut error_total = f64::NAN;
+            let mut ran = None;
             let repeats = REPEATS;
             for _ in 0..repeats {
                 let start = Instant::now();
-                let solution = match auto.solve(problem, &options) {
+                let (solution, choice) = match auto.solve_with_choice(problem, &options) {
                     Err(e) if crate::device_missing(&e) => break,
                     other => other?,
                 };
                 seconds = seconds.min(start.elapsed().as_secs_f64());
+                ran = Some(choice);
                 error_total = compare(&solution.fluence, &sweep.total).relative_l2;
                 if let Some((_, solver, fine, run_options)) = &single {
                     let start = Instant::now();
@@ -666,9 +667,9 @@ pub fn measure_auto(
                     single_seconds = single_seconds.map(|s| s.min(t));
                 }
             }
-            if !seconds.is_finite() {
+            let Some(choice) = ran.filter(|_| seconds.is_finite()) else {
                 continue;
-            }
+            };
             out.push(AutoPoint {
                 scene: scene.name.clone(),
                 tolerance,

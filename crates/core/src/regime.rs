@@ -260,10 +260,10 @@ fn boundary_distances(reduced: &[f64], void: &[bool], dims: [usize; 3], h: DVec3
     let lengths = [nx, ny, nz];
     for axis in 0..3 {
         let (stride, len, step) = (strides[axis], lengths[axis], h[axis]);
-        // Every line along `axis`: its first cell's index.
-        let starts: Vec<usize> = (0..reduced.len())
-            .filter(|&c| (c / stride) % len == 0)
-            .collect();
+        // Every line along `axis`: its first cell's index, over the other two axes.
+        let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+        let starts = (0..lengths[a])
+            .flat_map(|u| (0..lengths[b]).map(move |v| u * strides[a] + v * strides[b]));
         for start in starts {
             for forward in [true, false] {
                 let mut depth = 0.0;

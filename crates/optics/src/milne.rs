@@ -172,8 +172,27 @@ pub fn extrapolation_length_with(eta: f64, nodes: usize) -> Result<f64, OpticsEr
 
 /// The transport-exact extrapolation length z_b(η) in mean free paths (0.7104461 at η = 1),
 /// converged to about 10⁻⁷ (48 angular nodes).
+///
+/// Each η's value is solved once per process and remembered (the dense 48-node solve takes
+/// about a quarter of a millisecond, which every diffusion solve and every `auto` choice
+/// on a Robin or vacuum box would otherwise pay): the same bits every time.
 pub fn extrapolation_length(eta: f64) -> Result<f64, OpticsError> {
-    extrapolation_length_with(eta, 48)
+    use std::sync::Mutex;
+    /// (η's bits, z_b) of the indices solved so far; a handful in any process.
+    static SOLVED: Mutex<Vec<(u64, f64)>> = Mutex::new(Vec::new());
+    let key = eta.to_bits();
+    let known = |solved: &[(u64, f64)]| solved.iter().find(|(k, _)| *k == key).map(|e| e.1);
+    if let Some(z) = SOLVED.lock().ok().and_then(|s| known(&s)) {
+        return Ok(z);
+    }
+    let z = extrapolation_length_with(eta, 48)?;
+    if let Ok(mut solved) = SOLVED.lock()
+        && known(&solved).is_none()
+        && solved.len() < 64
+    {
+        solved.push((key, z));
+    }
+    Ok(z)
 }
 
 #[cfg(test)]
