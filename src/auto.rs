@@ -35,14 +35,6 @@
 //!    scene's, fits the time budget. When none qualifies, the admitted run with the
 //!    smallest expected error within the budget runs, and the report says the tolerance
 //!    cannot be met, with the error expected.
-//! 5. A problem that is none of the scenes, for which the table promises nothing or only
-//!    Monte Carlo (its paths scaled from another scene): a Monte Carlo [`Pilot`] of
-//!    [`PILOT_PATHS`] on the problem itself measures its standard error, which falls as
-//!    1/√paths whatever the regime, and sizes the run for [`UNSEEN_MARGIN`] of the
-//!    tolerance. That run replaces the table's when it fits the budget and the table's
-//!    choice does not promise the tolerance sooner. The pilot's time counts in the
-//!    solve's. (Held out of the table, this turned the thick cloud in a thin halo from
-//!    "cannot meet 5%" into Monte Carlo sized to meet it.)
 //!
 //! The three constants of step 2 and 4 are the rule's only numbers; they were set by
 //! leaving each suite scene out of the table in turn and asking whether the rule's choice
@@ -68,7 +60,6 @@ use lucent_core::{
     Capabilities, FluenceKind, Light, OutputKind, ParamValue, Params, Problem, Registry, Solution,
     SolveError, SolveOptions, Solver, SolverEntry, SolverParams, param_docs, resolved_params,
 };
-use lucent_grid::Grid;
 use lucent_grid::resample::restrict;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -461,34 +452,6 @@ pub struct Choice {
     pub budget_bound: bool,
     /// Faster runs meeting the tolerance whose solver refused the problem.
     pub refused: usize,
-    /// When the run is Monte Carlo sized by a pilot on this problem ([`Pilot`]), what the
-    /// pilot measured.
-    pub pilot: Option<Pilot>,
-}
-
-/// Paths of the Monte Carlo pilot `auto` runs on a problem the table has not measured (8
-/// batches of 1000).
-pub const PILOT_PATHS: u64 = 8000;
-
-/// A Monte Carlo pilot on the problem itself: where the table has not measured a problem
-/// and its neighbours promise no run, or only Monte Carlo scaled from another scene,
-/// Monte Carlo's own error is the one prediction that does not depend on the regime. Its
-/// error is statistical: the relative L2 of the standard error per cell falls as
-/// 1/√paths, so a pilot of [`PILOT_PATHS`] measures the constant and says how many paths
-/// the tolerance needs (with [`UNSEEN_MARGIN`], since the pilot's own estimate of the
-/// standard error is uncertain by about a quarter with 8 batches).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Pilot {
-    /// The pilot's paths.
-    pub paths: u64,
-    /// Its wall time, seconds.
-    pub seconds: f64,
-    /// Its relative L2 standard error (√Σσ² / √Σφ² over the cells above 10⁻³ of the
-    /// peak, the worst channel).
-    pub error: f64,
-    /// What the table would have run instead, in words, and whether it was expected to
-    /// meet the tolerance.
-    pub instead: (String, bool),
 }
 
 impl fmt::Display for Choice {
@@ -524,26 +487,6 @@ impl fmt::Display for Choice {
             String::new()
         };
         let refused = format!("{scaled}{refused}");
-        if let Some(pilot) = &self.pilot {
-            let (instead, met) = &pilot.instead;
-            return write!(
-                f,
-                "auto chose {what}: a pilot of {} paths here ({:.3} s) measured a standard error of {}, so these paths should give {} (expected {:.3} s); {}",
-                pilot.paths,
-                pilot.seconds,
-                pct(pilot.error),
-                pct(self.expected_error),
-                self.expected_seconds,
-                if *met {
-                    format!("cheaper than {instead}, measured on {scenes}")
-                } else {
-                    format!(
-                        "no run measured on {scenes} promises {}",
-                        pct(self.tolerance)
-                    )
-                }
-            );
-        }
         if self.meets {
             write!(
                 f,
@@ -604,128 +547,6 @@ impl Choice {
     pub fn nearest(&self) -> &str {
         &self.neighbours[0].0
     }
-
-    /// Whether the problem is a measured scene (closer than [`SAME_SCENE`]).
-    pub fn seen(&self) -> bool {
-        self.neighbours
-            .first()
-            .is_some_and(|(_, d)| *d < SAME_SCENE)
-    }
-
-    /// Whether a Monte Carlo pilot may do better than this choice: the problem was not
-    /// measured, and the table promises nothing or only Monte Carlo scaled from another
-    /// scene.
-    pub fn wants_pilot(&self) -> bool {
-        !self.seen() && (!self.meets || self.run.solver == lucent_mc::McSolver::NAME)
-    }
-}
-
-/// The relative L2 size of `error` against `fluence` over the cells above 10⁻³ of the
-/// peak (as the cross-check compares), the worst channel.
-fn relative_standard_error(fluence: &[Grid], error: &[Grid]) -> f64 {
-    fluence
-        .iter()
-        .zip(error)
-        .map(|(phi, se)| {
-            let peak = phi.data().iter().fold(0.0f32, |m, v| m.max(*v));
-            let (mut e2, mut p2) = (0.0f64, 0.0f64);
-            for (p, e) in phi.data().iter().zip(se.data()) {
-                if *p > 1e-3 * peak {
-                    e2 += f64::from(*e).powi(2);
-                    p2 += f64::from(*p).powi(2);
-                }
-            }
-            if p2 > 0.0 {
-                (e2 / p2).sqrt()
-            } else {
-                f64::INFINITY
-            }
-        })
-        .fold(0.0, f64::max)
-}
-
-/// Runs a Monte Carlo pilot of [`PILOT_PATHS`] on `problem` and returns Monte Carlo sized
-/// to meet the tolerance ([`Pilot`]), when that fits the time left of `options`' budget and
-/// `table_choice` does not promise the tolerance sooner; `None` otherwise (Monte Carlo
-/// refuses the problem, or the pilot measured nothing).
-fn pilot_choice(
-    problem: &Problem,
-    table_choice: &Choice,
-    options: &SolveOptions,
-    start: Instant,
-) -> Result<Option<Choice>, SolveError> {
-    let registry = crate::registry();
-    let pilot_params: Params =
-        toml::from_str(&format!("particles = {}\nbatches = 8", PILOT_PATHS / 8)).map_err(|e| {
-            SolveError::InvalidParameter {
-                name: "auto".into(),
-                reason: format!("the pilot's parameters: {e}"),
-            }
-        })?;
-    let mc = registry.build(lucent_mc::McSolver::NAME, &pilot_params)?;
-    if mc.admits(problem).is_err() {
-        return Ok(None);
-    }
-    let left = |b: Duration| b.saturating_sub(start.elapsed());
-    let pilot_start = Instant::now();
-    let solution = mc.solve(
-        problem,
-        &SolveOptions {
-            time_budget: options.time_budget.map(left),
-            ..options.clone()
-        },
-    )?;
-    let seconds = pilot_start.elapsed().as_secs_f64();
-    let Some(se) = &solution.standard_error else {
-        return Ok(None);
-    };
-    let error = relative_standard_error(&solution.fluence, se);
-    if !(solution.report.stop_reason.is_converged() && error.is_finite() && error > 0.0) {
-        return Ok(None);
-    }
-    let target = UNSEEN_MARGIN * table_choice.tolerance;
-    let ratio = (error / target).powi(2).max(1.0);
-    // 8 batches of equal size.
-    let per_batch = ((PILOT_PATHS as f64 * ratio / 8.0).ceil() as u64).max(PILOT_PATHS / 8);
-    let paths = 8 * per_batch;
-    let expected_seconds = seconds * paths as f64 / PILOT_PATHS as f64;
-    let fits = options
-        .time_budget
-        .is_none_or(|b| expected_seconds <= left(b).as_secs_f64());
-    if !fits || (table_choice.meets && table_choice.expected_seconds <= expected_seconds) {
-        return Ok(None);
-    }
-    let setting = format!("{paths} paths, sized by a pilot");
-    Ok(Some(Choice {
-        run: Run {
-            label: lucent_mc::McSolver::NAME,
-            solver: lucent_mc::McSolver::NAME,
-            params: format!("particles = {per_batch}\nbatches = 8"),
-            factor: 1,
-            tolerance: None,
-            max_iterations: None,
-            setting,
-        },
-        expected_error: error * (PILOT_PATHS as f64 / paths as f64).sqrt(),
-        expected_seconds,
-        cells_ratio: 1.0,
-        meets: true,
-        budget_bound: false,
-        refused: 0,
-        pilot: Some(Pilot {
-            paths: PILOT_PATHS,
-            seconds,
-            error,
-            instead: (
-                format!(
-                    "`{}` ({}, expected {:.3} s)",
-                    table_choice.run.label, table_choice.run.setting, table_choice.expected_seconds
-                ),
-                table_choice.meets,
-            ),
-        }),
-        ..table_choice.clone()
-    }))
 }
 
 /// Chooses what to run on `problem` for `tolerance` within `budget` from `table`, building
@@ -846,7 +667,6 @@ fn choose_from(
         meets,
         budget_bound,
         refused,
-        pilot: None,
     };
     let mut refused = 0;
     let mut budget_bound = false;
@@ -1021,8 +841,8 @@ impl Solver for AutoSolver {
 }
 
 impl AutoSolver {
-    /// [`Solver::solve`], also returning the choice that ran (the table's, or one sized by
-    /// a [`Pilot`]; after a memory-budget fallback, the run that could run).
+    /// [`Solver::solve`], also returning the choice that ran (after a memory-budget
+    /// fallback, the run that could run).
     pub fn solve_with_choice(
         &self,
         problem: &Problem,
@@ -1050,9 +870,6 @@ impl AutoSolver {
                 &skip,
             );
             let choice = match (next, skipped.is_empty()) {
-                (Ok(c), true) if c.wants_pilot() => {
-                    pilot_choice(problem, &c, options, start)?.unwrap_or(c)
-                }
                 (Ok(c), true) => c,
                 (Err(e), true) => return Err(e),
                 (Ok(c), false) if c.meets => c,
