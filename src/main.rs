@@ -1052,6 +1052,15 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
 }
 
 /// `lucent resolution`: the levels solved, their estimated errors and the one chosen.
+/// Where `lucent resolution`'s order came from, in words.
+fn order_source(observed: bool) -> &'static str {
+    if observed {
+        "observed from three levels"
+    } else {
+        "nominal: three levels did not show one"
+    }
+}
+
 fn resolution(scene: &Path, args: &SolverArgs, target: f64, directions: bool) -> Result<(), Error> {
     if !(target > 0.0 && target < 1.0) {
         return Err(Error::Usage(format!(
@@ -1112,11 +1121,7 @@ fn resolution(scene: &Path, args: &SolverArgs, target: f64, directions: bool) ->
             out,
             "  order {} in the angular spacing ({})",
             S(choice.order),
-            if choice.observed {
-                "observed from three levels"
-            } else {
-                "nominal: three levels did not show one"
-            }
+            order_source(choice.observed)
         )
         .map_err(io_err)?;
         let level = &choice.levels[choice.chosen];
@@ -1165,11 +1170,7 @@ fn resolution(scene: &Path, args: &SolverArgs, target: f64, directions: bool) ->
         out,
         "  order {} ({})",
         S(choice.order),
-        if choice.observed {
-            "observed from three levels"
-        } else {
-            "nominal: three levels did not show one"
-        }
+        order_source(choice.observed)
     )
     .map_err(io_err)?;
     match choice.needed_refinement(target) {

@@ -911,6 +911,30 @@ impl Uncollided {
         phi
     }
 
+    /// The point-like lights' terms in a transport solver's energy balance in `channel`
+    /// (W), for a solver whose swept source holds the scattered part of their first
+    /// collisions: the power they bring into the box (or emit in it) less that scattered
+    /// part (Σ C σ_s/σ_t over the cells, already counted as the source's), and the power
+    /// that leaves the box uncollided. `sigma_s` holds σ_s per cell.
+    pub fn balance_terms(&self, channel: usize, sigma_s: &[f32]) -> (f64, f64) {
+        let sigma_t = self.sigma_t[channel.min(self.sigma_t.len() - 1)].data();
+        let (mut entering, mut escaped) = (0.0, 0.0);
+        for (light, cells) in self.lights.iter().zip(&self.cells) {
+            let cells = &cells[channel.min(cells.len() - 1)];
+            let scale = light.spectrum().channel(channel);
+            let scattered: f64 = cells
+                .collided
+                .iter()
+                .zip(sigma_t.iter().zip(sigma_s))
+                .filter(|(_, (t, _))| **t > 0.0)
+                .map(|(c, (t, s))| c * f64::from(*s) / f64::from(*t))
+                .sum();
+            entering += scale * (cells.emitted - scattered);
+            escaped += scale * cells.escaped;
+        }
+        (entering, escaped)
+    }
+
     /// The first-collision sources of a diffusion-type solver in `channel`, per cell:
     /// Q₀ = σ_s φ_u, isotropic (power/length³), with the point-like lights' part
     /// (σ_s/σ_t) C/V from their conservative cell integrals; and Q₁ = g (σ_s/σ_t) D/V, the

@@ -121,5 +121,5 @@ pub use solve::{
     Acceleration, DomBalance, DomBoundary, DomConvergence, DomProblem, DomSettings, DomSolution,
     Outer, PagedWork, SourceIteration, SweepOnly, solve,
 };
-pub use solver::{DomChannel, DomSolver};
+pub use solver::{DomChannel, DomSolver, first_sweep_source};
 pub use sweep::WorkPages;

@@ -341,6 +341,28 @@ impl DomSolver {
     }
 }
 
+/// The fixed source of a channel's first sweep, per cell and storage direction of
+/// `ordinates` (grid order, direction fastest; power/length³/sr): the channel's emission,
+/// isotropic, and its uncollided light's first collisions projected onto the directions
+/// with the discrete phase function (`Uncollided::project_first_collisions`).
+pub fn first_sweep_source(channel: &Channel<'_>, ordinates: &Ordinates) -> Vec<f32> {
+    let m = ordinates.storage().len();
+    let mut fixed = vec![0.0f32; channel.problem.geometry().voxel_count() * m];
+    for (row, e) in fixed.chunks_mut(m).zip(channel.emission()) {
+        row.iter_mut().for_each(|v| *v += e as f32);
+    }
+    if let Some(uncollided) = channel.uncollided {
+        uncollided.project_first_collisions(
+            channel.index,
+            &channel.coefficients.sigma_s,
+            m,
+            &|d| ordinates.phase_from(d),
+            &mut fixed,
+        );
+    }
+    fixed
+}
+
 impl ChannelMethod for DomSolver {
     type Setup = Ordinates;
 
@@ -403,27 +425,12 @@ impl ChannelMethod for DomSolver {
     ) -> Result<ChannelSolution<Self::Extra>, SolveError> {
         let problem = channel.problem;
         let g = *problem.geometry();
-        let m = ordinates.storage().len();
         let c = channel.index;
-        let (emission, sky) = (channel.emission(), channel.sky_radiance());
+        let sky = channel.sky_radiance();
+        let fixed = first_sweep_source(&channel, ordinates);
         let Coefficients {
             sigma_t, sigma_s, ..
         } = channel.coefficients;
-        // Emission as an isotropic fixed source, the uncollided light's first collisions
-        // projected onto the storage directions.
-        let mut fixed = vec![0.0f32; g.voxel_count() * m];
-        for (row, e) in fixed.chunks_mut(m).zip(emission) {
-            row.iter_mut().for_each(|v| *v += e as f32);
-        }
-        if let Some(uncollided) = channel.uncollided {
-            uncollided.project_first_collisions(
-                c,
-                &sigma_s,
-                m,
-                &|d| ordinates.phase_from(d),
-                &mut fixed,
-            );
-        }
         // The capabilities refuse a Neumann flux other than 0.
         let reflectance = problem.boundary().diffuse_reflectance().unwrap_or(0.0);
         let dom = DomProblem {
@@ -459,19 +466,9 @@ impl ChannelMethod for DomSolver {
             for (t, u) in total.iter_mut().zip(uncollided.fluence(c)) {
                 *t += u;
             }
-            for (light, cells) in uncollided.lights.iter().zip(&uncollided.cells) {
-                let cells = &cells[c.min(cells.len() - 1)];
-                let scale = light.spectrum().channel(c);
-                let scattered: f64 = cells
-                    .collided
-                    .iter()
-                    .zip(dom.sigma_t.iter().zip(&dom.sigma_s))
-                    .filter(|(_, (t, _))| **t > 0.0)
-                    .map(|(c, (t, s))| c * f64::from(*s) / f64::from(*t))
-                    .sum();
-                balance.emitted += scale * (cells.emitted - scattered);
-                balance.outflow += scale * cells.escaped;
-            }
+            let (entering, escaped) = uncollided.balance_terms(c, &dom.sigma_s);
+            balance.emitted += entering;
+            balance.outflow += escaped;
         }
         let volume = g.cell_volume();
         balance.absorbed = total

@@ -46,7 +46,8 @@
 //! sweep, only the light scattered in cells at least 2 (or 4) ℓ′ from the box or void
 //! (`lucent_core::regime`'s boundary distance) and sweeping the rest again was never more
 //! accurate than the split by order at the same number of sweeps (a sweep costs the same
-//! whatever share of the power it carries): on the mixed scenes with S4 and 8 orders,
+//! whatever share of the power it carries): measured once, with a probe not kept in the
+//! repository, on the mixed scenes with S4 and 8 orders,
 //! 3.4% and 3.0% against 3.0% (marble behind smoke), 12.7% against 12.6% (forward layer),
 //! 32.9% against 32.1% (cloud with halo). The coupling by collision order needs no
 //! interface condition: every part solves the whole domain.

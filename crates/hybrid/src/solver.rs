@@ -281,28 +281,16 @@ impl ChannelMethod for HybridSolver {
         let set = ordinates.storage();
         let m = set.len();
         let c = channel.index;
-        let (emission, sky) = (channel.emission(), channel.sky_radiance());
+        // Order 1's source: emission (isotropic) and the lights' first collisions,
+        // projected onto the directions with the discrete phase function, as `dom`'s.
+        let sky = channel.sky_radiance();
+        let fixed = lucent_dom::first_sweep_source(&channel, ordinates);
         let Coefficients {
             sigma_t,
             sigma_s,
             sigma_a,
             diffusion: d,
         } = channel.coefficients;
-        // Order 1's source: emission (isotropic) and the lights' first collisions,
-        // projected onto the directions with the discrete phase function.
-        let mut fixed = vec![0.0f32; n * m];
-        for (row, e) in fixed.chunks_mut(m).zip(&emission) {
-            row.fill(*e as f32);
-        }
-        if let Some(uncollided) = channel.uncollided {
-            uncollided.project_first_collisions(
-                c,
-                &sigma_s,
-                m,
-                &|dir| ordinates.phase_from(dir),
-                &mut fixed,
-            );
-        }
         // The capabilities refuse a Neumann flux other than 0.
         let reflectance = problem.boundary().diffuse_reflectance().unwrap_or(0.0);
         let mut streaming = DomProblem {
@@ -422,19 +410,9 @@ impl ChannelMethod for HybridSolver {
             for (t, u) in total.iter_mut().zip(uncollided.fluence(c)) {
                 *t += u;
             }
-            for (light, cells) in uncollided.lights.iter().zip(&uncollided.cells) {
-                let cells = &cells[c.min(cells.len() - 1)];
-                let scale = light.spectrum().channel(c);
-                let first_scattered: f64 = cells
-                    .collided
-                    .iter()
-                    .zip(streaming.sigma_t.iter().zip(&sigma_s))
-                    .filter(|(_, (t, _))| **t > 0.0)
-                    .map(|(c, (t, s))| c * f64::from(*s) / f64::from(*t))
-                    .sum();
-                balance.emitted += scale * (cells.emitted - first_scattered);
-                balance.outflow += scale * cells.escaped;
-            }
+            let (entering, escaped) = uncollided.balance_terms(c, &sigma_s);
+            balance.emitted += entering;
+            balance.outflow += escaped;
         }
         balance.absorbed = total
             .iter()
