@@ -10,12 +10,9 @@ use lucent_core::Stopping;
 
 use crate::multigrid::Convergence;
 
+/// Σ aᵢbᵢ in a fixed order (the same bits on every run and thread count).
 fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.par_iter()
-        .zip(b.par_iter())
-        .with_min_len(PARALLEL_MIN_CELLS)
-        .map(|(a, b)| a * b)
-        .sum()
+    lucent_core::reduce::dot(a, b)
 }
 
 /// Preconditioned conjugate gradients for the symmetric positive definite A x = b;

@@ -973,14 +973,7 @@ impl Real for f64 {}
 
 /// Σ x² in f64.
 pub(crate) fn norm2<T: Copy + Into<f64> + Sync>(x: &[T]) -> f64 {
-    x.par_iter()
-        .with_min_len(PARALLEL_MIN_CELLS)
-        .map(|&v| {
-            let v: f64 = v.into();
-            v * v
-        })
-        .sum::<f64>()
-        .sqrt()
+    lucent_core::reduce::norm2(x)
 }
 
 #[cfg(test)]

@@ -134,12 +134,9 @@ impl Convergence {
 /// One vector per level.
 type Work = Vec<Vec<f32>>;
 
-/// Σ aᵢbᵢ in f64 of an f32 vector and a vector of either precision.
+/// Σ aᵢbᵢ in f64 of an f32 vector and a vector of either precision, in a fixed order.
 fn dot32<T: Copy + Into<f64> + Sync>(a: &[f32], b: &[T]) -> f64 {
-    a.par_iter()
-        .zip(b.par_iter())
-        .map(|(a, b)| f64::from(*a) * (*b).into())
-        .sum()
+    lucent_core::reduce::dot(a, b)
 }
 
 /// One level's operator as the cycles read it, for a device that runs the same cycle

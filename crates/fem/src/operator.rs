@@ -58,8 +58,9 @@ impl LinearOperator for Dense {
     }
 }
 
+/// Σ aᵢbᵢ in a fixed order (the same bits on every run and thread count).
 pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.par_iter().zip(b.par_iter()).map(|(x, y)| x * y).sum()
+    lucent_core::reduce::dot(a, b)
 }
 
 pub(crate) fn norm(a: &[f64]) -> f64 {
