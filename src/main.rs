@@ -587,7 +587,9 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
             "the standard error is written as .exr",
         )?;
         let s = built.settings;
-        let background = s.background.unwrap_or_else(|| sky_radiance(&built.problem));
+        let background = s
+            .background
+            .unwrap_or_else(|| lucent::scene::sky_background(&built.problem));
         let camera = built.camera;
         camera.validate()?;
         let aspect = s.width as f64 / s.height as f64;
@@ -815,18 +817,6 @@ fn solve_paged_to_file(
         );
     }
     Ok(Ended::Done)
-}
-
-/// The sky's radiance per channel (what escaping camera rays see by default).
-fn sky_radiance(problem: &lucent::core::Problem) -> [f64; 3] {
-    std::array::from_fn(|c| {
-        problem
-            .lights()
-            .iter()
-            .filter(|l| matches!(l, lucent::core::Light::Sky { .. }))
-            .map(|l| l.spectrum().channel(c))
-            .sum()
-    })
 }
 
 fn solve_to_file(

@@ -359,6 +359,21 @@ pub enum PhaseSpec {
     Rayleigh,
 }
 
+impl PhaseSpec {
+    /// The phase function (its parameters checked).
+    pub fn to_phase(self) -> Result<Phase, Error> {
+        let invalid = |e: lucent_optics::OpticsError| Error::Invalid(e.to_string());
+        Ok(match self {
+            PhaseSpec::Isotropic => Phase::Isotropic,
+            PhaseSpec::HenyeyGreenstein { g } => Phase::henyey_greenstein(g).map_err(invalid)?,
+            PhaseSpec::DoubleHenyeyGreenstein { g1, g2, weight } => {
+                Phase::double_henyey_greenstein(g1, g2, weight).map_err(invalid)?
+            }
+            PhaseSpec::Rayleigh => Phase::Rayleigh,
+        })
+    }
+}
+
 /// A light. Angles in degrees; directions need not be normalised.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
@@ -400,6 +415,66 @@ pub enum LightSpec {
         /// Radiance per unit length per unit of volume value.
         scale: Spectrum,
     },
+}
+
+impl LightSpec {
+    /// The light: directions normalised, angles in radians; an emission light takes its
+    /// grid from `volume` (none: refused, as for a paged scene).
+    pub fn to_light(&self, volume: Option<&Grid>) -> Result<Light, Error> {
+        let invalid = |reason: String| Error::Invalid(reason);
+        let unit = |v: [f64; 3], what: &str| -> Result<DVec3, Error> {
+            let d = DVec3::from_array(v);
+            let n = d.normalize_or_zero();
+            if n == DVec3::ZERO || !n.is_finite() {
+                Err(invalid(format!("{what} {v:?} is not a direction")))
+            } else {
+                Ok(n)
+            }
+        };
+        Ok(match self {
+            LightSpec::Directional {
+                direction,
+                irradiance,
+            } => Light::Directional {
+                direction: unit(*direction, "light direction")?,
+                irradiance: *irradiance,
+            },
+            LightSpec::Point {
+                position,
+                intensity,
+            } => Light::Point {
+                position: DVec3::from_array(*position),
+                intensity: *intensity,
+            },
+            LightSpec::Spot {
+                position,
+                direction,
+                intensity,
+                inner_angle,
+                outer_angle,
+            } => Light::Spot {
+                position: DVec3::from_array(*position),
+                direction: unit(*direction, "spot direction")?,
+                intensity: *intensity,
+                inner_angle: inner_angle.to_radians(),
+                outer_angle: outer_angle.to_radians(),
+            },
+            LightSpec::Sky { radiance } => Light::Sky {
+                radiance: *radiance,
+            },
+            LightSpec::Emission { scale } => match volume {
+                Some(volume) => Light::Emission {
+                    grid: volume.map(|v| v.max(0.0)),
+                    scale: *scale,
+                },
+                None => {
+                    return Err(invalid(
+                        "emission lights need the volume in memory (a paged scene has none)".into(),
+                    ));
+                }
+            },
+        })
+    }
 }
 
 /// Image size, exposure and tone mapping.
@@ -631,80 +706,12 @@ impl Scene {
 
     /// The phase function the scene names.
     fn phase(&self) -> Result<Phase, Error> {
-        let invalid = |reason: String| Error::Invalid(reason);
-        Ok(match self.medium.phase {
-            PhaseSpec::Isotropic => Phase::Isotropic,
-            PhaseSpec::HenyeyGreenstein { g } => {
-                Phase::henyey_greenstein(g).map_err(|e| invalid(e.to_string()))?
-            }
-            PhaseSpec::DoubleHenyeyGreenstein { g1, g2, weight } => {
-                Phase::double_henyey_greenstein(g1, g2, weight)
-                    .map_err(|e| invalid(e.to_string()))?
-            }
-            PhaseSpec::Rayleigh => Phase::Rayleigh,
-        })
+        self.medium.phase.to_phase()
     }
 
     /// The scene's lights; emission takes its grid from `volume` (none: emission refused).
     fn lights(&self, volume: Option<&Grid>) -> Result<Vec<Light>, Error> {
-        let invalid = |reason: String| Error::Invalid(reason);
-        let unit = |v: [f64; 3], what: &str| -> Result<DVec3, Error> {
-            let d = DVec3::from_array(v);
-            let n = d.normalize_or_zero();
-            if n == DVec3::ZERO || !n.is_finite() {
-                Err(invalid(format!("{what} {v:?} is not a direction")))
-            } else {
-                Ok(n)
-            }
-        };
-        let mut lights = Vec::new();
-        for light in &self.lights {
-            lights.push(match light {
-                LightSpec::Directional {
-                    direction,
-                    irradiance,
-                } => Light::Directional {
-                    direction: unit(*direction, "light direction")?,
-                    irradiance: *irradiance,
-                },
-                LightSpec::Point {
-                    position,
-                    intensity,
-                } => Light::Point {
-                    position: DVec3::from_array(*position),
-                    intensity: *intensity,
-                },
-                LightSpec::Spot {
-                    position,
-                    direction,
-                    intensity,
-                    inner_angle,
-                    outer_angle,
-                } => Light::Spot {
-                    position: DVec3::from_array(*position),
-                    direction: unit(*direction, "spot direction")?,
-                    intensity: *intensity,
-                    inner_angle: inner_angle.to_radians(),
-                    outer_angle: outer_angle.to_radians(),
-                },
-                LightSpec::Sky { radiance } => Light::Sky {
-                    radiance: *radiance,
-                },
-                LightSpec::Emission { scale } => match volume {
-                    Some(volume) => Light::Emission {
-                        grid: volume.map(|v| v.max(0.0)),
-                        scale: *scale,
-                    },
-                    None => {
-                        return Err(invalid(
-                            "emission lights need the volume in memory (a paged scene has none)"
-                                .into(),
-                        ));
-                    }
-                },
-            });
-        }
-        Ok(lights)
+        self.lights.iter().map(|l| l.to_light(volume)).collect()
     }
 
     /// Bytes of one dense f32 field on the scene's grid, where the scene states its
@@ -1140,6 +1147,19 @@ fn scalar_type(name: &str) -> Option<ScalarType> {
         "f32" => ScalarType::F32,
         "f64" => ScalarType::F64,
         _ => return None,
+    })
+}
+
+/// The radiance behind the medium when a scene sets no `[image] background`: the sum of
+/// its sky lights' radiance (linear RGB; black without a sky).
+pub fn sky_background(problem: &Problem) -> [f64; 3] {
+    std::array::from_fn(|c| {
+        problem
+            .lights()
+            .iter()
+            .filter(|l| matches!(l, Light::Sky { .. }))
+            .map(|l| l.spectrum().channel(c))
+            .sum()
     })
 }
 
