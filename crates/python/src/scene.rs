@@ -145,7 +145,8 @@ impl PyScene {
 #[pyclass(name = "Problem", module = "lucent", frozen)]
 pub(crate) struct PyProblem {
     pub(crate) problem: Arc<Problem>,
-    /// The scalar volume before the medium mapping, for a problem built from a scene.
+    /// The scalar volume before the medium mapping (a scene's), or the emission grid (a
+    /// problem made from arrays).
     pub(crate) volume: Option<Arc<Grid>>,
 }
 
@@ -340,6 +341,20 @@ impl PyProblem {
         (x, y, z)
     }
 
+    /// The same problem on `dims` = (n_x, n_y, n_z) cells over the same box: every grid
+    /// resampled (trilinear to finer grids, box-averaged to coarser), for convergence
+    /// studies (what `lucent resolution` solves on).
+    fn on_grid(&self, py: Python<'_>, dims: (usize, usize, usize)) -> PyResult<Self> {
+        let problem = self.problem.clone();
+        let resampled = py
+            .detach(|| lucent::resolution::on_grid(&problem, [dims.0, dims.1, dims.2]))
+            .map_err(|e| invalid("dims", e))?;
+        Ok(Self {
+            problem: Arc::new(resampled),
+            volume: None,
+        })
+    }
+
     /// numpy's shape of one field, (n_z, n_y, n_x).
     #[getter]
     fn shape(&self) -> (usize, usize, usize) {
@@ -436,8 +451,8 @@ impl PyProblem {
             .collect()
     }
 
-    /// The scalar volume the scene's medium was mapped from (n_z, n_y, n_x), or `None`
-    /// for a problem made from arrays.
+    /// The scalar volume the scene's medium was mapped from (n_z, n_y, n_x); for a
+    /// problem made from arrays, its `emission` grid, or `None`.
     #[getter]
     fn volume<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
         self.volume

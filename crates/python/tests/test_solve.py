@@ -139,3 +139,26 @@ def test_scene_from_dict_and_text_equal_the_file(root):
     assert np.array_equal(from_text.fluence, from_dict.fluence)
     with pytest.raises(lucent.SceneError, match="unknown field"):
         lucent.Scene.from_dict({**as_dict, "volumes": {}})
+
+
+def test_on_grid_resamples_for_convergence_studies(root):
+    """The same dims give the same bits; coarse grids converge to the fine solution at the
+    scheme's second order (multigrid diffusion on the marble sphere: measured 6.6% at 8³
+    and 1.7% at 16³ against 32³, a ratio of 3.9; asserted > 3, order > 1.58)."""
+    problem = lucent.Scene.load(root / "examples" / "scenes" / "suite" / "marble_sphere.toml").problem()
+    same = problem.on_grid(problem.dims)
+    assert np.array_equal(lucent.solve(same, "diffusion-mg").fluence, lucent.solve(problem, "diffusion-mg").fluence)
+    fine = lucent.solve(problem, "diffusion-mg").fluence[0]
+    errors = []
+    for n in (8, 16):
+        coarse = problem.on_grid((n, n, n))
+        assert coarse.shape == (n, n, n) and coarse.bounds == problem.bounds
+        phi = lucent.solve(coarse, "diffusion-mg").fluence[0]
+        # Box-average the fine solution onto the coarse cells.
+        k = 32 // n
+        averaged = fine.reshape(n, k, n, k, n, k).mean(axis=(1, 3, 5))
+        inside = coarse.embedded[...] < -2 * coarse.spacing[0]  # away from the surface
+        errors.append(np.linalg.norm((phi - averaged)[inside]) / np.linalg.norm(averaged[inside]))
+    assert errors[1] < errors[0] / 3, errors
+    with pytest.raises(ValueError, match="`dims`"):
+        problem.on_grid((0, 4, 4))

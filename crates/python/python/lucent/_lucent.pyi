@@ -81,6 +81,9 @@ class Problem:
     @property
     def shape(self) -> Tuple[int, int, int]:
         """One field's numpy shape, (n_z, n_y, n_x)."""
+    def on_grid(self, dims: Tuple[int, int, int]) -> "Problem":
+        """The same problem on ``dims`` = (n_x, n_y, n_z) cells over the same box, every
+        grid resampled (for convergence studies)."""
     @property
     def spacing(self) -> _Vec3: ...
     @property
@@ -100,7 +103,8 @@ class Problem:
     def embedded(self) -> Optional[npt.NDArray[np.float32]]: ...
     @property
     def volume(self) -> Optional[npt.NDArray[np.float32]]:
-        """The scalar volume a scene's medium was mapped from."""
+        """The scalar volume a scene's medium was mapped from; for a problem made from
+        arrays, its ``emission`` grid, or ``None``."""
     @property
     def boundary(self) -> str: ...
     @property
