@@ -4,7 +4,8 @@
 
 1. **Error against time** on a suite scene (default `thin_smoke`): every solver family at
    a few settings, each solve's relative L2 error over the medium against a Monte Carlo
-   reference, plotted against its wall time: the chart `cargo xtask pareto` draws into
+   reference of the total fluence (so `direct`, the uncollided light alone, and the
+   diffusion solvers level off at their models' errors), plotted against its wall time: the chart `cargo xtask pareto` draws into
    docs/pareto/, here in twenty lines of numpy.
 2. **Where FTCS diffusion blows up**: Murray's explicit scheme on a homogeneous
    reflecting box, run at step fractions around its von Neumann bound, over β = D/Δ; each
@@ -68,7 +69,7 @@ def pareto(scene_name, out):
             print(f"  {solver:22s} refuses: {e}")
             continue
         error = relative_l2(solution.fluence, reference.fluence, mask)
-        label = solver + "".join(f" {k}={v}" for k, v in params.items())
+        label = solver + "".join(f" {k}={v}" for k, v in params.items()) + (f" rtol={rtol:.0e}" if rtol else "")
         points.append((solver, label, solution.wall_time_s, error))
         print(f"  {label:34s} {solution.wall_time_s * 1e3:9.2f} ms  error {error:7.2%}  ({solution.stop_reason})")
 

@@ -79,8 +79,12 @@ def test_a_progress_callback_that_raises_stops_the_solve_and_raises():
 
 
 def test_ctrl_c_stops_the_solve_and_returns_what_was_computed():
+    # Python turns SIGINT into KeyboardInterrupt only where it was not ignored at start,
+    # and a shell's background jobs (CI under nohup) start with it ignored: install the
+    # handler an interactive session has.
     script = f"""
-import sys, lucent
+import signal, sys, lucent
+signal.signal(signal.SIGINT, signal.default_int_handler)
 sys.path.insert(0, {str(pathlib.Path(__file__).parent)!r})
 from test_interrupt import never_converging
 started = []
