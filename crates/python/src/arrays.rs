@@ -54,7 +54,10 @@ pub(crate) fn floats(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Floats> {
     }
     let values: Vec<f32> = if let Ok(a) = array.cast::<PyArrayDyn<f32>>() {
         let a = a.readonly();
-        a.as_array().iter().copied().collect()
+        match a.as_slice() {
+            Ok(contiguous) => contiguous.to_vec(),
+            Err(_) => a.as_array().iter().copied().collect(),
+        }
     } else {
         // float64 (and half or extended floats, through float64).
         let a64 = match array.cast::<PyArrayDyn<f64>>() {
@@ -65,7 +68,10 @@ pub(crate) fn floats(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Floats> {
                 .map_err(|_| invalid(name, "cannot be read as float64"))?,
         };
         let a = a64.readonly();
-        a.as_array().iter().map(|&v| v as f32).collect()
+        match a.as_slice() {
+            Ok(contiguous) => contiguous.iter().map(|&v| v as f32).collect(),
+            Err(_) => a.as_array().iter().map(|&v| v as f32).collect(),
+        }
     };
     if let Some(at) = values.iter().position(|v| !v.is_finite()) {
         return Err(invalid(
