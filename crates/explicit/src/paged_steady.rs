@@ -15,8 +15,9 @@
 //!    windows of three slabs (`lucent_diffusion::SlabSystem`, whose rows and right-hand
 //!    side are the assembled matrix's bits);
 //! 3. each iteration is one pass over z that updates φ on slab z and the residual
-//!    r = b − Aφ on slab z − 1 (a ring of three slabs of the new φ), adding r² in cell
-//!    order, which is the order of the in-memory norm.
+//!    r = b − Aφ on slab z − 1 (a ring of three slabs of the new φ), summing r² over the
+//!    slab in cell order and the slab sums in z order, which is the in-memory norm's
+//!    order (`steady::Layers`).
 //!
 //! Every value is computed by the in-memory arithmetic in the in-memory order, so the
 //! residual history, the stopping decision and the fluence have the in-memory bits
@@ -457,9 +458,8 @@ impl Channel<'_> {
                     scale[index] = omega / diagonal;
                 }
             }
-            for v in &b {
-                b_squares += v * v;
-            }
+            // By layers, as the in-memory norm sums (`steady::Layers`).
+            b_squares += b.iter().map(|v| v * v).sum::<f64>();
             b_pages.write_slab(z, &b).map_err(err)?;
             r_pages.write_slab(z, &b).map_err(err)?;
             if let Some(pages) = &scale_pages {
@@ -539,9 +539,7 @@ impl Channel<'_> {
                             *ri = rows_b[index] - ax;
                         }
                     });
-                    for v in &r {
-                        r_squares += v * v;
-                    }
+                    r_squares += r.iter().map(|v| v * v).sum::<f64>();
                     r_pages.write_slab(w, &r).map_err(err)?;
                 }
             }

@@ -411,7 +411,8 @@ fn steady(
         stopping: stop.clone(),
         allow_unstable,
     };
-    let out = iterate(&system, kind, &settings)
+    let [nx, ny, _] = d.cells().geometry().dims();
+    let out = iterate(&system, nx * ny, kind, &settings)
         .map_err(|e| lucent_diffusion::DiffusionError::Invalid(e.to_string()))?;
     let mut fluence = vec![0.0; d.cells().geometry().voxel_count()];
     for (&c, v) in system.cells.iter().zip(&out.fluence) {

@@ -65,9 +65,11 @@ pub fn ftcs_limit(system: &AssembledSystem, cell_volume: f64) -> f64 {
     2.0 * cell_volume / gershgorin
 }
 
-/// Iterates from zero to the stopping rule.
+/// Iterates from zero to the stopping rule. `slab_len` is the grid's n_x·n_y: norms are
+/// summed by z-layers ([`Layers`]), the order a z-slab decomposition over ranks keeps.
 pub fn iterate(
     system: &AssembledSystem,
+    slab_len: usize,
     iteration: Iteration,
     settings: &SteadySettings,
 ) -> Result<Steady, ExplicitError> {
@@ -111,12 +113,8 @@ pub fn iterate(
             diagonal.iter().map(|d| omega / d).collect()
         }
     };
-    let b_norm = b
-        .iter()
-        .map(|v| v * v)
-        .sum::<f64>()
-        .sqrt()
-        .max(f64::MIN_POSITIVE);
+    let layers = Layers::new(&system.cells, slab_len);
+    let b_norm = layers.norm(b).max(f64::MIN_POSITIVE);
     let mut phi = vec![0.0f64; n];
     let mut r = b.clone();
     let mut history = History::start();
@@ -142,6 +140,51 @@ pub fn iterate(
             let ax: f64 = row.map_or(0.0, |row| row.iter().map(|(j, v)| v * phi[j]).sum());
             *ri = b[i] - ax;
         });
-        relative = r.iter().map(|v| v * v).sum::<f64>().sqrt() / b_norm;
+        relative = layers.norm(&r) / b_norm;
+    }
+}
+
+/// The unknowns of an assembled system grouped by the z-layer of their cell, for norms
+/// summed in an order that does not depend on how the layers are split: Σ over each layer
+/// left to right (the unknowns' order), then the layer sums left to right in z. A z-slab
+/// decomposition over ranks (`lucent-mpi`) sums its own layers, gathers the layer sums and
+/// adds them in the same order, so one rank and many give the same bits.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Layers {
+    /// Unknown ranges [start, end) per non-empty layer, in z order, with the layer's z.
+    ranges: Vec<(usize, usize, usize)>,
+}
+
+impl Layers {
+    /// The layers of `cells` (each unknown's flat cell, ascending) on a grid of
+    /// `slab_len` = n_x·n_y cells per z-layer.
+    pub fn new(cells: &[usize], slab_len: usize) -> Self {
+        let mut ranges: Vec<(usize, usize, usize)> = Vec::new();
+        for (u, &c) in cells.iter().enumerate() {
+            let z = c / slab_len.max(1);
+            match ranges.last_mut() {
+                Some((layer, _, end)) if *layer == z => *end = u + 1,
+                _ => ranges.push((z, u, u + 1)),
+            }
+        }
+        Self { ranges }
+    }
+
+    /// (z, start, end) of every non-empty layer, in z order.
+    pub fn ranges(&self) -> &[(usize, usize, usize)] {
+        &self.ranges
+    }
+
+    /// Σ v² per layer, each left to right (in parallel across layers).
+    pub fn squares(&self, v: &[f64]) -> Vec<f64> {
+        self.ranges
+            .par_iter()
+            .map(|&(_, start, end)| v[start..end].iter().map(|x| x * x).sum::<f64>())
+            .collect()
+    }
+
+    /// ‖v‖₂ by [`Layers::squares`], the layer sums added in z order.
+    pub fn norm(&self, v: &[f64]) -> f64 {
+        self.squares(v).iter().sum::<f64>().sqrt()
     }
 }

@@ -61,7 +61,8 @@ fn ftcs_and_jacobi_reach_the_multigrid_solution() {
         },
         Iteration::Jacobi { omega: 1.0 },
     ] {
-        let out = iterate(&system, iteration, &settings).unwrap();
+        let slab = grid.dims()[0] * grid.dims()[1];
+        let out = iterate(&system, slab, iteration, &settings).unwrap();
         assert!(
             out.stop_reason.is_converged(),
             "{iteration:?}: {:?}",
@@ -87,7 +88,7 @@ fn ftcs_and_jacobi_reach_the_multigrid_solution() {
         cell_volume: volume,
     };
     assert!(matches!(
-        iterate(&system, too_big, &settings),
+        iterate(&system, grid.dims()[0] * grid.dims()[1], too_big, &settings),
         Err(ExplicitError::Unstable { .. })
     ));
 }
