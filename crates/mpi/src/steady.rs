@@ -1,0 +1,366 @@
+//! FTCS and Jacobi to steady state on an assembled diffusion system split over ranks by
+//! z-slabs: the distributed twin of `lucent_explicit::steady::iterate`, the same bits on
+//! any number of ranks.
+//!
+//! Each rank owns the unknowns of a run of z-layers (contiguous in the system's order:
+//! cells ascend, z slowest), keeps its rows with their columns renumbered into a local
+//! vector laid out as [halo below | owned | halo above] — an order-preserving map, so each
+//! row's products are summed in the serial order —, and per sweep
+//!
+//! 1. updates its owned φ from its residual (elementwise, as serially);
+//! 2. starts sending the owned values its neighbours' rows read, computes the rows that
+//!    read no halo while they travel, then the rows next to the neighbours;
+//! 3. sums r² per layer, left to right, and all-gathers the layer sums with each rank's
+//!    time-budget and cancel flags; every rank adds the layer sums in z order (the serial
+//!    `Layers::norm`) and takes one stopping decision.
+//!
+//! Deterministic stops (tolerances, iteration limit, divergence) follow from the identical
+//! residual; the time budget and cancellation, which differ per rank, travel with the
+//! gather, so no rank stops alone.
+
+use lucent_core::{History, StopReason, Stopping};
+use lucent_diffusion::AssembledSystem;
+use lucent_explicit::steady::{Iteration, Layers, Steady, SteadySettings, ftcs_limit};
+use rayon::prelude::*;
+use sprs::CsMat;
+
+use crate::comm::Communicator;
+use crate::error::DecompositionError;
+
+/// Which layers (indices into [`Layers::ranges`]) each rank owns: contiguous runs in z,
+/// balanced by unknowns (each rank takes layers until it holds its share).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Slabs {
+    /// Per rank, [first layer, end layer).
+    pub layers: Vec<(usize, usize)>,
+}
+
+impl Slabs {
+    /// `ranks` slabs of `layers`; every rank gets at least one layer.
+    pub fn new(layers: &Layers, ranks: usize) -> Result<Self, DecompositionError> {
+        let ranges = layers.ranges();
+        if ranks == 0 || ranks > ranges.len() {
+            return Err(DecompositionError::TooManyRanks {
+                ranks,
+                layers: ranges.len(),
+            });
+        }
+        let total = ranges.last().map_or(0, |r| r.2);
+        let mut out = Vec::with_capacity(ranks);
+        let mut first = 0;
+        for rank in 0..ranks {
+            let left = ranks - rank;
+            // The share of what is left; leave one layer for each rank after this one.
+            let target = ranges[first].1 + (total - ranges[first].1).div_ceil(left);
+            let mut end = first + 1;
+            while end < ranges.len() - (left - 1) && ranges[end - 1].2 < target {
+                end += 1;
+            }
+            if rank == ranks - 1 {
+                end = ranges.len();
+            }
+            out.push((first, end));
+            first = end;
+        }
+        Ok(Self { layers: out })
+    }
+}
+
+/// One rank's rows of the system, renumbered locally.
+struct Part {
+    /// The owned unknowns [u0, u1) of the global system.
+    u0: usize,
+    u1: usize,
+    /// Global indices of the halo below and above, ascending.
+    below: Vec<usize>,
+    above: Vec<usize>,
+    /// Owned rows, columns in local numbering ([below | owned | above]).
+    rows: CsMat<f64>,
+    /// Rows that read no halo value (computed while the halo travels), and the others.
+    interior: Vec<usize>,
+    border: Vec<usize>,
+    /// Owned positions (local to the owned block) whose values rank − 1 and rank + 1 read.
+    send_below: Vec<usize>,
+    send_above: Vec<usize>,
+}
+
+fn halo_of(
+    a: &CsMat<f64>,
+    rows: std::ops::Range<usize>,
+    keep: impl Fn(usize) -> bool,
+) -> Vec<usize> {
+    let mut out: Vec<usize> = rows
+        .flat_map(|i| {
+            a.outer_view(i)
+                .into_iter()
+                .flat_map(|r| r.indices().to_vec())
+        })
+        .filter(|&j| keep(j))
+        .collect();
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+impl Part {
+    fn new(
+        a: &CsMat<f64>,
+        bounds: &[(usize, usize)],
+        rank: usize,
+    ) -> Result<Self, DecompositionError> {
+        let (u0, u1) = bounds[rank];
+        let below = halo_of(a, u0..u1, |j| j < u0);
+        let above = halo_of(a, u0..u1, |j| j >= u1);
+        // The stencil reaches the neighbouring slabs only.
+        let lowest = if rank > 0 { bounds[rank - 1].0 } else { 0 };
+        let highest = bounds.get(rank + 1).map_or(u1, |b| b.1);
+        if below.first().is_some_and(|&j| j < lowest) || above.last().is_some_and(|&j| j >= highest)
+        {
+            return Err(DecompositionError::StencilTooWide { rank });
+        }
+        let local = |j: usize| -> usize {
+            if j < u0 {
+                below.binary_search(&j).unwrap_or(0)
+            } else if j < u1 {
+                below.len() + (j - u0)
+            } else {
+                below.len() + (u1 - u0) + above.binary_search(&j).unwrap_or(0)
+            }
+        };
+        let mut indptr = vec![0usize];
+        let (mut indices, mut data) = (Vec::new(), Vec::new());
+        let (mut interior, mut border) = (Vec::new(), Vec::new());
+        for i in u0..u1 {
+            let mut reads_halo = false;
+            if let Some(row) = a.outer_view(i) {
+                for (j, &v) in row.iter() {
+                    reads_halo |= !(u0..u1).contains(&j);
+                    indices.push(local(j));
+                    data.push(v);
+                }
+            }
+            indptr.push(indices.len());
+            if reads_halo {
+                &mut border
+            } else {
+                &mut interior
+            }
+            .push(i - u0);
+        }
+        let width = below.len() + (u1 - u0) + above.len();
+        let rows = CsMat::try_new((u1 - u0, width), indptr, indices, data)
+            .map_err(|e| DecompositionError::Matrix(e.3.to_string()))?;
+        // What the neighbours read of ours: their halos, computed from their rows.
+        let send_below = if rank > 0 {
+            let (v0, v1) = bounds[rank - 1];
+            halo_of(a, v0..v1, |j| (u0..u1).contains(&j))
+                .iter()
+                .map(|j| j - u0)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let send_above = if let Some(&(w0, w1)) = bounds.get(rank + 1) {
+            halo_of(a, w0..w1, |j| (u0..u1).contains(&j))
+                .iter()
+                .map(|j| j - u0)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Ok(Self {
+            u0,
+            u1,
+            below,
+            above,
+            rows,
+            interior,
+            border,
+            send_below,
+            send_above,
+        })
+    }
+}
+
+/// The residual b − Aφ of owned row `i` (local), reading the local vector `x`.
+fn row_residual(rows: &CsMat<f64>, b: &[f64], x: &[f64], i: usize) -> f64 {
+    let ax: f64 = rows
+        .outer_view(i)
+        .map_or(0.0, |row| row.iter().map(|(j, v)| v * x[j]).sum());
+    b[i] - ax
+}
+
+/// Iterates `system` (the whole system, as every rank assembles it for now) from zero to
+/// the stopping rule on the ranks of `comm`, each doing its slab's rows; `slab_len` is the
+/// grid's n_x·n_y. Returns the whole φ on every rank (gathered at the end) and the
+/// residual history: the bits of `lucent_explicit::steady::iterate` on one rank.
+pub fn iterate(
+    system: &AssembledSystem,
+    slab_len: usize,
+    iteration: Iteration,
+    settings: &SteadySettings,
+    comm: &impl Communicator,
+) -> Result<Steady, DecompositionError> {
+    let a = &system.matrix;
+    let n = system.rhs.len();
+    let layers = Layers::new(&system.cells, slab_len);
+    let slabs = Slabs::new(&layers, comm.size())?;
+    let ranges = layers.ranges();
+    let bounds: Vec<(usize, usize)> = slabs
+        .layers
+        .iter()
+        .map(|&(l0, l1)| (ranges[l0].1, ranges[l1 - 1].2))
+        .collect();
+    let rank = comm.rank();
+    let part = Part::new(a, &bounds, rank)?;
+    let (u0, u1) = (part.u0, part.u1);
+    let own = u1 - u0;
+    let (l0, l1) = slabs.layers[rank];
+    let my_layers: Vec<(usize, usize)> = ranges[l0..l1]
+        .iter()
+        .map(|&(_, s, e)| (s - u0, e - u0))
+        .collect();
+    let b = &system.rhs[u0..u1];
+    // The same checks and per-row scale as the serial iteration.
+    let diagonal: Vec<f64> = (u0..u1)
+        .map(|i| a.get(i, i).copied().unwrap_or(0.0))
+        .collect();
+    if diagonal.iter().any(|&d| d <= 0.0) {
+        return Err(DecompositionError::Matrix(
+            "the system has a non-positive diagonal".into(),
+        ));
+    }
+    let scale: Vec<f64> = match iteration {
+        Iteration::Ftcs {
+            time_step,
+            cell_volume,
+        } => {
+            let limit = ftcs_limit(system, cell_volume);
+            if !(time_step > 0.0 && time_step.is_finite())
+                || (time_step > limit * (1.0 + 1e-12) && !settings.allow_unstable)
+            {
+                return Err(DecompositionError::Unstable {
+                    requested: time_step,
+                    limit,
+                });
+            }
+            vec![time_step / cell_volume; own]
+        }
+        Iteration::Jacobi { omega } => diagonal.iter().map(|d| omega / d).collect(),
+    };
+    // Deterministic stops from the shared residual; the clock and the cancel flag are
+    // each rank's own and travel with the layer sums.
+    let shared = Stopping {
+        time_budget: None,
+        cancel: None,
+        progress: if rank == 0 {
+            settings.stopping.progress.clone()
+        } else {
+            None
+        },
+        ..settings.stopping.clone()
+    };
+    let mut history = History::start();
+    let started = std::time::Instant::now();
+    let local_flags = || -> [f64; 2] {
+        let s = &settings.stopping;
+        [
+            f64::from(u8::from(
+                s.time_budget.is_some_and(|t| started.elapsed() >= t),
+            )),
+            f64::from(u8::from(
+                s.cancel
+                    .as_ref()
+                    .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)),
+            )),
+        ]
+    };
+    // Layer sums of squares of v (owned), gathered with flags: (norm, any time, any cancel).
+    let counts: Vec<usize> = slabs.layers.iter().map(|&(a, b)| b - a).collect();
+    let gather = |v: &[f64]| -> (f64, bool, bool) {
+        let mut local = local_flags().to_vec();
+        local.extend(
+            my_layers
+                .par_iter()
+                .map(|&(s, e)| v[s..e].iter().map(|x| x * x).sum::<f64>())
+                .collect::<Vec<f64>>(),
+        );
+        let all = comm.all_gather(&local);
+        let (mut sum, mut time, mut cancel, mut at) = (0.0f64, false, false, 0);
+        for &c in &counts {
+            time |= all[at] != 0.0;
+            cancel |= all[at + 1] != 0.0;
+            for s in &all[at + 2..at + 2 + c] {
+                sum += s;
+            }
+            at += 2 + c;
+        }
+        (sum.sqrt(), time, cancel)
+    };
+    let (b_norm, mut time_up, mut cancelled) = gather(b);
+    let b_norm = b_norm.max(f64::MIN_POSITIVE);
+    let (nb, na) = (part.below.len(), part.above.len());
+    let mut x = vec![0.0f64; nb + own + na];
+    let mut r = b.to_vec();
+    let mut relative = 1.0;
+    let stop_reason = loop {
+        if let Some(reason) = history.record(&shared, relative, relative * b_norm) {
+            break reason;
+        }
+        if time_up {
+            break StopReason::TimeLimit { residual: relative };
+        }
+        if cancelled {
+            break StopReason::Interrupted { residual: relative };
+        }
+        x[nb..nb + own]
+            .par_iter_mut()
+            .zip(r.par_iter())
+            .zip(scale.par_iter())
+            .for_each(|((p, r), s)| *p += s * r);
+        let owned = &x[nb..nb + own];
+        let to_below: Vec<f64> = part.send_below.iter().map(|&i| owned[i]).collect();
+        let to_above: Vec<f64> = part.send_above.iter().map(|&i| owned[i]).collect();
+        let xs = &x;
+        let (from_below, from_above, interior) = comm.exchange(&to_below, &to_above, || {
+            part.interior
+                .par_iter()
+                .map(|&i| row_residual(&part.rows, b, xs, i))
+                .collect::<Vec<f64>>()
+        });
+        if from_below.len() != nb || from_above.len() != na {
+            return Err(DecompositionError::Protocol { rank });
+        }
+        x[..nb].copy_from_slice(&from_below);
+        x[nb + own..].copy_from_slice(&from_above);
+        for (&i, v) in part.interior.iter().zip(interior) {
+            r[i] = v;
+        }
+        let xs = &x;
+        let border: Vec<f64> = part
+            .border
+            .par_iter()
+            .map(|&i| row_residual(&part.rows, b, xs, i))
+            .collect();
+        for (&i, v) in part.border.iter().zip(border) {
+            r[i] = v;
+        }
+        let (norm, t, c) = gather(&r);
+        relative = norm / b_norm;
+        time_up = t;
+        cancelled = c;
+    };
+    // The serial rule, on the gathered whole: any non-finite φ zeroes all of it.
+    let mut fluence = comm.all_gather(&x[nb..nb + own]);
+    if fluence.len() != n {
+        return Err(DecompositionError::Protocol { rank });
+    }
+    if fluence.iter().any(|v| !v.is_finite()) {
+        fluence.fill(0.0);
+    }
+    Ok(Steady {
+        fluence,
+        residuals: history.into_residuals(),
+        stop_reason,
+    })
+}
