@@ -76,43 +76,7 @@ pub fn iterate(
     let a = &system.matrix;
     let b = &system.rhs;
     let n = b.len();
-    let diagonal: Vec<f64> = (0..n)
-        .map(|i| a.get(i, i).copied().unwrap_or(0.0))
-        .collect();
-    if diagonal.iter().any(|&d| d <= 0.0) {
-        return Err(ExplicitError::Invalid(
-            "the system has a non-positive diagonal".into(),
-        ));
-    }
-    // Per-row scale of the residual added to φ.
-    let scale: Vec<f64> = match iteration {
-        Iteration::Ftcs {
-            time_step,
-            cell_volume,
-        } => {
-            let limit = ftcs_limit(system, cell_volume);
-            if !(time_step > 0.0 && time_step.is_finite()) {
-                return Err(ExplicitError::Invalid(format!("time step {time_step}")));
-            }
-            if time_step > limit * (1.0 + 1e-12) && !settings.allow_unstable {
-                return Err(ExplicitError::Unstable {
-                    scheme: "FTCS diffusion",
-                    parameter: "cΔt",
-                    limit,
-                    requested: time_step,
-                });
-            }
-            vec![time_step / cell_volume; n]
-        }
-        Iteration::Jacobi { omega } => {
-            if !(omega > 0.0 && omega <= 1.0) {
-                return Err(ExplicitError::Invalid(format!(
-                    "Jacobi damping {omega} outside (0, 1]"
-                )));
-            }
-            diagonal.iter().map(|d| omega / d).collect()
-        }
-    };
+    let scale = row_scale(system, iteration, settings.allow_unstable)?;
     let layers = Layers::new(&system.cells, slab_len);
     let b_norm = layers.norm(b).max(f64::MIN_POSITIVE);
     let mut phi = vec![0.0f64; n];
@@ -187,4 +151,53 @@ impl Layers {
     pub fn norm(&self, v: &[f64]) -> f64 {
         self.squares(v).iter().sum::<f64>().sqrt()
     }
+}
+
+/// The scale s_i of each row's residual in φ ← φ + s r: cΔt/V for FTCS (refused beyond
+/// its Gershgorin bound unless `allow_unstable`), ω/a_ii for Jacobi (ω in (0, 1]); checks
+/// the diagonal is positive. Shared with the decomposed iteration (`lucent-mpi`), so both
+/// refuse and scale alike.
+pub fn row_scale(
+    system: &AssembledSystem,
+    iteration: Iteration,
+    allow_unstable: bool,
+) -> Result<Vec<f64>, ExplicitError> {
+    let a = &system.matrix;
+    let n = system.rhs.len();
+    let diagonal: Vec<f64> = (0..n)
+        .map(|i| a.get(i, i).copied().unwrap_or(0.0))
+        .collect();
+    if diagonal.iter().any(|&d| d <= 0.0) {
+        return Err(ExplicitError::Invalid(
+            "the system has a non-positive diagonal".into(),
+        ));
+    }
+    Ok(match iteration {
+        Iteration::Ftcs {
+            time_step,
+            cell_volume,
+        } => {
+            let limit = ftcs_limit(system, cell_volume);
+            if !(time_step > 0.0 && time_step.is_finite()) {
+                return Err(ExplicitError::Invalid(format!("time step {time_step}")));
+            }
+            if time_step > limit * (1.0 + 1e-12) && !allow_unstable {
+                return Err(ExplicitError::Unstable {
+                    scheme: "FTCS diffusion",
+                    parameter: "cΔt",
+                    limit,
+                    requested: time_step,
+                });
+            }
+            vec![time_step / cell_volume; n]
+        }
+        Iteration::Jacobi { omega } => {
+            if !(omega > 0.0 && omega <= 1.0) {
+                return Err(ExplicitError::Invalid(format!(
+                    "Jacobi damping {omega} outside (0, 1]"
+                )));
+            }
+            diagonal.iter().map(|d| omega / d).collect()
+        }
+    })
 }

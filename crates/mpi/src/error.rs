@@ -22,14 +22,9 @@ pub enum DecompositionError {
     /// The system cannot be iterated.
     #[error("the system: {0}")]
     Matrix(String),
-    /// An FTCS step beyond its stability bound (or not positive).
-    #[error("FTCS step cΔt = {requested} is beyond its stability limit {limit}")]
-    Unstable {
-        /// The step asked for.
-        requested: f64,
-        /// The Gershgorin bound.
-        limit: f64,
-    },
+    /// The iteration refused the system or its step (`lucent_explicit::steady::row_scale`).
+    #[error(transparent)]
+    Scheme(#[from] lucent_explicit::ExplicitError),
     /// A neighbour sent what the plan did not expect (a rank stopped or diverged from the
     /// protocol).
     #[error("rank {rank}: a halo or gather did not match the decomposition")]

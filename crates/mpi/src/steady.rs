@@ -20,7 +20,7 @@
 
 use lucent_core::{History, StopReason, Stopping};
 use lucent_diffusion::AssembledSystem;
-use lucent_explicit::steady::{Iteration, Layers, Steady, SteadySettings, ftcs_limit};
+use lucent_explicit::steady::{Iteration, Layers, Steady, SteadySettings, row_scale};
 use rayon::prelude::*;
 use sprs::CsMat;
 
@@ -221,33 +221,8 @@ pub fn iterate(
         .map(|&(_, s, e)| (s - u0, e - u0))
         .collect();
     let b = &system.rhs[u0..u1];
-    // The same checks and per-row scale as the serial iteration.
-    let diagonal: Vec<f64> = (u0..u1)
-        .map(|i| a.get(i, i).copied().unwrap_or(0.0))
-        .collect();
-    if diagonal.iter().any(|&d| d <= 0.0) {
-        return Err(DecompositionError::Matrix(
-            "the system has a non-positive diagonal".into(),
-        ));
-    }
-    let scale: Vec<f64> = match iteration {
-        Iteration::Ftcs {
-            time_step,
-            cell_volume,
-        } => {
-            let limit = ftcs_limit(system, cell_volume);
-            if !(time_step > 0.0 && time_step.is_finite())
-                || (time_step > limit * (1.0 + 1e-12) && !settings.allow_unstable)
-            {
-                return Err(DecompositionError::Unstable {
-                    requested: time_step,
-                    limit,
-                });
-            }
-            vec![time_step / cell_volume; own]
-        }
-        Iteration::Jacobi { omega } => diagonal.iter().map(|d| omega / d).collect(),
-    };
+    // The serial iteration's checks and per-row scale, then this rank's rows of it.
+    let scale = row_scale(system, iteration, settings.allow_unstable)?[u0..u1].to_vec();
     // Deterministic stops from the shared residual; the clock and the cancel flag are
     // each rank's own and travel with the layer sums.
     let shared = Stopping {

@@ -155,3 +155,27 @@ fn more_ranks_than_layers_is_an_error() {
         ));
     }
 }
+
+#[test]
+fn what_the_serial_iteration_refuses_every_rank_refuses() {
+    let (system, slab, volume) = system([9, 10, 11]);
+    let settings = SteadySettings {
+        stopping: Stopping::default(),
+        allow_unstable: false,
+    };
+    for iteration in [
+        Iteration::Jacobi { omega: 1.5 },
+        Iteration::Ftcs {
+            time_step: 1.1 * ftcs_limit(&system, volume),
+            cell_volume: volume,
+        },
+    ] {
+        let serial_error = serial(&system, slab, iteration, &settings).unwrap_err();
+        for out in on_ranks(2, &system, slab, iteration, &settings) {
+            assert_eq!(
+                out.unwrap_err(),
+                DecompositionError::Scheme(serial_error.clone())
+            );
+        }
+    }
+}
