@@ -132,6 +132,7 @@ def stability(out, albedo=0.9):
     positivity = lucent.stability.ftcs_diffusion.positivity(betas, albedo) / vn
     first = [fractions[np.argmax(diverged[:, j])] if diverged[:, j].any() else np.nan for j in range(len(betas))]
     print(f"FTCS diffusion, albedo {albedo}: first diverged step fraction per β = {np.round(first, 2)}")
+    print(f"Murray's Eq. 4.9 over β = {betas[0]:.2f}..{betas[-1]:.2f}: {murray.min():.2f}–{murray.max():.2f} of the von Neumann bound")
 
     import matplotlib
 

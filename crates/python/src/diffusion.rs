@@ -28,6 +28,8 @@ type Csr<'py> = (
 pub(crate) struct PyDiffusionSystem {
     problem: DiffusionProblem,
     sources: Sources,
+    /// A, b and the cell of each unknown, assembled once.
+    system: lucent::diffusion::AssembledSystem,
     dims: [usize; 3],
 }
 
@@ -78,9 +80,13 @@ impl PyDiffusionSystem {
             return Err(invalid("channel", "no system for this channel"));
         }
         let (problem_c, sources) = systems.swap_remove(channel);
+        let system = problem_c
+            .assemble(&sources)
+            .map_err(|e| invalid("problem", e))?;
         Ok(Self {
             problem: problem_c,
             sources,
+            system,
             dims: problem.geometry().dims(),
         })
     }
@@ -88,10 +94,7 @@ impl PyDiffusionSystem {
     /// A as CSR: (data float64, indices int64, indptr int64, (n, n)); with scipy,
     /// `scipy.sparse.csr_matrix((data, indices, indptr), shape=shape)`.
     fn matrix<'py>(&self, py: Python<'py>) -> PyResult<Csr<'py>> {
-        let system = self
-            .problem
-            .assemble(&self.sources)
-            .map_err(|e| invalid("problem", e))?;
+        let system = &self.system;
         let m = &system.matrix;
         let n = system.rhs.len();
         let indices: Vec<i64> = m.indices().iter().map(|&i| i as i64).collect();
@@ -106,19 +109,13 @@ impl PyDiffusionSystem {
 
     /// b, float64, one entry per unknown.
     fn rhs<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let system = self
-            .problem
-            .assemble(&self.sources)
-            .map_err(|e| invalid("problem", e))?;
-        Ok(array_f64(py, system.rhs))
+        let system = &self.system;
+        Ok(array_f64(py, system.rhs.clone()))
     }
 
     /// The flat grid cell (x fastest) of each unknown, int64.
     fn cells<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let system = self
-            .problem
-            .assemble(&self.sources)
-            .map_err(|e| invalid("problem", e))?;
+        let system = &self.system;
         let cells: Vec<i64> = system.cells.iter().map(|&c| c as i64).collect();
         Ok(numpy::PyArray1::from_vec(py, cells).into_any())
     }
@@ -156,10 +153,7 @@ impl PyDiffusionSystem {
             })
             .map_err(|e| invalid("problem", e))?;
         let seconds = start.elapsed().as_secs_f64();
-        let system = self
-            .problem
-            .assemble(&self.sources)
-            .map_err(|e| invalid("problem", e))?;
+        let system = &self.system;
         let phi: Vec<f64> = system.cells.iter().map(|&c| solution.fluence[c]).collect();
         Ok((
             array_f64(py, phi),

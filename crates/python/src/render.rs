@@ -3,7 +3,7 @@
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use lucent::core::{ImageRequest, Params};
+use lucent::core::ImageRequest;
 use lucent::render::{Image, ToneMap};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -11,8 +11,7 @@ use pyo3::types::PyDict;
 use crate::arrays::array_f32;
 use crate::errors::{from_lucent, from_solve, invalid};
 use crate::scene::PyScene;
-use crate::solve::{Options, PyCancel, PySolution, PySolver, run_interruptible};
-use crate::values::params_from;
+use crate::solve::{Options, PyCancel, PySolution, PySolver, params_for, run_interruptible};
 
 /// A rendered image: linear RGB radiance (height, width, 3) float32, its per-pixel
 /// standard error for solvers that trace camera paths (Monte Carlo), and the solution
@@ -152,14 +151,7 @@ pub(crate) fn render(
         built.settings.validate().map_err(|e| invalid("size", e))?;
     }
     let name = solver.unwrap_or(&scene.scene.solver.name).to_owned();
-    let mut typed = if name == scene.scene.solver.name {
-        scene.scene.solver.params.clone()
-    } else {
-        Params::default()
-    };
-    params_from(params, &mut typed)?;
-    params_from(kwargs, &mut typed)?;
-    let chosen = PySolver::build(&name, typed)?;
+    let chosen = PySolver::build(&name, params_for(Some(scene), &name, params, kwargs)?)?;
     let options = Options {
         rtol,
         atol,

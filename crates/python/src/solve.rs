@@ -527,13 +527,7 @@ pub(crate) fn solve(
             ));
         }
     };
-    let mut typed = match scene {
-        Some(scene) if scene.scene.solver.name == name => scene.scene.solver.params.clone(),
-        _ => Params::default(),
-    };
-    params_from(params, &mut typed)?;
-    params_from(kwargs, &mut typed)?;
-    let built = PySolver::build(&name, typed)?;
+    let built = PySolver::build(&name, params_for(scene, &name, params, kwargs)?)?;
     let options = Options {
         rtol,
         atol,
@@ -546,6 +540,24 @@ pub(crate) fn solve(
     };
     let (problem, default_rtol) = problem_and_tolerance(py, problem, options.memory_budget)?;
     built.run(py, &problem, &options, default_rtol)
+}
+
+/// The parameters `name` runs with, as the command line chooses them: the scene's
+/// `[solver.params]` when `name` is the scene's own solver (else none), then `params`,
+/// then the keywords.
+pub(crate) fn params_for(
+    scene: Option<&PyScene>,
+    name: &str,
+    params: Option<&Bound<'_, PyDict>>,
+    kwargs: Option<&Bound<'_, PyDict>>,
+) -> PyResult<Params> {
+    let mut typed = match scene {
+        Some(scene) if scene.scene.solver.name == name => scene.scene.solver.params.clone(),
+        _ => Params::default(),
+    };
+    params_from(params, &mut typed)?;
+    params_from(kwargs, &mut typed)?;
+    Ok(typed)
 }
 
 /// Every registered solver: `name`, `summary`, `params` (name, default, meaning) and
