@@ -69,6 +69,7 @@ pub mod memory;
 mod paged;
 mod paged_collisions;
 mod problem;
+pub mod ranks;
 pub mod reduce;
 mod refractive;
 pub mod regime;

@@ -13,4 +13,7 @@ pub enum DiffusionError {
         "the problem is singular: no absorption and no Robin or Dirichlet boundary to hold the fluence"
     )]
     Singular,
+    /// The problem cannot be split over the ranks, or a rank left the protocol.
+    #[error("on ranks: {0}")]
+    Ranks(String),
 }

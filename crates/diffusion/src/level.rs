@@ -23,6 +23,8 @@
 //! into chunks of equal work, one task each, whose boundary slabs are done in separate
 //! passes ([`Level::sor`]). The result equals a plain red sweep followed by a black sweep.
 
+use std::ops::Range;
+
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -92,18 +94,36 @@ impl Level {
     /// so every coupling to them is 0 too): (A x)_i = 0 there and no cycle changes their
     /// residual, which is their right-hand side.
     pub(crate) fn outside_sum_sq(&self, r: &[f64]) -> f64 {
-        let nx = self.dims[0];
-        r.par_chunks(nx.max(1))
-            .zip(self.spans.par_iter())
-            .map(|(row, &[lo, hi])| {
-                let (lo, hi) = (lo as usize, hi as usize);
-                row[..lo]
-                    .iter()
-                    .chain(&row[hi..])
-                    .map(|v| v * v)
+        self.outside_layers(r, self.all_layers()).iter().sum()
+    }
+
+    /// [`Level::outside_sum_sq`] per slab of `layers`.
+    pub(crate) fn outside_layers(&self, r: &[f64], layers: Range<usize>) -> Vec<f64> {
+        let [nx, ny, _] = self.dims;
+        let slab = nx * ny;
+        r[layers.start * slab..layers.end * slab]
+            .par_chunks(slab.max(1))
+            .enumerate()
+            .map(|(i, r)| {
+                let k = layers.start + i;
+                r.chunks(nx.max(1))
+                    .enumerate()
+                    .map(|(j, row)| {
+                        let (lo, hi) = self.span(j, k);
+                        row[..lo]
+                            .iter()
+                            .chain(&row[hi..])
+                            .map(|v| v * v)
+                            .sum::<f64>()
+                    })
                     .sum::<f64>()
             })
-            .sum()
+            .collect()
+    }
+
+    /// Every slab: 0..n_z.
+    pub(crate) fn all_layers(&self) -> Range<usize> {
+        0..self.dims[2]
     }
     pub(crate) fn len(&self) -> usize {
         self.dims[0] * self.dims[1] * self.dims[2]
@@ -216,7 +236,7 @@ impl Level {
 
     /// y = A x in f64 (x may be f32 or f64).
     pub(crate) fn apply<T: Copy + Into<f64> + Sync>(&self, x: &[T], y: &mut [f64]) {
-        self.apply_then(x, y, |_, _| 0.0);
+        self.apply_then(x, y, self.all_layers(), |_, _| 0.0);
     }
 
     /// r = b − A x in f64, in one pass; returns ‖r‖₂.
@@ -226,8 +246,23 @@ impl Level {
         x: &[T],
         r: &mut [f64],
     ) -> f64 {
+        self.residual_layers(b, x, r, self.all_layers())
+            .iter()
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    /// r = b − A x on the slabs `layers` (reading x on the slabs next to them too); returns
+    /// Σ r² per slab.
+    pub(crate) fn residual_layers<T: Copy + Into<f64> + Sync>(
+        &self,
+        b: &[f64],
+        x: &[T],
+        r: &mut [f64],
+        layers: Range<usize>,
+    ) -> Vec<f64> {
         let slab = self.slab();
-        self.apply_then(x, r, |k, rs| {
+        self.apply_then(x, r, layers, |k, rs| {
             let mut sum = 0.0;
             for (r, b) in rs.iter_mut().zip(&b[k * slab..]) {
                 *r = b - *r;
@@ -235,25 +270,28 @@ impl Level {
             }
             sum
         })
-        .sqrt()
     }
 
-    /// y = A x slab by slab, each slab then passed to `then(k, y_slab)` while it is in
-    /// cache; returns the sum of what `then` returns.
+    /// y = A x on the slabs `layers`, each slab then passed to `then(k, y_slab)` while it
+    /// is in cache; returns what `then` returns, per slab.
     fn apply_then<T: Copy + Into<f64> + Sync>(
         &self,
         x: &[T],
         y: &mut [f64],
+        layers: Range<usize>,
         then: impl Fn(usize, &mut [f64]) -> f64 + Sync,
-    ) -> f64 {
-        y.par_chunks_mut(self.slab())
+    ) -> Vec<f64> {
+        let slab = self.slab();
+        y[layers.start * slab..layers.end * slab]
+            .par_chunks_mut(slab)
             .with_min_len(self.slabs_per_task())
             .enumerate()
-            .map(|(k, y)| {
+            .map(|(i, y)| {
+                let k = layers.start + i;
                 self.apply_slab(k, x, y);
                 then(k, y)
             })
-            .sum()
+            .collect()
     }
 
     /// Slab k of A x into `y` (one slab long): computed on the rows' spans, 0 outside
@@ -294,16 +332,34 @@ impl Level {
     /// residual of φ updated without recomputing A φ) and b = r in f32 for the next cycle;
     /// returns Σ r² over the spans (outside them e = 0 and A e = 0: nothing changes).
     pub(crate) fn correct(&self, e: &[f32], phi: &mut [f64], r: &mut [f64], b: &mut [f32]) -> f64 {
+        self.correct_layers(e, phi, r, b, self.all_layers())
+            .iter()
+            .sum()
+    }
+
+    /// [`Level::correct`] on the slabs `layers` (reading e on the slabs next to them too);
+    /// returns Σ r² over the spans per slab.
+    pub(crate) fn correct_layers(
+        &self,
+        e: &[f32],
+        phi: &mut [f64],
+        r: &mut [f64],
+        b: &mut [f32],
+        layers: Range<usize>,
+    ) -> Vec<f64> {
         let slab = self.slab();
         let nx = self.dims[0];
-        phi.par_chunks_mut(slab)
-            .zip(r.par_chunks_mut(slab))
-            .zip(b.par_chunks_mut(slab))
+        let owned = layers.start * slab..layers.end * slab;
+        phi[owned.clone()]
+            .par_chunks_mut(slab)
+            .zip(r[owned.clone()].par_chunks_mut(slab))
+            .zip(b[owned].par_chunks_mut(slab))
             .with_min_len(self.slabs_per_task())
             .enumerate()
             .map_init(
                 || vec![0.0f64; slab],
-                |ae, (k, ((phi, r), b))| {
+                |ae, (i, ((phi, r), b))| {
+                    let k = layers.start + i;
                     self.apply_slab(k, e, ae);
                     let es = &e[k * slab..(k + 1) * slab];
                     let mut sum = 0.0;
@@ -319,7 +375,7 @@ impl Level {
                     sum
                 },
             )
-            .sum::<f64>()
+            .collect()
     }
 
     /// One red–black Gauss–Seidel sweep for A x = b, colours in the order `first`, then
@@ -395,6 +451,26 @@ impl Level {
         self.on_slabs(x, is_last, |k, xs, below, above| {
             colour(k, second, xs, below, above)
         });
+    }
+
+    /// One colour (0 = red) of a red–black SOR sweep on the slabs `layers` only, reading
+    /// the slabs next to them: the distributed sweep's half step, between halo exchanges.
+    pub(crate) fn colour_layers<T: Real>(
+        &self,
+        b: &[T],
+        x: &mut [T],
+        colour: usize,
+        omega: T,
+        layers: Range<usize>,
+    ) {
+        // Slabs of one parity at a time, so no two written slabs are adjacent.
+        for parity in 0..2 {
+            self.on_slabs(
+                x,
+                |k| layers.contains(&k) && k % 2 == parity,
+                |k, xs, below, above| self.colour(b, k, colour, omega, xs, below, above),
+            );
+        }
     }
 
     /// The wavefront over the run of slabs k0..end (`run`, mutable), with the first colour
@@ -707,43 +783,62 @@ impl Level {
 
     /// One weighted Jacobi sweep x ← x + ω D⁻¹(b − A x), using `scratch` (len n).
     pub(crate) fn jacobi(&self, b: &[f32], x: &mut [f32], omega: f32, scratch: &mut [f32]) {
+        self.jacobi_layers(b, x, omega, scratch, self.all_layers());
+        x.copy_from_slice(scratch);
+    }
+
+    /// The weighted Jacobi update of the slabs `layers` into `scratch` (x unchanged).
+    pub(crate) fn jacobi_layers(
+        &self,
+        b: &[f32],
+        x: &[f32],
+        omega: f32,
+        scratch: &mut [f32],
+        layers: Range<usize>,
+    ) {
         let slab = self.slab();
         let nz = self.dims[2];
         let [nx, ny, _] = self.dims;
-        {
-            let x: &[f32] = x;
-            scratch
-                .par_chunks_mut(slab)
-                .enumerate()
-                .for_each(|(k, out)| {
-                    let xs = &x[k * slab..(k + 1) * slab];
-                    let below = (k > 0).then(|| &x[(k - 1) * slab..k * slab]);
-                    let above = (k + 1 < nz).then(|| &x[(k + 1) * slab..(k + 2) * slab]);
-                    for j in 0..ny {
-                        for i in 0..nx {
-                            let l = i + nx * j;
-                            let g = k * slab + l;
-                            let r = b[g] + self.neighbour_sum(g, l, [i, j], xs, below, above)
-                                - self.diag[g] * xs[l];
-                            out[l] = xs[l] + omega * self.inv_diag[g] * r;
-                        }
+        scratch[layers.start * slab..layers.end * slab]
+            .par_chunks_mut(slab)
+            .enumerate()
+            .for_each(|(t, out)| {
+                let k = layers.start + t;
+                let xs = &x[k * slab..(k + 1) * slab];
+                let below = (k > 0).then(|| &x[(k - 1) * slab..k * slab]);
+                let above = (k + 1 < nz).then(|| &x[(k + 1) * slab..(k + 2) * slab]);
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let l = i + nx * j;
+                        let g = k * slab + l;
+                        let r = b[g] + self.neighbour_sum(g, l, [i, j], xs, below, above)
+                            - self.diag[g] * xs[l];
+                        out[l] = xs[l] + omega * self.inv_diag[g] * r;
                     }
-                });
-        }
-        x.copy_from_slice(scratch);
+                }
+            });
     }
 
     /// The coarse right-hand side Σ_children (b − A x): residual and restriction in one pass,
     /// over the rows' spans. Cells outside the medium (d = 0) are not unknowns: their
     /// residual, which is their b, is not passed down (whatever b holds there).
-    pub(crate) fn restrict_residual(&self, b: &[f32], x: &[f32], coarse: &Level, out: &mut [f32]) {
+    pub(crate) fn restrict_residual(
+        &self,
+        b: &[f32],
+        x: &[f32],
+        coarse: &Level,
+        out: &mut [f32],
+        coarse_layers: Range<usize>,
+    ) {
         let [nx, ny, nz] = self.dims;
         let [cx, cy, _] = coarse.dims;
         let slab = nx * ny;
-        out.par_chunks_mut(cx * cy)
+        out[coarse_layers.start * cx * cy..coarse_layers.end * cx * cy]
+            .par_chunks_mut(cx * cy)
             .with_min_len(coarse.slabs_per_task())
             .enumerate()
-            .for_each(|(kc, out)| {
+            .for_each(|(t, out)| {
+                let kc = coarse_layers.start + t;
                 out.fill(0.0);
                 for k in 2 * kc..(2 * kc + 2).min(nz) {
                     let xs = &x[k * slab..(k + 1) * slab];
@@ -796,14 +891,22 @@ impl Level {
 
     /// The coarse right-hand side Σ_children b: [`Level::restrict_residual`] for x = 0,
     /// without reading the operator (full multigrid's first pass down the levels).
-    pub(crate) fn restrict(&self, b: &[f32], coarse: &Level, out: &mut [f32]) {
+    pub(crate) fn restrict(
+        &self,
+        b: &[f32],
+        coarse: &Level,
+        out: &mut [f32],
+        coarse_layers: Range<usize>,
+    ) {
         let [nx, ny, nz] = self.dims;
         let [cx, cy, _] = coarse.dims;
         let slab = nx * ny;
-        out.par_chunks_mut(cx * cy)
+        out[coarse_layers.start * cx * cy..coarse_layers.end * cx * cy]
+            .par_chunks_mut(cx * cy)
             .with_min_len(coarse.slabs_per_task())
             .enumerate()
-            .for_each(|(kc, out)| {
+            .for_each(|(t, out)| {
+                let kc = coarse_layers.start + t;
                 out.fill(0.0);
                 for k in 2 * kc..(2 * kc + 2).min(nz) {
                     for j in 0..ny {
@@ -821,13 +924,21 @@ impl Level {
     }
 
     /// x_fine += x_coarse of the parent (piecewise-constant prolongation).
-    pub(crate) fn prolong_add(&self, coarse: &Level, xc: &[f32], x: &mut [f32]) {
+    pub(crate) fn prolong_add(
+        &self,
+        coarse: &Level,
+        xc: &[f32],
+        x: &mut [f32],
+        layers: Range<usize>,
+    ) {
         let [nx, ny, _] = self.dims;
         let [cx, cy, _] = coarse.dims;
-        x.par_chunks_mut(nx * ny)
+        x[layers.start * nx * ny..layers.end * nx * ny]
+            .par_chunks_mut(nx * ny)
             .with_min_len(self.slabs_per_task())
             .enumerate()
-            .for_each(|(k, xs)| {
+            .for_each(|(t, xs)| {
+                let k = layers.start + t;
                 let base = (k / 2) * cx * cy;
                 for j in 0..ny {
                     let row = base + (j / 2) * cx;
@@ -845,15 +956,23 @@ impl Level {
     /// its parent, 9/64 of each of the three parent's neighbours on its side, 3/64 of the
     /// three edge neighbours and 1/64 of the corner one, renormalised over the coarse cells
     /// in the medium (so it falls back to copying near boundaries).
-    pub(crate) fn prolong_trilinear_add(&self, coarse: &Level, xc: &[f32], x: &mut [f32]) {
+    pub(crate) fn prolong_trilinear_add(
+        &self,
+        coarse: &Level,
+        xc: &[f32],
+        x: &mut [f32],
+        layers: Range<usize>,
+    ) {
         let [nx, ny, _] = self.dims;
         let [cx, cy, cz] = coarse.dims;
-        x.par_chunks_mut(nx * ny)
+        x[layers.start * nx * ny..layers.end * nx * ny]
+            .par_chunks_mut(nx * ny)
             .with_min_len(self.slabs_per_task())
             .enumerate()
-            .for_each(|(k, xs)| {
+            .for_each(|(t, xs)| {
+                let k = layers.start + t;
                 let kc = k / 2;
-                let kn = if k % 2 == 0 {
+                let kn = if k.is_multiple_of(2) {
                     kc.checked_sub(1)
                 } else {
                     Some(kc + 1).filter(|&v| v < cz)
@@ -1194,7 +1313,7 @@ mod tests {
                 .map(|g| if medium(g) { (g % 5) as f32 * 0.1 } else { 0.0 })
                 .collect();
             let mut out = vec![0.0f32; coarse.len()];
-            lv.restrict_residual(&b, &x, &coarse, &mut out);
+            lv.restrict_residual(&b, &x, &coarse, &mut out, coarse.all_layers());
             let b64: Vec<f64> = b.iter().map(|&v| f64::from(v)).collect();
             let mut r = vec![0.0; n];
             let _ = lv.residual(&b64, &x, &mut r);
@@ -1215,8 +1334,8 @@ mod tests {
             // same order.
             let mut residual = vec![0.0f32; coarse.len()];
             let mut plain = vec![1.0f32; coarse.len()];
-            lv.restrict_residual(&b, &vec![0.0; n], &coarse, &mut residual);
-            lv.restrict(&b, &coarse, &mut plain);
+            lv.restrict_residual(&b, &vec![0.0; n], &coarse, &mut residual, coarse.all_layers());
+            lv.restrict(&b, &coarse, &mut plain, coarse.all_layers());
             assert_eq!(residual, plain);
         }
     }

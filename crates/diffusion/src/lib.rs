@@ -38,6 +38,10 @@
 //! Vassilevski 2008) as the preconditioner of flexible CG reaches 1e-8 in 6–14 iterations on
 //! jumps of 10³ (balls, tilted layers, random blocks a few coarse cells wide; tested).
 //!
+//! On several ranks (processes under MPI, or threads), `Multigrid::solve_on_ranks` runs
+//! the same cycles over z-slabs with one-layer halos and gathers the coarse levels onto
+//! every rank ([`RankLayout`]); φ and the history are the same bits on any rank count.
+//!
 //! For solvers that stream their fields slab by slab (out of core), [`slab`] gives the
 //! same system row by row for a medium that fills the box: the assembled matrix's rows and
 //! right-hand side, bit for bit, from slabs of D, σ_a and the sources.
@@ -77,6 +81,7 @@ mod level;
 mod multigrid;
 mod params;
 mod problem;
+mod ranks;
 pub mod slab;
 mod solve;
 mod solver;
@@ -92,6 +97,7 @@ pub use params::{
     SorParams,
 };
 pub use problem::{AssembledSystem, Balance, Boundaries, Condition, DiffusionProblem, Sources};
+pub use ranks::RankLayout;
 pub use slab::SlabSystem;
 pub use solve::{DiffusionSolution, Method, solve};
 pub use solver::{DiffusionSolver, LinearSolve, conditions};

@@ -19,6 +19,7 @@
 //! Cells on the box and the rows next to it take the general path.
 
 use lucent_core::{StopReason, Stopping};
+use std::ops::Range;
 use std::sync::Mutex;
 
 use rayon::prelude::*;
@@ -132,7 +133,7 @@ impl Convergence {
 }
 
 /// One vector per level.
-type Work = Vec<Vec<f32>>;
+pub(crate) type Work = Vec<Vec<f32>>;
 
 /// Σ aᵢbᵢ in f64 of an f32 vector and a vector of either precision, in a fixed order.
 fn dot32<T: Copy + Into<f64> + Sync>(a: &[f32], b: &[T]) -> f64 {
@@ -158,7 +159,7 @@ pub struct LevelOperator<'a> {
 /// The level hierarchy with its work vectors.
 #[derive(Debug)]
 pub struct Multigrid {
-    levels: Vec<Level>,
+    pub(crate) levels: Vec<Level>,
     settings: MultigridSettings,
     /// The solves' work vectors, allocated and first touched when the hierarchy is built
     /// and kept between solves (a solve borrows them; a second solve running at the same
@@ -340,7 +341,7 @@ impl Multigrid {
         self.levels.iter().map(|l| l.len() as u64 * 4 * 8).sum()
     }
 
-    fn work(&self) -> (Work, Work, Work) {
+    pub(crate) fn work(&self) -> (Work, Work, Work) {
         let b = self.levels.iter().map(|l| vec![0.0f32; l.len()]).collect();
         let x = self.levels.iter().map(|l| vec![0.0f32; l.len()]).collect();
         let s = self
@@ -372,7 +373,7 @@ impl Multigrid {
     }
 
     /// Solves the coarsest level by Jacobi-preconditioned CG in f64.
-    fn coarsest(&self, b: &[f32], x: &mut [f32]) {
+    pub(crate) fn coarsest(&self, b: &[f32], x: &mut [f32]) {
         let level = &self.levels[self.levels.len() - 1];
         let b64: Vec<f64> = b.iter().map(|&v| f64::from(v)).collect();
         let mut x64: Vec<f64> = x.iter().map(|&v| f64::from(v)).collect();
@@ -393,7 +394,7 @@ impl Multigrid {
     }
 
     /// One cycle on level `l` for A x = b (x holds the initial guess).
-    fn cycle(
+    pub(crate) fn cycle(
         &self,
         l: usize,
         cycle: Cycle,
@@ -411,7 +412,14 @@ impl Multigrid {
         }
         {
             let (bf, bc) = b.split_at_mut(l + 1);
-            self.levels[l].restrict_residual(&bf[l], &x[l], &self.levels[l + 1], &mut bc[0]);
+            let coarse = &self.levels[l + 1];
+            self.levels[l].restrict_residual(
+                &bf[l],
+                &x[l],
+                coarse,
+                &mut bc[0],
+                coarse.all_layers(),
+            );
         }
         x[l + 1].fill(0.0);
         match cycle {
@@ -428,7 +436,7 @@ impl Multigrid {
         }
         {
             let (xf, xc) = x.split_at_mut(l + 1);
-            self.prolong(l, &xc[0], &mut xf[l]);
+            self.prolong(l, &xc[0], &mut xf[l], self.levels[l].all_layers());
         }
         let (bl, xl, sl) = (&b[l], &mut x[l], &mut s[l]);
         self.smooth(l, bl, xl, sl, true);
@@ -439,7 +447,7 @@ impl Multigrid {
     /// residual left is above a quarter of b's, a second K-cycle on it gives c₂, which is
     /// A-orthogonalised against c₁ and stepped along likewise (flexible CG, two steps).
     /// Dot products in f64; leaves e in x[m] (b[m] is overwritten).
-    fn krylov_correction(
+    pub(crate) fn krylov_correction(
         &self,
         m: usize,
         b: &mut [Vec<f32>],
@@ -512,11 +520,14 @@ impl Multigrid {
             .for_each(|(x, c)| *x = (w1 * f64::from(*c) + w2 * f64::from(*x)) as f32);
     }
 
-    fn prolong(&self, l: usize, coarse: &[f32], fine: &mut [f32]) {
+    /// Adds the prolonged correction to the slabs `layers` of level `l`.
+    pub(crate) fn prolong(&self, l: usize, coarse: &[f32], fine: &mut [f32], layers: Range<usize>) {
         match self.settings.prolongation {
-            Prolongation::Constant => self.levels[l].prolong_add(&self.levels[l + 1], coarse, fine),
+            Prolongation::Constant => {
+                self.levels[l].prolong_add(&self.levels[l + 1], coarse, fine, layers)
+            }
             Prolongation::Trilinear => {
-                self.levels[l].prolong_trilinear_add(&self.levels[l + 1], coarse, fine)
+                self.levels[l].prolong_trilinear_add(&self.levels[l + 1], coarse, fine, layers)
             }
         }
     }
@@ -553,7 +564,8 @@ impl Multigrid {
             .for_each(|(b, r)| *b = *r as f32);
         for l in 0..self.levels.len() - 1 {
             let (bf, bc) = b.split_at_mut(l + 1);
-            self.levels[l].restrict(&bf[l], &self.levels[l + 1], &mut bc[0]);
+            let coarse = &self.levels[l + 1];
+            self.levels[l].restrict(&bf[l], coarse, &mut bc[0], coarse.all_layers());
         }
         let last = self.levels.len() - 1;
         x[last].fill(0.0);
@@ -562,7 +574,7 @@ impl Multigrid {
             x[l].fill(0.0);
             {
                 let (xf, xc) = x.split_at_mut(l + 1);
-                self.prolong(l, &xc[0], &mut xf[l]);
+                self.prolong(l, &xc[0], &mut xf[l], self.levels[l].all_layers());
             }
             self.cycle(l, self.settings.cycle, b, x, s);
         }

@@ -5,6 +5,9 @@
 //! (FTCS diffusion and Jacobi on `lucent-diffusion`'s assembled system,
 //! `lucent_explicit::steady`) for now.
 //!
+//! The distributed multigrid is `lucent_diffusion::Multigrid::solve_on_ranks`, on the same
+//! communicators (the trait lives in `lucent_core::ranks`, re-exported here).
+//!
 //! **Ranks.** [`Communicator`] is the two operations a slab decomposition needs: halo
 //! exchange with the neighbours below and above, started before and received after the
 //! interior rows (non-blocking sends overlapped with work), and an all-gather of small
@@ -33,13 +36,12 @@
 //! one layer of unknowns each (≤ 8 n_x n_y bytes), overlapped with the interior rows, and
 //! one all-gather of 2 + (layers per rank) doubles, whose latency grows as log P.
 
-mod comm;
 mod error;
 #[cfg(feature = "mpi")]
 mod mpi_comm;
 pub mod steady;
 
-pub use comm::{Alone, Communicator, Threads};
 pub use error::DecompositionError;
+pub use lucent_core::ranks::{Alone, Communicator, Threads};
 #[cfg(feature = "mpi")]
 pub use mpi_comm::Mpi;

@@ -5,7 +5,7 @@ use mpi::datatype::PartitionMut;
 use mpi::topology::{Communicator as _, SimpleCommunicator};
 use mpi::traits::*;
 
-use crate::comm::Communicator;
+use lucent_core::ranks::Communicator;
 
 /// The ranks of an MPI communicator (normally `universe.world()`), in rank order along z.
 pub struct Mpi {

@@ -24,8 +24,8 @@ use lucent_explicit::steady::{Iteration, Layers, Steady, SteadySettings, row_sca
 use rayon::prelude::*;
 use sprs::CsMat;
 
-use crate::comm::Communicator;
 use crate::error::DecompositionError;
+use lucent_core::ranks::Communicator;
 
 /// Which layers (indices into [`Layers::ranges`]) each rank owns: contiguous runs in z,
 /// balanced by unknowns (each rank takes layers until it holds its share).

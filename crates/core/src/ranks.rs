@@ -1,5 +1,11 @@
 //! How ranks talk: the two operations a z-slab decomposition needs, halo exchange with
 //! the neighbours below and above, and an all-gather of small vectors (layer sums, flags).
+//!
+//! Solvers that run on ranks take `&impl Communicator`; [`Alone`] is one rank, [`Threads`]
+//! ranks as threads of one process (tests, and machines without MPI), and `lucent-mpi`'s
+//! `Mpi` (feature `mpi`) ranks under `mpirun`. Every rank calls the operations in the same
+//! sequence; a message that does not fit the caller's plan (a rank that stopped) comes
+//! back empty or short, never as a hang: the callers check lengths and return an error.
 
 use std::cell::RefCell;
 use std::sync::mpsc::{Receiver, Sender, channel};
