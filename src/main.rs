@@ -122,6 +122,7 @@ impl SolverArgs {
             memory_budget: self.budget(),
             progress: Some(progress),
             cancel: Some(cancel_flag()),
+            ranks: world().cloned(),
             ..SolveOptions::default()
         })
     }
@@ -201,16 +202,32 @@ enum Ended {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Under `mpirun` (built with the `mpi` feature) this process is one rank; MPI is
+    // finalised when `_mpi` drops, after everything else.
+    #[cfg(feature = "mpi")]
+    let _mpi = match lucent_mpi::World::initialise() {
+        Ok(world) => {
+            let ranks: lucent::core::Ranks = Arc::new(world.ranks());
+            let _ = WORLD.set(ranks);
+            world
+        }
+        Err(e) => {
+            let _ = writeln!(io::stderr(), "lucent: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    // Only rank 0 speaks and writes.
+    let quiet = cli.quiet || !writes();
     // Ctrl-C from here on stops a solve cleanly instead of killing the process.
     cancel_flag();
     let result = match cli.command {
-        None => render(&cli.render, cli.quiet),
-        Some(Command::Render(args)) => render(&args, cli.quiet),
+        None => render(&cli.render, quiet),
+        Some(Command::Render(args)) => render(&args, quiet),
         Some(Command::Solve {
             scene,
             solver,
             output,
-        }) => solve_to_file(&scene, &solver, &output, cli.quiet),
+        }) => solve_to_file(&scene, &solver, &output, quiet),
         Some(Command::Solvers) => list_solvers().map(|()| Ended::Done),
         Some(Command::Info { scene, solver }) => {
             info(scene.as_deref(), &solver).map(|()| Ended::Done)
@@ -264,6 +281,20 @@ fn main() -> ExitCode {
         );
     }
     status
+}
+
+/// The MPI ranks this process is one of (set once, under `mpirun`, by the `mpi` feature).
+static WORLD: std::sync::OnceLock<lucent::core::Ranks> = std::sync::OnceLock::new();
+
+/// The ranks this process is one of, if more than itself.
+fn world() -> Option<&'static lucent::core::Ranks> {
+    WORLD.get().filter(|w| w.size() > 1)
+}
+
+/// Whether this process writes outputs and speaks: alone, or rank 0 of a world (every
+/// rank holds the whole, identical solution).
+fn writes() -> bool {
+    world().is_none_or(|w| w.rank() == 0)
 }
 
 /// The flag a Ctrl-C sets: the solve stops at its next iteration, batch or march and its
@@ -389,6 +420,14 @@ fn choose_solver(scene: &Scene, args: &SolverArgs) -> Result<Chosen, Error> {
         params.0.insert(key, value);
     }
     let solver = (entry.build)(&params)?;
+    if let Some(world) = world().filter(|w| w.size() > 1)
+        && !solver.capabilities().ranks
+    {
+        return Err(Error::Usage(format!(
+            "`{name}` runs in one process, not on {} MPI ranks (diffusion-mg, ftcs-diffusion, jacobi-diffusion and ftcs-p1 split over ranks)",
+            world.size()
+        )));
+    }
     let resolved = (entry.resolved)(&params)?;
     Ok(Chosen {
         solver,
@@ -644,6 +683,9 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
         (0.0, image)
     } else {
         let solution = run_solver(&chosen, &built, &args.solver, quiet)?;
+        if !writes() {
+            return Ok(Ended::Done);
+        }
         let report = &solution.report;
         if let Some(ended) = verdict(
             chosen.solver.name(),
@@ -714,6 +756,8 @@ fn solve_report(
             "tolerance": chosen.tolerance,
             "max_iterations": args.max_iterations,
             "time_limit_s": args.time_limit,
+            // MPI processes the solve was split over (1: this one alone).
+            "mpi_ranks": world().map_or(1, |w| w.size()),
         },
         "capabilities": chosen.solver.capabilities(),
         "channels": channels,
@@ -842,6 +886,9 @@ fn solve_to_file(
     chosen.solver.admits(&built.problem)?;
     args.options(&chosen, meter_free())?.validate()?;
     let solution = run_solver(&chosen, &built, args, quiet)?;
+    if !writes() {
+        return Ok(Ended::Done);
+    }
     let stop = &solution.report.stop_reason;
     let ended = verdict(
         chosen.solver.name(),

@@ -140,6 +140,7 @@ proptest! {
             memory_budget: memory,
             progress: None,
             cancel: None,
+            ranks: None,
         };
         every_solver_survives(&problem, &options);
     }

@@ -195,9 +195,11 @@ impl<'a> Context<'a> {
     }
 
     /// The options with progress mapped into [lo, hi] of this context's, for a nested
-    /// solve (its own final report lands at `hi`).
+    /// solve (its own final report lands at `hi`). Without ranks: a nested solve (the
+    /// uncollided light) runs whole in every process.
     pub fn options_within(&self, lo: f64, hi: f64) -> SolveOptions {
         SolveOptions {
+            ranks: None,
             progress: self
                 .options
                 .progress
@@ -262,6 +264,17 @@ where
 {
     solver.admits(problem)?;
     options.validate()?;
+    if let Some(ranks) = options.ranks.as_ref().filter(|r| r.size() > 1)
+        && !solver.capabilities().ranks
+    {
+        return Err(SolveError::Unsupported {
+            solver: solver.name().into(),
+            feature: format!(
+                "{} ranks: it runs in one process (diffusion-mg, ftcs-diffusion, jacobi-diffusion and ftcs-p1 split over ranks)",
+                ranks.size()
+            ),
+        });
+    }
     if memory_bytes > options.memory_budget {
         return Err(SolveError::OverBudget {
             solver: solver.name().into(),

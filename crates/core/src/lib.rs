@@ -99,7 +99,7 @@ pub use singular::{
 pub use solution::{Angular, CurvedArrival, LightTransmittance, OrdinateRadiance, Solution};
 pub use solver::{
     Capabilities, FluenceKind, ImageEstimate, ImageRequest, ImageSolver, OutputKind, Progress,
-    ProgressFn, SolveOptions, SolveReport, Solver, StopReason,
+    ProgressFn, Ranks, SolveOptions, SolveReport, Solver, StopReason,
 };
 pub use spectrum::Spectrum;
 pub use uncollided::{Uncollided, UncollidedCells, uncollided_cells};

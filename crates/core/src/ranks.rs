@@ -1,13 +1,15 @@
 //! How ranks talk: the two operations a z-slab decomposition needs, halo exchange with
 //! the neighbours below and above, and an all-gather of small vectors (layer sums, flags).
 //!
-//! Solvers that run on ranks take `&impl Communicator`; [`Alone`] is one rank, [`Threads`]
+//! Solvers that run on ranks take `&(impl Communicator + ?Sized)` (so `&dyn Communicator`
+//! works too: the trait is object safe, and [`SolveOptions::ranks`](crate::SolveOptions)
+//! carries one); [`Alone`] is one rank, [`Threads`]
 //! ranks as threads of one process (tests, and machines without MPI), and `lucent-mpi`'s
 //! `Mpi` (feature `mpi`) ranks under `mpirun`. Every rank calls the operations in the same
 //! sequence; a message that does not fit the caller's plan (a rank that stopped) comes
 //! back empty or short, never as a hang: the callers check lengths and return an error.
 
-use std::cell::RefCell;
+use std::sync::Mutex;
 use std::sync::mpsc::{Receiver, Sender, channel};
 
 /// A group of ranks ordered 0..size along z (rank r's slab lies below rank r + 1's).
@@ -20,16 +22,40 @@ pub trait Communicator {
 
     /// Sends `to_below` to rank − 1 and `to_above` to rank + 1 (nothing past the ends),
     /// runs `interior` while they travel, then receives what those neighbours sent: (from
-    /// below, from above, `interior`'s result). Every rank calls it in the same sequence.
-    fn exchange<R>(
+    /// below, from above). Every rank calls it in the same sequence. [`exchange`] is the
+    /// same with a closure that returns a value.
+    fn exchange_around(
         &self,
         to_below: &[f64],
         to_above: &[f64],
-        interior: impl FnOnce() -> R,
-    ) -> (Vec<f64>, Vec<f64>, R);
+        interior: &mut dyn FnMut(),
+    ) -> (Vec<f64>, Vec<f64>);
 
     /// Every rank's `local`, concatenated in rank order, on every rank.
     fn all_gather(&self, local: &[f64]) -> Vec<f64>;
+}
+
+/// [`Communicator::exchange_around`] with an `interior` that returns a value: (from below,
+/// from above, `interior`'s result).
+pub fn exchange<R>(
+    comm: &(impl Communicator + ?Sized),
+    to_below: &[f64],
+    to_above: &[f64],
+    interior: impl FnOnce() -> R,
+) -> (Vec<f64>, Vec<f64>, R) {
+    let mut interior = Some(interior);
+    let mut result = None;
+    let (below, above) = comm.exchange_around(to_below, to_above, &mut || {
+        if let Some(f) = interior.take() {
+            result = Some(f());
+        }
+    });
+    // `interior` ran (and left its result) or did not (and is still here): run it now.
+    match (result, interior) {
+        (Some(r), _) => (below, above, r),
+        (None, Some(f)) => (below, above, f()),
+        (None, None) => unreachable!("the closure takes `interior` only to store its result"),
+    }
 }
 
 /// One rank alone: nothing to exchange.
@@ -45,13 +71,14 @@ impl Communicator for Alone {
         1
     }
 
-    fn exchange<R>(
+    fn exchange_around(
         &self,
         _: &[f64],
         _: &[f64],
-        interior: impl FnOnce() -> R,
-    ) -> (Vec<f64>, Vec<f64>, R) {
-        (Vec::new(), Vec::new(), interior())
+        interior: &mut dyn FnMut(),
+    ) -> (Vec<f64>, Vec<f64>) {
+        interior();
+        (Vec::new(), Vec::new())
     }
 
     fn all_gather(&self, local: &[f64]) -> Vec<f64> {
@@ -69,15 +96,16 @@ const HALO: u8 = 0;
 const GATHER: u8 = 1;
 
 /// Ranks as threads of one process, connected by channels: the same protocol as MPI, for
-/// tests and for running a decomposition without an MPI installation.
+/// tests and for running a decomposition without an MPI installation. `Send + Sync`, so a
+/// rank can ride in `SolveOptions::ranks` as an MPI rank does (one thread uses it at a
+/// time; the locks are uncontended).
 #[derive(Debug)]
 pub struct Threads {
     rank: usize,
     to: Vec<Sender<Message>>,
-    inbox: Receiver<Message>,
-    /// Messages that arrived before they were asked for.
-    early: RefCell<Vec<Message>>,
-    sequence: RefCell<[u64; 2]>,
+    /// The inbox and the messages that arrived before they were asked for.
+    inbox: Mutex<(Receiver<Message>, Vec<Message>)>,
+    sequence: Mutex<[u64; 2]>,
 }
 
 impl Threads {
@@ -90,15 +118,14 @@ impl Threads {
             .map(|(rank, inbox)| Threads {
                 rank,
                 to: senders.clone(),
-                inbox,
-                early: RefCell::new(Vec::new()),
-                sequence: RefCell::new([0; 2]),
+                inbox: Mutex::new((inbox, Vec::new())),
+                sequence: Mutex::new([0; 2]),
             })
             .collect()
     }
 
     fn next(&self, kind: u8) -> u64 {
-        let mut s = self.sequence.borrow_mut();
+        let mut s = self.sequence.lock().unwrap_or_else(|p| p.into_inner());
         s[kind as usize] += 1;
         s[kind as usize]
     }
@@ -110,14 +137,15 @@ impl Threads {
 
     fn receive(&self, from: usize, kind: u8, sequence: u64) -> Vec<f64> {
         let matches = |m: &Message| m.0 == kind && m.1 == sequence && m.2 == from;
-        let early = self.early.borrow().iter().position(matches);
-        if let Some(at) = early {
-            return self.early.borrow_mut().swap_remove(at).3;
+        let mut guard = self.inbox.lock().unwrap_or_else(|p| p.into_inner());
+        let (inbox, early) = &mut *guard;
+        if let Some(at) = early.iter().position(matches) {
+            return early.swap_remove(at).3;
         }
         loop {
-            match self.inbox.recv_timeout(PATIENCE) {
+            match inbox.recv_timeout(PATIENCE) {
                 Ok(m) if matches(&m) => return m.3,
-                Ok(m) => self.early.borrow_mut().push(m),
+                Ok(m) => early.push(m),
                 // A rank that failed or panicked sends nothing more: the caller sees a
                 // message that does not fit its plan (an error) instead of waiting forever.
                 Err(_) => return Vec::new(),
@@ -135,12 +163,12 @@ impl Communicator for Threads {
         self.to.len()
     }
 
-    fn exchange<R>(
+    fn exchange_around(
         &self,
         to_below: &[f64],
         to_above: &[f64],
-        interior: impl FnOnce() -> R,
-    ) -> (Vec<f64>, Vec<f64>, R) {
+        interior: &mut dyn FnMut(),
+    ) -> (Vec<f64>, Vec<f64>) {
         let sequence = self.next(HALO);
         let (below, above) = (
             self.rank.checked_sub(1),
@@ -152,10 +180,10 @@ impl Communicator for Threads {
         if let Some(a) = above {
             self.send(a, HALO, sequence, to_above);
         }
-        let result = interior();
+        interior();
         let from_below = below.map_or_else(Vec::new, |b| self.receive(b, HALO, sequence));
         let from_above = above.map_or_else(Vec::new, |a| self.receive(a, HALO, sequence));
-        (from_below, from_above, result)
+        (from_below, from_above)
     }
 
     fn all_gather(&self, local: &[f64]) -> Vec<f64> {

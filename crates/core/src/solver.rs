@@ -53,6 +53,9 @@ pub struct Capabilities {
     pub output: OutputKind,
     /// Which light its fluence counts.
     pub fluence: FluenceKind,
+    /// Splits its solve over [`SolveOptions::ranks`] (z-slabs over processes); solvers
+    /// without it refuse more than one rank.
+    pub ranks: bool,
 }
 
 /// Which part of the light a solver's fluence counts: what it must be compared with.
@@ -345,7 +348,15 @@ pub struct SolveOptions {
     /// Set by the caller (a Ctrl-C handler) to stop the solve at its next iteration, batch
     /// or march with what it has computed ([`StopReason::Interrupted`]).
     pub cancel: Option<Arc<std::sync::atomic::AtomicBool>>,
+    /// The ranks this process is one of (`lucent-mpi`'s `Mpi` under `mpirun`): solvers
+    /// whose [`Capabilities::ranks`] is set split their solve over them, every rank calling
+    /// with the same problem and getting the same solution; others refuse more than one
+    /// rank. `None`: this process alone.
+    pub ranks: Option<Ranks>,
 }
+
+/// The ranks a solve runs on ([`SolveOptions::ranks`]).
+pub type Ranks = Arc<dyn crate::ranks::Communicator + Send + Sync>;
 
 impl Default for SolveOptions {
     fn default() -> Self {
@@ -358,6 +369,7 @@ impl Default for SolveOptions {
             memory_budget: 8 << 30,
             progress: None,
             cancel: None,
+            ranks: None,
         }
     }
 }
@@ -373,6 +385,13 @@ impl fmt::Debug for SolveOptions {
             .field("memory_budget", &self.memory_budget)
             .field("progress", &self.progress.as_ref().map(|_| "callback"))
             .field("cancel", &self.cancel)
+            .field(
+                "ranks",
+                &self
+                    .ranks
+                    .as_ref()
+                    .map(|r| format!("rank {} of {}", r.rank(), r.size())),
+            )
             .finish()
     }
 }

@@ -1334,7 +1334,13 @@ mod tests {
             // same order.
             let mut residual = vec![0.0f32; coarse.len()];
             let mut plain = vec![1.0f32; coarse.len()];
-            lv.restrict_residual(&b, &vec![0.0; n], &coarse, &mut residual, coarse.all_layers());
+            lv.restrict_residual(
+                &b,
+                &vec![0.0; n],
+                &coarse,
+                &mut residual,
+                coarse.all_layers(),
+            );
             lv.restrict(&b, &coarse, &mut plain, coarse.all_layers());
             assert_eq!(residual, plain);
         }

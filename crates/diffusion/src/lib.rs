@@ -93,11 +93,11 @@ pub use multigrid::{
     Convergence, Cycle, LevelOperator, Multigrid, MultigridSettings, Prolongation, Smoother,
 };
 pub use params::{
-    CgParams, CycleParam, DiscretisationParam, JacobiParams, MultigridParams, SmootherParam,
-    SorParams,
+    CgParams, CycleParam, DiscretisationParam, JacobiParams, MAX_RANKS, MultigridParams, RANKS,
+    SmootherParam, SorParams, check_ranks,
 };
 pub use problem::{AssembledSystem, Balance, Boundaries, Condition, DiffusionProblem, Sources};
 pub use ranks::RankLayout;
 pub use slab::SlabSystem;
-pub use solve::{DiffusionSolution, Method, solve};
+pub use solve::{DiffusionSolution, Method, RanksOf, solve, solve_on_ranks};
 pub use solver::{DiffusionSolver, LinearSolve, conditions};

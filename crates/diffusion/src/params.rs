@@ -78,6 +78,9 @@ pub struct MultigridParams {
     pub full_multigrid: bool,
     /// Cut cells.
     pub discretisation: DiscretisationParam,
+    /// In-process ranks to split the solve over (z-slabs; `diffusion-mg` only). Under
+    /// `mpirun` the processes are the ranks and this stays 1.
+    pub ranks: usize,
 }
 
 impl Default for MultigridParams {
@@ -89,8 +92,26 @@ impl Default for MultigridParams {
             smoother: SmootherParam::GaussSeidel,
             full_multigrid: true,
             discretisation: DiscretisationParam::Embedded,
+            ranks: 1,
         }
     }
+}
+
+/// The meaning of every `ranks` parameter.
+pub const RANKS: (&str, &str) = (
+    "ranks",
+    "split the solve over this many in-process ranks (z-slabs with one-layer halos, the bits of one rank; under mpirun the processes are the ranks: leave 1)",
+);
+
+/// The most in-process ranks a solve may ask for.
+pub const MAX_RANKS: usize = 256;
+
+/// Checks a `ranks` parameter: 1 to [`MAX_RANKS`].
+pub fn check_ranks(ranks: usize) -> Result<(), SolveError> {
+    if ranks == 0 || ranks > MAX_RANKS {
+        return Err(invalid("ranks", format!("1 to {MAX_RANKS}")));
+    }
+    Ok(())
 }
 
 const DISCRETISATION: (&str, &str) = (
@@ -121,13 +142,14 @@ impl SolverParams for MultigridParams {
             "start by full multigrid (nested iteration) instead of from zero (diffusion-mg only)",
         ),
         DISCRETISATION,
+        RANKS,
     ];
 
     fn validate(&self) -> Result<(), SolveError> {
         if self.pre_sweeps + self.post_sweeps == 0 || self.pre_sweeps.max(self.post_sweeps) > 64 {
             return Err(invalid("pre_sweeps", "1 to 64 sweeps in all"));
         }
-        Ok(())
+        check_ranks(self.ranks)
     }
 }
 

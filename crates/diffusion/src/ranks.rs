@@ -33,7 +33,7 @@
 
 use std::ops::Range;
 
-use lucent_core::ranks::Communicator;
+use lucent_core::ranks::{Communicator, exchange};
 use lucent_core::{StopReason, Stopping};
 
 use crate::error::DiffusionError;
@@ -95,7 +95,7 @@ impl RankLayout {
 }
 
 /// One rank's view of the distributed solve: the communicator, the layout, the hierarchy.
-struct OnRanks<'a, C> {
+struct OnRanks<'a, C: ?Sized> {
     mg: &'a Multigrid,
     comm: &'a C,
     layout: RankLayout,
@@ -109,7 +109,7 @@ fn protocol(rank: usize, what: &str) -> DiffusionError {
     ))
 }
 
-impl<C: Communicator> OnRanks<'_, C> {
+impl<C: Communicator + ?Sized> OnRanks<'_, C> {
     fn level(&self, l: usize) -> &Level {
         &self.mg.levels[l]
     }
@@ -160,9 +160,8 @@ impl<C: Communicator> OnRanks<'_, C> {
         } else {
             Vec::new()
         };
-        let (from_below, from_above, out) = self
-            .comm
-            .exchange(&to_below, &to_above, || interior(&mut *x));
+        let (from_below, from_above, out) =
+            exchange(self.comm, &to_below, &to_above, || interior(&mut *x));
         let expected = |present: bool| if present { slab } else { 0 };
         if from_below.len() != expected(has_below) || from_above.len() != expected(has_above) {
             return Err(protocol(self.rank, "a halo"));
@@ -188,6 +187,15 @@ impl<C: Communicator> OnRanks<'_, C> {
 
     fn halo32(&self, l: usize, x: &mut [f32]) -> Result<(), DiffusionError> {
         self.halo(l, x, f64::from, |v| v as f32, |_| ())
+    }
+
+    /// Zeroes level `l`'s vector where this rank reads it: its slab and halos on a
+    /// distributed level (the rest is never read), all of it on a gathered one.
+    fn zero(&self, l: usize, x: &mut [f32]) {
+        let o = self.owned(l);
+        let slab = self.level(l).slab();
+        let nz = self.level(l).dims[2];
+        x[o.start.saturating_sub(1) * slab..(o.end + 1).min(nz) * slab].fill(0.0);
     }
 
     /// The owned layers but the first and last, and those two (one when the slab is one
@@ -314,7 +322,7 @@ impl<C: Communicator> OnRanks<'_, C> {
         if !self.distributed(l + 1) {
             self.gather_level(l + 1, &mut b[l + 1])?;
         }
-        x[l + 1].fill(0.0);
+        self.zero(l + 1, &mut x[l + 1]);
         match cycle {
             Cycle::V => self.cycle(l + 1, Cycle::V, b, x, s)?,
             Cycle::W => {
@@ -379,7 +387,7 @@ impl<C: Communicator> OnRanks<'_, C> {
         x[last].fill(0.0);
         self.mg.coarsest(&b[last], &mut x[last]);
         for l in (0..last).rev() {
-            x[l].fill(0.0);
+            self.zero(l, &mut x[l]);
             self.prolong(l, x)?;
             self.cycle(l, self.mg.settings().cycle, b, x, s)?;
         }
@@ -422,7 +430,7 @@ impl Multigrid {
         rhs: &[f64],
         phi: &mut [f64],
         stopping: &Stopping,
-        comm: &impl Communicator,
+        comm: &(impl Communicator + ?Sized),
     ) -> Result<Convergence, DiffusionError> {
         let n = self.fine_cells();
         if rhs.len() != n || phi.len() != n {
@@ -550,7 +558,7 @@ impl Multigrid {
             if gathered.cancelled {
                 break StopReason::Interrupted { residual: relative };
             }
-            x[0].fill(0.0);
+            on.zero(0, &mut x[0]);
             on.cycle(0, self.settings().cycle, &mut b, &mut x, &mut s)?;
             on.halo32(0, &mut x[0])?;
             let spans = fine.correct_layers(&x[0], phi, &mut r, &mut b[0], o.clone());

@@ -5,6 +5,7 @@ use std::time::Instant;
 use crate::error::DiffusionError;
 use crate::krylov;
 use lucent_core::Stopping;
+use lucent_core::ranks::{Alone, Communicator, Threads};
 
 use crate::multigrid::{Convergence, Multigrid, MultigridSettings};
 use crate::problem::{Balance, DiffusionProblem, Sources};
@@ -138,6 +139,89 @@ pub fn solve(
         solve_seconds,
         levels,
         memory_bytes: memory,
+    })
+}
+
+/// Where a multigrid solve runs: here, on the ranks of a communicator, or on in-process
+/// ranks (threads joined by channels, sharing one hierarchy).
+#[derive(Clone, Copy)]
+pub enum RanksOf<'a> {
+    /// This process alone, on the decomposition's arithmetic (one slab): the history the
+    /// other variants give (the serial [`solve`] may differ in its last bits).
+    Alone,
+    /// The ranks of a communicator, this process one of them.
+    Communicator(&'a (dyn Communicator + Send + Sync)),
+    /// This many in-process ranks.
+    Threads(usize),
+}
+
+/// [`solve`] by `Method::Multigrid(settings)` split over `ranks`
+/// ([`Multigrid::solve_on_ranks`]): every rank gets the whole solution, the same bits on any
+/// number of ranks. `memory_bytes` counts one rank's hierarchy and its work vectors (per
+/// in-process rank, the work vectors again).
+pub fn solve_on_ranks(
+    problem: &DiffusionProblem,
+    sources: &Sources,
+    settings: MultigridSettings,
+    stopping: &Stopping,
+    ranks: RanksOf<'_>,
+) -> Result<DiffusionSolution, DiffusionError> {
+    let started = Instant::now();
+    let rhs = problem.rhs(sources)?;
+    check_sweeps(&settings)?;
+    let mg = Multigrid::new(problem.fine_level(), problem.boundaries(), settings);
+    let setup = started.elapsed().as_secs_f64();
+    let n = rhs.len();
+    // Per rank: b, x (and Jacobi's scratch) f32 on every level (8/7 of the fine one), and
+    // φ and r in f64.
+    let per_rank = n as u64 * (12 * 8 / 7 + 16);
+    let (phi, convergence, count) = match ranks {
+        RanksOf::Alone | RanksOf::Communicator(_) => {
+            let mut phi = vec![0.0f64; n];
+            let c = match ranks {
+                RanksOf::Communicator(comm) => mg.solve_on_ranks(&rhs, &mut phi, stopping, comm),
+                _ => mg.solve_on_ranks(&rhs, &mut phi, stopping, &Alone),
+            }?;
+            (phi, c, 1)
+        }
+        RanksOf::Threads(count) => {
+            let worlds = Threads::world(count);
+            let (mg, rhs) = (&mg, &rhs);
+            let mut results = std::thread::scope(|scope| {
+                let ranks: Vec<_> = worlds
+                    .into_iter()
+                    .map(|comm| {
+                        scope.spawn(move || {
+                            let mut phi = vec![0.0f64; rhs.len()];
+                            mg.solve_on_ranks(rhs, &mut phi, stopping, &comm)
+                                .map(|c| (phi, c))
+                        })
+                    })
+                    .collect();
+                ranks
+                    .into_iter()
+                    .map(|rank| {
+                        rank.join().unwrap_or_else(|_| {
+                            Err(DiffusionError::Ranks("a rank's thread panicked".into()))
+                        })
+                    })
+                    .collect::<Result<Vec<_>, _>>()
+            })?;
+            // Every rank holds the whole, identical result: keep rank 0's.
+            let (phi, c) = results.swap_remove(0);
+            (phi, c, count as u64)
+        }
+    };
+    let solve_seconds = started.elapsed().as_secs_f64() - setup;
+    let balance = problem.balance(sources, &phi);
+    Ok(DiffusionSolution {
+        fluence: phi,
+        convergence,
+        balance,
+        setup_seconds: setup,
+        solve_seconds,
+        levels: mg.depth(),
+        memory_bytes: mg.memory_bytes() + count * per_rank,
     })
 }
 

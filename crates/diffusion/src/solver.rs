@@ -38,7 +38,7 @@ use lucent_grid::Grid;
 use crate::geometry::{CellGeometry, Discretisation};
 use crate::multigrid::{Cycle, MultigridSettings, Smoother};
 use crate::problem::{Boundaries, Condition, DiffusionProblem, Sources};
-use crate::solve::{Method, solve};
+use crate::solve::{Method, RanksOf, solve, solve_on_ranks};
 use lucent_core::Stopping;
 
 /// A diffusion solver as the registry builds it.
@@ -47,6 +47,11 @@ pub struct DiffusionSolver {
     name: &'static str,
     method: Method,
     discretisation: Discretisation,
+    /// In-process ranks (`diffusion-mg`'s `ranks`).
+    ranks: usize,
+    /// Whether it splits over ranks (`diffusion-mg` only: its linear solve is
+    /// `Multigrid::solve_on_ranks`; [`DiffusionSolver::custom`]'s are the caller's).
+    splits: bool,
 }
 
 fn invalid(name: &str, reason: impl Into<String>) -> SolveError {
@@ -67,6 +72,8 @@ impl DiffusionSolver {
                 name: "diffusion-mg",
                 method: Method::Multigrid(p.settings()),
                 discretisation: p.discretisation.into(),
+                ranks: p.ranks,
+                splits: true,
             }))
         },
         params: param_docs::<MultigridParams>,
@@ -79,12 +86,20 @@ impl DiffusionSolver {
         summary: "steady diffusion, multigrid-preconditioned conjugate gradients",
         build: |p| {
             let p: MultigridParams = p.parse("diffusion-mgcg")?;
+            if p.ranks != 1 {
+                return Err(invalid(
+                    "ranks",
+                    "diffusion-mgcg runs in one process (diffusion-mg splits over ranks)",
+                ));
+            }
             let mut settings = p.settings();
             settings.full_multigrid = false;
             Ok(Box::new(DiffusionSolver {
                 name: "diffusion-mgcg",
                 method: Method::MultigridCg(settings),
                 discretisation: p.discretisation.into(),
+                ranks: 1,
+                splits: false,
             }))
         },
         params: param_docs::<MultigridParams>,
@@ -101,6 +116,8 @@ impl DiffusionSolver {
                 name: "diffusion-cg",
                 method: Method::ConjugateGradient,
                 discretisation: p.discretisation.into(),
+                ranks: 1,
+                splits: false,
             }))
         },
         params: param_docs::<CgParams>,
@@ -117,6 +134,8 @@ impl DiffusionSolver {
                 name: "diffusion-sor",
                 method: Method::Sor { omega: p.omega },
                 discretisation: p.discretisation.into(),
+                ranks: 1,
+                splits: false,
             }))
         },
         params: param_docs::<SorParams>,
@@ -133,6 +152,8 @@ impl DiffusionSolver {
                 name: "diffusion-jacobi",
                 method: Method::Jacobi { omega: p.omega },
                 discretisation: p.discretisation.into(),
+                ranks: 1,
+                splits: false,
             }))
         },
         params: param_docs::<JacobiParams>,
@@ -190,22 +211,47 @@ impl Solver for DiffusionSolver {
             // Lights outside enter as first-collision sources along curved rays
             // (`Uncollided::curved`); the scattered light diffuses as in a uniform index.
             graded_index: true,
+            // The multigrid splits over z-slabs (`Multigrid::solve_on_ranks`).
+            ranks: self.splits,
             ..Capabilities::default()
         }
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {
         let method = self.method;
+        let world = options.ranks.as_ref().filter(|r| r.size() > 1);
+        if world.is_some() && self.ranks > 1 {
+            return Err(invalid(
+                "ranks",
+                "under mpirun the processes are the ranks: leave ranks at 1",
+            ));
+        }
         // Per cell and channel: the hierarchy's f32 fields (14, with the coarse levels'
         // 1/7) and f64 vectors (4), and the cut-cell geometry (volume and aperture
         // fractions, 24 bytes). Measured (`tests/memory_estimates.rs`): 162 bytes per cell
         // in all with the driver's share.
-        let memory = problem.geometry().voxel_count() as u64
-            * (4 * 14 + 8 * 4 + 24)
+        let cells = problem.geometry().voxel_count() as u64;
+        // In-process ranks share the hierarchy; each has its own work vectors
+        // (`solve_on_ranks`: 29 bytes per cell).
+        let memory = (cells * (4 * 14 + 8 * 4 + 24) + (self.ranks as u64 - 1) * cells * 29)
             * problem.channels() as u64;
-        self.solve_with(problem, options, memory, &|diffusion, sources, stopping| {
-            solve(diffusion, sources, method, stopping)
-        })
+        let ranks = match (world, self.ranks) {
+            (Some(world), _) => RanksOf::Communicator(world.as_ref()),
+            (None, 1) => RanksOf::Alone,
+            (None, count) => RanksOf::Threads(count),
+        };
+        self.solve_with(
+            problem,
+            options,
+            memory,
+            &|diffusion, sources, stopping| match (method, ranks) {
+                (_, RanksOf::Alone) => solve(diffusion, sources, method, stopping),
+                (Method::Multigrid(settings), ranks) => {
+                    solve_on_ranks(diffusion, sources, settings, stopping, ranks)
+                }
+                _ => solve(diffusion, sources, method, stopping),
+            },
+        )
     }
 }
 
@@ -235,6 +281,17 @@ impl DiffusionSolver {
                 prolongation: crate::multigrid::Prolongation::Constant,
             }),
             discretisation: Discretisation::EmbeddedBoundary,
+            ranks: 1,
+            splits: false,
+        }
+    }
+
+    /// This solver with its linear solve declared to split over `SolveOptions::ranks`
+    /// itself (the caller's `linear` reads them): [`Capabilities::ranks`] is set.
+    pub const fn splitting(self) -> Self {
+        Self {
+            splits: true,
+            ..self
         }
     }
 

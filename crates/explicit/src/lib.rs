@@ -23,6 +23,11 @@
 //! `ftcs-p1` and `ftcs-ordinates` (the state twice in f64 slab pages, each step from a ring
 //! of three old slabs).
 //!
+//! On several ranks, [`ranks::iterate`] runs `steady`'s FTCS and Jacobi, and
+//! [`ranks::march_p1`] the P1 march (zero edges), over z-slabs (any
+//! `lucent_core::ranks::Communicator`: threads here, MPI through `lucent-mpi`) with the
+//! serial bits on any number of ranks.
+//!
 //! Every march checks its step against [`stability`] before running and refuses a step
 //! beyond the correct bound with [`ExplicitError::Unstable`] unless the study option
 //! `allow_unstable` is set; a growth monitor stops a diverging run with
@@ -55,6 +60,7 @@ mod paged;
 mod paged_march;
 mod paged_steady;
 mod params;
+pub mod ranks;
 pub mod scatter;
 mod solver;
 pub mod stability;

@@ -219,43 +219,23 @@ pub fn march(
         largest(source),
         settings,
     );
-    let s = lattice.strides();
-    let neighbour = |g: usize, axis: usize, step: isize| -> Option<usize> {
-        let at = lattice.coords(g);
-        let n = lattice.dims[axis] as isize;
-        let to = at[axis] as isize + step;
-        let moved = match settings.edges {
-            P1Edges::Periodic => to.rem_euclid(n),
-            P1Edges::Zero if (0..n).contains(&to) => to,
-            P1Edges::Zero => return None,
-        } as usize;
-        Some(g - at[axis] * s[axis] + moved * s[axis])
-    };
-    let at = |f: &[f64], g: Option<usize>| g.map_or(0.0, |g| f[g]);
     let mut history = History::start();
     let mut step = 0;
+    let slab = lattice.dims[0] * lattice.dims[1];
+    let all = 0..lattice.dims[2];
     loop {
         step += 1;
         let mut next_phi = vec![0.0; n];
         let mut next_flux = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-        for g in 0..n {
-            let [p, fx, fy, fz] = step_of.cell(source[g], |component, axis, offset| {
-                let field = if component == 0 {
-                    &phi
-                } else {
-                    &flux[component - 1]
-                };
-                if offset == 0 {
-                    field[g]
-                } else {
-                    at(field, neighbour(g, axis, offset))
-                }
-            });
-            next_phi[g] = p;
-            next_flux[0][g] = fx;
-            next_flux[1][g] = fy;
-            next_flux[2][g] = fz;
-        }
+        step_layers(
+            lattice,
+            &step_of,
+            settings.edges,
+            source,
+            (&phi, &flux),
+            (&mut next_phi, &mut next_flux),
+            all.clone(),
+        );
         let stop = monitor
             .check(&next_phi, step)
             .or_else(|| next_flux.iter().find_map(|f| monitor.check(f, step)));
@@ -267,12 +247,12 @@ pub fn march(
                 stop_reason,
             });
         }
-        let change: f64 = next_phi
-            .iter()
-            .zip(&phi)
-            .map(|(a, b)| (a - b).powi(2))
-            .sum();
-        let size: f64 = next_phi.iter().map(|a| a * a).sum();
+        // Per z-layer, then the layers in z order: the sums on ranks are the same bits.
+        let (mut change, mut size) = (0.0, 0.0);
+        for (c, z) in layer_norms(&next_phi, &phi, slab, all.clone()) {
+            change += c;
+            size += z;
+        }
         let last_change = if size > 0.0 {
             (change / size).sqrt()
         } else {
@@ -291,4 +271,68 @@ pub fn march(
             });
         }
     }
+}
+
+/// One FTCS step of the cells of the z-layers `layers`: `next` from `now` (φ, E), reading
+/// the layers next to them; cells beyond the grid per `edges`.
+pub(crate) fn step_layers(
+    lattice: &Lattice,
+    step_of: &StepCoefficients,
+    edges: P1Edges,
+    source: &[f64],
+    (phi, flux): (&[f64], &[Vec<f64>; 3]),
+    (next_phi, next_flux): (&mut [f64], &mut [Vec<f64>; 3]),
+    layers: std::ops::Range<usize>,
+) {
+    let s = lattice.strides();
+    let neighbour = |g: usize, axis: usize, step: isize| -> Option<usize> {
+        let at = lattice.coords(g);
+        let n = lattice.dims[axis] as isize;
+        let to = at[axis] as isize + step;
+        let moved = match edges {
+            P1Edges::Periodic => to.rem_euclid(n),
+            P1Edges::Zero if (0..n).contains(&to) => to,
+            P1Edges::Zero => return None,
+        } as usize;
+        Some(g - at[axis] * s[axis] + moved * s[axis])
+    };
+    let at = |f: &[f64], g: Option<usize>| g.map_or(0.0, |g| f[g]);
+    for g in layers.start * s[2]..layers.end * s[2] {
+        let [p, fx, fy, fz] = step_of.cell(source[g], |component, axis, offset| {
+            let field = if component == 0 {
+                phi
+            } else {
+                &flux[component - 1]
+            };
+            if offset == 0 {
+                field[g]
+            } else {
+                at(field, neighbour(g, axis, offset))
+            }
+        });
+        next_phi[g] = p;
+        next_flux[0][g] = fx;
+        next_flux[1][g] = fy;
+        next_flux[2][g] = fz;
+    }
+}
+
+/// Per z-layer of `layers`: (Σ (φ′ − φ)², Σ φ′²), each summed in cell order.
+pub(crate) fn layer_norms(
+    next: &[f64],
+    now: &[f64],
+    slab: usize,
+    layers: std::ops::Range<usize>,
+) -> Vec<(f64, f64)> {
+    layers
+        .map(|k| {
+            let range = k * slab..(k + 1) * slab;
+            next[range.clone()]
+                .iter()
+                .zip(&now[range])
+                .fold((0.0, 0.0), |(c, s), (a, b)| {
+                    (c + (a - b).powi(2), s + a * a)
+                })
+        })
+        .collect()
 }

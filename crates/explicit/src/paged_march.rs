@@ -7,7 +7,8 @@
 //! a step reads the old state through a ring of three slabs and writes the new one slab by
 //! slab, with the cell update of the in-memory march (`p1::StepCoefficients::cell`,
 //! `ordinates::cell_step`) and the step's reductions — the growth monitor's largest value,
-//! the change and size norms — added in cell order, as in memory. Then the two swap. So
+//! the change and size norms — added as in memory (P1: in cell order per slab, then slab by
+//! slab; ordinates: in cell order). Then the two swap. So
 //! the stopping decisions and the fluence have the in-memory bits
 //! (`crates/explicit/tests/paged_march.rs`).
 //!
@@ -433,13 +434,18 @@ impl Channel<'_> {
             step += 1;
             let mut sums = Sums::new(4);
             self.pass(now, next, &mut ring, &mut compute, &mut |old, new| {
+                // One z-slab: its sums in cell order, then added to the slabs before it
+                // (as `p1::march` adds its layer sums).
+                let (mut change, mut size) = (0.0, 0.0);
                 for (o, n) in old.chunks(4).zip(new.chunks(4)) {
                     for (field, v) in n.iter().enumerate() {
                         sums.see(field, *v);
                     }
-                    sums.change += (n[0] - o[0]).powi(2);
-                    sums.size += n[0] * n[0];
+                    change += (n[0] - o[0]).powi(2);
+                    size += n[0] * n[0];
                 }
+                sums.change += change;
+                sums.size += size;
             })
             .map_err(err)?;
             if let Some(stop_reason) = sums.verdict(&monitor, step) {

@@ -40,6 +40,8 @@ pub struct FtcsDiffusionParams {
     pub step_fraction: f64,
     /// Run beyond the bound anyway.
     pub allow_unstable: bool,
+    /// In-process ranks to split the iteration over (z-slabs).
+    pub ranks: usize,
 }
 
 impl Default for FtcsDiffusionParams {
@@ -47,15 +49,18 @@ impl Default for FtcsDiffusionParams {
         Self {
             step_fraction: 0.9,
             allow_unstable: false,
+            ranks: 1,
         }
     }
 }
 
 impl SolverParams for FtcsDiffusionParams {
-    const MEANINGS: &'static [(&'static str, &'static str)] = &[STEP_FRACTION, ALLOW_UNSTABLE];
+    const MEANINGS: &'static [(&'static str, &'static str)] =
+        &[STEP_FRACTION, ALLOW_UNSTABLE, lucent_diffusion::RANKS];
 
     fn validate(&self) -> Result<(), SolveError> {
-        check_fraction(self.step_fraction)
+        check_fraction(self.step_fraction)?;
+        lucent_diffusion::check_ranks(self.ranks)
     }
 }
 
@@ -65,24 +70,30 @@ impl SolverParams for FtcsDiffusionParams {
 pub struct JacobiDiffusionParams {
     /// Damping ω, in (0, 1].
     pub omega: f64,
+    /// In-process ranks to split the iteration over (z-slabs).
+    pub ranks: usize,
 }
 
 impl Default for JacobiDiffusionParams {
     fn default() -> Self {
-        Self { omega: 1.0 }
+        Self {
+            omega: 1.0,
+            ranks: 1,
+        }
     }
 }
 
 impl SolverParams for JacobiDiffusionParams {
-    const MEANINGS: &'static [(&'static str, &'static str)] =
-        &[("omega", "Jacobi damping ω in (0, 1]")];
+    const MEANINGS: &'static [(&'static str, &'static str)] = &[
+        ("omega", "Jacobi damping ω in (0, 1]"),
+        lucent_diffusion::RANKS,
+    ];
 
     fn validate(&self) -> Result<(), SolveError> {
-        if self.omega > 0.0 && self.omega <= 1.0 {
-            Ok(())
-        } else {
-            Err(invalid("omega", "in (0, 1]"))
+        if !(self.omega > 0.0 && self.omega <= 1.0) {
+            return Err(invalid("omega", "in (0, 1]"));
         }
+        lucent_diffusion::check_ranks(self.ranks)
     }
 }
 
@@ -183,6 +194,8 @@ pub struct P1Params {
     pub step_fraction: f64,
     /// Run beyond the bound anyway.
     pub allow_unstable: bool,
+    /// In-process ranks to split the march over (z-slabs).
+    pub ranks: usize,
 }
 
 impl Default for P1Params {
@@ -191,6 +204,7 @@ impl Default for P1Params {
             layout: Layout::Staggered,
             step_fraction: 0.9,
             allow_unstable: false,
+            ranks: 1,
         }
     }
 }
@@ -203,10 +217,12 @@ impl SolverParams for P1Params {
         ),
         STEP_FRACTION,
         ALLOW_UNSTABLE,
+        lucent_diffusion::RANKS,
     ];
 
     fn validate(&self) -> Result<(), SolveError> {
-        check_fraction(self.step_fraction)
+        check_fraction(self.step_fraction)?;
+        lucent_diffusion::check_ranks(self.ranks)
     }
 }
 

@@ -36,7 +36,7 @@ use lucent_core::{
     PagedSolution, Problem, Solution, SolveError, SolveOptions, Solver, SolverEntry, param_docs,
     resolved_params,
 };
-use lucent_diffusion::{Convergence, DiffusionSolution, DiffusionSolver};
+use lucent_diffusion::{Convergence, DiffusionSolution, DiffusionSolver, RanksOf};
 use lucent_grid::Grid;
 use lucent_optics::PhaseFunction;
 
@@ -86,6 +86,8 @@ enum Scheme {
     Steady {
         iteration: SteadyKind,
         allow_unstable: bool,
+        /// In-process ranks.
+        ranks: usize,
     },
     Convection {
         settings: UpwindSettings,
@@ -95,6 +97,8 @@ enum Scheme {
         layout: crate::p1::Layout,
         fraction: f64,
         allow_unstable: bool,
+        /// In-process ranks.
+        ranks: usize,
     },
     Ordinates {
         order: usize,
@@ -123,6 +127,7 @@ impl ExplicitSolver {
                         fraction: p.step_fraction,
                     },
                     allow_unstable: p.allow_unstable,
+                    ranks: p.ranks,
                 },
             }))
         },
@@ -141,6 +146,7 @@ impl ExplicitSolver {
                 scheme: Scheme::Steady {
                     iteration: SteadyKind::Jacobi { omega: p.omega },
                     allow_unstable: false,
+                    ranks: p.ranks,
                 },
             }))
         },
@@ -184,6 +190,7 @@ impl ExplicitSolver {
                     layout: p.layout,
                     fraction: p.step_fraction,
                     allow_unstable: p.allow_unstable,
+                    ranks: p.ranks,
                 },
             }))
         },
@@ -272,9 +279,16 @@ impl Solver for ExplicitSolver {
         if let Scheme::Steady {
             iteration,
             allow_unstable,
+            ranks,
         } = &self.scheme
         {
             options.validate()?;
+            if *ranks > 1 || options.ranks.as_ref().is_some_and(|r| r.size() > 1) {
+                return Err(SolveError::Unsupported {
+                    solver: self.name.into(),
+                    feature: "ranks out of core: a paged solve runs in one process".into(),
+                });
+            }
             let kind = match *iteration {
                 SteadyKind::Ftcs { fraction } => {
                     self.check_fraction(fraction, *allow_unstable)?;
@@ -287,10 +301,19 @@ impl Solver for ExplicitSolver {
                 .install(|| crate::paged_steady::solve(self.name, kind, problem, options))?;
         }
         let march = match self.scheme {
+            Scheme::P1 { ranks, .. }
+                if ranks > 1 || options.ranks.as_ref().is_some_and(|r| r.size() > 1) =>
+            {
+                return Err(SolveError::Unsupported {
+                    solver: self.name.into(),
+                    feature: "ranks out of core: a paged solve runs in one process".into(),
+                });
+            }
             Scheme::P1 {
                 layout,
                 fraction,
                 allow_unstable,
+                ..
             } => Some(crate::paged_march::March::P1 {
                 layout,
                 fraction,
@@ -321,7 +344,11 @@ impl Solver for ExplicitSolver {
     fn capabilities(&self) -> Capabilities {
         let diffusion = DiffusionSolver::custom(self.name).capabilities();
         match &self.scheme {
-            Scheme::Steady { .. } => diffusion,
+            // `ranks::iterate` splits the iteration over z-slabs.
+            Scheme::Steady { .. } => Capabilities {
+                ranks: true,
+                ..diffusion
+            },
             Scheme::Convection { scattering, .. } => Capabilities {
                 anisotropic: *scattering == 0.0,
                 heterogeneous: true,
@@ -338,6 +365,8 @@ impl Solver for ExplicitSolver {
                 ..Capabilities::default()
             },
             Scheme::P1 { .. } | Scheme::Ordinates { .. } => Capabilities {
+                // `ranks::march_p1` splits P1 over z-slabs.
+                ranks: matches!(self.scheme, Scheme::P1 { .. }),
                 anisotropic: matches!(self.scheme, Scheme::P1 { .. }),
                 heterogeneous: matches!(self.scheme, Scheme::Ordinates { .. }),
                 embedded_geometry: false,
@@ -359,16 +388,20 @@ impl Solver for ExplicitSolver {
             Scheme::Steady {
                 iteration,
                 allow_unstable,
+                ranks,
             } => {
                 if let SteadyKind::Ftcs { fraction } = iteration {
                     self.check_fraction(*fraction, *allow_unstable)?;
                 }
+                let world = options.ranks.as_ref().filter(|r| r.size() > 1);
+                let on = ranks_of(world, *ranks)?;
                 let volume = problem.geometry().cell_volume();
                 let (iteration, allow_unstable) = (*iteration, *allow_unstable);
                 let memory = self.memory_bytes(problem);
-                let diffusion = DiffusionSolver::custom(self.name);
+                // `steady` splits over the world itself.
+                let diffusion = DiffusionSolver::custom(self.name).splitting();
                 diffusion.solve_with(problem, options, memory, &|d, s, stop| {
-                    steady(d, s, stop, iteration, allow_unstable, volume)
+                    steady(d, s, stop, iteration, allow_unstable, volume, on)
                 })
             }
             Scheme::Convection {
@@ -388,6 +421,22 @@ impl Solver for ExplicitSolver {
     }
 }
 
+/// Where a solve runs: on the world's ranks (under `mpirun`), on `ranks` in-process ranks,
+/// or alone; both at once is refused.
+fn ranks_of(world: Option<&lucent_core::Ranks>, ranks: usize) -> Result<RanksOf<'_>, SolveError> {
+    Ok(match (world.filter(|w| w.size() > 1), ranks) {
+        (Some(_), 2..) => {
+            return Err(invalid(
+                "ranks",
+                "under mpirun the processes are the ranks: leave ranks at 1",
+            ));
+        }
+        (Some(world), _) => RanksOf::Communicator(world.as_ref()),
+        (None, 0 | 1) => RanksOf::Alone,
+        (None, count) => RanksOf::Threads(count),
+    })
+}
+
 /// FTCS or Jacobi to steady state on one channel's assembled diffusion system.
 fn steady(
     d: &lucent_diffusion::DiffusionProblem,
@@ -396,6 +445,7 @@ fn steady(
     iteration: SteadyKind,
     allow_unstable: bool,
     volume: f64,
+    on: RanksOf<'_>,
 ) -> Result<DiffusionSolution, lucent_diffusion::DiffusionError> {
     let t0 = Instant::now();
     let system = d.assemble(s)?;
@@ -412,8 +462,17 @@ fn steady(
         allow_unstable,
     };
     let [nx, ny, _] = d.cells().geometry().dims();
-    let out = iterate(&system, nx * ny, kind, &settings)
-        .map_err(|e| lucent_diffusion::DiffusionError::Invalid(e.to_string()))?;
+    let slab = nx * ny;
+    let out = match on {
+        RanksOf::Alone => iterate(&system, slab, kind, &settings)
+            .map_err(|e| lucent_diffusion::DiffusionError::Invalid(e.to_string()))?,
+        RanksOf::Communicator(comm) => crate::ranks::iterate(&system, slab, kind, &settings, comm)
+            .map_err(|e| lucent_diffusion::DiffusionError::Ranks(e.to_string()))?,
+        RanksOf::Threads(count) => {
+            crate::ranks::iterate_on_threads(&system, slab, kind, &settings, count)
+                .map_err(|e| lucent_diffusion::DiffusionError::Ranks(e.to_string()))?
+        }
+    };
     let mut fluence = vec![0.0; d.cells().geometry().voxel_count()];
     for (&c, v) in system.cells.iter().zip(&out.fluence) {
         fluence[c] = *v;
@@ -622,7 +681,8 @@ impl ExplicitSolver {
 
 /// P1 and ordinates march each channel with the lights they take themselves.
 impl ChannelMethod for ExplicitSolver {
-    type Setup = Lattice;
+    /// The lattice, and the ranks of `SolveOptions::ranks` when there are several.
+    type Setup = (Lattice, Option<lucent_core::Ranks>);
     type Extra = ();
 
     fn stage(&self) -> &'static str {
@@ -640,17 +700,18 @@ impl ChannelMethod for ExplicitSolver {
         ExplicitSolver::memory_bytes(self, problem)
     }
 
-    fn setup(&self, context: &Context<'_>) -> Result<Lattice, SolveError> {
-        lattice(context.problem)
+    fn setup(&self, context: &Context<'_>) -> Result<Self::Setup, SolveError> {
+        let world = context.options.ranks.clone().filter(|r| r.size() > 1);
+        Ok((lattice(context.problem)?, world))
     }
 
-    fn route(&self, _: &Lattice, _: &Problem, _: &Light) -> Route {
+    fn route(&self, _: &Self::Setup, _: &Problem, _: &Light) -> Route {
         Route::Own
     }
 
     fn solve_channel(
         &self,
-        l: &Lattice,
+        (l, world): &Self::Setup,
         channel: Channel<'_>,
     ) -> Result<ChannelSolution<()>, SolveError> {
         let q = point_and_emission(&channel);
@@ -659,7 +720,11 @@ impl ChannelMethod for ExplicitSolver {
                 layout,
                 fraction,
                 allow_unstable,
-            } => p1(l, &channel, &q, *layout, *fraction, *allow_unstable)?,
+                ranks,
+            } => {
+                let on = ranks_of(world.as_ref(), *ranks)?;
+                p1(l, &channel, &q, *layout, *fraction, *allow_unstable, on)?
+            }
             Scheme::Ordinates {
                 order,
                 fraction,
@@ -684,6 +749,7 @@ fn p1(
     layout: crate::p1::Layout,
     fraction: f64,
     allow_unstable: bool,
+    on: RanksOf<'_>,
 ) -> Result<(Vec<f64>, Record), SolveError> {
     let g = channel.problem.medium().phase.mean_cosine();
     // Homogeneous (the capabilities ask for it): any cell's coefficients.
@@ -695,7 +761,16 @@ fn p1(
         (layout, fraction, allow_unstable),
         channel.stopping.clone(),
     )?;
-    let out = crate::p1::march(l, q, &settings, None).map_err(explicit_error)?;
+    let ranks_error = |e: crate::ranks::DecompositionError| invalid("ranks", e.to_string());
+    let out = match on {
+        RanksOf::Alone => crate::p1::march(l, q, &settings, None).map_err(explicit_error)?,
+        RanksOf::Communicator(comm) => {
+            crate::ranks::march_p1(l, q, &settings, comm).map_err(ranks_error)?
+        }
+        RanksOf::Threads(count) => {
+            crate::ranks::march_p1_on_threads(l, q, &settings, count).map_err(ranks_error)?
+        }
+    };
     let mut record = Record::exact((l.len() * 8 * 8) as u64);
     record.iterations = out.steps;
     record.stop_reason = out.stop_reason;

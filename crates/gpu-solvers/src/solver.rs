@@ -240,7 +240,11 @@ impl Solver for GpuSolver {
     }
 
     fn capabilities(&self) -> Capabilities {
-        self.twin().capabilities()
+        Capabilities {
+            // One device, one process.
+            ranks: false,
+            ..self.twin().capabilities()
+        }
     }
 
     fn solve(&self, problem: &Problem, options: &SolveOptions) -> Result<Solution, SolveError> {

@@ -1,47 +1,36 @@
-//! # lucent-mpi: domain decomposition over ranks
+//! # lucent-mpi: lucent's solvers on MPI ranks
 //!
-//! Splits a solver's grid into z-slabs, one per rank, with one-cell halos, and runs the
-//! iteration on them with the same bits as on one rank: the explicit steady schemes
-//! (FTCS diffusion and Jacobi on `lucent-diffusion`'s assembled system,
-//! `lucent_explicit::steady`) for now.
+//! The solvers that split over ranks take any `lucent_core::ranks::Communicator` (z-slabs
+//! with one-layer halos): `lucent_diffusion::Multigrid::solve_on_ranks` (the distributed
+//! multigrid), `lucent_explicit::ranks::iterate` (FTCS and Jacobi to steady state),
+//! `lucent_explicit::ranks::march_p1` (P1 by FTCS), and through them the registry's
+//! `diffusion-mg`, `ftcs-diffusion`, `jacobi-diffusion` and `ftcs-p1` with
+//! `SolveOptions::ranks`. This crate adds the transport that runs them across processes:
+//! `Mpi` (feature `mpi`: rsmpi on the system's MPI, Debian's `openmpi-bin
+//! libopenmpi-dev`, and `libclang-dev` for its bindgen), `MPI_COMM_WORLD` under `mpirun`.
+//! Without the feature nothing of MPI is built; [`Alone`] and [`Threads`] (in-process
+//! ranks) are re-exported from `lucent-core`.
 //!
-//! The distributed multigrid is `lucent_diffusion::Multigrid::solve_on_ranks`, on the same
-//! communicators (the trait lives in `lucent_core::ranks`, re-exported here).
-//!
-//! **Ranks.** [`Communicator`] is the two operations a slab decomposition needs: halo
-//! exchange with the neighbours below and above, started before and received after the
-//! interior rows (non-blocking sends overlapped with work), and an all-gather of small
-//! vectors. [`Alone`] is one rank; [`Threads`] is ranks as threads of one process
-//! (channels), which the default tests use; `Mpi` (feature `mpi`, rsmpi on the system's
-//! MPI: Debian's `openmpi-bin libopenmpi-dev`, and `libclang-dev` for its bindgen) runs
-//! under `mpirun`. Without the feature nothing of MPI is built.
-//!
-//! **Reproducibility.** Norms are Σ per z-layer, left to right, then the layer sums in z
-//! order (`lucent_explicit::steady::Layers`), on one rank and on many: a layer never
-//! straddles ranks, so the gathered layer sums add to the serial bits whatever the rank
-//! count. Rows keep their column order under the local renumbering, so each residual is
-//! the serial one; elementwise updates are the same. The result is bit for bit the
-//! serial iteration's on any number of ranks (`tests/decomposition.rs`).
+//! **Reproducibility.** Norms are Σ per z-layer, then the layer sums in z order, on one
+//! rank and on many: a layer never straddles ranks, so the result does not depend on the
+//! rank count (the explicit schemes: the serial bits; the multigrid: the serial φ, and the
+//! same history on every rank count).
 //!
 //! **Stopping.** Tolerances, the iteration limit and divergence follow from the shared
 //! residual, identically on every rank; the time budget and cancellation are per rank and
-//! travel with each gather, so all ranks stop on the same sweep.
+//! travel with each gather, so all ranks stop on the same sweep or cycle.
 //!
-//! **Not yet.** Every rank still assembles the whole system (only its rows are iterated),
-//! so memory does not yet scale with ranks; per-slab assembly and positioned reads of the
-//! volume come next, then P1, Zhang & Ma's absorption march as a pipelined wavefront and
-//! the distributed multigrid.
+//! **Not yet.** Every rank still builds the whole problem (only its slab is iterated), so
+//! memory does not yet scale with ranks.
 //!
 //! **Cost model per sweep and rank** (slab of n_x·n_y·n_z/P cells): two halo messages of
-//! one layer of unknowns each (≤ 8 n_x n_y bytes), overlapped with the interior rows, and
-//! one all-gather of 2 + (layers per rank) doubles, whose latency grows as log P.
+//! one layer each (≤ 8 n_x n_y bytes), overlapped with the interior rows, and one
+//! all-gather of 2 + (layers per rank) doubles, whose latency grows as log P.
+//! `BENCHMARKS.md` ("Ranks") models 64 and 1024 ranks, multigrid's coarse levels included.
 
-mod error;
 #[cfg(feature = "mpi")]
 mod mpi_comm;
-pub mod steady;
 
-pub use error::DecompositionError;
 pub use lucent_core::ranks::{Alone, Communicator, Threads};
 #[cfg(feature = "mpi")]
-pub use mpi_comm::Mpi;
+pub use mpi_comm::{Mpi, MpiError, World};

@@ -7,54 +7,108 @@ use mpi::traits::*;
 
 use lucent_core::ranks::Communicator;
 
-/// The ranks of an MPI communicator (normally `universe.world()`), in rank order along z.
+/// The ranks of `MPI_COMM_WORLD`, in rank order along z.
+///
+/// Holds no MPI handle (each call takes the world's), so it is `Send + Sync` and can ride
+/// in `SolveOptions::ranks` to the thread that runs the solve: initialise MPI with at
+/// least `Threading::Serialized` (the ranks' calls come from one thread at a time, not
+/// necessarily the main one), and keep the `Universe` alive while it is used.
+#[derive(Debug, Clone, Copy)]
 pub struct Mpi {
-    world: SimpleCommunicator,
+    rank: usize,
+    size: usize,
 }
 
 impl Mpi {
-    /// Ranks of `world`.
-    pub fn new(world: SimpleCommunicator) -> Self {
-        Self { world }
+    /// The world of an initialised MPI (`universe` is the proof, and must outlive the
+    /// solves).
+    pub fn world(universe: &mpi::environment::Universe) -> Self {
+        let world = universe.world();
+        Self {
+            rank: world.rank() as usize,
+            size: world.size() as usize,
+        }
     }
+}
+
+/// An initialised MPI (finalised when dropped) and its world's ranks: what a program
+/// under `mpirun` holds for its lifetime.
+pub struct World {
+    universe: mpi::environment::Universe,
+}
+
+/// Why MPI could not be started.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum MpiError {
+    /// `MPI_Init_thread` failed or MPI was initialised already.
+    #[error("MPI could not be initialised (or was initialised already)")]
+    Initialise,
+    /// The library cannot take calls from a thread other than the main one.
+    #[error(
+        "this MPI offers {0:?} threading; lucent needs Serialized or Multiple (the solve runs on a pool thread)"
+    )]
+    Threading(mpi::Threading),
+}
+
+impl World {
+    /// Initialises MPI with serialised threading (one thread calls MPI at a time, not
+    /// necessarily the main one).
+    pub fn initialise() -> Result<Self, MpiError> {
+        let (universe, threading) = mpi::initialize_with_threading(mpi::Threading::Serialized)
+            .ok_or(MpiError::Initialise)?;
+        if threading < mpi::Threading::Serialized {
+            return Err(MpiError::Threading(threading));
+        }
+        Ok(Self { universe })
+    }
+
+    /// The world's ranks.
+    pub fn ranks(&self) -> Mpi {
+        Mpi::world(&self.universe)
+    }
+}
+
+fn world() -> SimpleCommunicator {
+    SimpleCommunicator::world()
 }
 
 impl Communicator for Mpi {
     fn rank(&self) -> usize {
-        self.world.rank() as usize
+        self.rank
     }
 
     fn size(&self) -> usize {
-        self.world.size() as usize
+        self.size
     }
 
-    fn exchange<R>(
+    fn exchange_around(
         &self,
         to_below: &[f64],
         to_above: &[f64],
-        interior: impl FnOnce() -> R,
-    ) -> (Vec<f64>, Vec<f64>, R) {
+        interior: &mut dyn FnMut(),
+    ) -> (Vec<f64>, Vec<f64>) {
         let rank = self.rank();
         let below = rank.checked_sub(1);
         let above = Some(rank + 1).filter(|&r| r < self.size());
+        let world = world();
         mpi::request::scope(|scope| {
             let sent_below = below.map(|b| {
-                self.world
+                world
                     .process_at_rank(b as i32)
                     .immediate_send(scope, to_below)
             });
             let sent_above = above.map(|a| {
-                self.world
+                world
                     .process_at_rank(a as i32)
                     .immediate_send(scope, to_above)
             });
             // The interior rows need no halo: they run while the messages travel.
-            let result = interior();
+            interior();
             let from_below = below.map_or_else(Vec::new, |b| {
-                self.world.process_at_rank(b as i32).receive_vec::<f64>().0
+                world.process_at_rank(b as i32).receive_vec::<f64>().0
             });
             let from_above = above.map_or_else(Vec::new, |a| {
-                self.world.process_at_rank(a as i32).receive_vec::<f64>().0
+                world.process_at_rank(a as i32).receive_vec::<f64>().0
             });
             if let Some(request) = sent_below {
                 request.wait();
@@ -62,15 +116,16 @@ impl Communicator for Mpi {
             if let Some(request) = sent_above {
                 request.wait();
             }
-            (from_below, from_above, result)
+            (from_below, from_above)
         })
     }
 
     fn all_gather(&self, local: &[f64]) -> Vec<f64> {
+        let world = world();
         let size = self.size();
         let count = local.len() as i32;
         let mut counts = vec![0i32; size];
-        self.world.all_gather_into(&count, &mut counts[..]);
+        world.all_gather_into(&count, &mut counts[..]);
         let displacements: Vec<i32> = counts
             .iter()
             .scan(0, |at, &c| {
@@ -83,7 +138,7 @@ impl Communicator for Mpi {
         let mut out = vec![0.0f64; total as usize];
         {
             let mut partition = PartitionMut::new(&mut out[..], &counts[..], &displacements[..]);
-            self.world.all_gather_varcount_into(local, &mut partition);
+            world.all_gather_varcount_into(local, &mut partition);
         }
         out
     }

@@ -176,6 +176,7 @@ impl Options {
                 .unwrap_or(lucent::scene::SCENE_MEMORY_BUDGET),
             progress,
             cancel: Some(cancel),
+            ranks: None,
         };
         options.validate().map_err(from_solve)?;
         Ok(options)

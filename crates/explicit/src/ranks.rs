@@ -1,6 +1,7 @@
-//! FTCS and Jacobi to steady state on an assembled diffusion system split over ranks by
-//! z-slabs: the distributed twin of `lucent_explicit::steady::iterate`, the same bits on
-//! any number of ranks.
+//! The explicit schemes split over ranks by z-slabs, the same bits on any number of ranks:
+//! [`iterate`], FTCS and Jacobi to steady state on an assembled diffusion system (the twin
+//! of [`crate::steady::iterate`]), and [`march_p1`], P1 by FTCS (the twin of
+//! [`crate::p1::march`]). For the steady iterations:
 //!
 //! Each rank owns the unknowns of a run of z-layers (contiguous in the system's order:
 //! cells ascend, z slowest), keeps its rows with their columns renumbered into a local
@@ -18,14 +19,47 @@
 //! residual; the time budget and cancellation, which differ per rank, travel with the
 //! gather, so no rank stops alone.
 
+use crate::steady::{Iteration, Layers, Steady, SteadySettings, row_scale};
 use lucent_core::{History, StopReason, Stopping};
 use lucent_diffusion::AssembledSystem;
-use lucent_explicit::steady::{Iteration, Layers, Steady, SteadySettings, row_scale};
 use rayon::prelude::*;
 use sprs::CsMat;
 
-use crate::error::DecompositionError;
-use lucent_core::ranks::Communicator;
+/// Why a decomposed solve could not run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DecompositionError {
+    /// More ranks than z-layers holding unknowns.
+    #[error(
+        "{ranks} ranks for {layers} z-layers with unknowns: every rank needs at least one layer"
+    )]
+    TooManyRanks {
+        /// Ranks asked for.
+        ranks: usize,
+        /// Layers there are.
+        layers: usize,
+    },
+    /// A row reads beyond the neighbouring slabs (slabs thinner than the stencil).
+    #[error("rank {rank}: the stencil reaches past the neighbouring slabs (use fewer ranks)")]
+    StencilTooWide {
+        /// The rank.
+        rank: usize,
+    },
+    /// The system cannot be iterated.
+    #[error("the system: {0}")]
+    Matrix(String),
+    /// The iteration refused the system or its step (`steady::row_scale`).
+    #[error(transparent)]
+    Scheme(#[from] crate::ExplicitError),
+    /// A neighbour sent what the plan did not expect (a rank stopped or diverged from the
+    /// protocol).
+    #[error("rank {rank}: a halo or gather did not match the decomposition")]
+    Protocol {
+        /// The rank that noticed.
+        rank: usize,
+    },
+}
+
+use lucent_core::ranks::{Communicator, exchange};
 
 /// Which layers (indices into [`Layers::ranges`]) each rank owns: contiguous runs in z,
 /// balanced by unknowns (each rank takes layers until it holds its share).
@@ -199,7 +233,7 @@ pub fn iterate(
     slab_len: usize,
     iteration: Iteration,
     settings: &SteadySettings,
-    comm: &impl Communicator,
+    comm: &(impl Communicator + ?Sized),
 ) -> Result<Steady, DecompositionError> {
     let a = &system.matrix;
     let n = system.rhs.len();
@@ -297,7 +331,7 @@ pub fn iterate(
         let to_below: Vec<f64> = part.send_below.iter().map(|&i| owned[i]).collect();
         let to_above: Vec<f64> = part.send_above.iter().map(|&i| owned[i]).collect();
         let xs = &x;
-        let (from_below, from_above, interior) = comm.exchange(&to_below, &to_above, || {
+        let (from_below, from_above, interior) = exchange(comm, &to_below, &to_above, || {
             part.interior
                 .par_iter()
                 .map(|&i| row_residual(&part.rows, b, xs, i))
@@ -338,4 +372,280 @@ pub fn iterate(
         residuals: history.into_residuals(),
         stop_reason,
     })
+}
+
+/// [`iterate`] on `ranks` in-process ranks (threads joined by channels, sharing `system`):
+/// rank 0's result, which every rank holds.
+pub fn iterate_on_threads(
+    system: &AssembledSystem,
+    slab_len: usize,
+    iteration: Iteration,
+    settings: &SteadySettings,
+    ranks: usize,
+) -> Result<Steady, DecompositionError> {
+    let worlds = lucent_core::ranks::Threads::world(ranks);
+    let mut results = std::thread::scope(|scope| {
+        let handles: Vec<_> = worlds
+            .into_iter()
+            .map(|comm| scope.spawn(move || iterate(system, slab_len, iteration, settings, &comm)))
+            .collect();
+        handles
+            .into_iter()
+            .enumerate()
+            .map(|(rank, h)| {
+                h.join()
+                    .unwrap_or(Err(DecompositionError::Protocol { rank }))
+            })
+            .collect::<Result<Vec<_>, _>>()
+    })?;
+    Ok(results.swap_remove(0))
+}
+
+/// [`crate::p1::march`] from zero, split over the ranks of `comm` by z-layers (balanced by
+/// count): per step each rank sends its first and last layer of (φ, E) to its neighbours,
+/// steps its inner layers while they travel, then its two edge layers; the growth
+/// monitor's largest values and finiteness, the change and size sums per layer, and the
+/// time and cancel flags are all-gathered, and every rank takes the serial decision. The
+/// whole state on every rank at the end, the serial bits on any number of ranks.
+///
+/// # Errors
+/// The serial march's refusals ([`DecompositionError::Scheme`]); periodic edges on more
+/// than one rank (the decomposition has no wrap-around neighbours); more ranks than
+/// layers; a rank that left the protocol.
+pub fn march_p1(
+    lattice: &crate::Lattice,
+    source: &[f64],
+    settings: &crate::p1::P1Settings,
+    comm: &(impl Communicator + ?Sized),
+) -> Result<crate::p1::P1State, DecompositionError> {
+    use crate::p1::{P1Edges, P1State, StepCoefficients, growth_monitor, layer_norms, step_layers};
+    lattice.check_field("source", source)?;
+    let step_of = StepCoefficients::checked(settings, lattice.spacing)?;
+    let (size, rank) = (comm.size(), comm.rank());
+    let [nx, ny, nz] = lattice.dims;
+    if size == 0 || size > nz {
+        return Err(DecompositionError::TooManyRanks {
+            ranks: size,
+            layers: nz,
+        });
+    }
+    if size > 1 && settings.edges == P1Edges::Periodic {
+        return Err(DecompositionError::Scheme(crate::ExplicitError::Invalid(
+            "periodic edges do not split over ranks (no wrap-around neighbours): use zero edges"
+                .into(),
+        )));
+    }
+    let bounds: Vec<(usize, usize)> = (0..size)
+        .map(|r| (r * nz / size, (r + 1) * nz / size))
+        .collect();
+    let (k0, k1) = bounds[rank];
+    let slab = nx * ny;
+    let n = lattice.len();
+    let largest = source.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+    let monitor = growth_monitor(0.0, largest, settings);
+    let shared = Stopping {
+        time_budget: None,
+        cancel: None,
+        progress: if rank == 0 {
+            settings.stopping.progress.clone()
+        } else {
+            None
+        },
+        ..settings.stopping.clone()
+    };
+    let started = std::time::Instant::now();
+    let mut history = History::start();
+    let (mut phi, mut flux) = (vec![0.0; n], [vec![0.0; n], vec![0.0; n], vec![0.0; n]]);
+    let (mut next_phi, mut next_flux) = (vec![0.0; n], [vec![0.0; n], vec![0.0; n], vec![0.0; n]]);
+    // The layers that read no halo (stepped while the halos travel), and the others.
+    let (inner, edges) = if k1 - k0 <= 2 {
+        (k0..k0, (k0..k1).map(|k| k..k + 1).collect::<Vec<_>>())
+    } else {
+        (k0 + 1..k1 - 1, vec![k0..k0 + 1, k1 - 1..k1])
+    };
+    let layer = |fields: (&[f64], &[Vec<f64>; 3]), k: usize| -> Vec<f64> {
+        let range = k * slab..(k + 1) * slab;
+        let mut out = fields.0[range.clone()].to_vec();
+        for f in fields.1 {
+            out.extend_from_slice(&f[range.clone()]);
+        }
+        out
+    };
+    let counts: Vec<usize> = bounds.iter().map(|&(a, b)| b - a).collect();
+    let mut step = 0;
+    let stop_reason = loop {
+        step += 1;
+        let to_below = if rank > 0 {
+            layer((&phi, &flux), k0)
+        } else {
+            Vec::new()
+        };
+        let to_above = if rank + 1 < size {
+            layer((&phi, &flux), k1 - 1)
+        } else {
+            Vec::new()
+        };
+        let (from_below, from_above, ()) = exchange(comm, &to_below, &to_above, || {
+            step_layers(
+                lattice,
+                &step_of,
+                settings.edges,
+                source,
+                (&phi, &flux),
+                (&mut next_phi, &mut next_flux),
+                inner.clone(),
+            );
+        });
+        for (received, k, present) in [
+            (from_below, k0.wrapping_sub(1), rank > 0),
+            (from_above, k1, rank + 1 < size),
+        ] {
+            if !present {
+                continue;
+            }
+            if received.len() != 4 * slab {
+                return Err(DecompositionError::Protocol { rank });
+            }
+            let range = k * slab..(k + 1) * slab;
+            phi[range.clone()].copy_from_slice(&received[..slab]);
+            for (a, f) in flux.iter_mut().enumerate() {
+                f[range.clone()].copy_from_slice(&received[(a + 1) * slab..(a + 2) * slab]);
+            }
+        }
+        for edge in &edges {
+            step_layers(
+                lattice,
+                &step_of,
+                settings.edges,
+                source,
+                (&phi, &flux),
+                (&mut next_phi, &mut next_flux),
+                edge.clone(),
+            );
+        }
+        // [time, cancel, finite ×4, largest ×4, (change, size) per layer].
+        let owned = k0 * slab..k1 * slab;
+        let mut local = vec![
+            f64::from(u8::from(
+                settings
+                    .stopping
+                    .time_budget
+                    .is_some_and(|t| started.elapsed() >= t),
+            )),
+            f64::from(u8::from(
+                settings
+                    .stopping
+                    .cancel
+                    .as_ref()
+                    .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)),
+            )),
+        ];
+        let fields = [&next_phi, &next_flux[0], &next_flux[1], &next_flux[2]];
+        for f in fields {
+            local.push(f64::from(u8::from(
+                f[owned.clone()].iter().all(|v| v.is_finite()),
+            )));
+        }
+        for f in fields {
+            local.push(f[owned.clone()].iter().fold(0.0f64, |a, b| a.max(b.abs())));
+        }
+        for (c, s) in layer_norms(&next_phi, &phi, slab, k0..k1) {
+            local.extend([c, s]);
+        }
+        let all = comm.all_gather(&local);
+        if all.len() != counts.iter().map(|c| 10 + 2 * c).sum::<usize>() {
+            return Err(DecompositionError::Protocol { rank });
+        }
+        let (mut time_up, mut cancelled) = (false, false);
+        let (mut finite, mut largest) = ([true; 4], [0.0f64; 4]);
+        let (mut change, mut size_sum) = (0.0, 0.0);
+        let mut at = 0;
+        for &c in &counts {
+            time_up |= all[at] != 0.0;
+            cancelled |= all[at + 1] != 0.0;
+            for f in 0..4 {
+                finite[f] &= all[at + 2 + f] != 0.0;
+                largest[f] = largest[f].max(all[at + 6 + f]);
+            }
+            for pair in all[at + 10..at + 10 + 2 * c].chunks(2) {
+                change += pair[0];
+                size_sum += pair[1];
+            }
+            at += 10 + 2 * c;
+        }
+        // The serial monitor's order: φ, then E_x, E_y, E_z.
+        let stop = (0..4).find_map(|f| {
+            if finite[f] {
+                monitor.check_largest(largest[f], step)
+            } else {
+                Some(StopReason::DivergedNonFinite { iteration: step })
+            }
+        });
+        if let Some(stop) = stop {
+            break stop;
+        }
+        let last_change = if size_sum > 0.0 {
+            (change / size_sum).sqrt()
+        } else {
+            change.sqrt()
+        };
+        std::mem::swap(&mut phi, &mut next_phi);
+        std::mem::swap(&mut flux, &mut next_flux);
+        if let Some(reason) = history.record_step(&shared, step, last_change, change.sqrt()) {
+            break reason;
+        }
+        if time_up {
+            break StopReason::TimeLimit {
+                residual: last_change,
+            };
+        }
+        if cancelled {
+            break StopReason::Interrupted {
+                residual: last_change,
+            };
+        }
+    };
+    let owned = k0 * slab..k1 * slab;
+    let gathered = |f: &[f64]| -> Result<Vec<f64>, DecompositionError> {
+        let whole = comm.all_gather(&f[owned.clone()]);
+        if whole.len() != n {
+            return Err(DecompositionError::Protocol { rank });
+        }
+        Ok(whole)
+    };
+    Ok(P1State {
+        fluence: gathered(&phi)?,
+        flux: [
+            gathered(&flux[0])?,
+            gathered(&flux[1])?,
+            gathered(&flux[2])?,
+        ],
+        steps: step,
+        stop_reason,
+    })
+}
+
+/// [`march_p1`] on `ranks` in-process ranks: rank 0's state, which every rank holds.
+pub fn march_p1_on_threads(
+    lattice: &crate::Lattice,
+    source: &[f64],
+    settings: &crate::p1::P1Settings,
+    ranks: usize,
+) -> Result<crate::p1::P1State, DecompositionError> {
+    let worlds = lucent_core::ranks::Threads::world(ranks);
+    let mut results = std::thread::scope(|scope| {
+        let handles: Vec<_> = worlds
+            .into_iter()
+            .map(|comm| scope.spawn(move || march_p1(lattice, source, settings, &comm)))
+            .collect();
+        handles
+            .into_iter()
+            .enumerate()
+            .map(|(rank, h)| {
+                h.join()
+                    .unwrap_or(Err(DecompositionError::Protocol { rank }))
+            })
+            .collect::<Result<Vec<_>, _>>()
+    })?;
+    Ok(results.swap_remove(0))
 }

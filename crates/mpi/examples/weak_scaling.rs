@@ -1,0 +1,259 @@
+//! One solve split over ranks, checked against one rank, timed per sweep or cycle: the
+//! weak-scaling measurement of `BENCHMARKS.md` ("Ranks").
+//!
+//! ```sh
+//! cargo run --profile examples -p lucent-mpi --example weak_scaling -- --ranks 3      # in-process ranks
+//! cargo build --profile examples -p lucent-mpi --features mpi --example weak_scaling
+//! mpirun -n 2 target/examples/examples/weak_scaling --method mg                     # MPI ranks
+//! ```
+//!
+//! The problem: a heterogeneous diffusion medium in an embedded cylinder along z with a
+//! point source, `n_z` = L·ranks layers of S × 5S/6 cells (the same slab per rank;
+//! `--layers L`, default 24, `--side S`, default 24). `--method ftcs` (default), `jacobi`
+//! or `mg` (`lucent_diffusion::Multigrid::solve_on_ranks`, V(2,2) from full multigrid).
+//! Every rank also solves serially and compares: FTCS and Jacobi must give the same bits;
+//! the multigrid the serial φ to 1e-10 of its largest value with the cycle count ± 1. The
+//! exit status is 1 otherwise. Rank 0 prints the iterations, the stop reason and the wall
+//! time of the split solve (the best of `--repeat R` runs, default 1).
+
+use std::process::ExitCode;
+use std::time::Instant;
+
+use glam::DVec3;
+use lucent_core::Stopping;
+use lucent_diffusion::{
+    Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Multigrid,
+    MultigridSettings, Sources,
+};
+use lucent_explicit::steady::{Iteration, SteadySettings, ftcs_limit, iterate as serial};
+use lucent_grid::GridGeometry;
+use lucent_mpi::Communicator;
+
+#[derive(Clone, Copy, PartialEq)]
+enum Method {
+    Ftcs,
+    Jacobi,
+    Multigrid,
+}
+
+struct Run {
+    iterations: usize,
+    stop: String,
+    seconds: f64,
+    agrees: bool,
+}
+
+fn problem(
+    ranks: usize,
+    layers_per_rank: usize,
+    side: usize,
+) -> Result<(DiffusionProblem, Sources, usize), String> {
+    let dims = [side, side * 5 / 6, layers_per_rank * ranks];
+    let h = 6.0 / side as f64;
+    let half = DVec3::new(3.0, 0.5 * h * dims[1] as f64, 0.5 * h * dims[2] as f64);
+    let grid = GridGeometry::from_bounds(dims, -half, half).map_err(|e| e.to_string())?;
+    // A cylinder along z: every layer holds the same unknowns, so each rank the same work.
+    let radius = half.x.min(half.y) * 0.9;
+    let cells = CellGeometry::from_sdf(
+        grid,
+        |p| p.truncate().length() - radius,
+        Discretisation::EmbeddedBoundary,
+    )
+    .map_err(|e| e.to_string())?;
+    let n = grid.voxel_count();
+    let d: Vec<f32> = (0..n).map(|c| 0.1 + 0.1 * ((c * 7) % 5) as f32).collect();
+    let problem = DiffusionProblem::new(
+        cells,
+        d,
+        vec![0.05; n],
+        Boundaries::uniform(Condition::Robin { a: 2.2 }),
+    )
+    .map_err(|e| e.to_string())?;
+    let sources = Sources {
+        points: vec![(DVec3::new(0.2, -0.1, 0.3), 1.0)],
+        ..Sources::default()
+    };
+    Ok((problem, sources, dims[0] * dims[1]))
+}
+
+fn bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+/// The best wall time of `repeat` runs of `solve`, and its last result.
+fn best_of<T, E: ToString>(
+    repeat: usize,
+    mut solve: impl FnMut() -> Result<T, E>,
+) -> Result<(T, f64), String> {
+    let mut best = f64::INFINITY;
+    let mut last = None;
+    for _ in 0..repeat.max(1) {
+        let start = Instant::now();
+        last = Some(solve().map_err(|e| e.to_string())?);
+        best = best.min(start.elapsed().as_secs_f64());
+    }
+    Ok((last.ok_or("no run")?, best))
+}
+
+fn run(
+    comm: &(impl Communicator + ?Sized),
+    method: Method,
+    layers_per_rank: usize,
+    side: usize,
+    repeat: usize,
+) -> Result<Run, String> {
+    let (problem, sources, slab) = problem(comm.size(), layers_per_rank, side)?;
+    if method == Method::Multigrid {
+        let stopping = Stopping {
+            relative_tolerance: 1e-10,
+            max_iterations: 100,
+            ..Stopping::default()
+        };
+        let rhs = problem.rhs(&sources).map_err(|e| e.to_string())?;
+        let mg =
+            Multigrid::build(&problem, MultigridSettings::default()).map_err(|e| e.to_string())?;
+        let mut phi = vec![0.0; rhs.len()];
+        let (split, seconds) = best_of(repeat, || {
+            mg.solve_on_ranks(&rhs, &mut phi, &stopping, comm)
+        })?;
+        let mut alone = vec![0.0; rhs.len()];
+        let reference = mg.solve(&rhs, &mut alone, &stopping);
+        let scale = alone.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let worst = alone
+            .iter()
+            .zip(&phi)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        return Ok(Run {
+            iterations: split.iterations(),
+            stop: split.stop_reason.to_string(),
+            seconds,
+            agrees: worst <= 1e-10 * scale
+                && split.iterations().abs_diff(reference.iterations()) <= 1
+                && split.stop_reason.is_converged(),
+        });
+    }
+    let system = problem.assemble(&sources).map_err(|e| e.to_string())?;
+    let volume = problem.cells().geometry().cell_volume();
+    let iteration = match method {
+        Method::Jacobi => Iteration::Jacobi { omega: 1.0 },
+        _ => Iteration::Ftcs {
+            time_step: 0.9 * ftcs_limit(&system, volume),
+            cell_volume: volume,
+        },
+    };
+    let settings = SteadySettings {
+        stopping: Stopping {
+            relative_tolerance: 1e-6,
+            max_iterations: 100_000,
+            ..Stopping::default()
+        },
+        allow_unstable: false,
+    };
+    let (split, seconds) = best_of(repeat, || {
+        lucent_explicit::ranks::iterate(&system, slab, iteration, &settings, comm)
+    })?;
+    let reference = serial(&system, slab, iteration, &settings).map_err(|e| e.to_string())?;
+    Ok(Run {
+        iterations: split.residuals.len() - 1,
+        stop: split.stop_reason.to_string(),
+        seconds,
+        agrees: bits(&split.fluence) == bits(&reference.fluence)
+            && bits(&split.residuals) == bits(&reference.residuals),
+    })
+}
+
+fn report(
+    comm: &(impl Communicator + ?Sized),
+    method: Method,
+    layers: usize,
+    side: usize,
+    repeat: usize,
+) -> Result<bool, String> {
+    let out = run(comm, method, layers, side, repeat)?;
+    if comm.rank() == 0 {
+        let dims = [side, side * 5 / 6, layers * comm.size()];
+        let (what, agree) = match method {
+            Method::Multigrid => ("cycles", "within 1e-10 and ±1 cycle of"),
+            Method::Jacobi | Method::Ftcs => ("sweeps", "the bits of"),
+        };
+        eprintln!(
+            "{} ranks, {}×{}×{} cells: {} {what}, {}, {:.4} s split ({:.1} µs per {}); {} one rank's: {}",
+            comm.size(),
+            dims[0],
+            dims[1],
+            dims[2],
+            out.iterations,
+            out.stop,
+            out.seconds,
+            out.seconds * 1e6 / out.iterations.max(1) as f64,
+            &what[..what.len() - 1],
+            agree,
+            if out.agrees { "yes" } else { "NO" }
+        );
+    }
+    Ok(out.agrees)
+}
+
+fn value<T: std::str::FromStr>(args: &[String], name: &str) -> Option<T> {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .and_then(|v| v.parse().ok())
+}
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let layers = value(&args, "--layers").unwrap_or(24);
+    let side = value(&args, "--side").unwrap_or(24);
+    let repeat = value(&args, "--repeat").unwrap_or(1);
+    let method = match value::<String>(&args, "--method").as_deref() {
+        None | Some("ftcs") => Method::Ftcs,
+        Some("jacobi") => Method::Jacobi,
+        Some("mg") => Method::Multigrid,
+        Some(other) => {
+            eprintln!("weak_scaling: --method {other}: ftcs, jacobi or mg");
+            return ExitCode::from(2);
+        }
+    };
+    match run_on_ranks(&args, method, layers, side, repeat) {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::FAILURE,
+        Err(e) => {
+            eprintln!("weak_scaling: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(feature = "mpi")]
+fn run_on_ranks(
+    _: &[String],
+    method: Method,
+    layers: usize,
+    side: usize,
+    repeat: usize,
+) -> Result<bool, String> {
+    let world = lucent_mpi::World::initialise().map_err(|e| e.to_string())?;
+    report(&world.ranks(), method, layers, side, repeat)
+}
+
+#[cfg(not(feature = "mpi"))]
+fn run_on_ranks(
+    args: &[String],
+    method: Method,
+    layers: usize,
+    side: usize,
+    repeat: usize,
+) -> Result<bool, String> {
+    let ranks: usize = value(args, "--ranks").unwrap_or(2);
+    let worlds = lucent_mpi::Threads::world(ranks);
+    std::thread::scope(|scope| {
+        let runs: Vec<_> = worlds
+            .into_iter()
+            .map(|comm| scope.spawn(move || report(&comm, method, layers, side, repeat)))
+            .collect();
+        runs.into_iter()
+            .map(|r| r.join().map_err(|_| "a rank panicked".to_owned())?)
+            .try_fold(true, |all, r| r.map(|same| all && same))
+    })
+}

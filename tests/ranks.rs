@@ -1,0 +1,258 @@
+//! The registry's solvers on ranks, through both doors: the `ranks` parameter (in-process
+//! ranks) and `SolveOptions::ranks` (what `mpirun -n N lucent solve` hands every process),
+//! on scenes of every class the suite has (an embedded sphere with a Robin boundary, a
+//! medium touching every face of a grid whose sides are not multiples of 8, RGB with a sky,
+//! a box-filling medium lit from outside, a thin slab).
+//!
+//! - `ftcs-diffusion`, `jacobi-diffusion` and `ftcs-p1`: the serial bits.
+//! - `diffusion-mg`: the serial fluence to 1e-10 of its largest value and the same cycle
+//!   count ± 1 (the norms add layer sums in z order, the serial solve slabs in a tree; the
+//!   fluence has come out bit-equal on every scene measured), and the same bits on every
+//!   rank count and through both doors.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use lucent::core::ranks::{Communicator, Threads};
+use lucent::core::{ParamValue, Params, Problem, Solution, SolveError, SolveOptions};
+
+const SCENES: [&str; 5] = [
+    "suite/marble_sphere.toml",
+    "suite/touching_faces.toml",
+    "rgb_medium.toml",
+    "box_filling.toml",
+    "suite/slab.toml",
+];
+
+fn problem(scene: &str) -> Problem {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes");
+    let path = root.join(scene);
+    let dir = path.parent().unwrap().to_path_buf();
+    lucent::scene::Scene::load(&path)
+        .and_then(|s| s.build(&dir))
+        .expect("the scene builds")
+        .problem
+}
+
+fn params(ranks: i64) -> Params {
+    let mut p = Params::default();
+    p.0.insert("ranks".into(), ParamValue::Int(ranks));
+    p
+}
+
+fn options(name: &str) -> SolveOptions {
+    SolveOptions {
+        // FTCS crawls: a fixed number of sweeps compares as well as convergence does.
+        relative_tolerance: if name == "diffusion-mg" { 1e-9 } else { 1e-4 },
+        max_iterations: if name == "diffusion-mg" { 100 } else { 120 },
+        ..SolveOptions::default()
+    }
+}
+
+fn solve(name: &str, problem: &Problem, ranks: i64) -> Solution {
+    lucent::registry()
+        .build(name, &params(ranks))
+        .expect("a registered solver")
+        .solve(problem, &options(name))
+        .unwrap_or_else(|e| panic!("{name} on {ranks} ranks: {e}"))
+}
+
+/// Every process's solve under a world of `ranks`, as `mpirun` runs them: rank 0's
+/// solution, after checking every rank got the same.
+fn solve_as_processes(name: &str, problem: &Problem, ranks: usize) -> Solution {
+    let solutions: Vec<Solution> = std::thread::scope(|scope| {
+        let handles: Vec<_> = Threads::world(ranks)
+            .into_iter()
+            .map(|rank| {
+                scope.spawn(move || {
+                    let options = SolveOptions {
+                        ranks: Some(Arc::new(rank)),
+                        ..options(name)
+                    };
+                    lucent::registry()
+                        .build(name, &Params::default())
+                        .and_then(|s| s.solve(problem, &options))
+                        .unwrap_or_else(|e| panic!("{name} as {ranks} processes: {e}"))
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    for s in &solutions[1..] {
+        assert_eq!(
+            fluence_bits(s),
+            fluence_bits(&solutions[0]),
+            "{name}: ranks disagree"
+        );
+    }
+    solutions.into_iter().next().unwrap()
+}
+
+fn fluence_bits(s: &Solution) -> Vec<u32> {
+    s.fluence
+        .iter()
+        .flat_map(|g| g.data().iter().map(|v| v.to_bits()))
+        .collect()
+}
+
+fn history_bits(s: &Solution) -> Vec<u64> {
+    s.report
+        .residual_history
+        .iter()
+        .map(|r| r.to_bits())
+        .collect()
+}
+
+#[test]
+fn steady_explicit_schemes_give_the_serial_bits_on_ranks() {
+    for scene in SCENES {
+        let problem = problem(scene);
+        for name in ["ftcs-diffusion", "jacobi-diffusion"] {
+            let serial = solve(name, &problem, 1);
+            for ranks in [2, 3] {
+                let split = solve(name, &problem, ranks);
+                assert_eq!(
+                    fluence_bits(&split),
+                    fluence_bits(&serial),
+                    "{name} on {scene}, {ranks} ranks"
+                );
+                assert_eq!(
+                    history_bits(&split),
+                    history_bits(&serial),
+                    "{name} on {scene}, {ranks} ranks"
+                );
+                assert_eq!(split.report.stop_reason, serial.report.stop_reason);
+            }
+            let processes = solve_as_processes(name, &problem, 2);
+            assert_eq!(
+                fluence_bits(&processes),
+                fluence_bits(&serial),
+                "{name} on {scene} as processes"
+            );
+            assert_eq!(
+                history_bits(&processes),
+                history_bits(&serial),
+                "{name} on {scene} as processes"
+            );
+        }
+    }
+}
+
+#[test]
+fn p1_gives_the_serial_bits_on_ranks() {
+    // Point lights inside homogeneous media with vacuum edges (what `ftcs-p1` admits): a
+    // 19 × 17 × 15 grid and a cubic 16³ one.
+    for scene in ["suite/point_inside.toml", "suite/absorber_point.toml"] {
+        let problem = problem(scene);
+        let serial = solve("ftcs-p1", &problem, 1);
+        for ranks in [2, 3, 4] {
+            let split = solve("ftcs-p1", &problem, ranks);
+            assert_eq!(
+                fluence_bits(&split),
+                fluence_bits(&serial),
+                "{scene}, {ranks} ranks"
+            );
+            assert_eq!(
+                split.report.stop_reason, serial.report.stop_reason,
+                "{scene}"
+            );
+            assert_eq!(split.report.iterations, serial.report.iterations, "{scene}");
+        }
+        let processes = solve_as_processes("ftcs-p1", &problem, 3);
+        assert_eq!(
+            fluence_bits(&processes),
+            fluence_bits(&serial),
+            "{scene} as processes"
+        );
+    }
+}
+
+#[test]
+fn multigrid_on_ranks_gives_the_serial_fluence_and_cycle_count() {
+    for scene in SCENES {
+        let problem = problem(scene);
+        let serial = solve("diffusion-mg", &problem, 1);
+        assert!(serial.report.stop_reason.is_converged(), "{scene}");
+        let two = solve("diffusion-mg", &problem, 2);
+        for (channel, (s, d)) in serial.fluence.iter().zip(&two.fluence).enumerate() {
+            let scale = s.data().iter().fold(0.0f32, |m, v| m.max(v.abs()));
+            let worst = s
+                .data()
+                .iter()
+                .zip(d.data())
+                .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+            // The solution is stored in f32: 1e-10 of the largest value is below its
+            // rounding, so this asks for the same f32 values.
+            assert!(
+                f64::from(worst) <= 1e-10 * f64::from(scale),
+                "{scene}, channel {channel}: {worst:e} of {scale:e}"
+            );
+        }
+        let cycles = |s: &Solution| s.report.residual_history.len();
+        assert!(
+            cycles(&serial).abs_diff(cycles(&two)) <= 1,
+            "{scene}: {} serial, {} on two ranks",
+            cycles(&serial),
+            cycles(&two)
+        );
+        // On ranks, the history does not depend on the rank count or the door.
+        let three = solve("diffusion-mg", &problem, 3);
+        assert_eq!(fluence_bits(&three), fluence_bits(&two), "{scene}");
+        assert_eq!(history_bits(&three), history_bits(&two), "{scene}");
+        let processes = solve_as_processes("diffusion-mg", &problem, 2);
+        assert_eq!(fluence_bits(&processes), fluence_bits(&two), "{scene}");
+        assert_eq!(history_bits(&processes), history_bits(&two), "{scene}");
+    }
+}
+
+#[test]
+fn what_cannot_split_says_so() {
+    let problem = problem("suite/slab.toml");
+    let registry = lucent::registry();
+    // A solver that runs in one process, handed two ranks.
+    let world = Threads::world(2);
+    let rank: Arc<dyn Communicator + Send + Sync> = Arc::new(world.into_iter().next().unwrap());
+    let options = SolveOptions {
+        ranks: Some(rank),
+        ..SolveOptions::default()
+    };
+    for name in ["direct", "dom", "diffusion-cg", "convection-diffusion"] {
+        let e = registry
+            .build(name, &Params::default())
+            .unwrap()
+            .solve(&problem, &options)
+            .unwrap_err();
+        assert!(
+            matches!(&e, SolveError::Unsupported { feature, .. } if feature.contains("2 ranks")),
+            "{name}: {e}"
+        );
+    }
+    // Both doors at once, no ranks, too many ranks, and the multigrid under CG.
+    let e = registry
+        .build("diffusion-mg", &params(2))
+        .unwrap()
+        .solve(&problem, &options)
+        .unwrap_err();
+    assert!(
+        matches!(&e, SolveError::InvalidParameter { name, .. } if name == "ranks"),
+        "{e}"
+    );
+    for (name, ranks) in [
+        ("diffusion-mg", 0),
+        ("jacobi-diffusion", 100_000),
+        ("diffusion-mgcg", 2),
+    ] {
+        let e = registry.build(name, &params(ranks)).err().unwrap();
+        assert!(
+            matches!(&e, SolveError::InvalidParameter { name, .. } if name == "ranks"),
+            "{e}"
+        );
+    }
+    // More ranks than the slab's 32 layers.
+    let e = registry
+        .build("diffusion-mg", &params(33))
+        .unwrap()
+        .solve(&problem, &SolveOptions::default())
+        .unwrap_err();
+    assert!(e.to_string().contains("33 ranks for 32 z-layers"), "{e}");
+}
