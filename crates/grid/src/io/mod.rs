@@ -19,6 +19,7 @@
 //! Every reader checks sizes against the file and against [`LoadOptions::memory_budget`]
 //! *before* allocating, and reports problems as [`GridError`]s that name the file.
 
+pub mod layers;
 pub mod mhd;
 pub mod mitsuba;
 pub mod npy;

@@ -30,9 +30,15 @@ fn malformed(path: &Path, reason: impl Into<String>) -> GridError {
     }
 }
 
-/// Decodes a `.npy` file already in memory.
-pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, GridError> {
-    let mut c = Cursor::new(bytes, path);
+/// What a `.npy` header says: the grid's dims, the samples' type and byte order.
+pub(crate) struct Header {
+    pub(crate) dims: [usize; 3],
+    pub(crate) scalar: ScalarType,
+    pub(crate) endian: Endian,
+}
+
+/// Reads the header at the cursor (magic, version, dict), leaving it at the array data.
+pub(crate) fn header(c: &mut Cursor<'_>, path: &Path) -> Result<Header, GridError> {
     if c.take(6, "magic")? != MAGIC {
         return Err(malformed(path, "missing \\x93NUMPY magic"));
     }
@@ -82,11 +88,28 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, G
             value: shape.len().to_string(),
         });
     }
+    // Both orders put x fastest and z slowest: C order's (n_z, n_y, n_x) and Fortran
+    // order's (n_x, n_y, n_z).
     let dims = if fortran {
         [shape[0], shape[1], shape[2]]
     } else {
         [shape[2], shape[1], shape[0]]
     };
+    Ok(Header {
+        dims,
+        scalar,
+        endian,
+    })
+}
+
+/// Decodes a `.npy` file already in memory.
+pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, GridError> {
+    let mut c = Cursor::new(bytes, path);
+    let Header {
+        dims,
+        scalar,
+        endian,
+    } = header(&mut c, path)?;
     let voxels = checked_voxels(path, "npy", dims)?;
     options.reserve_voxels(path, voxels, scalar)?;
     let expected = voxels * scalar.size() as u64;

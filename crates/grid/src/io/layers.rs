@@ -1,0 +1,177 @@
+//! Some z-layers of a volume file, read by positioned reads (`pread`): a rank of a z-slab
+//! decomposition reads the header and its own layers' bytes, never the whole volume.
+//!
+//! Formats whose samples are stored uncompressed with x fastest and z slowest, so that a
+//! run of z-layers is one contiguous run of bytes: headerless `.raw` (with its
+//! [`RawLayout`]) and `.npy` (C order (n_z, n_y, n_x) or Fortran order (n_x, n_y, n_z)).
+//! The file's size is checked against its header (metadata, not a read) exactly as the
+//! whole-file readers check it, the budget covers the layers only, and a non-finite sample
+//! in the layers is refused by its cell, as everywhere.
+
+use std::fs::File;
+use std::ops::Range;
+use std::path::Path;
+
+use glam::DVec3;
+
+use super::raw::RawLayout;
+use super::{Cursor, Endian, LoadOptions, ScalarType, checked_voxels, decode};
+use crate::dense::Grid;
+use crate::error::GridError;
+use crate::geometry::GridGeometry;
+
+/// Layers `first..first + grid.dims()[2]` of a volume.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Layers {
+    /// The whole volume's geometry.
+    pub whole: GridGeometry,
+    /// The first layer read.
+    pub first: usize,
+    /// The layers: the whole volume's n_x × n_y, its spacing, its origin moved up by
+    /// `first` layers.
+    pub grid: Grid,
+}
+
+fn io_error(path: &Path) -> impl Fn(std::io::Error) -> GridError + '_ {
+    move |source| GridError::Io {
+        path: path.to_owned(),
+        source,
+    }
+}
+
+/// `buf.len()` bytes of `file` from `offset`.
+fn read_at(file: &File, path: &Path, buf: &mut [u8], offset: u64) -> Result<(), GridError> {
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::FileExt::read_exact_at(file, buf, offset).map_err(io_error(path))
+    }
+    #[cfg(not(unix))]
+    {
+        use std::io::{Read, Seek, SeekFrom};
+        let mut f = file;
+        f.seek(SeekFrom::Start(offset)).map_err(io_error(path))?;
+        f.read_exact(buf).map_err(io_error(path))
+    }
+}
+
+/// Layers `layers` of a raw file of `layout`.
+///
+/// # Errors
+/// An empty range or one past n_z ([`GridError::InvalidParameter`]), a file whose size is
+/// not the layout's, the budget, I/O, and non-finite samples.
+pub fn read_raw_layers(
+    path: impl AsRef<Path>,
+    layout: &RawLayout,
+    layers: Range<usize>,
+    options: &LoadOptions,
+) -> Result<Layers, GridError> {
+    let path = path.as_ref();
+    let whole = super::geometry(path, "raw", layout.dims, layout.spacing, layout.origin)?;
+    let file = File::open(path).map_err(io_error(path))?;
+    positioned(
+        &file,
+        path,
+        "raw",
+        whole,
+        (layout.scalar, layout.endian),
+        0,
+        layers,
+        options,
+    )
+}
+
+/// The most bytes a `.npy` header may take (NumPy writes 64 to a few hundred).
+const MAX_NPY_HEADER: usize = 1 << 20;
+
+/// Layers `layers` of a `.npy` file (unit spacing at the origin, as [`super::npy::read`]).
+///
+/// # Errors
+/// As [`read_raw_layers`], and a malformed header.
+pub fn read_npy_layers(
+    path: impl AsRef<Path>,
+    layers: Range<usize>,
+    options: &LoadOptions,
+) -> Result<Layers, GridError> {
+    let path = path.as_ref();
+    let file = File::open(path).map_err(io_error(path))?;
+    let len = file.metadata().map_err(io_error(path))?.len();
+    // Magic (6), version (2) and the header's length (2 or 4), then the header.
+    let mut prefix = vec![0u8; (len as usize).min(12)];
+    read_at(&file, path, &mut prefix, 0)?;
+    let header_len = match prefix.get(6) {
+        Some(1) if prefix.len() >= 10 => 10 + u16::from_le_bytes([prefix[8], prefix[9]]) as usize,
+        Some(2 | 3) if prefix.len() >= 12 => {
+            12 + u32::from_le_bytes([prefix[8], prefix[9], prefix[10], prefix[11]]) as usize
+        }
+        _ => prefix.len(),
+    };
+    let header_len = header_len.min(MAX_NPY_HEADER).min(len as usize);
+    let mut bytes = vec![0u8; header_len];
+    read_at(&file, path, &mut bytes, 0)?;
+    let mut c = Cursor::new(&bytes, path);
+    let header = super::npy::header(&mut c, path)?;
+    let whole = super::geometry(path, "npy", header.dims, DVec3::ONE, DVec3::ZERO)?;
+    positioned(
+        &file,
+        path,
+        "npy",
+        whole,
+        (header.scalar, header.endian),
+        c.pos as u64,
+        layers,
+        options,
+    )
+}
+
+/// Reads `layers` of the samples stored from `offset` of `file` as `whole`'s cells.
+#[allow(clippy::too_many_arguments)]
+fn positioned(
+    file: &File,
+    path: &Path,
+    format: &'static str,
+    whole: GridGeometry,
+    (scalar, endian): (ScalarType, Endian),
+    offset: u64,
+    layers: Range<usize>,
+    options: &LoadOptions,
+) -> Result<Layers, GridError> {
+    let [nx, ny, nz] = whole.dims();
+    if layers.is_empty() || layers.end > nz {
+        return Err(GridError::InvalidParameter {
+            name: "layers",
+            reason: format!("{layers:?} of a volume of {nz} z-layers"),
+        });
+    }
+    let voxels = checked_voxels(path, format, whole.dims())?;
+    let expected = offset + voxels * scalar.size() as u64;
+    let found = file.metadata().map_err(io_error(path))?.len();
+    if found != expected {
+        return Err(GridError::SizeMismatch {
+            path: path.to_owned(),
+            expected,
+            found,
+        });
+    }
+    let layer_bytes = (nx * ny * scalar.size()) as u64;
+    let count = layers.len();
+    options.reserve_voxels(path, (nx * ny * count) as u64, scalar)?;
+    let mut bytes = vec![0u8; layer_bytes as usize * count];
+    read_at(
+        file,
+        path,
+        &mut bytes,
+        offset + layers.start as u64 * layer_bytes,
+    )?;
+    let geometry = super::geometry(
+        path,
+        format,
+        [nx, ny, count],
+        whole.spacing(),
+        whole.origin() + DVec3::new(0.0, 0.0, layers.start as f64 * whole.spacing().z),
+    )?;
+    Ok(Layers {
+        whole,
+        first: layers.start,
+        grid: super::finite_grid(path, geometry, decode(&bytes, scalar, endian))?,
+    })
+}

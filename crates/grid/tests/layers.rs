@@ -1,0 +1,152 @@
+//! Positioned reads of z-layers (`io::layers`): the layers of every whole-file read, for
+//! random grids, ranges and sample types; a 32 GiB (sparse) volume's two layers under a
+//! budget the whole could never fit; and typed errors for bad ranges and sizes.
+
+use std::io::Write;
+
+use glam::DVec3;
+use lucent_grid::io::layers::{read_npy_layers, read_raw_layers};
+use lucent_grid::io::raw::RawLayout;
+use lucent_grid::io::{Endian, LoadOptions, ScalarType, npy, raw};
+use lucent_grid::{Grid, GridError, GridGeometry};
+use proptest::prelude::*;
+
+fn grid(dims: [usize; 3], seed: u64) -> Grid {
+    let geometry = GridGeometry::new(dims, DVec3::ONE, DVec3::ZERO).unwrap();
+    let n = dims.iter().product::<usize>();
+    // Small integers: exact in every sample type.
+    let data = (0..n)
+        .map(|i| (((i as u64 * 2_654_435_761) ^ seed) % 200) as f32)
+        .collect();
+    Grid::from_vec(geometry, data).unwrap()
+}
+
+fn slice(g: &Grid, z: std::ops::Range<usize>) -> Vec<f32> {
+    let [nx, ny, _] = g.dims();
+    g.data()[z.start * nx * ny..z.end * nx * ny].to_vec()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+    #[test]
+    fn layers_are_the_whole_reads_layers(
+        nx in 1usize..13, ny in 1usize..11, nz in 1usize..17,
+        a in 0usize..17, b in 0usize..17, seed in any::<u64>(),
+        scalar in prop::sample::select(vec![ScalarType::U8, ScalarType::I16, ScalarType::U16, ScalarType::F32, ScalarType::F64]),
+        big_endian in any::<bool>(),
+    ) {
+        let (k0, k1) = (a.min(b) % nz, (a.max(b) % nz) + 1);
+        prop_assume!(k0 < k1);
+        let g = grid([nx, ny, nz], seed);
+        let dir = tempfile::tempdir().unwrap();
+        let options = LoadOptions::default();
+
+        let npy_path = dir.path().join("v.npy");
+        npy::write(&npy_path, &g, scalar).unwrap();
+        let whole = npy::read(&npy_path, &options).unwrap();
+        let part = read_npy_layers(&npy_path, k0..k1, &options).unwrap();
+        prop_assert_eq!(part.whole, *whole.geometry());
+        prop_assert_eq!(part.first, k0);
+        prop_assert_eq!(part.grid.dims(), [nx, ny, k1 - k0]);
+        prop_assert_eq!(part.grid.data(), &slice(&whole, k0..k1)[..]);
+        prop_assert_eq!(part.grid.geometry().origin().z, k0 as f64);
+
+        let endian = if big_endian { Endian::Big } else { Endian::Little };
+        let raw_path = dir.path().join("v.raw");
+        raw::write(&raw_path, &g, scalar, endian).unwrap();
+        let layout = RawLayout {
+            dims: [nx, ny, nz],
+            scalar,
+            endian,
+            spacing: DVec3::new(0.5, 0.25, 2.0),
+            origin: DVec3::new(-1.0, 3.0, 7.0),
+        };
+        let whole = raw::read(&raw_path, &layout, &options).unwrap();
+        let part = read_raw_layers(&raw_path, &layout, k0..k1, &options).unwrap();
+        prop_assert_eq!(part.grid.data(), &slice(&whole, k0..k1)[..]);
+        prop_assert_eq!(part.grid.geometry().origin(), DVec3::new(-1.0, 3.0, 7.0 + 2.0 * k0 as f64));
+        prop_assert_eq!(part.grid.geometry().spacing(), layout.spacing);
+    }
+}
+
+#[test]
+fn two_layers_of_a_32_gib_volume_read_within_a_small_budget() {
+    // A sparse .npy of 1024 × 1024 × 8192 f32 (32 GiB, no disk used): the whole read is
+    // refused by a 64 MiB budget; two layers (8 MiB) are read, and are the zeros there.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("huge.npy");
+    let dict = "{'descr': '<f4', 'fortran_order': False, 'shape': (8192, 1024, 1024), }";
+    let mut header = dict.to_owned();
+    while !(10 + header.len() + 1).is_multiple_of(64) {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut file = std::fs::File::create(&path).unwrap();
+    file.write_all(b"\x93NUMPY\x01\x00").unwrap();
+    file.write_all(&(header.len() as u16).to_le_bytes())
+        .unwrap();
+    file.write_all(header.as_bytes()).unwrap();
+    let data_offset = 10 + header.len() as u64;
+    file.set_len(data_offset + 4 * 1024 * 1024 * 8192).unwrap();
+    drop(file);
+    let options = LoadOptions {
+        memory_budget: 64 << 20,
+    };
+    assert!(matches!(
+        npy::read(&path, &options),
+        Err(GridError::OverBudget { .. })
+    ));
+    let part = read_npy_layers(&path, 4000..4002, &options).unwrap();
+    assert_eq!(part.whole.dims(), [1024, 1024, 8192]);
+    assert_eq!(part.grid.dims(), [1024, 1024, 2]);
+    assert!(part.grid.data().iter().all(|&v| v == 0.0));
+    // Ten layers (40 MiB of f32 plus their samples) do not fit: the budget is per read.
+    assert!(matches!(
+        read_npy_layers(&path, 0..10, &options),
+        Err(GridError::OverBudget { .. })
+    ));
+}
+
+#[test]
+fn bad_ranges_and_sizes_are_typed_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let g = grid([5, 4, 6], 7);
+    let path = dir.path().join("v.npy");
+    npy::write(&path, &g, ScalarType::F32).unwrap();
+    let options = LoadOptions::default();
+    for range in [3..3, 5..7, 6..7] {
+        let e = read_npy_layers(&path, range.clone(), &options).unwrap_err();
+        assert!(
+            matches!(e, GridError::InvalidParameter { name: "layers", .. }),
+            "{range:?}: {e}"
+        );
+    }
+    // A truncated file is refused before anything is read, as by the whole read.
+    let bytes = std::fs::read(&path).unwrap();
+    let cut = dir.path().join("cut.npy");
+    std::fs::write(&cut, &bytes[..bytes.len() - 4]).unwrap();
+    assert!(matches!(
+        read_npy_layers(&cut, 0..1, &options),
+        Err(GridError::SizeMismatch { .. })
+    ));
+    let raw_path = dir.path().join("v.raw");
+    raw::write(&raw_path, &g, ScalarType::U8, Endian::Little).unwrap();
+    let wrong = RawLayout::new([5, 4, 7], ScalarType::U8);
+    assert!(matches!(
+        read_raw_layers(&raw_path, &wrong, 0..2, &options),
+        Err(GridError::SizeMismatch { .. })
+    ));
+    // A NaN in the layers is refused by its cell; outside them it is not read.
+    // (The writers refuse NaN: patch one into layer 5's bytes.)
+    let mut bytes = std::fs::read(&path).unwrap();
+    let data_offset = bytes.len() - 4 * 5 * 4 * 6;
+    let at = data_offset + 4 * (5 * 4 * 5 + 3);
+    bytes[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    let nan_path = dir.path().join("nan.npy");
+    std::fs::write(&nan_path, &bytes).unwrap();
+    assert!(matches!(
+        read_npy_layers(&nan_path, 4..6, &options),
+        Err(GridError::NonFinite { .. })
+    ));
+    assert!(read_npy_layers(&nan_path, 0..5, &options).is_ok());
+}
