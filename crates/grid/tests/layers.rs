@@ -1,13 +1,14 @@
 //! Positioned reads of z-layers (`io::layers`): the layers of every whole-file read, for
-//! random grids, ranges and sample types; a 32 GiB (sparse) volume's two layers under a
-//! budget the whole could never fit; and typed errors for bad ranges and sizes.
+//! random grids, ranges and sample types (raw, npy) and for NRRD attached and detached; a
+//! 32 GiB (sparse) volume's two layers under a budget the whole could never fit; and typed
+//! errors for bad ranges, sizes and compressed payloads.
 
 use std::io::Write;
 
 use glam::DVec3;
-use lucent_grid::io::layers::{read_npy_layers, read_raw_layers};
+use lucent_grid::io::layers::{read_npy_layers, read_nrrd_layers, read_raw_layers};
 use lucent_grid::io::raw::RawLayout;
-use lucent_grid::io::{Endian, LoadOptions, ScalarType, npy, raw};
+use lucent_grid::io::{Endian, LoadOptions, ScalarType, npy, nrrd, raw};
 use lucent_grid::{Grid, GridError, GridGeometry};
 use proptest::prelude::*;
 
@@ -149,4 +150,66 @@ fn bad_ranges_and_sizes_are_typed_errors() {
         Err(GridError::NonFinite { .. })
     ));
     assert!(read_npy_layers(&nan_path, 0..5, &options).is_ok());
+}
+
+#[test]
+fn nrrd_layers_attached_and_detached_are_the_whole_reads_layers() {
+    let dir = tempfile::tempdir().unwrap();
+    let options = LoadOptions::default();
+    let geometry = GridGeometry::new(
+        [7, 5, 9],
+        DVec3::new(0.5, 0.25, 2.0),
+        DVec3::new(-1.0, 3.0, 7.0),
+    )
+    .unwrap();
+    let g = Grid::from_vec(geometry, grid([7, 5, 9], 3).data().to_vec()).unwrap();
+    // Attached, as lucent writes it.
+    let attached = dir.path().join("v.nrrd");
+    nrrd::write(&attached, &g, ScalarType::U16, nrrd::Encoding::Raw).unwrap();
+    let whole = nrrd::read(&attached, &options).unwrap();
+    for range in [0..9, 2..5, 8..9] {
+        let part = read_nrrd_layers(&attached, range.clone(), &options).unwrap();
+        assert_eq!(part.whole, *whole.geometry());
+        assert_eq!(part.grid.data(), &slice(&whole, range.clone())[..]);
+        let z = whole.geometry().origin().z + 2.0 * range.start as f64;
+        assert!((part.grid.geometry().origin().z - z).abs() < 1e-12);
+    }
+    // Detached, big-endian floats at the end of a data file that starts with junk
+    // (`byte skip: -1`).
+    let mut data = b"junk before the samples".to_vec();
+    for v in whole.data() {
+        data.extend_from_slice(&v.to_be_bytes());
+    }
+    std::fs::write(dir.path().join("v.raw"), &data).unwrap();
+    let nhdr = dir.path().join("v.nhdr");
+    std::fs::write(
+        &nhdr,
+        "NRRD0004\ntype: float\ndimension: 3\nsizes: 7 5 9\nspacings: 0.5 0.25 2\nendian: big\nencoding: raw\nbyte skip: -1\ndata file: v.raw\n",
+    )
+    .unwrap();
+    let whole_detached = nrrd::read(&nhdr, &options).unwrap();
+    let part = read_nrrd_layers(&nhdr, 3..7, &options).unwrap();
+    assert_eq!(part.grid.data(), &slice(&whole_detached, 3..7)[..]);
+    assert_eq!(part.grid.data(), &slice(&whole, 3..7)[..]);
+    // A compressed payload cannot be read in part.
+    let gz = dir.path().join("v.gz.nrrd");
+    nrrd::write(&gz, &g, ScalarType::F32, nrrd::Encoding::Gzip).unwrap();
+    assert!(matches!(
+        read_nrrd_layers(&gz, 0..2, &options),
+        Err(GridError::Unsupported { .. })
+    ));
+    // A payload one sample short is truncated, as for the whole read.
+    let short = dir.path().join("short.raw");
+    std::fs::write(&short, &data[..data.len() - 4]).unwrap();
+    let nhdr_short = dir.path().join("short.nhdr");
+    std::fs::write(
+        &nhdr_short,
+        "NRRD0004\ntype: float\ndimension: 3\nsizes: 7 5 9\nendian: big\nencoding: raw\nbyte skip: 23\ndata file: short.raw\n",
+    )
+    .unwrap();
+    assert!(matches!(
+        read_nrrd_layers(&nhdr_short, 0..2, &options),
+        Err(GridError::Truncated { .. })
+    ));
+    assert!(nrrd::read(&nhdr_short, &options).is_err());
 }

@@ -3,7 +3,8 @@
 //!
 //! Formats whose samples are stored uncompressed with x fastest and z slowest, so that a
 //! run of z-layers is one contiguous run of bytes: headerless `.raw` (with its
-//! [`RawLayout`]) and `.npy` (C order (n_z, n_y, n_x) or Fortran order (n_x, n_y, n_z)).
+//! [`RawLayout`]), `.npy` (C order (n_z, n_y, n_x) or Fortran order (n_x, n_y, n_z)), and
+//! NRRD with a `raw` payload, attached or detached (`byte skip` ≥ 0 or −1).
 //! The file's size is checked against its header (metadata, not a read) exactly as the
 //! whole-file readers check it, the budget covers the layers only, and a non-finite sample
 //! in the layers is refused by its cell, as everywhere.
@@ -68,6 +69,7 @@ pub fn read_raw_layers(
     let path = path.as_ref();
     let whole = super::geometry(path, "raw", layout.dims, layout.spacing, layout.origin)?;
     let file = File::open(path).map_err(io_error(path))?;
+    exact_size(&file, path, "raw", &whole, layout.scalar, 0)?;
     positioned(
         &file,
         path,
@@ -111,6 +113,7 @@ pub fn read_npy_layers(
     let mut c = Cursor::new(&bytes, path);
     let header = super::npy::header(&mut c, path)?;
     let whole = super::geometry(path, "npy", header.dims, DVec3::ONE, DVec3::ZERO)?;
+    exact_size(&file, path, "npy", &whole, header.scalar, c.pos as u64)?;
     positioned(
         &file,
         path,
@@ -123,7 +126,138 @@ pub fn read_npy_layers(
     )
 }
 
-/// Reads `layers` of the samples stored from `offset` of `file` as `whole`'s cells.
+/// Refuses a file that is not `offset` plus `whole`'s samples long (as the whole-file
+/// readers do).
+fn exact_size(
+    file: &File,
+    path: &Path,
+    format: &'static str,
+    whole: &GridGeometry,
+    scalar: ScalarType,
+    offset: u64,
+) -> Result<(), GridError> {
+    let voxels = checked_voxels(path, format, whole.dims())?;
+    let expected = offset + voxels * scalar.size() as u64;
+    let found = file.metadata().map_err(io_error(path))?.len();
+    if found != expected {
+        return Err(GridError::SizeMismatch {
+            path: path.to_owned(),
+            expected,
+            found,
+        });
+    }
+    Ok(())
+}
+
+/// The most bytes a NRRD header may take before its blank line.
+const MAX_NRRD_HEADER: u64 = 1 << 20;
+
+/// Layers `layers` of a NRRD volume (`.nrrd` attached or `.nhdr` detached) whose samples
+/// are `raw`-encoded, with its placement, as [`super::nrrd::read`] gives the whole.
+///
+/// # Errors
+/// As [`read_raw_layers`]; [`GridError::Unsupported`] for a compressed or text payload or
+/// a `line skip` (which only a read of the lines before the samples can resolve).
+pub fn read_nrrd_layers(
+    path: impl AsRef<Path>,
+    layers: Range<usize>,
+    options: &LoadOptions,
+) -> Result<Layers, GridError> {
+    let path = path.as_ref();
+    let malformed = |reason: &str| GridError::Malformed {
+        path: path.to_owned(),
+        format: "NRRD",
+        reason: reason.to_owned(),
+    };
+    let unsupported = |what: &'static str, value: String| GridError::Unsupported {
+        path: path.to_owned(),
+        what,
+        value,
+    };
+    let file = File::open(path).map_err(io_error(path))?;
+    let len = file.metadata().map_err(io_error(path))?.len();
+    let mut prefix = vec![0u8; len.min(MAX_NRRD_HEADER) as usize];
+    read_at(&file, path, &mut prefix, 0)?;
+    if !prefix.starts_with(b"NRRD000") {
+        return Err(malformed("missing NRRD000x magic"));
+    }
+    let (header_bytes, attached_at) = match super::split_header(&prefix) {
+        Some((h, rest)) => (h, (prefix.len() - rest.len()) as u64),
+        None if len <= MAX_NRRD_HEADER => (&prefix[..], len),
+        None => return Err(malformed("no blank line ends the header within 1 MiB")),
+    };
+    let header = super::nrrd::header(header_bytes, path, |_, _| Ok(()))?;
+    if header.encoding != "raw" {
+        return Err(unsupported(
+            "NRRD encoding for positioned reads",
+            header.encoding.clone(),
+        ));
+    }
+    if header.line_skip != 0 {
+        return Err(unsupported(
+            "NRRD `line skip` for positioned reads",
+            header.line_skip.to_string(),
+        ));
+    }
+    let (data_path, data, base) = match header.data_file.as_deref() {
+        Some(name) if name.starts_with("LIST") || name.contains('%') => {
+            return Err(unsupported("multi-file NRRD data", name.to_owned()));
+        }
+        Some(name) => {
+            let data_path = super::sibling(path, name);
+            let data = File::open(&data_path).map_err(io_error(&data_path))?;
+            (data_path, data, 0)
+        }
+        None => (path.to_owned(), file, attached_at),
+    };
+    let data_len = data.metadata().map_err(io_error(&data_path))?.len();
+    let expected = header.expected;
+    let truncated = |found: u64| GridError::Truncated {
+        path: data_path.clone(),
+        what: "raw samples",
+        expected,
+        found,
+    };
+    let start = if header.byte_skip == -1 {
+        data_len
+            .checked_sub(expected)
+            .filter(|&s| s >= base)
+            .ok_or_else(|| truncated(data_len.saturating_sub(base)))?
+    } else {
+        let skip = u64::try_from(header.byte_skip).map_err(|_| malformed("bad `byte skip`"))?;
+        base.saturating_add(skip)
+    };
+    let present = data_len.saturating_sub(start);
+    if present < expected {
+        return Err(truncated(present));
+    }
+    // One byte more is allowed when it is a final newline, as the whole read allows it.
+    if present > expected {
+        let mut last = [0u8];
+        read_at(&data, &data_path, &mut last, data_len - 1)?;
+        if present != expected + 1 || last != *b"\n" {
+            return Err(GridError::SizeMismatch {
+                path: data_path.clone(),
+                expected,
+                found: present,
+            });
+        }
+    }
+    debug_assert_eq!(header.voxels * header.scalar.size() as u64, expected);
+    positioned(
+        &data,
+        &data_path,
+        "NRRD",
+        header.geometry,
+        (header.scalar, header.endian),
+        start,
+        layers,
+        options,
+    )
+}
+
+/// Reads `layers` of the samples stored from `offset` of `file` as `whole`'s cells (the
+/// file's size checked by the caller).
 #[allow(clippy::too_many_arguments)]
 fn positioned(
     file: &File,
@@ -140,16 +274,6 @@ fn positioned(
         return Err(GridError::InvalidParameter {
             name: "layers",
             reason: format!("{layers:?} of a volume of {nz} z-layers"),
-        });
-    }
-    let voxels = checked_voxels(path, format, whole.dims())?;
-    let expected = offset + voxels * scalar.size() as u64;
-    let found = file.metadata().map_err(io_error(path))?.len();
-    if found != expected {
-        return Err(GridError::SizeMismatch {
-            path: path.to_owned(),
-            expected,
-            found,
         });
     }
     let layer_bytes = (nx * ny * scalar.size()) as u64;

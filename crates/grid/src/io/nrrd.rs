@@ -61,13 +61,29 @@ fn scalar_type(name: &str) -> Option<ScalarType> {
     })
 }
 
-/// Parses a NRRD header and its payload (attached after the header, or from the detached
-/// file relative to `path`).
-pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, GridError> {
-    if !bytes.starts_with(b"NRRD000") {
-        return Err(malformed(path, "missing NRRD000x magic"));
-    }
-    let (header, attached) = split_header(bytes).unwrap_or((bytes, &[]));
+/// What a NRRD header says.
+pub(crate) struct Header {
+    pub(crate) geometry: crate::GridGeometry,
+    pub(crate) scalar: ScalarType,
+    pub(crate) endian: Endian,
+    pub(crate) voxels: u64,
+    /// Payload bytes of `raw` samples.
+    pub(crate) expected: u64,
+    pub(crate) encoding: String,
+    pub(crate) line_skip: usize,
+    pub(crate) byte_skip: i64,
+    /// The detached data file's name, as written.
+    pub(crate) data_file: Option<String>,
+}
+
+/// Parses a header (the bytes before the blank line, magic included); `reserve` checks the
+/// samples against a budget where the whole-file read checks them (so errors keep their
+/// order).
+pub(crate) fn header(
+    header: &[u8],
+    path: &Path,
+    reserve: impl Fn(u64, ScalarType) -> Result<(), GridError>,
+) -> Result<Header, GridError> {
     let header = std::str::from_utf8(header).map_err(|_| malformed(path, "header is not text"))?;
     let mut fields = std::collections::HashMap::new();
     for line in header.lines().skip(1) {
@@ -124,23 +140,56 @@ pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, G
     let geometry = super::geometry(path, "NRRD", dims, spacing, first_sample - 0.5 * spacing)?;
 
     let voxels = checked_voxels(path, "NRRD", dims)?;
-    options.reserve_voxels(path, voxels, scalar)?;
+    reserve(voxels, scalar)?;
     let expected = voxels * scalar.size() as u64;
     let endian = match field("endian") {
         Some("big") => Endian::Big,
         Some("little") | None => Endian::Little,
         Some(other) => return Err(malformed(path, format!("bad `endian` {other}"))),
     };
-    let encoding = required("encoding")?;
+    let encoding = required("encoding")?.to_owned();
     let line_skip: usize = field("line skip")
         .map_or(Ok(0), str::parse)
         .map_err(|_| malformed(path, "bad `line skip`"))?;
     let byte_skip: i64 = field("byte skip")
         .map_or(Ok(0), str::parse)
         .map_err(|_| malformed(path, "bad `byte skip`"))?;
+    Ok(Header {
+        geometry,
+        scalar,
+        endian,
+        voxels,
+        expected,
+        encoding,
+        line_skip,
+        byte_skip,
+        data_file: field("data file").or(field("datafile")).map(str::to_owned),
+    })
+}
 
+/// Parses a NRRD header and its payload (attached after the header, or from the detached
+/// file relative to `path`).
+pub fn parse(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Grid, GridError> {
+    if !bytes.starts_with(b"NRRD000") {
+        return Err(malformed(path, "missing NRRD000x magic"));
+    }
+    let (header_bytes, attached) = split_header(bytes).unwrap_or((bytes, &[]));
+    let Header {
+        geometry,
+        scalar,
+        endian,
+        voxels,
+        expected,
+        encoding,
+        line_skip,
+        byte_skip,
+        data_file,
+    } = header(header_bytes, path, |voxels, scalar| {
+        options.reserve_voxels(path, voxels, scalar)
+    })?;
+    let encoding = encoding.as_str();
     let detached;
-    let (data_path, mut payload): (&Path, &[u8]) = match field("data file").or(field("datafile")) {
+    let (data_path, mut payload): (&Path, &[u8]) = match data_file.as_deref() {
         Some(name) if name.starts_with("LIST") || name.contains('%') => {
             return Err(GridError::Unsupported {
                 path: path.to_owned(),
