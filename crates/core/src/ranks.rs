@@ -124,6 +124,19 @@ impl Threads {
             .collect()
     }
 
+    /// Runs `f` on `size` connected ranks, one scoped thread each; every rank's result in
+    /// rank order (`None` for a rank whose thread panicked).
+    pub fn run<T: Send>(size: usize, f: impl Fn(&Threads) -> T + Sync) -> Vec<Option<T>> {
+        let f = &f;
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = Threads::world(size)
+                .into_iter()
+                .map(|comm| scope.spawn(move || f(&comm)))
+                .collect();
+            handles.into_iter().map(|h| h.join().ok()).collect()
+        })
+    }
+
     fn next(&self, kind: u8) -> u64 {
         let mut s = self.sequence.lock().unwrap_or_else(|p| p.into_inner());
         s[kind as usize] += 1;

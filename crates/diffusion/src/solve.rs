@@ -185,28 +185,17 @@ pub fn solve_on_ranks(
             (phi, c, 1)
         }
         RanksOf::Threads(count) => {
-            let worlds = Threads::world(count);
             let (mg, rhs) = (&mg, &rhs);
-            let mut results = std::thread::scope(|scope| {
-                let ranks: Vec<_> = worlds
-                    .into_iter()
-                    .map(|comm| {
-                        scope.spawn(move || {
-                            let mut phi = vec![0.0f64; rhs.len()];
-                            mg.solve_on_ranks(rhs, &mut phi, stopping, &comm)
-                                .map(|c| (phi, c))
-                        })
-                    })
-                    .collect();
-                ranks
-                    .into_iter()
-                    .map(|rank| {
-                        rank.join().unwrap_or_else(|_| {
-                            Err(DiffusionError::Ranks("a rank's thread panicked".into()))
-                        })
-                    })
-                    .collect::<Result<Vec<_>, _>>()
-            })?;
+            let mut results = Threads::run(count, |comm| {
+                let mut phi = vec![0.0f64; rhs.len()];
+                mg.solve_on_ranks(rhs, &mut phi, stopping, comm)
+                    .map(|c| (phi, c))
+            })
+            .into_iter()
+            .map(|r| {
+                r.unwrap_or_else(|| Err(DiffusionError::Ranks("a rank's thread panicked".into())))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
             // Every rank holds the whole, identical result: keep rank 0's.
             let (phi, c) = results.swap_remove(0);
             (phi, c, count as u64)

@@ -383,21 +383,13 @@ pub fn iterate_on_threads(
     settings: &SteadySettings,
     ranks: usize,
 ) -> Result<Steady, DecompositionError> {
-    let worlds = lucent_core::ranks::Threads::world(ranks);
-    let mut results = std::thread::scope(|scope| {
-        let handles: Vec<_> = worlds
-            .into_iter()
-            .map(|comm| scope.spawn(move || iterate(system, slab_len, iteration, settings, &comm)))
-            .collect();
-        handles
-            .into_iter()
-            .enumerate()
-            .map(|(rank, h)| {
-                h.join()
-                    .unwrap_or(Err(DecompositionError::Protocol { rank }))
-            })
-            .collect::<Result<Vec<_>, _>>()
-    })?;
+    let mut results = lucent_core::ranks::Threads::run(ranks, |comm| {
+        iterate(system, slab_len, iteration, settings, comm)
+    })
+    .into_iter()
+    .enumerate()
+    .map(|(rank, r)| r.unwrap_or(Err(DecompositionError::Protocol { rank })))
+    .collect::<Result<Vec<_>, _>>()?;
     Ok(results.swap_remove(0))
 }
 
@@ -632,20 +624,11 @@ pub fn march_p1_on_threads(
     settings: &crate::p1::P1Settings,
     ranks: usize,
 ) -> Result<crate::p1::P1State, DecompositionError> {
-    let worlds = lucent_core::ranks::Threads::world(ranks);
-    let mut results = std::thread::scope(|scope| {
-        let handles: Vec<_> = worlds
-            .into_iter()
-            .map(|comm| scope.spawn(move || march_p1(lattice, source, settings, &comm)))
-            .collect();
-        handles
+    let mut results =
+        lucent_core::ranks::Threads::run(ranks, |comm| march_p1(lattice, source, settings, comm))
             .into_iter()
             .enumerate()
-            .map(|(rank, h)| {
-                h.join()
-                    .unwrap_or(Err(DecompositionError::Protocol { rank }))
-            })
-            .collect::<Result<Vec<_>, _>>()
-    })?;
+            .map(|(rank, r)| r.unwrap_or(Err(DecompositionError::Protocol { rank })))
+            .collect::<Result<Vec<_>, _>>()?;
     Ok(results.swap_remove(0))
 }
