@@ -424,7 +424,7 @@ fn choose_solver(scene: &Scene, args: &SolverArgs) -> Result<Chosen, Error> {
         && !solver.capabilities().ranks
     {
         return Err(Error::Usage(format!(
-            "`{name}` runs in one process, not on {} MPI ranks (diffusion-mg, ftcs-diffusion, jacobi-diffusion and ftcs-p1 split over ranks)",
+            "`{name}` runs in one process, not on {} MPI ranks (diffusion-mg, ftcs-diffusion, jacobi-diffusion, ftcs-p1 and convection-diffusion's ordered characteristic or paper march split over ranks)",
             world.size()
         )));
     }

@@ -163,13 +163,13 @@ enum Upwind {
     Ghost(f64),
 }
 
-struct Setup<'a> {
-    lattice: &'a Lattice,
-    light: Light,
-    model: Model,
-    edges: Edges,
-    courant: f64,
-    absorption: &'a [f64],
+pub(crate) struct Setup<'a> {
+    pub(crate) lattice: &'a Lattice,
+    pub(crate) light: Light,
+    pub(crate) model: Model,
+    pub(crate) edges: Edges,
+    pub(crate) courant: f64,
+    pub(crate) absorption: &'a [f64],
     /// Cells held fixed (seed of an interior point light) and their values.
     fixed: Vec<Option<f64>>,
 }
@@ -289,7 +289,7 @@ impl Setup<'_> {
     /// nodes around it: cell centres, or points of an inflow face, where the light arrives
     /// unattenuated (so the interpolation never reaches across the box's surface, where
     /// the field has a kink).
-    fn characteristic(&self, c: usize, rho: &[f64]) -> f64 {
+    pub(crate) fn characteristic(&self, c: usize, rho: &[f64]) -> f64 {
         self.characteristic_with(c, &|i| rho[i], &|i| self.absorption[i])
     }
 
@@ -557,14 +557,15 @@ pub fn courant_bound(lattice: &Lattice, light: &Light, model: Model, absorption:
     1.0 / (s_max + extra)
 }
 
-/// Marches one light to steady state over `absorption` (per step in [0, 1] for
-/// [`Model::Paper`], a rate in 1/length for [`Model::Conservative`]).
-pub fn propagate(
-    lattice: &Lattice,
-    absorption: &[f64],
+/// The checks every march of one light runs first (the absorption, the light, the Courant
+/// number against its bound), and the march's setup with no cell held fixed:
+/// [`propagate`] and the march on ranks ([`crate::wavefront`]) share them.
+pub(crate) fn prepare<'a>(
+    lattice: &'a Lattice,
+    absorption: &'a [f64],
     light: &Light,
     settings: &UpwindSettings,
-) -> Result<Propagation, ExplicitError> {
+) -> Result<Setup<'a>, ExplicitError> {
     lattice.check_field("absorption", absorption)?;
     let bad_absorption = match settings.model {
         Model::Paper => absorption.iter().any(|&a| !(0.0..=1.0).contains(&a)),
@@ -626,17 +627,29 @@ pub fn propagate(
             requested: courant,
         });
     }
-    let n = lattice.len();
-    let h = lattice.spacing;
-    let mut setup = Setup {
+    Ok(Setup {
         lattice,
         light,
         model: settings.model,
         edges: settings.edges,
         courant,
         absorption,
-        fixed: vec![None; n],
-    };
+        fixed: vec![None; lattice.len()],
+    })
+}
+
+/// Marches one light to steady state over `absorption` (per step in [0, 1] for
+/// [`Model::Paper`], a rate in 1/length for [`Model::Conservative`]).
+pub fn propagate(
+    lattice: &Lattice,
+    absorption: &[f64],
+    light: &Light,
+    settings: &UpwindSettings,
+) -> Result<Propagation, ExplicitError> {
+    let mut setup = prepare(lattice, absorption, light, settings)?;
+    let light = setup.light;
+    let n = lattice.len();
+    let h = lattice.spacing;
     let mut reference = match light {
         Light::Distant { density, .. } => density.abs(),
         Light::Point { .. } => 0.0,
@@ -958,6 +971,24 @@ pub fn march_distant_planes<E: Send>(
 /// order of the light, each cell the fixed point ρ = (1 − σ)C Σ|u_a|ρ_up / (σ + (1 − σ)CS)
 /// of its three upwind neighbours (the light's density beyond inflow faces).
 fn ordered_distant(setup: &Setup<'_>, u: DVec3, density: f64, rho: &mut [f64]) {
+    let [_, ny, nz] = setup.lattice.dims;
+    for kk in 0..nz {
+        for jj in 0..ny {
+            paper_row(setup, u, density, rho, [jj, kk]);
+        }
+    }
+}
+
+/// One x-row of [`ordered_distant`]'s pass: the row `jj`-th along y and `kk`-th along z in
+/// the light's order (its upwind rows in y and z done), x in the light's order. The march
+/// on ranks runs the same rows in another order that keeps every row after its upwind ones.
+pub(crate) fn paper_row(
+    setup: &Setup<'_>,
+    u: DVec3,
+    density: f64,
+    rho: &mut [f64],
+    [jj, kk]: [usize; 2],
+) {
     let l = setup.lattice;
     let [nx, ny, nz] = l.dims;
     let s = l.strides();
@@ -965,32 +996,28 @@ fn ordered_distant(setup: &Setup<'_>, u: DVec3, density: f64, rho: &mut [f64]) {
     let total = w.element_sum();
     let (px, py, pz) = (u.x >= 0.0, u.y >= 0.0, u.z >= 0.0);
     let flip = |v: usize, n: usize, positive: bool| if positive { v } else { n - 1 - v };
-    for kk in 0..nz {
-        let k = flip(kk, nz, pz);
-        for jj in 0..ny {
-            let j = flip(jj, ny, py);
-            let row = j * s[1] + k * s[2];
-            let y_up = (jj > 0).then(|| if py { row - s[1] } else { row + s[1] });
-            let z_up = (kk > 0).then(|| if pz { row - s[2] } else { row + s[2] });
-            let mut x_up = density;
-            for ii in 0..nx {
-                let i = flip(ii, nx, px);
-                let c = row + i;
-                let from_y = y_up.map_or(density, |r| rho[r + i]);
-                let from_z = z_up.map_or(density, |r| rho[r + i]);
-                let inflow = w.x * x_up + w.y * from_y + w.z * from_z;
-                let sigma = setup.absorption[c];
-                let keep = (1.0 - sigma) * setup.courant;
-                let denominator = sigma + keep * total;
-                let value = if denominator > 0.0 {
-                    keep * inflow / denominator
-                } else {
-                    rho[c]
-                };
-                rho[c] = value;
-                x_up = value;
-            }
-        }
+    let k = flip(kk, nz, pz);
+    let j = flip(jj, ny, py);
+    let row = j * s[1] + k * s[2];
+    let y_up = (jj > 0).then(|| if py { row - s[1] } else { row + s[1] });
+    let z_up = (kk > 0).then(|| if pz { row - s[2] } else { row + s[2] });
+    let mut x_up = density;
+    for ii in 0..nx {
+        let i = flip(ii, nx, px);
+        let c = row + i;
+        let from_y = y_up.map_or(density, |r| rho[r + i]);
+        let from_z = z_up.map_or(density, |r| rho[r + i]);
+        let inflow = w.x * x_up + w.y * from_y + w.z * from_z;
+        let sigma = setup.absorption[c];
+        let keep = (1.0 - sigma) * setup.courant;
+        let denominator = sigma + keep * total;
+        let value = if denominator > 0.0 {
+            keep * inflow / denominator
+        } else {
+            rho[c]
+        };
+        rho[c] = value;
+        x_up = value;
     }
 }
 

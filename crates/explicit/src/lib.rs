@@ -23,10 +23,12 @@
 //! `ftcs-p1` and `ftcs-ordinates` (the state twice in f64 slab pages, each step from a ring
 //! of three old slabs).
 //!
-//! On several ranks, [`ranks::iterate`] runs `steady`'s FTCS and Jacobi, and
-//! [`ranks::march_p1`] the P1 march (zero edges), over z-slabs (any
-//! `lucent_core::ranks::Communicator`: threads here, MPI through `lucent-mpi`) with the
-//! serial bits on any number of ranks.
+//! On several ranks, [`ranks::iterate`] runs `steady`'s FTCS and Jacobi,
+//! [`ranks::march_p1`] the P1 march (zero edges), and [`wavefront::propagate_on_ranks`]
+//! Zhang & Ma's one-pass absorption march of a distant light (a pipelined wavefront where
+//! the light crosses the slabs, planes in lock step where it runs along them), over
+//! z-slabs (any `lucent_core::ranks::Communicator`: threads here, MPI through
+//! `lucent-mpi`) with the serial bits on any number of ranks.
 //!
 //! Every march checks its step against [`stability`] before running and refuses a step
 //! beyond the correct bound with [`ExplicitError::Unstable`] unless the study option
@@ -65,6 +67,7 @@ pub mod scatter;
 mod solver;
 pub mod stability;
 pub mod steady;
+pub mod wavefront;
 
 pub use error::ExplicitError;
 pub use lattice::{GrowthMonitor, Lattice};

@@ -138,6 +138,9 @@ pub struct ConvectionParams {
     pub scattering: f64,
     /// Run a Courant number beyond the bound anyway.
     pub allow_unstable: bool,
+    /// In-process ranks to split the march over (z-slabs; distant lights, ordered sweeps,
+    /// the characteristic or the paper's model).
+    pub ranks: usize,
 }
 
 impl Default for ConvectionParams {
@@ -148,6 +151,7 @@ impl Default for ConvectionParams {
             sweep: SweepParam::Ordered,
             scattering: 0.0,
             allow_unstable: false,
+            ranks: 1,
         }
     }
 }
@@ -171,9 +175,14 @@ impl SolverParams for ConvectionParams {
             "σ̂_s t of the implicit scattering step (length², ≥ 0; 0: the uncollided light only)",
         ),
         ALLOW_UNSTABLE,
+        (
+            "ranks",
+            "split each light's march over this many in-process ranks (z-slabs: a pipelined wavefront, or planes in lock step; the bits of one rank; distant lights with ordered sweeps and the characteristic or paper model; under mpirun the processes are the ranks: leave 1)",
+        ),
     ];
 
     fn validate(&self) -> Result<(), SolveError> {
+        lucent_diffusion::check_ranks(self.ranks)?;
         if !(self.scattering >= 0.0 && self.scattering.is_finite()) {
             return Err(invalid("scattering", "σ̂_s t ≥ 0 (length²)"));
         }

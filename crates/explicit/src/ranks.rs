@@ -50,6 +50,9 @@ pub enum DecompositionError {
     /// The iteration refused the system or its step (`steady::row_scale`).
     #[error(transparent)]
     Scheme(#[from] crate::ExplicitError),
+    /// What this march cannot split over ranks (it runs in one process).
+    #[error("{0}")]
+    Unsupported(String),
     /// A neighbour sent what the plan did not expect (a rank stopped or diverged from the
     /// protocol).
     #[error("rank {rank}: a halo or gather did not match the decomposition")]

@@ -92,6 +92,8 @@ enum Scheme {
     Convection {
         settings: UpwindSettings,
         scattering: f64,
+        /// In-process ranks.
+        ranks: usize,
     },
     P1 {
         layout: crate::p1::Layout,
@@ -171,6 +173,7 @@ impl ExplicitSolver {
                         ..UpwindSettings::default()
                     },
                     scattering: p.scattering,
+                    ranks: p.ranks,
                 },
             }))
         },
@@ -301,7 +304,7 @@ impl Solver for ExplicitSolver {
                 .install(|| crate::paged_steady::solve(self.name, kind, problem, options))?;
         }
         let march = match self.scheme {
-            Scheme::P1 { ranks, .. }
+            Scheme::P1 { ranks, .. } | Scheme::Convection { ranks, .. }
                 if ranks > 1 || options.ranks.as_ref().is_some_and(|r| r.size() > 1) =>
             {
                 return Err(SolveError::Unsupported {
@@ -349,7 +352,14 @@ impl Solver for ExplicitSolver {
                 ranks: true,
                 ..diffusion
             },
-            Scheme::Convection { scattering, .. } => Capabilities {
+            // `wavefront::propagate_on_ranks` splits the one-pass marches over z-slabs.
+            Scheme::Convection {
+                scattering,
+                settings,
+                ..
+            } => Capabilities {
+                ranks: settings.sweep == crate::convection::Sweep::Ordered
+                    && settings.model != Model::Conservative,
                 anisotropic: *scattering == 0.0,
                 heterogeneous: true,
                 embedded_geometry: false,
@@ -407,13 +417,18 @@ impl Solver for ExplicitSolver {
             Scheme::Convection {
                 settings,
                 scattering,
-            } => driver::run(
-                self,
-                problem,
-                options,
-                self.memory_bytes(problem),
-                |context| self.convection(context, settings, *scattering),
-            ),
+                ranks,
+            } => {
+                let world = options.ranks.as_ref().filter(|r| r.size() > 1);
+                let on = ranks_of(world, *ranks)?;
+                driver::run(
+                    self,
+                    problem,
+                    options,
+                    self.memory_bytes(problem),
+                    |context| self.convection(context, settings, *scattering, on),
+                )
+            }
             Scheme::P1 { .. } | Scheme::Ordinates { .. } => {
                 driver::solve_per_channel(self, self, problem, options).map(|(s, _)| s)
             }
@@ -496,13 +511,17 @@ impl ExplicitSolver {
     /// f64 working fields per cell: for the steady schemes the assembled system as it is
     /// built (triplets of 24 bytes and the CSR matrix of 16 bytes per non-zero, 7 per row,
     /// the diffusion problem's fields and 6 vectors: 600 bytes, against 590 measured by
-    /// `tests/memory_estimates.rs`), two fields per light and four more for convection, φ
+    /// `tests/memory_estimates.rs`), two fields per light and four more for convection (and
+    /// two per extra in-process rank), φ
     /// and E twice for P1, the radiance of every direction twice for ordinates.
     fn memory_bytes(&self, problem: &Problem) -> u64 {
         let n = problem.geometry().voxel_count() as u64;
         let per_cell = match &self.scheme {
             Scheme::Steady { .. } => 600,
-            Scheme::Convection { .. } => 8 * (6 + 2 * problem.lights().len() as u64),
+            // In-process ranks hold a field and its gather each.
+            Scheme::Convection { ranks, .. } => {
+                8 * (6 + 2 * problem.lights().len() as u64 + 2 * (*ranks as u64).saturating_sub(1))
+            }
             Scheme::P1 { .. } => 8 * 2 * 4 * 2,
             Scheme::Ordinates { order, .. } => 8 * 2 * (order * (order + 2)) as u64 + 32,
         };
@@ -517,6 +536,7 @@ impl ExplicitSolver {
         context: &Context<'_>,
         settings: &UpwindSettings,
         scattering: f64,
+        on: RanksOf<'_>,
     ) -> Result<Outcome, SolveError> {
         let problem = context.problem;
         let l = lattice(problem)?;
@@ -583,7 +603,27 @@ impl ExplicitSolver {
                     },
                     ..settings.clone()
                 };
-                let out = propagate(&l, &absorption, &light, &settings).map_err(explicit_error)?;
+                let out = match on {
+                    RanksOf::Alone => {
+                        propagate(&l, &absorption, &light, &settings).map_err(explicit_error)?
+                    }
+                    RanksOf::Communicator(comm) => crate::wavefront::propagate_on_ranks(
+                        &l,
+                        &absorption,
+                        &light,
+                        &settings,
+                        comm,
+                    )
+                    .map_err(|e| self.decomposition_error(e))?,
+                    RanksOf::Threads(count) => crate::wavefront::propagate_on_threads(
+                        &l,
+                        &absorption,
+                        &light,
+                        &settings,
+                        count,
+                    )
+                    .map_err(|e| self.decomposition_error(e))?,
+                };
                 context.report(lucent_core::Progress {
                     stage: "light march",
                     fraction: (c * problem.lights().len() + i + 1) as f64 / marches as f64,
@@ -629,6 +669,21 @@ impl ExplicitSolver {
 }
 
 impl ExplicitSolver {
+    /// A decomposed march's error: the scheme's own as the serial march gives it, a march
+    /// that cannot split as unsupported, the rest (ranks against layers, a broken
+    /// protocol) as the `ranks` asked for.
+    fn decomposition_error(&self, e: crate::ranks::DecompositionError) -> SolveError {
+        use crate::ranks::DecompositionError as E;
+        match e {
+            E::Scheme(e) => explicit_error(e),
+            E::Unsupported(feature) => SolveError::Unsupported {
+                solver: self.name.into(),
+                feature,
+            },
+            other => invalid("ranks", other.to_string()),
+        }
+    }
+
     /// FTCS's step as a fraction of its bound: at most 1 unless `allow_unstable`.
     fn check_fraction(&self, fraction: f64, allow_unstable: bool) -> Result<(), SolveError> {
         if fraction > 1.0 && !allow_unstable {
@@ -655,6 +710,7 @@ impl ExplicitSolver {
             Scheme::Convection {
                 settings,
                 scattering,
+                ..
             } => {
                 if settings.model != Model::Characteristic {
                     Err(unsupported(

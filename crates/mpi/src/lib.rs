@@ -1,11 +1,12 @@
 //! # lucent-mpi: lucent's solvers on MPI ranks
 //!
-//! The solvers that split over ranks take any `lucent_core::ranks::Communicator` (z-slabs
-//! with one-layer halos): `lucent_diffusion::Multigrid::solve_on_ranks` (the distributed
-//! multigrid), `lucent_explicit::ranks::iterate` (FTCS and Jacobi to steady state),
-//! `lucent_explicit::ranks::march_p1` (P1 by FTCS), and through them the registry's
-//! `diffusion-mg`, `ftcs-diffusion`, `jacobi-diffusion` and `ftcs-p1` with
-//! `SolveOptions::ranks`. This crate adds the transport that runs them across processes:
+//! The solvers that split over ranks take any `lucent_core::ranks::Communicator` (z-slabs):
+//! `lucent_diffusion::Multigrid::solve_on_ranks` (the distributed multigrid),
+//! `lucent_explicit::ranks::iterate` (FTCS and Jacobi to steady state),
+//! `lucent_explicit::ranks::march_p1` (P1 by FTCS), `lucent_explicit::wavefront`
+//! (Zhang & Ma's absorption march: a pipelined wavefront or planes in lock step), and
+//! through them the registry's `diffusion-mg`, `ftcs-diffusion`, `jacobi-diffusion`,
+//! `ftcs-p1` and `convection-diffusion` with `SolveOptions::ranks`. This crate adds the transport that runs them across processes:
 //! `Mpi` (feature `mpi`: rsmpi on the system's MPI, Debian's `openmpi-bin
 //! libopenmpi-dev`, and `libclang-dev` for its bindgen), `MPI_COMM_WORLD` under `mpirun`.
 //! Without the feature nothing of MPI is built; [`Alone`] and [`Threads`] (in-process

@@ -1,0 +1,177 @@
+//! Zhang & Ma's absorption march on ranks gives the serial bits: a proptest over grids
+//! (sides 1–13, not multiples of 8), light directions (every octant, components zero,
+//! diagonal, each axis dominant), heterogeneous absorption, both one-pass models and 1–5
+//! in-process ranks, so both shapes of the split run (the pipeline with chunks of one row
+//! and of several, the lock step with slabs of two layers and more); then the refusals.
+
+use glam::DVec3;
+use lucent_core::StopReason;
+use lucent_explicit::Lattice;
+use lucent_explicit::convection::{Edges, Light, Model, Sweep, UpwindSettings, propagate};
+use lucent_explicit::ranks::DecompositionError;
+use lucent_explicit::wavefront::propagate_on_threads;
+use proptest::prelude::*;
+
+/// Absorption varying cell to cell (a hash of the index), within `[0, top]`.
+fn absorption(n: usize, seed: u64, top: f64) -> Vec<f64> {
+    (0..n as u64)
+        .map(|c| {
+            let h = (c ^ seed)
+                .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                .rotate_left(29);
+            top * (h % 1000) as f64 / 999.0
+        })
+        .collect()
+}
+
+fn settings(model: Model) -> UpwindSettings {
+    UpwindSettings {
+        model,
+        ..UpwindSettings::default()
+    }
+}
+
+/// A direction component: zero, ± the other components' size, or between.
+fn component() -> impl Strategy<Value = f64> {
+    prop_oneof![Just(0.0), Just(1.0), Just(-1.0), -1.0..1.0f64, Just(-0.0),]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 96, ..ProptestConfig::default() })]
+
+    #[test]
+    fn the_march_on_ranks_is_the_serial_march(
+        dims in (1usize..=13, 1usize..=13, 1usize..=13),
+        u in (component(), component(), component()),
+        paper in any::<bool>(),
+        ranks in 1usize..=5,
+        seed in any::<u64>(),
+        spacing in 0.05..0.5f64,
+    ) {
+        let dims = [dims.0, dims.1, dims.2];
+        let direction = DVec3::new(u.0, u.1, u.2);
+        prop_assume!(direction.length() > 1e-3);
+        let lattice = Lattice::new(dims, spacing).unwrap();
+        let n = lattice.len();
+        // Per-step absorption in [0, 0.9] for the paper, a rate up to 4/length otherwise.
+        let (model, sigma) = if paper {
+            (Model::Paper, absorption(n, seed, 0.9))
+        } else {
+            (Model::Characteristic, absorption(n, seed, 4.0))
+        };
+        let light = Light::Distant { direction, density: 1.5 };
+        let serial = propagate(&lattice, &sigma, &light, &settings(model)).unwrap();
+        let split = propagate_on_threads(&lattice, &sigma, &light, &settings(model), ranks);
+        let lockstep = model == Model::Characteristic
+            && direction.normalize().abs().max_position() != 2;
+        // Slabs of one layer are too thin for the lock step's halo when there are neighbours.
+        let thin = ranks > 1
+            && (0..ranks).any(|r| (r + 1) * dims[2] / ranks - r * dims[2] / ranks < 2);
+        match split {
+            Err(DecompositionError::TooManyRanks { .. }) => prop_assert!(ranks > dims[2]),
+            Err(DecompositionError::StencilTooWide { .. }) => {
+                prop_assert!(lockstep && ranks <= dims[2] && thin);
+            }
+            Err(e) => prop_assert!(false, "{e}"),
+            Ok(split) => {
+                prop_assert!(ranks <= dims[2] && !(lockstep && thin));
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                prop_assert_eq!(bits(&split.density), bits(&serial.density));
+                prop_assert_eq!(split.iterations, serial.iterations);
+                prop_assert_eq!(&split.residuals, &serial.residuals);
+                prop_assert_eq!(split.stop_reason, StopReason::Exact);
+                prop_assert_eq!(serial.stop_reason, StopReason::Exact);
+            }
+        }
+    }
+}
+
+/// A larger grid, every rank count to 5, each axis dominant both ways: the pipeline's
+/// chunks of several rows and the lock step's inner rows (slabs of five layers and more).
+#[test]
+fn larger_grids_on_every_rank_count() {
+    let lattice = Lattice::new([23, 19, 27], 0.1).unwrap();
+    let sigma = absorption(lattice.len(), 7, 3.0);
+    let paper_sigma = absorption(lattice.len(), 11, 0.5);
+    let directions = [
+        DVec3::new(0.3, -0.2, 1.0),
+        DVec3::new(-0.4, 0.5, -1.0),
+        DVec3::new(1.0, 0.6, -0.3),
+        DVec3::new(0.2, -1.0, 0.7),
+        DVec3::new(-1.0, -1.0, 0.0),
+    ];
+    for direction in directions {
+        let light = Light::Distant {
+            direction,
+            density: 1.0,
+        };
+        for (model, sigma) in [
+            (Model::Characteristic, &sigma),
+            (Model::Paper, &paper_sigma),
+        ] {
+            let serial = propagate(&lattice, sigma, &light, &settings(model)).unwrap();
+            assert!(serial.density.iter().all(|v| v.is_finite() && *v > 0.0));
+            for ranks in 1..=5 {
+                // One rank runs the split code too.
+                let split =
+                    propagate_on_threads(&lattice, sigma, &light, &settings(model), ranks).unwrap();
+                assert!(
+                    split
+                        .density
+                        .iter()
+                        .zip(&serial.density)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{model:?} {direction} on {ranks} ranks"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn marches_that_do_not_split_are_refused_on_ranks_and_run_on_one() {
+    let lattice = Lattice::new([6, 5, 8], 0.2).unwrap();
+    let sigma = vec![0.3; lattice.len()];
+    let distant = Light::Distant {
+        direction: DVec3::new(0.1, 0.2, 1.0),
+        density: 1.0,
+    };
+    let point = Light::Point {
+        position: DVec3::new(0.6, 0.5, 0.8),
+        density: 1.0,
+        falloff: None,
+    };
+    let cases = [
+        (point, settings(Model::Characteristic)),
+        (distant, settings(Model::Conservative)),
+        (
+            distant,
+            UpwindSettings {
+                sweep: Sweep::Jacobi,
+                ..settings(Model::Paper)
+            },
+        ),
+        (
+            distant,
+            UpwindSettings {
+                edges: Edges::Periodic,
+                ..settings(Model::Paper)
+            },
+        ),
+    ];
+    for (light, settings) in cases {
+        let serial = propagate(&lattice, &sigma, &light, &settings).unwrap();
+        let one = propagate_on_threads(&lattice, &sigma, &light, &settings, 1).unwrap();
+        assert_eq!(one, serial);
+        assert!(matches!(
+            propagate_on_threads(&lattice, &sigma, &light, &settings, 2),
+            Err(DecompositionError::Unsupported(_))
+        ));
+    }
+    // Bad input is the serial march's error, on ranks too.
+    let bad = vec![-1.0; lattice.len()];
+    assert!(matches!(
+        propagate_on_threads(&lattice, &bad, &distant, &settings(Model::Paper), 2),
+        Err(DecompositionError::Scheme(_))
+    ));
+}
