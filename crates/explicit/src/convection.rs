@@ -289,8 +289,14 @@ impl Setup<'_> {
     /// nodes around it: cell centres, or points of an inflow face, where the light arrives
     /// unattenuated (so the interpolation never reaches across the box's surface, where
     /// the field has a kink).
-    pub(crate) fn characteristic(&self, c: usize, rho: &[f64]) -> f64 {
+    fn characteristic(&self, c: usize, rho: &[f64]) -> f64 {
         self.characteristic_with(c, &|i| rho[i], &|i| self.absorption[i])
+    }
+
+    /// [`Setup::characteristic`] with `rho` and the setup's absorption holding the cells
+    /// from `first` on (a rank's layers and halo): cell i at `i - first`.
+    pub(crate) fn characteristic_from(&self, c: usize, rho: &[f64], first: usize) -> f64 {
+        self.characteristic_with(c, &|i| rho[i - first], &|i| self.absorption[i - first])
     }
 
     /// [`Setup::characteristic`] reading ρ and σ_a of cells by index through `rho` and
@@ -567,6 +573,22 @@ pub(crate) fn prepare<'a>(
     settings: &UpwindSettings,
 ) -> Result<Setup<'a>, ExplicitError> {
     lattice.check_field("absorption", absorption)?;
+    prepare_part(lattice, absorption, light, settings)
+}
+
+/// [`prepare`] with `absorption` for some of the cells (a rank's layers, which it indexes
+/// from their first cell): the same checks but its length.
+pub(crate) fn prepare_part<'a>(
+    lattice: &'a Lattice,
+    absorption: &'a [f64],
+    light: &Light,
+    settings: &UpwindSettings,
+) -> Result<Setup<'a>, ExplicitError> {
+    if let Some((c, v)) = absorption.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(ExplicitError::Invalid(format!(
+            "absorption: {v} in cell {c}"
+        )));
+    }
     let bad_absorption = match settings.model {
         Model::Paper => absorption.iter().any(|&a| !(0.0..=1.0).contains(&a)),
         Model::Conservative | Model::Characteristic => absorption.iter().any(|&a| a < 0.0),
@@ -974,19 +996,20 @@ fn ordered_distant(setup: &Setup<'_>, u: DVec3, density: f64, rho: &mut [f64]) {
     let [_, ny, nz] = setup.lattice.dims;
     for kk in 0..nz {
         for jj in 0..ny {
-            paper_row(setup, u, density, rho, [jj, kk]);
+            paper_row(setup, u, density, (rho, 0), [jj, kk]);
         }
     }
 }
 
 /// One x-row of [`ordered_distant`]'s pass: the row `jj`-th along y and `kk`-th along z in
-/// the light's order (its upwind rows in y and z done), x in the light's order. The march
-/// on ranks runs the same rows in another order that keeps every row after its upwind ones.
+/// the light's order (its upwind rows in y and z done), x in the light's order. `rho` and
+/// the setup's absorption hold the cells from `first` on (0: all). The march on ranks runs
+/// the same rows in another order that keeps every row after its upwind ones.
 pub(crate) fn paper_row(
     setup: &Setup<'_>,
     u: DVec3,
     density: f64,
-    rho: &mut [f64],
+    (rho, first): (&mut [f64], usize),
     [jj, kk]: [usize; 2],
 ) {
     let l = setup.lattice;
@@ -998,7 +1021,8 @@ pub(crate) fn paper_row(
     let flip = |v: usize, n: usize, positive: bool| if positive { v } else { n - 1 - v };
     let k = flip(kk, nz, pz);
     let j = flip(jj, ny, py);
-    let row = j * s[1] + k * s[2];
+    // Indices into `rho` and the absorption.
+    let row = j * s[1] + k * s[2] - first;
     let y_up = (jj > 0).then(|| if py { row - s[1] } else { row + s[1] });
     let z_up = (kk > 0).then(|| if pz { row - s[2] } else { row + s[2] });
     let mut x_up = density;

@@ -48,15 +48,37 @@ use rayon::prelude::*;
 
 use crate::Lattice;
 use crate::convection::{
-    Edges, Light, Model, Propagation, Setup, Sweep, UpwindSettings, paper_row, prepare, propagate,
+    Edges, Light, Model, Propagation, Setup, Sweep, UpwindSettings, paper_row, propagate,
 };
 use crate::ranks::DecompositionError;
 
+/// The z-layers rank `rank` of `size` owns: [rank·n_z/size, (rank + 1)·n_z/size).
+pub fn owned_layers(nz: usize, size: usize, rank: usize) -> Range<usize> {
+    rank * nz / size..(rank + 1) * nz / size
+}
+
+/// The z-layers of the absorption rank `rank` of `size` reads ([`propagate_slab`]): its
+/// own and two more on each side within the grid (the lock step's halo; the pipeline
+/// reads one upstream).
+pub fn read_layers(nz: usize, size: usize, rank: usize) -> Range<usize> {
+    let owned = owned_layers(nz, size, rank);
+    owned.start.saturating_sub(2)..(owned.end + 2).min(nz)
+}
+
+/// Whether more than one rank can take this march: a distant light's one-pass march.
+fn splits(light: &Light, settings: &UpwindSettings) -> bool {
+    matches!(light, Light::Distant { .. })
+        && settings.sweep == Sweep::Ordered
+        && settings.edges == Edges::Inflow
+        && settings.model != Model::Conservative
+}
+
 /// Marches one light on the ranks of `comm`, each computing its z-slab; the same result as
-/// [`propagate`] on every rank. More than one rank takes the
-/// one-pass marches of a distant light only: [`Sweep::Ordered`], [`Edges::Inflow`] and
-/// [`Model::Paper`] or [`Model::Characteristic`]; the rest is
-/// [`DecompositionError::Unsupported`].
+/// [`propagate`] on every rank. More than one rank takes the one-pass marches of a
+/// distant light only: [`Sweep::Ordered`], [`Edges::Inflow`] and [`Model::Paper`] or
+/// [`Model::Characteristic`]; the rest is [`DecompositionError::Unsupported`]. Every rank
+/// holds the whole `absorption` and gets the whole ρ; [`propagate_slab`] is the march that
+/// holds only a rank's layers.
 pub fn propagate_on_ranks(
     lattice: &Lattice,
     absorption: &[f64],
@@ -65,55 +87,25 @@ pub fn propagate_on_ranks(
     comm: &(impl Communicator + ?Sized),
 ) -> Result<Propagation, DecompositionError> {
     let (size, rank) = (comm.size(), comm.rank());
-    let splits = matches!(light, Light::Distant { .. })
-        && settings.sweep == Sweep::Ordered
-        && settings.edges == Edges::Inflow
-        && settings.model != Model::Conservative;
-    if size <= 1 && !splits {
+    if size <= 1 && !splits(light, settings) {
         return Ok(propagate(lattice, absorption, light, settings)?);
     }
     // One rank that splits runs the split code too (so a weak-scaling measurement compares
     // the same kernel); it gives the same bits.
-    let setup = prepare(lattice, absorption, light, settings)?;
+    lattice.check_field("absorption", absorption)?;
     if let Some(initial) = &settings.initial {
         lattice.check_field("initial", initial)?;
     }
-    let Light::Distant { direction, density } = setup.light else {
-        return Err(DecompositionError::Unsupported(
-            "a point light's march over ranks (its cells go by distance from the light, in \
-             passes until they settle): distant lights split over ranks"
-                .into(),
-        ));
-    };
-    if !splits {
-        return Err(DecompositionError::Unsupported(
-            "this march over ranks: only the one-pass marches split (ordered sweeps, inflow \
-             edges, the paper's or the characteristic model)"
-                .into(),
-        ));
-    }
     let [nx, ny, nz] = lattice.dims;
-    if size > nz {
-        return Err(DecompositionError::TooManyRanks {
-            ranks: size,
-            layers: nz,
-        });
-    }
-    let bounds: Vec<(usize, usize)> = (0..size)
-        .map(|r| (r * nz / size, (r + 1) * nz / size))
-        .collect();
-    let mut rho = settings
-        .initial
-        .clone()
-        .unwrap_or_else(|| vec![0.0; lattice.len()]);
-    let axis = direction.abs().max_position();
-    match setup.model {
-        Model::Paper => pipeline(&setup, Some(density), &bounds, &mut rho, comm)?,
-        _ if axis == 2 => pipeline(&setup, None, &bounds, &mut rho, comm)?,
-        _ => lockstep(&setup, axis, &bounds, &mut rho, comm)?,
-    }
-    let (k0, k1) = bounds[rank];
-    let density = comm.all_gather(&rho[k0 * nx * ny..k1 * nx * ny]);
+    let reads = read_layers(nz, size, rank);
+    let mine = propagate_slab(
+        lattice,
+        &absorption[reads.start * nx * ny..reads.end * nx * ny],
+        light,
+        settings,
+        comm,
+    )?;
+    let density = comm.all_gather(&mine);
     if density.len() != lattice.len() {
         return Err(DecompositionError::Protocol { rank });
     }
@@ -123,6 +115,93 @@ pub fn propagate_on_ranks(
         residuals: vec![0.0],
         stop_reason: StopReason::Exact,
     })
+}
+
+/// The march of [`propagate_on_ranks`] holding only this rank's layers: `absorption` is
+/// σ_a of the layers [`read_layers`] names (as a rank reads them from a volume file with
+/// `lucent_grid::io::layers`), and the result ρ of the layers [`owned_layers`] names, the
+/// serial march's bits there. Memory per rank: two fields of (owned + 4) layers. The
+/// march reads no starting field (`settings.initial` is ignored). Every rank checks its
+/// absorption and all agree before marching, so a bad layer on one rank stops every rank
+/// with an error, never a hang.
+pub fn propagate_slab(
+    lattice: &Lattice,
+    absorption: &[f64],
+    light: &Light,
+    settings: &UpwindSettings,
+    comm: &(impl Communicator + ?Sized),
+) -> Result<Vec<f64>, DecompositionError> {
+    let (size, rank) = (comm.size(), comm.rank());
+    let [nx, ny, nz] = lattice.dims;
+    if !splits(light, settings) {
+        if size <= 1 {
+            return Ok(propagate(lattice, absorption, light, settings)?.density);
+        }
+        return Err(DecompositionError::Unsupported(
+            if matches!(light, Light::Point { .. }) {
+                "a point light's march over ranks (its cells go by distance from the light, \
+                 in passes until they settle): distant lights split over ranks"
+            } else {
+                "this march over ranks: only the one-pass marches split (ordered sweeps, \
+                 inflow edges, the paper's or the characteristic model)"
+            }
+            .into(),
+        ));
+    }
+    if size > nz {
+        return Err(DecompositionError::TooManyRanks {
+            ranks: size,
+            layers: nz,
+        });
+    }
+    let layer_len = nx * ny;
+    let reads = read_layers(nz, size, rank);
+    // This rank's checks (its layers' count and values, the light), then everyone's.
+    let checked = if absorption.len() == reads.len() * layer_len {
+        crate::convection::prepare_part(lattice, absorption, light, settings)
+    } else {
+        Err(crate::ExplicitError::Invalid(format!(
+            "absorption: {} values for layers {reads:?} of {nx} × {ny}",
+            absorption.len()
+        )))
+    };
+    let flags = comm.all_gather(&[if checked.is_ok() { 1.0 } else { 0.0 }]);
+    let setup = checked?;
+    if let Some(bad) = flags.iter().position(|&f| f != 1.0) {
+        return Err(DecompositionError::Scheme(crate::ExplicitError::Invalid(
+            format!("rank {bad} refused its layers of the absorption (it says why)"),
+        )));
+    }
+    if flags.len() != size {
+        return Err(DecompositionError::Protocol { rank });
+    }
+    let Light::Distant { direction, density } = setup.light else {
+        unreachable!("`splits` admits distant lights only");
+    };
+    let bounds: Vec<(usize, usize)> = (0..size)
+        .map(|r| {
+            let owned = owned_layers(nz, size, r);
+            (owned.start, owned.end)
+        })
+        .collect();
+    let mut rho = Local {
+        values: vec![0.0; absorption.len()],
+        first: reads.start * layer_len,
+    };
+    let axis = direction.abs().max_position();
+    match setup.model {
+        Model::Paper => pipeline(&setup, Some(density), &bounds, &mut rho, comm)?,
+        _ if axis == 2 => pipeline(&setup, None, &bounds, &mut rho, comm)?,
+        _ => lockstep(&setup, axis, &bounds, &mut rho, comm)?,
+    }
+    let (k0, k1) = bounds[rank];
+    Ok(rho.values[k0 * layer_len - rho.first..k1 * layer_len - rho.first].to_vec())
+}
+
+/// A rank's ρ: the cells from `first` (a global index) on.
+struct Local {
+    values: Vec<f64>,
+    first: usize,
 }
 
 /// [`propagate_on_ranks`] on `ranks` in-process ranks ([`lucent_core::ranks::Threads`]).
@@ -157,7 +236,7 @@ fn pipeline(
     setup: &Setup<'_>,
     paper: Option<f64>,
     bounds: &[(usize, usize)],
-    rho: &mut [f64],
+    local: &mut Local,
     comm: &(impl Communicator + ?Sized),
 ) -> Result<(), DecompositionError> {
     let (size, rank) = (comm.size(), comm.rank());
@@ -189,7 +268,10 @@ fn pipeline(
         let hi = ((c + 1) * rows_per_chunk).saturating_sub(shift).min(ny);
         lo..hi
     };
-    let start = |q: usize, m: usize| row(q) * nx + layer(m) * layer_len;
+    // Where row q of the layer m-th in the march starts in this rank's ρ.
+    let first = local.first;
+    let start = |q: usize, m: usize| row(q) * nx + layer(m) * layer_len - first;
+    let rho = &mut local.values;
     let pack = |rho: &[f64], c: usize, m: usize| -> Vec<f64> {
         rows(c, m)
             .flat_map(|q| rho[start(q, m)..start(q, m) + nx].iter().copied())
@@ -202,7 +284,7 @@ fn pipeline(
                 match paper {
                     Some(density) => {
                         for q in rows(c, m) {
-                            paper_row(setup, u, density, rho, [q, m]);
+                            paper_row(setup, u, density, (rho, first), [q, m]);
                         }
                     }
                     None => {
@@ -215,8 +297,9 @@ fn pipeline(
                             rows(c, m)
                                 .into_par_iter()
                                 .flat_map_iter(|q| {
-                                    let first = start(q, m);
-                                    (first..first + nx).map(|i| setup.characteristic(i, rho))
+                                    let cell = start(q, m) + first;
+                                    (cell..cell + nx)
+                                        .map(|i| setup.characteristic_from(i, rho, first))
                                 })
                                 .collect()
                         };
@@ -261,7 +344,7 @@ fn lockstep(
     setup: &Setup<'_>,
     axis: usize,
     bounds: &[(usize, usize)],
-    rho: &mut [f64],
+    local: &mut Local,
     comm: &(impl Communicator + ?Sized),
 ) -> Result<(), DecompositionError> {
     let (size, rank) = (comm.size(), comm.rank());
@@ -282,12 +365,16 @@ fn lockstep(
     } else {
         (0..l.dims[axis]).collect()
     };
+    // Cells by their global index, and where they are in this rank's ρ.
+    let first = local.first;
     let cell = |p: usize, t: usize, k: usize| p * s[axis] + t * s[lateral] + k * s[2];
+    let here = |p: usize, t: usize, k: usize| cell(p, t, k) - first;
+    let rho = &mut local.values;
     let compute = |rho: &[f64], p: usize, layers: Range<usize>| -> Vec<f64> {
         layers
             .into_par_iter()
             .flat_map_iter(|k| {
-                (0..n_lateral).map(move |t| setup.characteristic(cell(p, t, k), rho))
+                (0..n_lateral).map(move |t| setup.characteristic_from(cell(p, t, k), rho, first))
             })
             .collect()
     };
@@ -297,14 +384,14 @@ fn lockstep(
         }
         for (k, row) in layers.zip(values.chunks(n_lateral)) {
             for (t, v) in row.iter().enumerate() {
-                rho[cell(p, t, k)] = *v;
+                rho[here(p, t, k)] = *v;
             }
         }
         true
     };
     let pack = |rho: &[f64], p: usize, layers: Range<usize>| -> Vec<f64> {
         layers
-            .flat_map(|k| (0..n_lateral).map(move |t| cell(p, t, k)))
+            .flat_map(|k| (0..n_lateral).map(move |t| here(p, t, k)))
             .map(|c| rho[c])
             .collect()
     };

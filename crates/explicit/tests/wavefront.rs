@@ -175,3 +175,73 @@ fn marches_that_do_not_split_are_refused_on_ranks_and_run_on_one() {
         Err(DecompositionError::Scheme(_))
     ));
 }
+
+/// Each rank handed only the layers `read_layers` names (as it reads them from a file)
+/// returns its owned layers of the serial ρ; a bad value in one rank's layers stops every
+/// rank with an error.
+#[test]
+fn a_rank_needs_only_its_layers() {
+    use lucent_core::ranks::Threads;
+    use lucent_explicit::wavefront::{owned_layers, propagate_slab, read_layers};
+    let lattice = Lattice::new([9, 7, 17], 0.15).unwrap();
+    let layer = 9 * 7;
+    let sigma = absorption(lattice.len(), 3, 2.5);
+    for direction in [DVec3::new(0.2, 0.3, -1.0), DVec3::new(0.9, -0.3, 0.4)] {
+        let light = Light::Distant {
+            direction,
+            density: 2.0,
+        };
+        for model in [Model::Characteristic, Model::Paper] {
+            let sigma: Vec<f64> = match model {
+                Model::Paper => sigma.iter().map(|s| s / 3.0).collect(),
+                _ => sigma.clone(),
+            };
+            let serial = propagate(&lattice, &sigma, &light, &settings(model)).unwrap();
+            for ranks in 1..=4 {
+                let parts = Threads::run(ranks, |comm| {
+                    use lucent_core::ranks::Communicator;
+                    let reads = read_layers(17, ranks, comm.rank());
+                    let mine = &sigma[reads.start * layer..reads.end * layer];
+                    propagate_slab(&lattice, mine, &light, &settings(model), comm)
+                });
+                for (rank, part) in parts.into_iter().enumerate() {
+                    let owned = owned_layers(17, ranks, rank);
+                    let part = part.unwrap().unwrap();
+                    assert!(
+                        part.iter()
+                            .zip(&serial.density[owned.start * layer..owned.end * layer])
+                            .all(|(a, b)| a.to_bits() == b.to_bits()),
+                        "{model:?} {direction}: rank {rank} of {ranks}"
+                    );
+                }
+            }
+        }
+        // A NaN in rank 1's layers only: every rank returns an error (none waits).
+        let light = Light::Distant {
+            direction,
+            density: 1.0,
+        };
+        let results = Threads::run(3, |comm| {
+            use lucent_core::ranks::Communicator;
+            let reads = read_layers(17, 3, comm.rank());
+            let mut mine = sigma[reads.start * layer..reads.end * layer].to_vec();
+            if comm.rank() == 1 {
+                mine[5] = f64::NAN;
+            }
+            propagate_slab(
+                &lattice,
+                &mine,
+                &light,
+                &settings(Model::Characteristic),
+                comm,
+            )
+        });
+        for (rank, result) in results.into_iter().enumerate() {
+            let e = result.unwrap().unwrap_err();
+            assert!(
+                matches!(e, DecompositionError::Scheme(_)),
+                "rank {rank}: {e}"
+            );
+        }
+    }
+}

@@ -213,3 +213,36 @@ fn nrrd_layers_attached_and_detached_are_the_whole_reads_layers() {
     ));
     assert!(nrrd::read(&nhdr_short, &options).is_err());
 }
+
+/// Layers written by positioned writes, in any order, make the file the whole write
+/// makes, byte for byte; a bad range is refused.
+#[test]
+fn positioned_npy_writes_make_the_whole_file() {
+    use lucent_grid::io::layers::{create_npy, write_npy_layers};
+    let dir = std::env::temp_dir().join(format!("lucent-npy-layers-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for dims in [[5, 3, 7], [1, 1, 1], [9, 4, 2]] {
+        let g = grid(dims, 11);
+        let whole = dir.join("whole.npy");
+        let parts = dir.join("parts.npy");
+        npy::write(&whole, &g, ScalarType::F32).unwrap();
+        // A longer file left behind is emptied first.
+        std::fs::write(&parts, vec![7u8; 10_000]).unwrap();
+        create_npy(&parts, dims).unwrap();
+        let nz = dims[2];
+        let cuts = [0, nz / 3, nz / 3 + nz / 2, nz];
+        // Last slab first: the order of the ranks' writes does not matter.
+        for w in cuts.windows(2).rev().filter(|w| w[0] < w[1]) {
+            write_npy_layers(&parts, dims, w[0]..w[1], &slice(&g, w[0]..w[1])).unwrap();
+        }
+        assert_eq!(
+            std::fs::read(&parts).unwrap(),
+            std::fs::read(&whole).unwrap()
+        );
+        assert!(matches!(
+            write_npy_layers(&parts, dims, 0..nz + 1, &[]),
+            Err(GridError::InvalidParameter { .. })
+        ));
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

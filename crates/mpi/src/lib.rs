@@ -21,8 +21,12 @@
 //! residual, identically on every rank; the time budget and cancellation are per rank and
 //! travel with each gather, so all ranks stop on the same sweep or cycle.
 //!
-//! **Not yet.** Every rank still builds the whole problem (only its slab is iterated), so
-//! memory does not yet scale with ranks.
+//! **Memory.** Through the registry every rank still builds the whole problem (only its
+//! slab is iterated), so memory does not yet scale with ranks there. The absorption march
+//! has a slab-local form (`lucent_explicit::wavefront::propagate_slab`: σ_a and ρ of the
+//! rank's layers and a two-layer halo); the `slab_march` example feeds it by positioned
+//! reads of a volume file and writes its layers of the result into one `.npy`
+//! (`lucent_grid::io::layers`), so no rank holds the whole volume.
 //!
 //! **Cost model per sweep and rank** (slab of n_x·n_y·n_z/P cells): two halo messages of
 //! one layer each (≤ 8 n_x n_y bytes), overlapped with the interior rows, and one

@@ -8,6 +8,9 @@
 //! The file's size is checked against its header (metadata, not a read) exactly as the
 //! whole-file readers check it, the budget covers the layers only, and a non-finite sample
 //! in the layers is refused by its cell, as everywhere.
+//!
+//! The other way, [`write_npy_layers`] writes a rank's layers of a result into one f32
+//! `.npy` by positioned writes (after [`create_npy`] on one rank).
 
 use std::fs::File;
 use std::ops::Range;
@@ -53,6 +56,70 @@ fn read_at(file: &File, path: &Path, buf: &mut [u8], offset: u64) -> Result<(), 
         f.seek(SeekFrom::Start(offset)).map_err(io_error(path))?;
         f.read_exact(buf).map_err(io_error(path))
     }
+}
+
+/// `bytes` written into `file` from `offset`.
+fn write_at(file: &File, path: &Path, bytes: &[u8], offset: u64) -> Result<(), GridError> {
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::FileExt::write_all_at(file, bytes, offset).map_err(io_error(path))
+    }
+    #[cfg(not(unix))]
+    {
+        use std::io::{Seek, SeekFrom, Write};
+        let mut f = file;
+        f.seek(SeekFrom::Start(offset)).map_err(io_error(path))?;
+        f.write_all(bytes).map_err(io_error(path))
+    }
+}
+
+/// Writes `values` (f32, x fastest) as layers `layers` of the C-order (n_z, n_y, n_x)
+/// f32 `.npy` array of `dims`, by positioned writes: every rank of a z-slab decomposition
+/// writes its own layers into one file, and the header, identical from every rank. The
+/// file is created if it is missing and never truncated, so one rank creates (or empties)
+/// it before the others write: [`create_npy`], then a barrier. Once every layer has been
+/// written the file is the array [`super::npy::write`] would have written.
+///
+/// # Errors
+/// An empty range or one past n_z, `values` of another length
+/// ([`GridError::InvalidParameter`]), and I/O.
+pub fn write_npy_layers(
+    path: impl AsRef<Path>,
+    dims: [usize; 3],
+    layers: Range<usize>,
+    values: &[f32],
+) -> Result<(), GridError> {
+    let path = path.as_ref();
+    let [nx, ny, nz] = dims;
+    if layers.is_empty() || layers.end > nz || values.len() != layers.len() * nx * ny {
+        return Err(GridError::InvalidParameter {
+            name: "layers",
+            reason: format!(
+                "{layers:?} of {nx} × {ny} × {nz} with {} values",
+                values.len()
+            ),
+        });
+    }
+    let header = super::npy::header_bytes(dims, 1, ScalarType::F32);
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(path)
+        .map_err(io_error(path))?;
+    write_at(&file, path, &header, 0)?;
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let offset = header.len() as u64 + (layers.start * nx * ny * 4) as u64;
+    write_at(&file, path, &bytes, offset)
+}
+
+/// Creates (or empties) the `.npy` file that [`write_npy_layers`] fills, with its header.
+///
+/// # Errors
+/// I/O.
+pub fn create_npy(path: impl AsRef<Path>, dims: [usize; 3]) -> Result<(), GridError> {
+    let path = path.as_ref();
+    std::fs::write(path, super::npy::header_bytes(dims, 1, ScalarType::F32)).map_err(io_error(path))
 }
 
 /// Layers `layers` of a raw file of `layout`.

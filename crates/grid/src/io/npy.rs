@@ -193,7 +193,7 @@ pub fn write(path: impl AsRef<Path>, grid: &Grid, scalar: ScalarType) -> Result<
 
 /// The magic, version, length and header of a C-order array of `channels` grids of `dims`
 /// (a 3D array for one channel), padded to a multiple of 64 bytes.
-fn header_bytes(dims: [usize; 3], channels: usize, scalar: ScalarType) -> Vec<u8> {
+pub(crate) fn header_bytes(dims: [usize; 3], channels: usize, scalar: ScalarType) -> Vec<u8> {
     let [nx, ny, nz] = dims;
     let shape = if channels == 1 {
         format!("({nz}, {ny}, {nx})")

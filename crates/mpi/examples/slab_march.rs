@@ -1,0 +1,241 @@
+//! Zhang & Ma's absorption march through a volume file on ranks, no rank holding the whole
+//! volume: each rank reads only the z-layers it needs (`lucent_grid::io::layers`:
+//! positioned reads of `.raw`, `.npy` or raw-encoded NRRD), marches its slab
+//! (`lucent_explicit::wavefront::propagate_slab`, short characteristics) and writes its
+//! layers of ρ into one `.npy` by positioned writes.
+//!
+//! ```sh
+//! cargo build --profile examples -p lucent-mpi --features mpi --example slab_march
+//! mpirun -n 4 target/examples/examples/slab_march "$LUCENT_DATA/tooth_103x94x161_uint8.raw" \
+//!     --raw 103,94,161,u8 --scale 0.02 --direction 0.3,-0.2,1 -o rho.npy
+//! ```
+//!
+//! σ_a = `--scale` × sample per cell side (cells of side 1: a `.raw` is read with unit
+//! spacing, a `.npy` has none, an NRRD's spacing must be cubic and is used). The light is
+//! distant, of unit density, along `--direction` (default (0.3, −0.2, 1)). Each rank prints
+//! the layers it read and the bytes it holds. `--check`: every rank also reads the whole
+//! volume, marches it serially and compares its layers (bits; exit status 1 if they
+//! differ), for CI. Without the `mpi` feature, `--ranks N` in-process ranks.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use glam::DVec3;
+use lucent_explicit::Lattice;
+use lucent_explicit::convection::{Light, Model, UpwindSettings, propagate};
+use lucent_explicit::wavefront::{owned_layers, propagate_slab, read_layers};
+use lucent_grid::io::layers::{
+    Layers, create_npy, read_npy_layers, read_nrrd_layers, read_raw_layers, write_npy_layers,
+};
+use lucent_grid::io::raw::RawLayout;
+use lucent_grid::io::{LoadOptions, ScalarType};
+use lucent_mpi::Communicator;
+
+struct Args {
+    volume: PathBuf,
+    out: PathBuf,
+    /// A `.raw`'s dims and sample type.
+    raw: Option<RawLayout>,
+    scale: f64,
+    direction: DVec3,
+    check: bool,
+}
+
+fn parse(args: &[String]) -> Result<Args, String> {
+    let value = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1))
+            .cloned()
+    };
+    let numbers = |text: &str| -> Result<Vec<f64>, String> {
+        text.split(',')
+            .map(|v| v.trim().parse().map_err(|_| format!("not a number: {v}")))
+            .collect()
+    };
+    let volume = args
+        .first()
+        .filter(|a| !a.starts_with('-'))
+        .ok_or("usage: slab_march VOLUME -o OUT.npy [--raw NX,NY,NZ,TYPE] [--scale S] [--direction X,Y,Z] [--check]")?;
+    let raw = value("--raw")
+        .map(|text| -> Result<RawLayout, String> {
+            let parts: Vec<&str> = text.split(',').collect();
+            let [x, y, z, kind] = parts[..] else {
+                return Err(format!("--raw {text}: NX,NY,NZ,TYPE"));
+            };
+            let dim = |v: &str| v.parse::<usize>().map_err(|_| format!("--raw: {v}"));
+            let scalar = match kind {
+                "u8" => ScalarType::U8,
+                "u16" => ScalarType::U16,
+                "i16" => ScalarType::I16,
+                "f32" => ScalarType::F32,
+                "f64" => ScalarType::F64,
+                other => {
+                    return Err(format!(
+                        "--raw: sample type {other} (u8, u16, i16, f32, f64)"
+                    ));
+                }
+            };
+            Ok(RawLayout::new([dim(x)?, dim(y)?, dim(z)?], scalar))
+        })
+        .transpose()?;
+    let direction = match value("--direction") {
+        Some(text) => match numbers(&text)?[..] {
+            [x, y, z] => DVec3::new(x, y, z),
+            _ => return Err(format!("--direction {text}: X,Y,Z")),
+        },
+        None => DVec3::new(0.3, -0.2, 1.0),
+    };
+    Ok(Args {
+        volume: PathBuf::from(volume),
+        out: PathBuf::from(value("-o").ok_or("-o OUT.npy is needed")?),
+        raw,
+        scale: value("--scale").map_or(Ok(1.0), |v| numbers(&v).map(|n| n[0]))?,
+        direction,
+        check: args.iter().any(|a| a == "--check"),
+    })
+}
+
+/// Layers `layers` of the volume (the whole volume's dims come with them).
+fn read(args: &Args, layers: std::ops::Range<usize>) -> Result<Layers, String> {
+    let options = LoadOptions::default();
+    let path: &Path = &args.volume;
+    let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    match (&args.raw, extension) {
+        (Some(layout), _) => read_raw_layers(path, layout, layers, &options),
+        (None, "npy") => read_npy_layers(path, layers, &options),
+        (None, "nrrd" | "nhdr") => read_nrrd_layers(path, layers, &options),
+        _ => {
+            return Err(format!(
+                "{}: a .npy or .nrrd, or --raw for a raw file",
+                path.display()
+            ));
+        }
+    }
+    .map_err(|e| e.to_string())
+}
+
+/// The whole volume's dims and cell side, from its first layer's read.
+fn shape(args: &Args) -> Result<([usize; 3], f64), String> {
+    let first = read(args, 0..1)?;
+    let spacing = first.whole.spacing();
+    if (spacing - DVec3::splat(spacing.x)).abs().max_element() > 1e-9 * spacing.x {
+        return Err(format!("cells of {spacing}: the march needs cubic cells"));
+    }
+    Ok((first.whole.dims(), spacing.x))
+}
+
+/// `result` on this rank, once every rank has said whether its step worked: a step that
+/// failed on one rank (a bad layer, a full disk) stops every rank, none waits forever.
+fn agree<T>(comm: &(impl Communicator + ?Sized), result: Result<T, String>) -> Result<T, String> {
+    let flags = comm.all_gather(&[if result.is_ok() { 1.0 } else { 0.0 }]);
+    let value = result?;
+    match flags.iter().position(|&f| f != 1.0) {
+        Some(rank) => Err(format!("rank {rank} failed (it says why)")),
+        None => Ok(value),
+    }
+}
+
+fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String> {
+    let (size, rank) = (comm.size(), comm.rank());
+    let (dims, spacing) = shape(args)?;
+    let lattice = Lattice::new(dims, spacing).map_err(|e| e.to_string())?;
+    let layer = dims[0] * dims[1];
+    let reads = read_layers(dims[2], size, rank);
+    let owned = owned_layers(dims[2], size, rank);
+    let sigma: Vec<f64> = agree(comm, read(args, reads.clone()))?
+        .grid
+        .data()
+        .iter()
+        .map(|&v| args.scale * f64::from(v))
+        .collect();
+    let light = Light::Distant {
+        direction: args.direction,
+        density: 1.0,
+    };
+    let settings = UpwindSettings {
+        model: Model::Characteristic,
+        ..UpwindSettings::default()
+    };
+    let rho =
+        propagate_slab(&lattice, &sigma, &light, &settings, comm).map_err(|e| e.to_string())?;
+    // Rank 0 empties the file, everyone waits (the agreement is the barrier), then each
+    // rank writes its layers.
+    let created = if rank == 0 {
+        create_npy(&args.out, dims).map_err(|e| e.to_string())
+    } else {
+        Ok(())
+    };
+    agree(comm, created)?;
+    let values: Vec<f32> = rho.iter().map(|&v| v as f32).collect();
+    let written = write_npy_layers(&args.out, dims, owned.clone(), &values);
+    agree(comm, written.map_err(|e| e.to_string()))?;
+    // σ_a and ρ of the layers read (f64), the layers as read (f32), ρ of the owned
+    // layers returned and written (f64 and f32).
+    let held = reads.len() * layer * (8 + 8 + 4) + rho.len() * (8 + 4);
+    eprintln!(
+        "rank {rank} of {size}: read layers {reads:?} of {}, wrote {owned:?}; held {:.1} MB \
+         (one rank: {:.1} MB)",
+        dims[2],
+        held as f64 / 1e6,
+        (lattice.len() * (8 + 8 + 4 + 8 + 4)) as f64 / 1e6
+    );
+    let mut agrees = true;
+    if args.check {
+        let whole: Vec<f64> = read(args, 0..dims[2])?
+            .grid
+            .data()
+            .iter()
+            .map(|&v| args.scale * f64::from(v))
+            .collect();
+        let serial = propagate(&lattice, &whole, &light, &settings).map_err(|e| e.to_string())?;
+        agrees = serial.density[owned.start * layer..owned.end * layer]
+            .iter()
+            .zip(&rho)
+            .all(|(a, b)| a.to_bits() == b.to_bits());
+        eprintln!(
+            "rank {rank}: the serial march's bits: {}",
+            if agrees { "yes" } else { "NO" }
+        );
+    }
+    Ok(agrees)
+}
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let parsed = match parse(&args) {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("slab_march: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    match run_on_ranks(&args, &parsed) {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::FAILURE,
+        Err(e) => {
+            eprintln!("slab_march: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(feature = "mpi")]
+fn run_on_ranks(_: &[String], args: &Args) -> Result<bool, String> {
+    let world = lucent_mpi::World::initialise().map_err(|e| e.to_string())?;
+    run(&world.ranks(), args)
+}
+
+#[cfg(not(feature = "mpi"))]
+fn run_on_ranks(raw: &[String], args: &Args) -> Result<bool, String> {
+    let ranks: usize = raw
+        .iter()
+        .position(|a| a == "--ranks")
+        .and_then(|i| raw.get(i + 1))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(2);
+    lucent_mpi::Threads::run(ranks, |comm| run(comm, args))
+        .into_iter()
+        .map(|r| r.ok_or_else(|| "a rank panicked".to_owned())?)
+        .try_fold(true, |all, r| r.map(|same| all && same))
+}
