@@ -231,9 +231,9 @@ pub fn march(
             lattice,
             &step_of,
             settings.edges,
-            source,
             (&phi, &flux),
             (&mut next_phi, &mut next_flux),
+            (source, 0),
             all.clone(),
         );
         let stop = monitor
@@ -274,14 +274,15 @@ pub fn march(
 }
 
 /// One FTCS step of the cells of the z-layers `layers`: `next` from `now` (φ, E), reading
-/// the layers next to them; cells beyond the grid per `edges`.
+/// the layers next to them; cells beyond the grid per `edges`. The fields and `source`
+/// hold the cells from `first` on (a rank's layers and halo; 0: the whole grid).
 pub(crate) fn step_layers(
     lattice: &Lattice,
     step_of: &StepCoefficients,
     edges: P1Edges,
-    source: &[f64],
     (phi, flux): (&[f64], &[Vec<f64>; 3]),
     (next_phi, next_flux): (&mut [f64], &mut [Vec<f64>; 3]),
+    (source, first): (&[f64], usize),
     layers: std::ops::Range<usize>,
 ) {
     let s = lattice.strides();
@@ -296,24 +297,26 @@ pub(crate) fn step_layers(
         } as usize;
         Some(g - at[axis] * s[axis] + moved * s[axis])
     };
-    let at = |f: &[f64], g: Option<usize>| g.map_or(0.0, |g| f[g]);
+    // Fields hold the cells from `first` on (a rank's layers and halo; 0: all).
+    let at = |f: &[f64], g: Option<usize>| g.map_or(0.0, |g| f[g - first]);
     for g in layers.start * s[2]..layers.end * s[2] {
-        let [p, fx, fy, fz] = step_of.cell(source[g], |component, axis, offset| {
+        let i = g - first;
+        let [p, fx, fy, fz] = step_of.cell(source[i], |component, axis, offset| {
             let field = if component == 0 {
                 phi
             } else {
                 &flux[component - 1]
             };
             if offset == 0 {
-                field[g]
+                field[i]
             } else {
                 at(field, neighbour(g, axis, offset))
             }
         });
-        next_phi[g] = p;
-        next_flux[0][g] = fx;
-        next_flux[1][g] = fy;
-        next_flux[2][g] = fz;
+        next_phi[i] = p;
+        next_flux[0][i] = fx;
+        next_flux[1][i] = fy;
+        next_flux[2][i] = fz;
     }
 }
 

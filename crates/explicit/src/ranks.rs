@@ -400,8 +400,10 @@ pub fn iterate_on_threads(
 /// count): per step each rank sends its first and last layer of (φ, E) to its neighbours,
 /// steps its inner layers while they travel, then its two edge layers; the growth
 /// monitor's largest values and finiteness, the change and size sums per layer, and the
-/// time and cancel flags are all-gathered, and every rank takes the serial decision. The
-/// whole state on every rank at the end, the serial bits on any number of ranks.
+/// time and cancel flags are all-gathered, and every rank takes the serial decision. A
+/// rank holds the state of its layers and one halo layer each side only (eight f64 fields
+/// of (owned + 2) layers); the whole state is gathered on every rank at the end, the
+/// serial bits on any number of ranks.
 ///
 /// # Errors
 /// The serial march's refusals ([`DecompositionError::Scheme`]); periodic edges on more
@@ -436,6 +438,11 @@ pub fn march_p1(
     let (k0, k1) = bounds[rank];
     let slab = nx * ny;
     let n = lattice.len();
+    // This rank's layers and one halo layer each side within the grid: all it holds of
+    // the state (cell g of the grid at g − first).
+    let (lo, hi) = (k0.saturating_sub(1), (k1 + 1).min(nz));
+    let (first, len) = (lo * slab, (hi - lo) * slab);
+    let local_source = &source[first..first + len];
     let largest = source.iter().fold(0.0f64, |a, b| a.max(b.abs()));
     let monitor = growth_monitor(0.0, largest, settings);
     let shared = Stopping {
@@ -450,8 +457,13 @@ pub fn march_p1(
     };
     let started = std::time::Instant::now();
     let mut history = History::start();
-    let (mut phi, mut flux) = (vec![0.0; n], [vec![0.0; n], vec![0.0; n], vec![0.0; n]]);
-    let (mut next_phi, mut next_flux) = (vec![0.0; n], [vec![0.0; n], vec![0.0; n], vec![0.0; n]]);
+    let fields = || {
+        (
+            vec![0.0; len],
+            [vec![0.0; len], vec![0.0; len], vec![0.0; len]],
+        )
+    };
+    let ((mut phi, mut flux), (mut next_phi, mut next_flux)) = (fields(), fields());
     // The layers that read no halo (stepped while the halos travel), and the others.
     let (inner, edges) = if k1 - k0 <= 2 {
         (k0..k0, (k0..k1).map(|k| k..k + 1).collect::<Vec<_>>())
@@ -459,7 +471,7 @@ pub fn march_p1(
         (k0 + 1..k1 - 1, vec![k0..k0 + 1, k1 - 1..k1])
     };
     let layer = |fields: (&[f64], &[Vec<f64>; 3]), k: usize| -> Vec<f64> {
-        let range = k * slab..(k + 1) * slab;
+        let range = (k - lo) * slab..(k - lo + 1) * slab;
         let mut out = fields.0[range.clone()].to_vec();
         for f in fields.1 {
             out.extend_from_slice(&f[range.clone()]);
@@ -485,9 +497,9 @@ pub fn march_p1(
                 lattice,
                 &step_of,
                 settings.edges,
-                source,
                 (&phi, &flux),
                 (&mut next_phi, &mut next_flux),
+                (local_source, first),
                 inner.clone(),
             );
         });
@@ -501,7 +513,7 @@ pub fn march_p1(
             if received.len() != 4 * slab {
                 return Err(DecompositionError::Protocol { rank });
             }
-            let range = k * slab..(k + 1) * slab;
+            let range = (k - lo) * slab..(k - lo + 1) * slab;
             phi[range.clone()].copy_from_slice(&received[..slab]);
             for (a, f) in flux.iter_mut().enumerate() {
                 f[range.clone()].copy_from_slice(&received[(a + 1) * slab..(a + 2) * slab]);
@@ -512,14 +524,14 @@ pub fn march_p1(
                 lattice,
                 &step_of,
                 settings.edges,
-                source,
                 (&phi, &flux),
                 (&mut next_phi, &mut next_flux),
+                (local_source, first),
                 edge.clone(),
             );
         }
         // [time, cancel, finite ×4, largest ×4, (change, size) per layer].
-        let owned = k0 * slab..k1 * slab;
+        let owned = (k0 - lo) * slab..(k1 - lo) * slab;
         let mut local = vec![
             f64::from(u8::from(
                 settings
@@ -544,7 +556,7 @@ pub fn march_p1(
         for f in fields {
             local.push(f[owned.clone()].iter().fold(0.0f64, |a, b| a.max(b.abs())));
         }
-        for (c, s) in layer_norms(&next_phi, &phi, slab, k0..k1) {
+        for (c, s) in layer_norms(&next_phi, &phi, slab, k0 - lo..k1 - lo) {
             local.extend([c, s]);
         }
         let all = comm.all_gather(&local);
@@ -600,7 +612,7 @@ pub fn march_p1(
             };
         }
     };
-    let owned = k0 * slab..k1 * slab;
+    let owned = (k0 - lo) * slab..(k1 - lo) * slab;
     let gathered = |f: &[f64]| -> Result<Vec<f64>, DecompositionError> {
         let whole = comm.all_gather(&f[owned.clone()]);
         if whole.len() != n {

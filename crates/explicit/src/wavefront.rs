@@ -3,9 +3,11 @@
 //! edges, the paper's Eq. 16 or short characteristics), the same bits on any number of
 //! ranks.
 //!
-//! Rank r owns the z-layers [k0, k1) = [r n_z / P, (r + 1) n_z / P), holds the absorption
-//! of the whole grid and a full-length ρ of which it computes its own layers, and the
-//! march takes one of two shapes, by how the light's dependencies cross the slabs:
+//! Rank r owns the z-layers [k0, k1) = [r n_z / P, (r + 1) n_z / P) ([`owned_layers`]) and
+//! holds σ_a and ρ of those and of two more layers each side ([`read_layers`]), so
+//! [`propagate_slab`] never needs the whole volume ([`propagate_on_ranks`] slices the
+//! whole σ_a and gathers the whole ρ, for the registry). The march takes one of two
+//! shapes, by how the light's dependencies cross the slabs:
 //!
 //! - **Across the slabs: a pipelined wavefront.** The paper's pass visits z outermost (its
 //!   octant order), and the characteristic model marches planes across the light's
@@ -29,15 +31,19 @@
 //!   read no halo.
 //!
 //! Every cell is computed by the same function from the same values as in the serial
-//! pass, so ρ is the serial ρ bit for bit. At the end each rank's layers are all-gathered,
-//! so every rank returns the whole field.
+//! pass, so ρ is the serial ρ bit for bit.
 //!
-//! Cost, P ranks on an n_x × n_y × n_z grid: the pipeline takes C + P − 1 steps for the C
-//! chunks (C = ⌈n_y / B⌉, or ⌈(n_y + n_z − 1)/B⌉ skewed; a rank works in about
-//! ⌈(n_y + n_z/P)/B⌉ of them), with B = ⌈n_y / 4P⌉, so it idles about (P − 1)/(C + P − 1)
-//! of the time, and sends one message of at most B n_x values per step. The lock step
-//! sends two messages of 2 n_l values (n_l the lateral extent) per plane and idles only
-//! in synchronisation.
+//! Cost, P ranks of H layers on an n_x × n_y × n_z grid: chunks are one row (B = 1) unless
+//! a step would then hold fewer than 512 cells. The pipeline sends one message of at most
+//! B n_x values per step. The paper's pass starts each rank one step after its upstream
+//! neighbour, so against one rank's H layers it takes at most (P − 1 + n_y)/n_y times as
+//! long; a short characteristic's first row depends on its upstream slab's rows 0 … H (the
+//! downwind read, H layers deep), so each rank starts H + 1 steps after its neighbour:
+//! ((P − 1)(H + 1) + n_y + H)/n_y (about 2 on a cube at large P: half the ranks' time is
+//! filling). The lock step sends two messages of 2 n_l values (n_l the lateral extent) per
+//! plane, hidden behind the plane's inner rows, and idles only in synchronisation.
+//! BENCHMARKS.md ("Absorption march on ranks") has the measurements and the model at 64
+//! and 1024 ranks.
 
 use std::ops::Range;
 
