@@ -386,13 +386,22 @@ pub fn iterate_on_threads(
     settings: &SteadySettings,
     ranks: usize,
 ) -> Result<Steady, DecompositionError> {
-    let mut results = lucent_core::ranks::Threads::run(ranks, |comm| {
+    on_threads(ranks, |comm| {
         iterate(system, slab_len, iteration, settings, comm)
     })
-    .into_iter()
-    .enumerate()
-    .map(|(rank, r)| r.unwrap_or(Err(DecompositionError::Protocol { rank })))
-    .collect::<Result<Vec<_>, _>>()?;
+}
+
+/// Runs `solve` on `ranks` in-process ranks and returns rank 0's result, or the first
+/// rank's error (a rank whose thread panicked: [`DecompositionError::Protocol`]).
+pub(crate) fn on_threads<T: Send>(
+    ranks: usize,
+    solve: impl Fn(&lucent_core::ranks::Threads) -> Result<T, DecompositionError> + Sync,
+) -> Result<T, DecompositionError> {
+    let mut results = lucent_core::ranks::Threads::run(ranks, solve)
+        .into_iter()
+        .enumerate()
+        .map(|(rank, r)| r.unwrap_or(Err(DecompositionError::Protocol { rank })))
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(results.swap_remove(0))
 }
 
@@ -639,11 +648,5 @@ pub fn march_p1_on_threads(
     settings: &crate::p1::P1Settings,
     ranks: usize,
 ) -> Result<crate::p1::P1State, DecompositionError> {
-    let mut results =
-        lucent_core::ranks::Threads::run(ranks, |comm| march_p1(lattice, source, settings, comm))
-            .into_iter()
-            .enumerate()
-            .map(|(rank, r)| r.unwrap_or(Err(DecompositionError::Protocol { rank })))
-            .collect::<Result<Vec<_>, _>>()?;
-    Ok(results.swap_remove(0))
+    on_threads(ranks, |comm| march_p1(lattice, source, settings, comm))
 }

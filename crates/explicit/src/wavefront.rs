@@ -218,14 +218,9 @@ pub fn propagate_on_threads(
     settings: &UpwindSettings,
     ranks: usize,
 ) -> Result<Propagation, DecompositionError> {
-    let mut results = lucent_core::ranks::Threads::run(ranks, |comm| {
+    crate::ranks::on_threads(ranks, |comm| {
         propagate_on_ranks(lattice, absorption, light, settings, comm)
     })
-    .into_iter()
-    .enumerate()
-    .map(|(rank, r)| r.unwrap_or(Err(DecompositionError::Protocol { rank })))
-    .collect::<Result<Vec<_>, _>>()?;
-    Ok(results.swap_remove(0))
 }
 
 /// The light of `setup` (distant: [`propagate_on_ranks`] checked it).
