@@ -1,12 +1,15 @@
-//! How ranks talk: the two operations a z-slab decomposition needs, halo exchange with
-//! the neighbours below and above, and an all-gather of small vectors (layer sums, flags).
+//! How ranks talk: the operations a z-slab decomposition needs, halo exchange with the
+//! neighbours below and above, an all-gather of small vectors (layer sums, flags), and
+//! point-to-point messages among any ranks (a subset of ranks working on its own, and
+//! moving a coarse level between subsets).
 //!
 //! Solvers that run on ranks take `&(impl Communicator + ?Sized)` (so `&dyn Communicator`
 //! works too: the trait is object safe, and [`SolveOptions::ranks`](crate::SolveOptions)
 //! carries one); [`Alone`] is one rank, [`Threads`]
 //! ranks as threads of one process (tests, and machines without MPI), and `lucent-mpi`'s
-//! `Mpi` (feature `mpi`) ranks under `mpirun`. Every rank calls the operations in the same
-//! sequence; a message that does not fit the caller's plan (a rank that stopped) comes
+//! `Mpi` (feature `mpi`) ranks under `mpirun`. Every rank calls the collective operations
+//! in the same sequence, and every pair of ranks agrees on its point-to-point messages; a
+//! message that does not fit the caller's plan (a rank that stopped) comes
 //! back empty or short, never as a hang: the callers check lengths and return an error.
 
 use std::sync::Mutex;
@@ -33,6 +36,19 @@ pub trait Communicator {
 
     /// Every rank's `local`, concatenated in rank order, on every rank.
     fn all_gather(&self, local: &[f64]) -> Vec<f64>;
+
+    /// Point to point among any ranks: sends each `(to, values)` of `sends`, runs
+    /// `interior` while they travel, then receives one message from each rank of `from`,
+    /// in that order. Only the ranks involved call it (a subset of ranks can work on its
+    /// own), and the messages between two ranks arrive in the order they were sent, so
+    /// each pair must agree on its sequence of messages. A rank that does not send what
+    /// the plan says gives an empty or short message, not a hang.
+    fn exchange_with(
+        &self,
+        sends: &[(usize, &[f64])],
+        from: &[usize],
+        interior: &mut dyn FnMut(),
+    ) -> Vec<Vec<f64>>;
 }
 
 /// [`Communicator::exchange_around`] with an `interior` that returns a value: (from below,
@@ -84,6 +100,31 @@ impl Communicator for Alone {
     fn all_gather(&self, local: &[f64]) -> Vec<f64> {
         local.to_vec()
     }
+
+    fn exchange_with(
+        &self,
+        sends: &[(usize, &[f64])],
+        from: &[usize],
+        interior: &mut dyn FnMut(),
+    ) -> Vec<Vec<f64>> {
+        // Rank 0 can only talk to itself: what it sends is what it receives, in order.
+        let mut sent: Vec<Vec<f64>> = sends
+            .iter()
+            .filter(|(to, _)| *to == 0)
+            .map(|(_, v)| v.to_vec())
+            .collect();
+        interior();
+        sent.reverse();
+        from.iter()
+            .map(|&f| {
+                if f == 0 {
+                    sent.pop().unwrap_or_default()
+                } else {
+                    Vec::new()
+                }
+            })
+            .collect()
+    }
 }
 
 /// What travels between in-process ranks: (kind, sequence number, sender, values).
@@ -94,6 +135,8 @@ const PATIENCE: std::time::Duration = std::time::Duration::from_secs(60);
 
 const HALO: u8 = 0;
 const GATHER: u8 = 1;
+/// Point to point: numbered per pair of ranks, not per call.
+const POINT: u8 = 2;
 
 /// Ranks as threads of one process, connected by channels: the same protocol as MPI, for
 /// tests and for running a decomposition without an MPI installation. `Send + Sync`, so a
@@ -106,6 +149,8 @@ pub struct Threads {
     /// The inbox and the messages that arrived before they were asked for.
     inbox: Mutex<(Receiver<Message>, Vec<Message>)>,
     sequence: Mutex<[u64; 2]>,
+    /// Point-to-point messages sent to and received from each rank so far.
+    pairs: Mutex<(Vec<u64>, Vec<u64>)>,
 }
 
 impl Threads {
@@ -120,6 +165,7 @@ impl Threads {
                 to: senders.clone(),
                 inbox: Mutex::new((inbox, Vec::new())),
                 sequence: Mutex::new([0; 2]),
+                pairs: Mutex::new((vec![0; size], vec![0; size])),
             })
             .collect()
     }
@@ -213,5 +259,93 @@ impl Communicator for Threads {
             }
         }
         out
+    }
+
+    fn exchange_with(
+        &self,
+        sends: &[(usize, &[f64])],
+        from: &[usize],
+        interior: &mut dyn FnMut(),
+    ) -> Vec<Vec<f64>> {
+        let lock = || self.pairs.lock().unwrap_or_else(|p| p.into_inner());
+        {
+            let mut pairs = lock();
+            for &(to, values) in sends {
+                if to < self.size() {
+                    pairs.0[to] += 1;
+                    self.send(to, POINT, pairs.0[to], values);
+                }
+            }
+        }
+        interior();
+        let mut pairs = lock();
+        from.iter()
+            .map(|&f| {
+                if f >= self.size() {
+                    return Vec::new();
+                }
+                pairs.1[f] += 1;
+                self.receive(f, POINT, pairs.1[f])
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn point_to_point_among_a_subset_keeps_each_pairs_order() {
+        // Ranks 0–2 of 4 trade among themselves (rank 3 takes no part) three times,
+        // with a message to self, between two all-gathers of every rank; each pair's
+        // messages arrive in the order sent, whatever the other ranks do meanwhile.
+        let results = Threads::run(4, |comm| {
+            let r = comm.rank();
+            let before = comm.all_gather(&[r as f64]);
+            let mut got = Vec::new();
+            if r < 3 {
+                for round in 0..3 {
+                    let value = (10 * r + round) as f64;
+                    let to: Vec<usize> = (0..3).collect();
+                    let payloads: Vec<Vec<f64>> =
+                        to.iter().map(|&q| vec![value, q as f64]).collect();
+                    let sends: Vec<(usize, &[f64])> = to
+                        .iter()
+                        .zip(&payloads)
+                        .map(|(&q, p)| (q, &p[..]))
+                        .collect();
+                    let mut ran = false;
+                    let received = comm.exchange_with(&sends, &[2, 1, 0], &mut || ran = true);
+                    assert!(ran);
+                    got.push(received);
+                }
+            }
+            let after = comm.all_gather(&[-(r as f64)]);
+            (before, got, after)
+        });
+        for (r, result) in results.into_iter().enumerate() {
+            let (before, got, after) = result.unwrap();
+            assert_eq!(before, [0.0, 1.0, 2.0, 3.0]);
+            assert_eq!(after, [0.0, -1.0, -2.0, -3.0]);
+            if r == 3 {
+                assert!(got.is_empty());
+                continue;
+            }
+            for (round, received) in got.iter().enumerate() {
+                let expected: Vec<Vec<f64>> = [2, 1, 0]
+                    .iter()
+                    .map(|&q| vec![(10 * q + round) as f64, r as f64])
+                    .collect();
+                assert_eq!(received, &expected, "rank {r}, round {round}");
+            }
+        }
+    }
+
+    #[test]
+    fn alone_receives_what_it_sent_itself_in_order() {
+        let (a, b) = ([1.0, 2.0], [3.0]);
+        let got = Alone.exchange_with(&[(0, &a), (0, &b)], &[0, 0, 0], &mut || ());
+        assert_eq!(got, vec![vec![1.0, 2.0], vec![3.0], vec![]]);
     }
 }

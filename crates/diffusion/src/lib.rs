@@ -39,8 +39,9 @@
 //! jumps of 10³ (balls, tilted layers, random blocks a few coarse cells wide; tested).
 //!
 //! On several ranks (processes under MPI, or threads), `Multigrid::solve_on_ranks` runs
-//! the same cycles over z-slabs with one-layer halos and gathers the coarse levels onto
-//! every rank ([`RankLayout`]); φ and the history are the same bits on any rank count.
+//! the same cycles over z-slabs with one-layer halos, and agglomerates the coarse levels
+//! onto fewer ranks as they shrink, down to rank 0 for the coarsest ([`RankLayout`]); φ
+//! and the history are the same bits on any rank count.
 //!
 //! For solvers that stream their fields slab by slab (out of core), [`slab`] gives the
 //! same system row by row for a medium that fills the box: the assembled matrix's rows and
@@ -97,7 +98,7 @@ pub use params::{
     SmootherParam, SorParams, check_ranks,
 };
 pub use problem::{AssembledSystem, Balance, Boundaries, Condition, DiffusionProblem, Sources};
-pub use ranks::RankLayout;
+pub use ranks::{RankLayout, Stage};
 pub use slab::SlabSystem;
 pub use solve::{DiffusionSolution, Method, RanksOf, solve, solve_on_ranks};
 pub use solver::{DiffusionSolver, LinearSolve, conditions};

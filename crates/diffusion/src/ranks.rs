@@ -1,97 +1,181 @@
-//! Multigrid on ranks: the hierarchy split into z-slabs, one per rank, on the finer levels,
-//! and gathered onto every rank below them.
+//! Multigrid on ranks: the hierarchy split into z-slabs, the finer levels over every rank
+//! and the coarser ones agglomerated onto fewer ranks, down to one for the coarsest.
 //!
-//! **Layout** ([`RankLayout`]). The fine level's z-layers are cut into runs of whole units
-//! of 2^d layers, balanced by units, so the slab bounds stay whole layers on each of the
-//! d distributed levels (level l owns layers [k₀/2^l, ⌈k₁/2^l⌉)): a coarse cell's eight
-//! children are on its rank, and restriction and constant prolongation need no halo. d is
-//! the largest with P·2^d ≤ n_z (every rank keeps two layers or more on level d − 1), at
-//! most depth − 1; the K-cycle distributes the fine level only (its coarse Krylov steps
-//! run on the gathered levels).
+//! **Layout** ([`RankLayout`]): the levels fall into *stages*, runs of levels split over
+//! the same ranks 0..p. A stage of m levels cuts its first level's z-layers into runs of
+//! whole units of 2^m layers, balanced by units, so the slab bounds stay whole layers on
+//! each of its levels (level L + i owns layers [k₀/2^i, ⌈k₁/2^i⌉)) and on the next
+//! stage's first level: a coarse cell's eight children are on one rank, and restriction
+//! and constant prolongation need no halo. m is the largest with p·2^m ≤ n_z (every rank
+//! keeps a unit) and every level of the stage but the fine one at least
+//! `coarse_cells_per_rank` cells per rank. The next stage takes p' = min(p, ⌊n_z'/2⌋, cells'/`coarse_cells_per_rank`)
+//! ranks, about half as many, as HPGMG and AMReX agglomerate coarse levels; the stage on
+//! one rank (always the coarsest level's) is rank 0's, which cycles it serially. The
+//! K-cycle splits its fine level only (its coarse Krylov steps run on rank 0).
 //!
-//! **A cycle on a distributed level** (as [`Multigrid`]'s, the same arithmetic per cell):
+//! **A cycle on a split level** (as [`Multigrid`]'s, the same arithmetic per cell):
 //! - red–black Gauss–Seidel: each colour starts by sending the slab's first and last
 //!   layers to the neighbours and sweeping the layers between them while the layers
 //!   travel, then sweeps the two boundary layers with the received halo; weighted Jacobi
 //!   likewise;
 //! - the residual's restriction after one halo exchange; trilinear prolongation after one
 //!   on the coarse level (constant prolongation needs none);
-//! - on level d, the restricted right-hand side is all-gathered, and every rank runs the
-//!   serial cycle below (replicated: each rank receives level d's n/8^d values and no
-//!   rank waits for another's coarse solve; the agglomeration AMReX and HPGMG do onto
-//!   fewer ranks, here onto all).
+//! - where the next level starts a stage, the restricted right-hand side moves from the
+//!   layers each rank computed to the next stage's owners (point to point, each owner
+//!   receiving from the two or three ranks whose slabs cover its own), the ranks outside
+//!   the next stage wait, and the coarse correction comes back with the one-layer halo
+//!   trilinear prolongation reads. Ranks that own nothing on a level exchange nothing on
+//!   it.
 //!
 //! **Norms** are Σ r² per fine layer, all-gathered and added one layer at a time in z
 //! order, so the residual history, the stopping decision and φ are the same bits on every
-//! rank count (tested on 1–5 ranks). [`Multigrid::solve`] groups its norm differently
-//! (the spans' sums, then the cells outside them), so the history may differ in the last
-//! bits and a tolerance be crossed one cycle apart; φ has been the serial bits in every
-//! case tested (`tests/ranks.rs` asserts 1e-10 and ± 1 cycle). The time budget and cancellation are each rank's own and
-//! travel with each gather, so all ranks stop on the same cycle.
+//! rank count (tested on 1–5 ranks, with and without agglomeration). [`Multigrid::solve`]
+//! groups its norm differently (the spans' sums, then the cells outside them), so the
+//! history may differ in the last bits and a tolerance be crossed one cycle apart; φ has
+//! been the serial bits in every case tested (`tests/ranks.rs` asserts 1e-10 and ± 1
+//! cycle). The time budget and cancellation are each rank's own and travel with each
+//! gather, so all ranks stop on the same cycle.
 //!
 //! **Not yet.** Every rank holds the whole hierarchy and full-length work vectors (it
 //! touches only its slabs and their halos), so memory does not scale with ranks.
 
 use std::ops::Range;
 
-use lucent_core::ranks::{Communicator, exchange};
+use lucent_core::ranks::Communicator;
 use lucent_core::{StopReason, Stopping};
 
 use crate::error::DiffusionError;
 use crate::level::Level;
-use crate::multigrid::{Convergence, Cycle, Multigrid, Smoother, Work};
+use crate::multigrid::{Convergence, Cycle, Multigrid, Prolongation, Smoother, Work};
 
-/// How a hierarchy is split over ranks.
+/// A run of levels split over the same ranks.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct RankLayout {
-    /// Levels split into z-slabs, finest first; the coarser ones are gathered onto every
-    /// rank.
-    pub distributed_levels: usize,
-    /// Per rank, its fine z-layers [k₀, k₁).
+pub struct Stage {
+    /// Its first level.
+    pub first_level: usize,
+    /// How many levels it spans: `first_level..first_level + levels`.
+    pub levels: usize,
+    /// Per rank that works on it (ranks `0..layers.len()`), its z-layers [k₀, k₁) of the
+    /// first level: the bounds are multiples of 2^`levels` but the last, so a coarse
+    /// cell's children stay on one rank down to the next stage's first level.
     pub layers: Vec<(usize, usize)>,
 }
 
+impl Stage {
+    /// How many ranks work on it.
+    pub fn ranks(&self) -> usize {
+        self.layers.len()
+    }
+
+    /// Rank `rank`'s layers of level `level`, which may be the next stage's first level
+    /// (the layers its slab restricts to); empty for a rank outside the stage.
+    pub fn owned(&self, rank: usize, level: usize) -> Range<usize> {
+        let Some(&(k0, k1)) = self.layers.get(rank) else {
+            return 0..0;
+        };
+        let shift = level - self.first_level;
+        (k0 >> shift)..(k1 + (1 << shift) - 1) >> shift
+    }
+}
+
+/// How a hierarchy is split over ranks: its stages, finest first, covering every level;
+/// the last is on one rank and holds the coarsest level.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RankLayout {
+    /// The stages, finest first.
+    pub stages: Vec<Stage>,
+}
+
 impl RankLayout {
-    /// The layout of a hierarchy of `depth` levels over `n_z` fine layers on `ranks` ranks.
+    /// Below this many cells per rank a level goes to fewer ranks: 16³, where a sweep's
+    /// work per rank (tens of microseconds) is no longer large against a message's
+    /// latency.
+    pub const COARSE_CELLS_PER_RANK: usize = 4096;
+
+    /// The layout of a hierarchy whose levels have `dims` (finest first) on `ranks` ranks:
+    /// the fine level over every rank while each keeps two layers, then a stage keeps at
+    /// least `coarse_cells_per_rank` cells per rank on each of its coarse levels (0 or 1:
+    /// split as far as the layers allow).
     ///
     /// # Errors
-    /// [`DiffusionError::Ranks`] for no ranks or more ranks than layers.
+    /// [`DiffusionError::Ranks`] for no ranks or more ranks than fine layers;
+    /// [`DiffusionError::Invalid`] for no levels.
     pub fn new(
-        n_z: usize,
-        depth: usize,
+        dims: &[[usize; 3]],
         ranks: usize,
         cycle: Cycle,
+        coarse_cells_per_rank: usize,
     ) -> Result<Self, DiffusionError> {
+        let Some(fine) = dims.first() else {
+            return Err(DiffusionError::Invalid("a hierarchy of no levels".into()));
+        };
+        let n_z = fine[2];
         if ranks == 0 || ranks > n_z {
             return Err(DiffusionError::Ranks(format!(
                 "{ranks} ranks for {n_z} z-layers: every rank needs at least one layer"
             )));
         }
-        let mut d = 0;
-        while d + 1 < depth && ranks << (d + 1) <= n_z {
-            d += 1;
+        let depth = dims.len();
+        let per_rank = coarse_cells_per_rank.max(1);
+        let cells = |l: usize| dims[l].iter().product::<usize>();
+        let mut stages = Vec::new();
+        let (mut level, mut p) = (0, ranks);
+        loop {
+            let n = dims[level][2];
+            // The fine level is split over every rank it can be (the caller chose the
+            // ranks, and its data lives split); coarser ones keep the threshold.
+            p = p.min(n / 2).max(1);
+            if level > 0 {
+                p = p.min(cells(level) / per_rank).max(1);
+            }
+            if level + 1 == depth || (cycle == Cycle::K && level > 0) {
+                p = 1;
+            }
+            if p == 1 {
+                stages.push(Stage {
+                    first_level: level,
+                    levels: depth - level,
+                    layers: vec![(0, n)],
+                });
+                return Ok(Self { stages });
+            }
+            let mut m = 1;
+            while level + m + 1 < depth
+                && p << (m + 1) <= n
+                && cells(level + m) >= p * per_rank
+                && !(cycle == Cycle::K)
+            {
+                m += 1;
+            }
+            let unit = 1usize << m;
+            let units = n.div_ceil(unit);
+            let layers = (0..p)
+                .map(|r| {
+                    let (u0, u1) = (r * units / p, (r + 1) * units / p);
+                    (u0 * unit, (u1 * unit).min(n))
+                })
+                .collect();
+            stages.push(Stage {
+                first_level: level,
+                levels: m,
+                layers,
+            });
+            level += m;
         }
-        if cycle == Cycle::K {
-            d = d.min(1);
-        }
-        let unit = 1usize << d;
-        let units = n_z.div_ceil(unit);
-        let layers = (0..ranks)
-            .map(|r| {
-                let (u0, u1) = (r * units / ranks, (r + 1) * units / ranks);
-                (u0 * unit, (u1 * unit).min(n_z))
-            })
-            .collect();
-        Ok(Self {
-            distributed_levels: d,
-            layers,
-        })
     }
 
-    /// Rank `rank`'s layers on level `level` (< `distributed_levels`).
+    /// The stage that holds level `level`.
+    pub fn stage_of(&self, level: usize) -> &Stage {
+        self.stages
+            .iter()
+            .rev()
+            .find(|s| s.first_level <= level)
+            .unwrap_or(&self.stages[0])
+    }
+
+    /// Rank `rank`'s layers of level `level` (empty where it does not work on it).
     pub fn owned(&self, rank: usize, level: usize) -> Range<usize> {
-        let (k0, k1) = self.layers[rank];
-        (k0 >> level)..(k1 + (1 << level) - 1) >> level
+        self.stage_of(level).owned(rank, level)
     }
 }
 
@@ -110,28 +194,44 @@ fn protocol(rank: usize, what: &str) -> DiffusionError {
     ))
 }
 
+/// The common part of two layer ranges.
+fn overlap(a: &Range<usize>, b: &Range<usize>) -> Range<usize> {
+    let (start, end) = (a.start.max(b.start), a.end.min(b.end));
+    start..end.max(start)
+}
+
 impl<C: Communicator + ?Sized> OnRanks<'_, C> {
     fn level(&self, l: usize) -> &Level {
         &self.mg.levels[l]
     }
 
-    fn distributed(&self, l: usize) -> bool {
-        l < self.layout.distributed_levels
+    fn stage(&self, l: usize) -> &Stage {
+        self.layout.stage_of(l)
     }
 
-    /// The layers of level `l` this rank computes: its slab on distributed levels, all of
-    /// them on gathered ones.
+    /// Whether level `l` is on rank 0 alone (cycled serially there).
+    fn serial(&self, l: usize) -> bool {
+        self.stage(l).ranks() == 1
+    }
+
+    /// Whether level `l + 1` starts a new stage.
+    fn hands_over(&self, l: usize) -> bool {
+        self.stage(l + 1).first_level == l + 1
+    }
+
+    /// The layers of level `l` this rank computes (empty where it has no part in it).
     fn owned(&self, l: usize) -> Range<usize> {
-        if self.distributed(l) {
-            self.layout.owned(self.rank, l)
-        } else {
-            self.level(l).all_layers()
-        }
+        self.layout.owned(self.rank, l)
     }
 
-    /// Sends the first and last owned layers of `x` (level `l`) to the neighbours, runs
-    /// `interior` on `x` while they travel, and writes what the neighbours sent into the
-    /// halo layers.
+    /// The coarse layers (level `l + 1`) this rank's slab of level `l` restricts to.
+    fn restricts_to(&self, l: usize) -> Range<usize> {
+        self.stage(l).owned(self.rank, l + 1)
+    }
+
+    /// Sends the first and last owned layers of `x` (level `l`) to the neighbours of its
+    /// stage, runs `interior` on `x` while they travel, and writes what the neighbours
+    /// sent into the halo layers. A rank outside the stage only runs `interior`.
     fn halo<T: Copy, R>(
         &self,
         l: usize,
@@ -141,45 +241,52 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         interior: impl FnOnce(&mut [T]) -> R,
     ) -> Result<R, DiffusionError> {
         let slab = self.level(l).slab();
-        let nz = self.level(l).dims[2];
         let o = self.owned(l);
-        let has_below = o.start > 0;
-        let has_above = o.end < nz;
+        let ranks = self.stage(l).ranks();
+        if o.is_empty() || ranks == 1 {
+            return Ok(interior(x));
+        }
+        let below = (self.rank > 0).then(|| self.rank - 1);
+        let above = Some(self.rank + 1).filter(|&r| r < ranks);
         let layer = |k: usize, x: &[T]| -> Vec<f64> {
             x[k * slab..(k + 1) * slab]
                 .iter()
                 .map(|&v| to_f64(v))
                 .collect()
         };
-        let to_below = if has_below {
-            layer(o.start, x)
-        } else {
-            Vec::new()
+        let to_below = below.map(|_| layer(o.start, x)).unwrap_or_default();
+        let to_above = above.map(|_| layer(o.end - 1, x)).unwrap_or_default();
+        let sends: Vec<(usize, &[f64])> = below
+            .map(|b| (b, &to_below[..]))
+            .into_iter()
+            .chain(above.map(|a| (a, &to_above[..])))
+            .collect();
+        let from: Vec<usize> = below.into_iter().chain(above).collect();
+        let mut interior = Some(interior);
+        let mut out = None;
+        let received = {
+            let x = &mut *x;
+            self.comm.exchange_with(&sends, &from, &mut || {
+                if let Some(f) = interior.take() {
+                    out = Some(f(&mut *x));
+                }
+            })
         };
-        let to_above = if has_above {
-            layer(o.end - 1, x)
-        } else {
-            Vec::new()
+        let out = match (out, interior) {
+            (Some(out), _) => out,
+            (None, Some(f)) => f(&mut *x),
+            (None, None) => unreachable!("the closure takes `interior` only to store its result"),
         };
-        let (from_below, from_above, out) =
-            exchange(self.comm, &to_below, &to_above, || interior(&mut *x));
-        let expected = |present: bool| if present { slab } else { 0 };
-        if from_below.len() != expected(has_below) || from_above.len() != expected(has_above) {
-            return Err(protocol(self.rank, "a halo"));
-        }
-        if has_below {
-            for (x, v) in x[(o.start - 1) * slab..o.start * slab]
-                .iter_mut()
-                .zip(from_below)
-            {
-                *x = from_f64(v);
+        let mut received = received.into_iter();
+        for (k, present) in [(o.start.wrapping_sub(1), below), (o.end, above)] {
+            if present.is_none() {
+                continue;
             }
-        }
-        if has_above {
-            for (x, v) in x[o.end * slab..(o.end + 1) * slab]
-                .iter_mut()
-                .zip(from_above)
-            {
+            let values = received.next().unwrap_or_default();
+            if values.len() != slab {
+                return Err(protocol(self.rank, "a halo"));
+            }
+            for (x, v) in x[k * slab..(k + 1) * slab].iter_mut().zip(values) {
                 *x = from_f64(v);
             }
         }
@@ -190,10 +297,98 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         self.halo(l, x, f64::from, |v| v as f32, |_| ())
     }
 
-    /// Zeroes level `l`'s vector where this rank reads it: its slab and halos on a
-    /// distributed level (the rest is never read), all of it on a gathered one.
+    /// Moves level `l`'s layers between ranks 0..`ranks`: rank q holds `have(q)` and
+    /// wants `want(q)`; every rank sends each other rank the part of its layers that rank
+    /// wants and receives its own wants from their holders (the ranges on one level are
+    /// disjoint for `have`, so each wanted layer has one holder).
+    fn move_layers(
+        &self,
+        l: usize,
+        v: &mut [f32],
+        ranks: usize,
+        have: impl Fn(usize) -> Range<usize>,
+        want: impl Fn(usize) -> Range<usize>,
+    ) -> Result<(), DiffusionError> {
+        if self.rank >= ranks {
+            return Ok(());
+        }
+        let slab = self.level(l).slab();
+        let mine = have(self.rank);
+        let parts: Vec<(usize, Vec<f64>)> = (0..ranks)
+            .filter(|&q| q != self.rank)
+            .filter_map(|q| {
+                let part = overlap(&mine, &want(q));
+                (!part.is_empty()).then(|| {
+                    let values = v[part.start * slab..part.end * slab]
+                        .iter()
+                        .map(|&x| f64::from(x))
+                        .collect();
+                    (q, values)
+                })
+            })
+            .collect();
+        let sends: Vec<(usize, &[f64])> = parts.iter().map(|(q, v)| (*q, &v[..])).collect();
+        let wanted = want(self.rank);
+        let from: Vec<(usize, Range<usize>)> = (0..ranks)
+            .filter(|&q| q != self.rank)
+            .map(|q| (q, overlap(&have(q), &wanted)))
+            .filter(|(_, part)| !part.is_empty())
+            .collect();
+        let sources: Vec<usize> = from.iter().map(|(q, _)| *q).collect();
+        let received = self.comm.exchange_with(&sends, &sources, &mut || ());
+        for ((_, part), values) in from.iter().zip(received) {
+            if values.len() != part.len() * slab {
+                return Err(protocol(self.rank, "a coarse level's hand-over"));
+            }
+            for (x, v) in v[part.start * slab..part.end * slab].iter_mut().zip(values) {
+                *x = v as f32;
+            }
+        }
+        Ok(())
+    }
+
+    /// Hands level `l + 1`'s restricted right-hand side from the ranks of `l`'s stage (the
+    /// layers each restricted to) to the owners in the next stage.
+    fn hand_down(&self, l: usize, b: &mut [f32]) -> Result<(), DiffusionError> {
+        let (fine, coarse) = (self.stage(l), self.stage(l + 1));
+        self.move_layers(
+            l + 1,
+            b,
+            fine.ranks(),
+            |q| fine.owned(q, l + 1),
+            |q| coarse.owned(q, l + 1),
+        )
+    }
+
+    /// Hands level `l + 1`'s correction back from the next stage's owners to the ranks of
+    /// `l`'s stage: the layers each restricted to and, for trilinear prolongation, one
+    /// more each side.
+    fn hand_up(&self, l: usize, x: &mut [f32]) -> Result<(), DiffusionError> {
+        let (fine, coarse) = (self.stage(l), self.stage(l + 1));
+        let nz = self.level(l + 1).dims[2];
+        let halo = usize::from(self.mg.settings().prolongation == Prolongation::Trilinear);
+        self.move_layers(
+            l + 1,
+            x,
+            fine.ranks(),
+            |q| coarse.owned(q, l + 1),
+            |q| {
+                let r = fine.owned(q, l + 1);
+                if r.is_empty() {
+                    r
+                } else {
+                    r.start.saturating_sub(halo)..(r.end + halo).min(nz)
+                }
+            },
+        )
+    }
+
+    /// Zeroes level `l`'s vector where this rank reads it: its slab and halos.
     fn zero(&self, l: usize, x: &mut [f32]) {
         let o = self.owned(l);
+        if o.is_empty() {
+            return;
+        }
         let slab = self.level(l).slab();
         let nz = self.level(l).dims[2];
         x[o.start.saturating_sub(1) * slab..(o.end + 1).min(nz) * slab].fill(0.0);
@@ -215,7 +410,7 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         )
     }
 
-    /// The pre- or post-smoothing sweeps on distributed level `l`.
+    /// The pre- or post-smoothing sweeps on split level `l`.
     fn smooth(
         &self,
         l: usize,
@@ -274,27 +469,8 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         Ok(())
     }
 
-    /// Gathers the owned layers of `v` (level `l`, the first gathered level) onto every
-    /// rank.
-    fn gather_level(&self, l: usize, v: &mut [f32]) -> Result<(), DiffusionError> {
-        let level = self.level(l);
-        let slab = level.slab();
-        let o = self.layout.owned(self.rank, l);
-        let local: Vec<f64> = v[o.start * slab..o.end * slab]
-            .iter()
-            .map(|&x| f64::from(x))
-            .collect();
-        let all = self.comm.all_gather(&local);
-        if all.len() != v.len() {
-            return Err(protocol(self.rank, "a coarse level's gather"));
-        }
-        for (v, a) in v.iter_mut().zip(all) {
-            *v = a as f32;
-        }
-        Ok(())
-    }
-
-    /// One cycle on level `l` for A x = b (x holds the initial guess on the owned layers).
+    /// One cycle on level `l` for A x = b (x holds the initial guess on the owned layers);
+    /// a rank with no part in level `l` returns at once.
     fn cycle(
         &self,
         l: usize,
@@ -303,7 +479,10 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         x: &mut Work,
         s: &mut Work,
     ) -> Result<(), DiffusionError> {
-        if !self.distributed(l) {
+        if self.owned(l).is_empty() {
+            return Ok(());
+        }
+        if self.serial(l) {
             self.mg.cycle(l, cycle, b, x, s);
             return Ok(());
         }
@@ -317,35 +496,38 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
                 &x[l],
                 coarse,
                 &mut bc[0],
-                self.layout.owned(self.rank, l + 1),
+                self.restricts_to(l),
             );
         }
-        if !self.distributed(l + 1) {
-            self.gather_level(l + 1, &mut b[l + 1])?;
+        if self.hands_over(l) {
+            self.hand_down(l, &mut b[l + 1])?;
         }
         self.zero(l + 1, &mut x[l + 1]);
-        match cycle {
-            Cycle::V => self.cycle(l + 1, Cycle::V, b, x, s)?,
-            Cycle::W => {
-                self.cycle(l + 1, Cycle::W, b, x, s)?;
-                self.cycle(l + 1, Cycle::W, b, x, s)?;
+        if !self.owned(l + 1).is_empty() {
+            match cycle {
+                Cycle::V => self.cycle(l + 1, Cycle::V, b, x, s)?,
+                Cycle::W => {
+                    self.cycle(l + 1, Cycle::W, b, x, s)?;
+                    self.cycle(l + 1, Cycle::W, b, x, s)?;
+                }
+                Cycle::F => {
+                    self.cycle(l + 1, Cycle::F, b, x, s)?;
+                    self.cycle(l + 1, Cycle::V, b, x, s)?;
+                }
+                // The layout keeps the K-cycle's coarse levels on rank 0.
+                Cycle::K => self.mg.krylov_correction(l + 1, b, x, s),
             }
-            Cycle::F => {
-                self.cycle(l + 1, Cycle::F, b, x, s)?;
-                self.cycle(l + 1, Cycle::V, b, x, s)?;
-            }
-            // The layout keeps the K-cycle's coarse levels gathered.
-            Cycle::K => self.mg.krylov_correction(l + 1, b, x, s),
         }
         self.prolong(l, x)?;
         self.smooth(l, &b[l], &mut x[l], &mut s[l], true)
     }
 
-    /// x[l] += the prolonged x[l + 1], on the owned layers of `l`.
+    /// x[l] += the prolonged x[l + 1], on the owned layers of `l` (after fetching the
+    /// coarse layers it reads: the halo within a stage, the hand-up across one).
     fn prolong(&self, l: usize, x: &mut Work) -> Result<(), DiffusionError> {
-        let trilinear =
-            self.mg.settings().prolongation == crate::multigrid::Prolongation::Trilinear;
-        if trilinear && self.distributed(l + 1) {
+        if self.hands_over(l) {
+            self.hand_up(l, &mut x[l + 1])?;
+        } else if self.mg.settings().prolongation == Prolongation::Trilinear {
             self.halo32(l + 1, &mut x[l + 1])?;
         }
         let (xf, xc) = x.split_at_mut(l + 1);
@@ -371,23 +553,24 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         }
         let last = self.mg.levels.len() - 1;
         for l in 0..last {
+            if self.owned(l).is_empty() {
+                break;
+            }
             let (bf, bc) = b.split_at_mut(l + 1);
-            // From a distributed level, the coarse layers of this rank's slab (gathered
-            // below if the coarse level is not distributed).
-            let coarse_layers = if self.distributed(l) {
-                self.layout.owned(self.rank, l + 1)
-            } else {
-                self.level(l + 1).all_layers()
-            };
             self.level(l)
-                .restrict(&bf[l], self.level(l + 1), &mut bc[0], coarse_layers);
-            if self.distributed(l) && !self.distributed(l + 1) {
-                self.gather_level(l + 1, &mut b[l + 1])?;
+                .restrict(&bf[l], self.level(l + 1), &mut bc[0], self.restricts_to(l));
+            if self.hands_over(l) {
+                self.hand_down(l, &mut b[l + 1])?;
             }
         }
-        x[last].fill(0.0);
-        self.mg.coarsest(&b[last], &mut x[last]);
+        if !self.owned(last).is_empty() {
+            x[last].fill(0.0);
+            self.mg.coarsest(&b[last], &mut x[last]);
+        }
         for l in (0..last).rev() {
+            if self.owned(l).is_empty() {
+                continue;
+            }
             self.zero(l, &mut x[l]);
             self.prolong(l, x)?;
             self.cycle(l, self.mg.settings().cycle, b, x, s)?;
@@ -405,17 +588,84 @@ struct Gathered {
 }
 
 impl Multigrid {
-    /// How [`Multigrid::solve_on_ranks`] splits this hierarchy over `ranks` ranks.
+    /// Whether `layout` splits this hierarchy over `ranks` ranks as a stage layout must:
+    /// stages cover the levels in order, the last on one rank; each stage's ranks (no more
+    /// than `ranks`, no more than its predecessor's) cover its first level's layers in
+    /// order, bounds multiples of 2^levels but the last.
+    fn check_layout(&self, layout: &RankLayout, ranks: usize) -> Result<(), DiffusionError> {
+        let invalid = |why: &str| {
+            Err(DiffusionError::Invalid(format!(
+                "a rank layout whose {why} ({layout:?} for {} levels on {ranks} ranks)",
+                self.levels.len()
+            )))
+        };
+        let mut level = 0;
+        let mut previous = ranks;
+        for (i, stage) in layout.stages.iter().enumerate() {
+            let last = i + 1 == layout.stages.len();
+            if stage.first_level != level || stage.levels == 0 {
+                return invalid("stages do not follow each other");
+            }
+            let p = stage.ranks();
+            if p == 0 || p > previous || (last != (p == 1)) {
+                return invalid("rank counts do not shrink to one on the last stage");
+            }
+            let n = self.levels[level].dims[2];
+            let unit = 1usize << stage.levels.min(usize::BITS as usize - 1);
+            let mut at = 0;
+            for &(k0, k1) in &stage.layers {
+                if k0 != at || k1 <= k0 || (!last && k1 != n && k1 % unit != 0) {
+                    return invalid("slabs do not cover a level in whole units");
+                }
+                at = k1;
+            }
+            if at != n {
+                return invalid("slabs do not cover a level");
+            }
+            previous = p;
+            level += stage.levels;
+            if level > self.levels.len() {
+                return invalid("stages run past the coarsest level");
+            }
+        }
+        if level != self.levels.len() {
+            return invalid("stages do not reach the coarsest level");
+        }
+        if self.settings().cycle == Cycle::K
+            && layout
+                .stages
+                .first()
+                .is_some_and(|s| s.ranks() > 1 && s.levels > 1)
+        {
+            return invalid(
+                "K-cycle splits more than its fine level (its Krylov steps run on one rank)",
+            );
+        }
+        Ok(())
+    }
+
+    /// How [`Multigrid::solve_on_ranks`] splits this hierarchy over `ranks` ranks: coarse
+    /// levels go to fewer ranks below [`RankLayout::COARSE_CELLS_PER_RANK`] cells per
+    /// rank ([`Multigrid::rank_layout_with`] chooses the threshold).
     ///
     /// # Errors
     /// [`DiffusionError::Ranks`] for no ranks or more ranks than z-layers.
     pub fn rank_layout(&self, ranks: usize) -> Result<RankLayout, DiffusionError> {
-        RankLayout::new(
-            self.fine().dims[2],
-            self.depth(),
-            ranks,
-            self.settings().cycle,
-        )
+        self.rank_layout_with(ranks, RankLayout::COARSE_CELLS_PER_RANK)
+    }
+
+    /// [`Multigrid::rank_layout`] with levels split while they have at least
+    /// `coarse_cells_per_rank` cells per rank (0: as far as the layers allow).
+    ///
+    /// # Errors
+    /// [`DiffusionError::Ranks`] for no ranks or more ranks than z-layers.
+    pub fn rank_layout_with(
+        &self,
+        ranks: usize,
+        coarse_cells_per_rank: usize,
+    ) -> Result<RankLayout, DiffusionError> {
+        let dims: Vec<[usize; 3]> = self.levels.iter().map(|l| l.dims).collect();
+        RankLayout::new(&dims, ranks, self.settings().cycle, coarse_cells_per_rank)
     }
 
     /// [`Multigrid::solve`] on the ranks of `comm`, every rank calling it with the whole
@@ -433,6 +683,25 @@ impl Multigrid {
         stopping: &Stopping,
         comm: &(impl Communicator + ?Sized),
     ) -> Result<Convergence, DiffusionError> {
+        let layout = self.rank_layout(comm.size())?;
+        self.solve_on_layout(rhs, phi, stopping, comm, layout)
+    }
+
+    /// [`Multigrid::solve_on_ranks`] with a chosen layout (every rank passes the same one,
+    /// for `comm.size()` ranks; [`Multigrid::rank_layout_with`] makes one).
+    ///
+    /// # Errors
+    /// As [`Multigrid::solve_on_ranks`]; [`DiffusionError::Invalid`] for a layout of
+    /// another hierarchy or rank count.
+    pub fn solve_on_layout(
+        &self,
+        rhs: &[f64],
+        phi: &mut [f64],
+        stopping: &Stopping,
+        comm: &(impl Communicator + ?Sized),
+        layout: RankLayout,
+    ) -> Result<Convergence, DiffusionError> {
+        self.check_layout(&layout, comm.size())?;
         let n = self.fine_cells();
         if rhs.len() != n || phi.len() != n {
             return Err(DiffusionError::Invalid(format!(
@@ -444,7 +713,7 @@ impl Multigrid {
         let on = OnRanks {
             mg: self,
             comm,
-            layout: self.rank_layout(comm.size())?,
+            layout,
             rank: comm.rank(),
         };
         let started = std::time::Instant::now();
@@ -453,10 +722,7 @@ impl Multigrid {
         let o = on.owned(0);
         let owned = o.start * slab..o.end * slab;
         let counts: Vec<usize> = (0..comm.size())
-            .map(|r| {
-                let (k0, k1) = on.layout.layers[r];
-                k1 - k0
-            })
+            .map(|r| on.layout.owned(r, 0).len())
             .collect();
         // Σ of the gathered layer sums in z order, with every rank's flags.
         let gather = |layer_sums: &[f64]| -> Result<Gathered, DiffusionError> {

@@ -8,7 +8,8 @@ use lucent_core::Stopping;
 use lucent_core::ranks::{Communicator, Threads};
 use lucent_diffusion::{
     Boundaries, CellGeometry, Condition, Convergence, Cycle, DiffusionError, DiffusionProblem,
-    Discretisation, Multigrid, MultigridSettings, Prolongation, Smoother, Sources,
+    Discretisation, Multigrid, MultigridSettings, Prolongation, RankLayout, Smoother, Sources,
+    Stage,
 };
 use lucent_grid::GridGeometry;
 use proptest::prelude::*;
@@ -73,11 +74,18 @@ fn stopping() -> Stopping {
     }
 }
 
-/// The solve on `ranks` in-process ranks: every rank's (φ, history), which must agree.
+/// Coarse levels agglomerated below these cells per rank: 0 splits every level as far as
+/// its layers allow (the most stages and hand-overs on these small grids), 64 mixes split
+/// and agglomerated levels, the default agglomerates most of them here.
+const THRESHOLDS: [usize; 3] = [0, 64, RankLayout::COARSE_CELLS_PER_RANK];
+
+/// The solve on `ranks` in-process ranks, coarse levels agglomerated below `threshold`
+/// cells per rank: every rank's (φ, history), which must agree.
 fn on_ranks(
     mg: &Multigrid,
     rhs: &[f64],
     ranks: usize,
+    threshold: usize,
 ) -> Result<(Vec<f64>, Convergence), DiffusionError> {
     let results: Vec<Result<(Vec<f64>, Convergence), DiffusionError>> = std::thread::scope(|s| {
         let handles: Vec<_> = Threads::world(ranks)
@@ -85,7 +93,8 @@ fn on_ranks(
             .map(|comm| {
                 s.spawn(move || {
                     let mut phi = vec![0.0; rhs.len()];
-                    let c = mg.solve_on_ranks(rhs, &mut phi, &stopping(), &comm)?;
+                    let layout = mg.rank_layout_with(ranks, threshold)?;
+                    let c = mg.solve_on_layout(rhs, &mut phi, &stopping(), &comm, layout)?;
                     assert_eq!(comm.size(), ranks);
                     Ok((phi, c))
                 })
@@ -124,7 +133,7 @@ fn check(scene: Scene, settings: MultigridSettings, max_ranks: usize) {
         expected.stop_reason.is_converged(),
         "{scene:?} {settings:?}: {expected:?}"
     );
-    let (one, history) = on_ranks(&mg, &rhs, 1).unwrap();
+    let (one, history) = on_ranks(&mg, &rhs, 1, 0).unwrap();
     // The same cells and arithmetic as the serial cycles; only the norm's grouping differs
     // (layer sums with each layer's outside cells, against spans then outside), which may
     // move the history in the last bits and a tolerance one cycle: the bound is 1e-10 of
@@ -145,16 +154,15 @@ fn check(scene: Scene, settings: MultigridSettings, max_ranks: usize) {
         history.iterations()
     );
     for ranks in 2..=max_ranks {
-        match on_ranks(&mg, &rhs, ranks) {
-            Ok((phi, h)) => {
-                assert_eq!(h, history, "{scene:?} {settings:?} on {ranks} ranks");
-                assert_eq!(
-                    bits(&phi),
-                    bits(&one),
-                    "{scene:?} {settings:?} on {ranks} ranks"
-                );
+        for threshold in THRESHOLDS {
+            let case = format!("{scene:?} {settings:?} on {ranks} ranks, {threshold} cells");
+            match on_ranks(&mg, &rhs, ranks, threshold) {
+                Ok((phi, h)) => {
+                    assert_eq!(h, history, "{case}");
+                    assert_eq!(bits(&phi), bits(&one), "{case}");
+                }
+                Err(e) => panic!("{case}: {e}"),
             }
-            Err(e) => panic!("{scene:?} on {ranks} ranks: {e}"),
         }
     }
 }
@@ -214,6 +222,22 @@ fn a_medium_filling_the_box_with_dirichlet_faces() {
 }
 
 #[test]
+fn ranks_beyond_half_the_layers_wait_and_the_rest_split_the_grid() {
+    // 5 layers: the fine level goes to 2 ranks (two layers or more each); ranks 2–4 own
+    // nothing, take part in the norms' gathers only, and get the whole φ.
+    check(
+        Scene {
+            dims: [12, 10, 5],
+            sphere: true,
+            contrast: 10.0,
+            dirichlet_box: false,
+        },
+        MultigridSettings::default(),
+        5,
+    );
+}
+
+#[test]
 fn more_ranks_than_layers_is_a_typed_error() {
     let (problem, rhs) = system(Scene {
         dims: [8, 8, 3],
@@ -222,33 +246,152 @@ fn more_ranks_than_layers_is_a_typed_error() {
         dirichlet_box: false,
     });
     let mg = Multigrid::build(&problem, MultigridSettings::default()).unwrap();
-    let e = on_ranks(&mg, &rhs, 4).unwrap_err();
+    let e = on_ranks(&mg, &rhs, 4, 0).unwrap_err();
     assert!(matches!(e, DiffusionError::Ranks(_)), "{e}");
     assert!(e.to_string().contains("4 ranks for 3 z-layers"), "{e}");
 }
 
+/// The levels' dims of a hierarchy of `depth` levels over a fine grid `dims`.
+fn level_dims(dims: [usize; 3], depth: usize) -> Vec<[usize; 3]> {
+    std::iter::successors(Some(dims), |d| {
+        Some(d.map(|n| if n == 1 { 1 } else { n.div_ceil(2) }))
+    })
+    .take(depth)
+    .collect()
+}
+
 #[test]
-fn the_layout_keeps_coarse_cells_on_one_rank() {
-    // Bounds are multiples of 2^d (a coarse cell's children on one rank), cover the layers
-    // in order, and each rank keeps ≥ 2 layers on its coarsest distributed level.
-    for (n_z, depth, ranks) in [(37, 4, 4), (64, 5, 2), (22, 3, 5), (1000, 8, 64), (9, 2, 9)] {
-        let layout = lucent_diffusion::RankLayout::new(n_z, depth, ranks, Cycle::V).unwrap();
-        let d = layout.distributed_levels;
-        assert!(d < depth);
-        assert_eq!(layout.layers.first().unwrap().0, 0);
-        assert_eq!(layout.layers.last().unwrap().1, n_z);
-        for w in layout.layers.windows(2) {
-            assert_eq!(w[0].1, w[1].0);
-            assert_eq!(w[0].1 % (1 << d), 0, "{n_z} {depth} {ranks}: {layout:?}");
-        }
-        if d > 0 {
-            for r in 0..ranks {
-                assert!(
-                    layout.owned(r, d - 1).len() >= 2,
-                    "{n_z} {depth} {ranks}: {layout:?}"
-                );
+fn the_layout_keeps_coarse_cells_on_one_rank_and_agglomerates_onto_fewer() {
+    // Stages follow each other down to the coarsest level, which is rank 0's alone; rank
+    // counts never grow; each stage's slabs cover its first level in order with bounds in
+    // whole units of 2^levels (a coarse cell's children on one rank, down to the next
+    // stage); every rank keeps a unit, and a coarse level the threshold's cells per rank;
+    // the fine level is split over every rank while each keeps two layers.
+    let cases = [
+        ([13, 11, 37], 4, 4),
+        ([64, 64, 64], 5, 2),
+        ([9, 14, 22], 3, 5),
+        ([1000, 1000, 1000], 8, 64),
+        ([1024, 1024, 1024], 9, 1024),
+        ([40, 40, 9], 2, 9),
+        ([33, 17, 33], 5, 3),
+    ];
+    for (dims, depth, ranks) in cases {
+        let levels = level_dims(dims, depth);
+        for threshold in [0, 64, RankLayout::COARSE_CELLS_PER_RANK] {
+            let layout = RankLayout::new(&levels, ranks, Cycle::V, threshold).unwrap();
+            let case = format!("{dims:?} {depth} {ranks} {threshold}: {layout:?}");
+            assert_eq!(
+                layout.stages[0].ranks(),
+                ranks.min(dims[2] / 2).max(1),
+                "{case}"
+            );
+            let last = layout.stages.last().unwrap();
+            assert_eq!(last.ranks(), 1, "{case}");
+            assert_eq!(last.first_level + last.levels, depth, "{case}");
+            let mut level = 0;
+            let mut previous = ranks;
+            for stage in &layout.stages {
+                assert_eq!(stage.first_level, level, "{case}");
+                assert!(stage.ranks() <= previous && stage.levels > 0, "{case}");
+                previous = stage.ranks();
+                let n = levels[level][2];
+                assert_eq!(stage.layers.first().unwrap().0, 0, "{case}");
+                assert_eq!(stage.layers.last().unwrap().1, n, "{case}");
+                if stage.ranks() > 1 {
+                    for w in stage.layers.windows(2) {
+                        assert_eq!(w[0].1, w[1].0, "{case}");
+                        assert_eq!(w[0].1 % (1 << stage.levels), 0, "{case}");
+                    }
+                    for l in level..level + stage.levels {
+                        let cells: usize = levels[l].iter().product();
+                        assert!(l == 0 || cells >= stage.ranks() * threshold, "{case}");
+                        for r in 0..stage.ranks() {
+                            assert!(!stage.owned(r, l).is_empty(), "{case}");
+                        }
+                    }
+                    // Its slabs restrict to disjoint runs covering the next level.
+                    let next = level + stage.levels;
+                    let mut at = 0;
+                    for r in 0..stage.ranks() {
+                        let o = stage.owned(r, next);
+                        assert_eq!(o.start, at, "{case}");
+                        at = o.end;
+                    }
+                    assert_eq!(at, levels[next][2], "{case}");
+                }
+                level += stage.levels;
             }
         }
+    }
+    // Splitting as far as the layers allow on 1024³ over 1024 ranks: the fine level on
+    // 512 ranks (two layers each), then about half as many per level.
+    let layout = RankLayout::new(&level_dims([1024; 3], 9), 1024, Cycle::V, 0).unwrap();
+    let counts: Vec<usize> = layout.stages.iter().map(|s| s.ranks()).collect();
+    assert_eq!(counts, [512, 256, 128, 64, 32, 16, 8, 4, 1]);
+    // 64 ranks on 1000³ split levels 0–2 over all (64·2³ ≤ 1000 layers), then level 3's
+    // 125 layers over 62 ranks (two layers each); the default's 16³ cells per rank hold.
+    let layout = RankLayout::new(
+        &level_dims([1000; 3], 8),
+        64,
+        Cycle::V,
+        RankLayout::COARSE_CELLS_PER_RANK,
+    )
+    .unwrap();
+    let stages: Vec<(usize, usize)> = layout
+        .stages
+        .iter()
+        .map(|s| (s.ranks(), s.levels))
+        .collect();
+    assert_eq!(stages, [(64, 3), (62, 1), (31, 1), (8, 1), (1, 2)]);
+}
+
+#[test]
+fn a_layout_of_another_hierarchy_is_a_typed_error() {
+    let (problem, rhs) = system(Scene {
+        dims: [8, 8, 16],
+        sphere: false,
+        contrast: 1.0,
+        dirichlet_box: false,
+    });
+    let mg = Multigrid::build(&problem, MultigridSettings::default()).unwrap();
+    let phi = vec![0.0; rhs.len()];
+    let bad = [
+        // Four ranks' layout on a communicator of two.
+        mg.rank_layout_with(4, 0).unwrap(),
+        // Bounds that split a coarse cell's children.
+        RankLayout {
+            stages: vec![
+                Stage {
+                    first_level: 0,
+                    levels: 2,
+                    layers: vec![(0, 6), (6, 16)],
+                },
+                Stage {
+                    first_level: 2,
+                    levels: mg.depth() - 2,
+                    layers: vec![(0, 4)],
+                },
+            ],
+        },
+    ];
+    for layout in bad {
+        let results = Threads::run(2, |comm| {
+            mg.solve_on_layout(&rhs, &mut phi.clone(), &stopping(), comm, layout.clone())
+        });
+        for r in results {
+            let e = r.unwrap().unwrap_err();
+            assert!(matches!(e, DiffusionError::Invalid(_)), "{e}");
+        }
+    }
+    // The default layout passes the same check.
+    let layout = mg.rank_layout_with(2, 0).unwrap();
+    let results = Threads::run(2, |comm| {
+        let mut phi = phi.clone();
+        mg.solve_on_layout(&rhs, &mut phi, &stopping(), comm, layout.clone())
+    });
+    for r in results {
+        assert!(r.unwrap().unwrap().stop_reason.is_converged());
     }
 }
 

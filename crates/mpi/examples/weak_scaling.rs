@@ -10,7 +10,9 @@
 //! The problem: a heterogeneous diffusion medium in an embedded cylinder along z with a
 //! point source, `n_z` = L·ranks layers of S × 5S/6 cells (the same slab per rank;
 //! `--layers L`, default 24, `--side S`, default 24). `--method ftcs` (default), `jacobi`
-//! or `mg` (`lucent_diffusion::Multigrid::solve_on_ranks`, V(2,2) from full multigrid);
+//! or `mg` (`lucent_diffusion::Multigrid::solve_on_ranks`, V(2,2) from full multigrid;
+//! `--coarse-cells N` agglomerates coarse levels onto fewer ranks below N cells per rank,
+//! default `RankLayout::COARSE_CELLS_PER_RANK`, 0 splits every level as far as it goes);
 //! or Zhang & Ma's absorption march of a distant light through heterogeneous absorption on
 //! the same grid (`lucent_explicit::wavefront`, short characteristics): `march` with the
 //! light along z (the pipelined wavefront), `march-x` along x (planes in lock step).
@@ -27,7 +29,7 @@ use glam::DVec3;
 use lucent_core::Stopping;
 use lucent_diffusion::{
     Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Multigrid,
-    MultigridSettings, Sources,
+    MultigridSettings, RankLayout, Sources,
 };
 use lucent_explicit::steady::{Iteration, SteadySettings, ftcs_limit, iterate as serial};
 use lucent_grid::GridGeometry;
@@ -37,7 +39,8 @@ use lucent_mpi::Communicator;
 enum Method {
     Ftcs,
     Jacobi,
-    Multigrid,
+    /// Coarse levels go to fewer ranks below this many cells per rank.
+    Multigrid(usize),
     /// The absorption march, the light's dominant axis z (`true`) or x.
     March(bool),
 }
@@ -112,7 +115,7 @@ fn run(
         return march(comm, along_z, layers_per_rank, side, repeat);
     }
     let (problem, sources, slab) = problem(comm.size(), layers_per_rank, side)?;
-    if method == Method::Multigrid {
+    if let Method::Multigrid(coarse_cells) = method {
         let stopping = Stopping {
             relative_tolerance: 1e-10,
             max_iterations: 100,
@@ -121,9 +124,28 @@ fn run(
         let rhs = problem.rhs(&sources).map_err(|e| e.to_string())?;
         let mg =
             Multigrid::build(&problem, MultigridSettings::default()).map_err(|e| e.to_string())?;
+        let layout = mg
+            .rank_layout_with(comm.size(), coarse_cells)
+            .map_err(|e| e.to_string())?;
+        if comm.rank() == 0 {
+            let stages: Vec<String> = layout
+                .stages
+                .iter()
+                .map(|s| match s.levels {
+                    1 => format!("{} × level {}", s.ranks(), s.first_level),
+                    n => format!(
+                        "{} × levels {}–{}",
+                        s.ranks(),
+                        s.first_level,
+                        s.first_level + n - 1
+                    ),
+                })
+                .collect();
+            eprintln!("multigrid stages: {}", stages.join(", "));
+        }
         let mut phi = vec![0.0; rhs.len()];
         let (split, seconds) = best_of(repeat, || {
-            mg.solve_on_ranks(&rhs, &mut phi, &stopping, comm)
+            mg.solve_on_layout(&rhs, &mut phi, &stopping, comm, layout.clone())
         })?;
         let mut alone = vec![0.0; rhs.len()];
         let reference = mg.solve(&rhs, &mut alone, &stopping);
@@ -222,7 +244,7 @@ fn report(
     if comm.rank() == 0 {
         let dims = [side, side * 5 / 6, layers * comm.size()];
         let (what, agree) = match method {
-            Method::Multigrid => (["cycles", "cycle"], "within 1e-10 and ±1 cycle of"),
+            Method::Multigrid(_) => (["cycles", "cycle"], "within 1e-10 and ±1 cycle of"),
             Method::Jacobi | Method::Ftcs => (["sweeps", "sweep"], "the bits of"),
             Method::March(_) => (["passes", "pass"], "the bits of"),
         };
@@ -260,7 +282,9 @@ fn main() -> ExitCode {
     let method = match value::<String>(&args, "--method").as_deref() {
         None | Some("ftcs") => Method::Ftcs,
         Some("jacobi") => Method::Jacobi,
-        Some("mg") => Method::Multigrid,
+        Some("mg") => Method::Multigrid(
+            value(&args, "--coarse-cells").unwrap_or(RankLayout::COARSE_CELLS_PER_RANK),
+        ),
         Some("march") => Method::March(true),
         Some("march-x") => Method::March(false),
         Some(other) => {

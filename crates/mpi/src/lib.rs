@@ -31,7 +31,9 @@
 //! **Cost model per sweep and rank** (slab of n_x·n_y·n_z/P cells): two halo messages of
 //! one layer each (≤ 8 n_x n_y bytes), overlapped with the interior rows, and one
 //! all-gather of 2 + (layers per rank) doubles, whose latency grows as log P.
-//! `BENCHMARKS.md` ("Ranks") models 64 and 1024 ranks, multigrid's coarse levels included.
+//! `BENCHMARKS.md` ("Ranks") models 64 and 1024 ranks, multigrid's coarse levels included
+//! (agglomerated onto fewer ranks as they shrink, moved by `Communicator::exchange_with`'s
+//! point-to-point messages).
 
 #[cfg(feature = "mpi")]
 mod mpi_comm;

@@ -68,6 +68,10 @@ impl World {
     }
 }
 
+/// The tag of [`Communicator::exchange_with`]'s messages (the halo exchange's are 0), so
+/// the two kinds never match each other's receives.
+const POINT: mpi::Tag = 7;
+
 fn world() -> SimpleCommunicator {
     SimpleCommunicator::world()
 }
@@ -105,10 +109,16 @@ impl Communicator for Mpi {
             // The interior rows need no halo: they run while the messages travel.
             interior();
             let from_below = below.map_or_else(Vec::new, |b| {
-                world.process_at_rank(b as i32).receive_vec::<f64>().0
+                world
+                    .process_at_rank(b as i32)
+                    .receive_vec_with_tag::<f64>(0)
+                    .0
             });
             let from_above = above.map_or_else(Vec::new, |a| {
-                world.process_at_rank(a as i32).receive_vec::<f64>().0
+                world
+                    .process_at_rank(a as i32)
+                    .receive_vec_with_tag::<f64>(0)
+                    .0
             });
             if let Some(request) = sent_below {
                 request.wait();
@@ -141,5 +151,44 @@ impl Communicator for Mpi {
             world.all_gather_varcount_into(local, &mut partition);
         }
         out
+    }
+
+    fn exchange_with(
+        &self,
+        sends: &[(usize, &[f64])],
+        from: &[usize],
+        interior: &mut dyn FnMut(),
+    ) -> Vec<Vec<f64>> {
+        let world = world();
+        let size = self.size();
+        mpi::request::scope(|scope| {
+            let requests: Vec<_> = sends
+                .iter()
+                .filter(|(to, _)| *to < size)
+                .map(|&(to, values)| {
+                    world
+                        .process_at_rank(to as i32)
+                        .immediate_send_with_tag(scope, values, POINT)
+                })
+                .collect();
+            interior();
+            let received = from
+                .iter()
+                .map(|&f| {
+                    if f < size {
+                        world
+                            .process_at_rank(f as i32)
+                            .receive_vec_with_tag::<f64>(POINT)
+                            .0
+                    } else {
+                        Vec::new()
+                    }
+                })
+                .collect();
+            for request in requests {
+                request.wait();
+            }
+            received
+        })
     }
 }

@@ -1,0 +1,110 @@
+//! The cost model of the multigrid on ranks (`BENCHMARKS.md`, "Multigrid on ranks"): for a
+//! cube of n³ cells on P ranks, the stages `RankLayout` gives and the time of one V(2,2)
+//! cycle on the critical path, from a few machine constants. Nothing is solved: it prints
+//! the model for the layout the solver would use.
+//!
+//! ```sh
+//! cargo run --release -p lucent-diffusion --example rank_model -- 1024 64 256 1024
+//! ```
+//!
+//! The terms, per cycle: compute t_c × (a level's cells / its ranks) summed over levels; on
+//! each split level 9 halo exchanges (a colour of each of the four sweeps, one before the
+//! restriction) of one layer each way, as f64, of which what the colour's sweep of the
+//! inner layers does not hide is paid, and 9 · 2α of latency; at each stage boundary the
+//! right-hand side down and the correction up, 2 · (2α + a coarse owner's share / B).
+
+use lucent_diffusion::{Cycle, RankLayout};
+
+/// Seconds per cell, level and V(2,2) cycle on one core (measured: 22 ns per fine cell and
+/// cycle over the hierarchy's 8/7).
+const T_CELL: f64 = 19e-9;
+/// Network bandwidth (bytes/s) and latency (s).
+const BANDWIDTH: f64 = 10e9;
+const LATENCY: f64 = 2e-6;
+
+fn levels(n: usize) -> Vec<[usize; 3]> {
+    // Multigrid::build coarsens while every axis keeps four cells or more.
+    let mut dims = vec![[n; 3]];
+    while dims.last().is_some_and(|d| d[0] / 2 >= 4) {
+        let d = dims[dims.len() - 1].map(|n| n.div_ceil(2));
+        dims.push(d);
+    }
+    dims
+}
+
+#[allow(clippy::print_stdout)] // An example: its report is its output.
+fn main() {
+    let args: Vec<usize> = std::env::args()
+        .skip(1)
+        .filter_map(|a| a.parse().ok())
+        .collect();
+    let (n, ranks) = match args.split_first() {
+        Some((&n, ranks)) if !ranks.is_empty() => (n, ranks.to_vec()),
+        _ => (1024, vec![64, 256, 1024]),
+    };
+    let dims = levels(n);
+    let cells = |l: usize| dims[l].iter().product::<usize>() as f64;
+    let serial: f64 = (0..dims.len()).map(|l| cells(l) * T_CELL).sum();
+    println!(
+        "{n}³, {} levels: one core {:.2} s per cycle",
+        dims.len(),
+        serial
+    );
+    for p in ranks {
+        let layout = match RankLayout::new(&dims, p, Cycle::V, RankLayout::COARSE_CELLS_PER_RANK) {
+            Ok(layout) => layout,
+            Err(e) => {
+                eprintln!("rank_model: {e}");
+                continue;
+            }
+        };
+        let (mut compute, mut halo, mut latency, mut hand_over) = (0.0, 0.0, 0.0, 0.0);
+        for stage in &layout.stages {
+            let q = stage.ranks() as f64;
+            for l in stage.first_level..stage.first_level + stage.levels {
+                if stage.ranks() == 1 {
+                    compute += cells(l) * T_CELL;
+                    continue;
+                }
+                let slab = (dims[l][0] * dims[l][1]) as f64;
+                let layers = (dims[l][2] as f64 / q).ceil();
+                compute += cells(l) / q * T_CELL;
+                let message = slab * 8.0 / BANDWIDTH;
+                // One colour's sweep of the inner layers: half their cells, a ninth of a
+                // cycle's work per cell.
+                let hidden = (layers - 2.0).max(0.0) * slab * T_CELL / 9.0 / 2.0;
+                halo += 9.0 * (message - hidden).max(0.0);
+                latency += 9.0 * 2.0 * LATENCY;
+            }
+            if stage.first_level > 0 {
+                let share = cells(stage.first_level) / q;
+                hand_over += 2.0 * (2.0 * LATENCY + share * 8.0 / BANDWIDTH);
+            }
+        }
+        let total = compute + halo + latency + hand_over;
+        let stages: Vec<String> = layout
+            .stages
+            .iter()
+            .map(|s| {
+                let last = s.first_level + s.levels - 1;
+                if last == s.first_level {
+                    format!("{}×L{last}", s.ranks())
+                } else {
+                    format!("{}×L{}–{last}", s.ranks(), s.first_level)
+                }
+            })
+            .collect();
+        println!(
+            "{p} ranks [{}]: compute {:.1} ms, halo {:.2} ms, latency {:.2} ms, hand-overs {:.2} ms; \
+             {:.1} ms per cycle, {:.0}× one core ({:.0} % of {p})",
+            stages.join(", "),
+            compute * 1e3,
+            halo * 1e3,
+            latency * 1e3,
+            hand_over * 1e3,
+            total * 1e3,
+            serial / total,
+            100.0 * serial / total / p as f64
+        );
+    }
+}
