@@ -9,10 +9,16 @@
 //! harmonic mean, the patches' couplings and data fluxes, the point sources' trilinear
 //! weights) and summed in the order `assemble` sums it, so a row and a right-hand side
 //! have the bits of the assembled matrix's row and vector (test:
-//! `crates/diffusion/tests/slab_system.rs`).
+//! `crates/diffusion/tests/slab_system.rs`). [`SlabSystem::block`] gathers a run of
+//! layers' rows into a CSR block with the whole grid's column numbers, what one rank of a
+//! z-slab decomposition iterates without the rest of the volume (test:
+//! `crates/diffusion/tests/slab_block.rs`).
+
+use std::ops::Range;
 
 use glam::DVec3;
 use lucent_grid::GridGeometry;
+use sprs::CsMat;
 
 use crate::error::DiffusionError;
 use crate::geometry::{box_patch, box_sides};
@@ -293,5 +299,141 @@ impl SlabSystem {
             }
             *b = value;
         }
+    }
+}
+
+/// One rank's rows of the box system ([`SlabSystem::block`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Block {
+    /// Its z-layers.
+    pub layers: Range<usize>,
+    /// Row i is the row of cell `layers.start · n_x n_y + i`; columns are cells of the
+    /// whole grid, ascending (the assembled matrix's entries, bit for bit).
+    pub matrix: CsMat<f64>,
+    /// Its rows' right-hand side.
+    pub rhs: Vec<f64>,
+}
+
+/// The fields a [`Block`] is built from: layers `first..` of D (cm), σ_a (1/cm) and the
+/// volumetric source q0 (W/cm³), each a whole number of z-layers, the same number.
+#[derive(Debug, Clone, Copy)]
+pub struct BlockFields<'a> {
+    /// The grid layer the fields start at.
+    pub first: usize,
+    /// D per cell.
+    pub diffusion: &'a [f32],
+    /// σ_a per cell.
+    pub absorption: &'a [f32],
+    /// q0 per cell.
+    pub source: &'a [f32],
+}
+
+impl SlabSystem {
+    /// The rows and right-hand side of z-layers `layers` (without a first moment), from
+    /// the fields of those layers and, for D, the layer on either side that the box has:
+    /// what one rank of a z-slab decomposition builds without the rest of the volume. The
+    /// coefficients are checked as [`DiffusionProblem::new`](crate::DiffusionProblem::new)
+    /// checks them (D finite and positive, σ_a finite and ≥ 0; q0 finite).
+    ///
+    /// # Errors
+    /// [`DiffusionError::Invalid`] for fields that are not whole layers, do not cover the
+    /// layers the block reads, or hold a value the problem refuses (named by its cell).
+    pub fn block(
+        &self,
+        layers: Range<usize>,
+        fields: BlockFields<'_>,
+        points: &[PointShares],
+    ) -> Result<Block, DiffusionError> {
+        let [nx, ny, nz] = self.geometry.dims();
+        let slab = nx * ny;
+        let BlockFields {
+            first,
+            diffusion: d,
+            absorption: sigma_a,
+            source: q0,
+        } = fields;
+        let held = d.len() / slab.max(1);
+        let reads = layers.start.saturating_sub(1)..(layers.end + 1).min(nz);
+        if layers.is_empty()
+            || layers.end > nz
+            || d.len() % slab != 0
+            || sigma_a.len() != d.len()
+            || q0.len() != d.len()
+            || first > reads.start
+            || first + held < reads.end
+        {
+            return Err(DiffusionError::Invalid(format!(
+                "fields of {}, {} and {} values from layer {first} for the rows of layers \
+                 {layers:?}, which read D on layers {reads:?} of slabs of {slab} cells",
+                d.len(),
+                sigma_a.len(),
+                q0.len()
+            )));
+        }
+        let at = |k: usize| (k - first) * slab..(k - first + 1) * slab;
+        for k in reads.clone() {
+            for (i, &v) in d[at(k)].iter().enumerate() {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(DiffusionError::Invalid(format!(
+                        "diffusion coefficient {v} in cell {}: it must be finite and positive",
+                        k * slab + i
+                    )));
+                }
+            }
+        }
+        for k in layers.clone() {
+            for (i, (&s, &q)) in sigma_a[at(k)].iter().zip(&q0[at(k)]).enumerate() {
+                let cell = k * slab + i;
+                if !(s.is_finite() && s >= 0.0) {
+                    return Err(DiffusionError::Invalid(format!(
+                        "absorption {s} in cell {cell}: it must be finite and ≥ 0"
+                    )));
+                }
+                if !q.is_finite() {
+                    return Err(DiffusionError::Invalid(format!(
+                        "source {q} in cell {cell}: it must be finite"
+                    )));
+                }
+            }
+        }
+        let rows = layers.len() * slab;
+        let mut indptr = Vec::with_capacity(rows + 1);
+        indptr.push(0);
+        let mut indices = Vec::with_capacity(7 * rows);
+        let mut data = Vec::with_capacity(7 * rows);
+        let mut rhs = vec![0.0f64; rows];
+        for (t, k) in layers.clone().enumerate() {
+            let window = Window {
+                below: (k > 0).then(|| &d[at(k - 1)]),
+                here: &d[at(k)],
+                above: (k + 1 < nz).then(|| &d[at(k + 1)]),
+            };
+            let (sigma, here) = (&sigma_a[at(k)], window.here);
+            for index in 0..slab {
+                let cell = k * slab + index;
+                let position = [index % nx, index / nx, k];
+                let extra = self.extra(position, here[index], sigma[index]);
+                for &(offset, value) in self.row(position, &window, extra).entries() {
+                    indices.push((cell as isize + offset) as usize);
+                    data.push(value);
+                }
+                indptr.push(indices.len());
+            }
+            self.rhs_slab(
+                k,
+                &q0[at(k)],
+                None,
+                &window,
+                points,
+                &mut rhs[t * slab..(t + 1) * slab],
+            );
+        }
+        let matrix = CsMat::try_new((rows, slab * nz), indptr, indices, data)
+            .map_err(|e| DiffusionError::Invalid(format!("a block's rows: {}", e.3)))?;
+        Ok(Block {
+            layers,
+            matrix,
+            rhs,
+        })
     }
 }

@@ -23,7 +23,9 @@
 //! `ftcs-p1` and `ftcs-ordinates` (the state twice in f64 slab pages, each step from a ring
 //! of three old slabs).
 //!
-//! On several ranks, [`ranks::iterate`] runs `steady`'s FTCS and Jacobi,
+//! On several ranks, [`ranks::iterate`] runs `steady`'s FTCS and Jacobi (and
+//! [`ranks::iterate_block`] the same from rows each rank builds for its own layers of a
+//! box medium, so no rank holds the whole system),
 //! [`ranks::march_p1`] the P1 march (zero edges), and [`wavefront::propagate_on_ranks`]
 //! Zhang & Ma's one-pass absorption march of a distant light (a pipelined wavefront where
 //! the light crosses the slabs, planes in lock step where it runs along them), over

@@ -1,7 +1,8 @@
 //! The explicit schemes split over ranks by z-slabs, the same bits on any number of ranks:
 //! [`iterate`], FTCS and Jacobi to steady state on an assembled diffusion system (the twin
-//! of [`crate::steady::iterate`]), and [`march_p1`], P1 by FTCS (the twin of
-//! [`crate::p1::march`]). For the steady iterations:
+//! of [`crate::steady::iterate`]), [`iterate_block`], the same from rows each rank builds
+//! for its own layers of a medium filling the box (no rank holds the whole system), and
+//! [`march_p1`], P1 by FTCS (the twin of [`crate::p1::march`]). For the steady iterations:
 //!
 //! Each rank owns the unknowns of a run of z-layers (contiguous in the system's order:
 //! cells ascend, z slowest), keeps its rows with their columns renumbered into a local
@@ -19,7 +20,8 @@
 //! residual; the time budget and cancellation, which differ per rank, travel with the
 //! gather, so no rank stops alone.
 
-use crate::steady::{Iteration, Layers, Steady, SteadySettings, row_scale};
+use crate::ExplicitError;
+use crate::steady::{Iteration, Layers, Steady, SteadySettings, row_scale, scale_rows};
 use lucent_core::{History, StopReason, Stopping};
 use lucent_diffusion::AssembledSystem;
 use rayon::prelude::*;
@@ -42,6 +44,15 @@ pub enum DecompositionError {
     #[error("rank {rank}: the stencil reaches past the neighbouring slabs (use fewer ranks)")]
     StencilTooWide {
         /// The rank.
+        rank: usize,
+    },
+    /// The ranks' blocks of rows are not consecutive runs of layers from the grid's first
+    /// to its last (`iterate_block`).
+    #[error(
+        "rank {rank}'s block of rows does not follow on from the previous rank's (blocks must be consecutive runs of layers covering the grid)"
+    )]
+    Blocks {
+        /// The first rank whose block is out of place.
         rank: usize,
     },
     /// The system cannot be iterated.
@@ -227,10 +238,11 @@ fn row_residual(rows: &CsMat<f64>, b: &[f64], x: &[f64], i: usize) -> f64 {
     b[i] - ax
 }
 
-/// Iterates `system` (the whole system, as every rank assembles it for now) from zero to
-/// the stopping rule on the ranks of `comm`, each doing its slab's rows; `slab_len` is the
+/// Iterates `system` (the whole system, as every rank assembles it) from zero to the
+/// stopping rule on the ranks of `comm`, each doing its slab's rows; `slab_len` is the
 /// grid's n_x·n_y. Returns the whole φ on every rank (gathered at the end) and the
 /// residual history: the bits of `lucent_explicit::steady::iterate` on one rank.
+/// [`iterate_block`] is the same iteration from rows each rank builds for its own layers.
 pub fn iterate(
     system: &AssembledSystem,
     slab_len: usize,
@@ -250,16 +262,245 @@ pub fn iterate(
         .collect();
     let rank = comm.rank();
     let part = Part::new(a, &bounds, rank)?;
-    let (u0, u1) = (part.u0, part.u1);
-    let own = u1 - u0;
     let (l0, l1) = slabs.layers[rank];
     let my_layers: Vec<(usize, usize)> = ranges[l0..l1]
         .iter()
-        .map(|&(_, s, e)| (s - u0, e - u0))
+        .map(|&(_, s, e)| (s - part.u0, e - part.u0))
         .collect();
-    let b = &system.rhs[u0..u1];
     // The serial iteration's checks and per-row scale, then this rank's rows of it.
-    let scale = row_scale(system, iteration, settings.allow_unstable)?[u0..u1].to_vec();
+    let scale = row_scale(system, iteration, settings.allow_unstable)?[part.u0..part.u1].to_vec();
+    let counts: Vec<usize> = slabs.layers.iter().map(|&(a, b)| b - a).collect();
+    let b = &system.rhs[part.u0..part.u1];
+    let (owned, residuals, stop_reason) =
+        sweep(&part, b, &scale, &my_layers, &counts, settings, comm)?;
+    // The serial rule, on the gathered whole: any non-finite φ zeroes all of it.
+    let mut fluence = comm.all_gather(&owned);
+    if fluence.len() != n {
+        return Err(DecompositionError::Protocol { rank });
+    }
+    if fluence.iter().any(|v| !v.is_finite()) {
+        fluence.fill(0.0);
+    }
+    Ok(Steady {
+        fluence,
+        residuals,
+        stop_reason,
+    })
+}
+
+/// The result of [`iterate_block`]: this rank's layers of φ, and the history and stop
+/// reason every rank shares.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlockSteady {
+    /// φ of the block's cells (its layers, in the grid's order).
+    pub fluence: Vec<f64>,
+    /// Relative residual before each sweep and after the last.
+    pub residuals: Vec<f64>,
+    /// Why it stopped.
+    pub stop_reason: StopReason,
+}
+
+/// [`iterate`] from the rows of a medium that fills the box, each rank holding only its
+/// own: `block` is this rank's layers' rows and right-hand side
+/// (`lucent_diffusion::SlabSystem::block`, built from its layers of the coefficients and
+/// D's layer on either side), `slab_len` the grid's n_x·n_y. The blocks of ranks 0, 1, …
+/// must be consecutive runs of layers from the first to the last. No rank holds more than
+/// its rows, four vectors of its layers and a halo layer each side; the ranks learn what
+/// to send each other from one exchange of the columns their rows read, and agree on the
+/// checks (the diagonal, the FTCS bound from the largest Gershgorin sum of all rows, a
+/// stencil that reaches no further than the neighbours, a missing layer) before the first
+/// sweep, so a bad block stops every rank with the same error. On return each rank holds
+/// its layers of φ (zeroed, on every rank, if any is not finite, as the serial rule does);
+/// they and the history are the bits of `steady::iterate` on the assembled whole.
+///
+/// # Errors
+/// [`DecompositionError::Scheme`] for what the serial iteration refuses (a non-positive
+/// diagonal, an FTCS step beyond the bound, a damping outside (0, 1]);
+/// [`DecompositionError::StencilTooWide`] for blocks that do not join up; a rank that left
+/// the protocol.
+pub fn iterate_block(
+    block: &lucent_diffusion::slab::Block,
+    slab_len: usize,
+    iteration: Iteration,
+    settings: &SteadySettings,
+    comm: &(impl Communicator + ?Sized),
+) -> Result<BlockSteady, DecompositionError> {
+    let rank = comm.rank();
+    let slab = slab_len.max(1);
+    let a = &block.matrix;
+    let own = a.rows();
+    let u0 = block.layers.start * slab;
+    let u1 = u0 + own;
+    let lengths_fit = own == block.layers.len() * slab && block.rhs.len() == own;
+    // The columns this block reads beyond its rows, as global indices.
+    let below = halo_of(a, 0..own, |j| j < u0);
+    let above = halo_of(a, 0..own, |j| j >= u1);
+    let encode = |v: &[usize]| -> Vec<f64> { v.iter().map(|&j| j as f64).collect() };
+    // Tell each neighbour what this block reads of it; learn what it reads of this one.
+    let (wants_below, wants_above) = {
+        let (b, a, ()) = exchange(comm, &encode(&below), &encode(&above), || ());
+        (b, a)
+    };
+    let decode = |v: &[f64]| -> Option<Vec<usize>> {
+        v.iter()
+            .map(|&j| {
+                let whole = j >= 0.0 && j.fract() == 0.0;
+                let j = j as usize;
+                (whole && (u0..u1).contains(&j)).then_some(j - u0)
+            })
+            .collect()
+    };
+    let (send_below, send_above) = (decode(&wants_below), decode(&wants_above));
+    // Reads past the ends, or requests for cells this block does not hold, or holes
+    // between neighbouring blocks: the blocks do not join up.
+    let reads_past = (rank == 0 && !below.is_empty())
+        || (rank + 1 == comm.size() && !above.is_empty())
+        || below.first().is_some_and(|&j| j + slab < u0)
+        || above.last().is_some_and(|&j| j >= u1 + slab);
+    let too_wide = !lengths_fit || reads_past || send_below.is_none() || send_above.is_none();
+    let diagonal: Vec<f64> = (0..own)
+        .map(|i| a.get(i, u0 + i).copied().unwrap_or(0.0))
+        .collect();
+    let gershgorin = a
+        .outer_iterator()
+        .map(|row| row.iter().map(|(_, v)| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    let layer_count = block.layers.len() as f64;
+    let agreed = comm.all_gather(&[
+        f64::from(u8::from(too_wide)),
+        f64::from(u8::from(diagonal.iter().any(|&d| d <= 0.0))),
+        gershgorin,
+        block.layers.start as f64,
+        layer_count,
+    ]);
+    if agreed.len() != 5 * comm.size() {
+        return Err(DecompositionError::Protocol { rank });
+    }
+    let flags: Vec<&[f64]> = agreed.chunks(5).collect();
+    // Consecutive blocks from the first layer to the last.
+    let mut next = 0.0;
+    for (r, f) in flags.iter().enumerate() {
+        if f[3] != next || f[4] < 1.0 {
+            return Err(DecompositionError::Blocks { rank: r });
+        }
+        next = f[3] + f[4];
+    }
+    if next != (a.cols() / slab) as f64 {
+        return Err(DecompositionError::Blocks {
+            rank: comm.size() - 1,
+        });
+    }
+    if let Some(r) = flags.iter().position(|f| f[0] != 0.0) {
+        return Err(DecompositionError::StencilTooWide { rank: r });
+    }
+    if flags.iter().any(|f| f[1] != 0.0) {
+        return Err(ExplicitError::Invalid("the system has a non-positive diagonal".into()).into());
+    }
+    let gershgorin = flags.iter().map(|f| f[2]).fold(0.0, f64::max);
+    let scale = scale_rows(&diagonal, gershgorin, iteration, settings.allow_unstable)?;
+    let local = |j: usize| -> usize {
+        if j < u0 {
+            below.binary_search(&j).unwrap_or(0)
+        } else if j < u1 {
+            below.len() + (j - u0)
+        } else {
+            below.len() + own + above.binary_search(&j).unwrap_or(0)
+        }
+    };
+    let mut indptr = vec![0usize];
+    let (mut indices, mut data) = (Vec::new(), Vec::new());
+    let (mut interior, mut border) = (Vec::new(), Vec::new());
+    for i in 0..own {
+        let mut reads_halo = false;
+        if let Some(row) = a.outer_view(i) {
+            for (j, &v) in row.iter() {
+                reads_halo |= !(u0..u1).contains(&j);
+                indices.push(local(j));
+                data.push(v);
+            }
+        }
+        indptr.push(indices.len());
+        if reads_halo {
+            &mut border
+        } else {
+            &mut interior
+        }
+        .push(i);
+    }
+    let width = below.len() + own + above.len();
+    let rows = CsMat::try_new((own, width), indptr, indices, data)
+        .map_err(|e| DecompositionError::Matrix(e.3.to_string()))?;
+    let part = Part {
+        u0,
+        u1,
+        below,
+        above,
+        rows,
+        interior,
+        border,
+        send_below: send_below.unwrap_or_default(),
+        send_above: send_above.unwrap_or_default(),
+    };
+    let my_layers: Vec<(usize, usize)> = (0..block.layers.len())
+        .map(|t| (t * slab, (t + 1) * slab))
+        .collect();
+    let counts: Vec<usize> = flags.iter().map(|f| f[4] as usize).collect();
+    let (mut fluence, residuals, stop_reason) = sweep(
+        &part, &block.rhs, &scale, &my_layers, &counts, settings, comm,
+    )?;
+    // The serial rule: any non-finite φ anywhere zeroes all of it.
+    let finite = f64::from(u8::from(fluence.iter().all(|v| v.is_finite())));
+    let all = comm.all_gather(&[finite]);
+    if all.len() != comm.size() {
+        return Err(DecompositionError::Protocol { rank });
+    }
+    if all.contains(&0.0) {
+        fluence.fill(0.0);
+    }
+    Ok(BlockSteady {
+        fluence,
+        residuals,
+        stop_reason,
+    })
+}
+
+/// The FTCS step bound of the system whose rows the ranks' blocks hold, on every rank:
+/// 2V / max_i Σ_j |a_ij| over all of them (`steady::ftcs_limit` of the assembled whole,
+/// the same bits), for choosing the step of [`iterate_block`].
+///
+/// # Errors
+/// [`DecompositionError::Protocol`] if a rank left the protocol.
+pub fn block_ftcs_limit(
+    block: &lucent_diffusion::slab::Block,
+    cell_volume: f64,
+    comm: &(impl Communicator + ?Sized),
+) -> Result<f64, DecompositionError> {
+    let gershgorin = block
+        .matrix
+        .outer_iterator()
+        .map(|row| row.iter().map(|(_, v)| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    let all = comm.all_gather(&[gershgorin]);
+    if all.len() != comm.size() {
+        return Err(DecompositionError::Protocol { rank: comm.rank() });
+    }
+    Ok(2.0 * cell_volume / all.into_iter().fold(0.0, f64::max))
+}
+
+/// The sweeps from zero: this rank's owned φ, the residual history and the stop reason.
+/// `b` and `scale` are the owned rows'; `my_layers` the owned unknowns' ranges per layer
+/// (local), `counts` every rank's number of layers.
+fn sweep(
+    part: &Part,
+    b: &[f64],
+    scale: &[f64],
+    my_layers: &[(usize, usize)],
+    counts: &[usize],
+    settings: &SteadySettings,
+    comm: &(impl Communicator + ?Sized),
+) -> Result<(Vec<f64>, Vec<f64>, StopReason), DecompositionError> {
+    let rank = comm.rank();
+    let own = part.u1 - part.u0;
     // Deterministic stops from the shared residual; the clock and the cancel flag are
     // each rank's own and travel with the layer sums.
     let shared = Stopping {
@@ -288,8 +529,7 @@ pub fn iterate(
         ]
     };
     // Layer sums of squares of v (owned), gathered with flags: (norm, any time, any cancel).
-    let counts: Vec<usize> = slabs.layers.iter().map(|&(a, b)| b - a).collect();
-    let gather = |v: &[f64]| -> (f64, bool, bool) {
+    let gather = |v: &[f64]| -> Result<(f64, bool, bool), DecompositionError> {
         let mut local = local_flags().to_vec();
         local.extend(
             my_layers
@@ -298,8 +538,11 @@ pub fn iterate(
                 .collect::<Vec<f64>>(),
         );
         let all = comm.all_gather(&local);
+        if all.len() != counts.iter().map(|c| c + 2).sum::<usize>() {
+            return Err(DecompositionError::Protocol { rank });
+        }
         let (mut sum, mut time, mut cancel, mut at) = (0.0f64, false, false, 0);
-        for &c in &counts {
+        for &c in counts {
             time |= all[at] != 0.0;
             cancel |= all[at + 1] != 0.0;
             for s in &all[at + 2..at + 2 + c] {
@@ -307,9 +550,9 @@ pub fn iterate(
             }
             at += 2 + c;
         }
-        (sum.sqrt(), time, cancel)
+        Ok((sum.sqrt(), time, cancel))
     };
-    let (b_norm, mut time_up, mut cancelled) = gather(b);
+    let (b_norm, mut time_up, mut cancelled) = gather(b)?;
     let b_norm = b_norm.max(f64::MIN_POSITIVE);
     let (nb, na) = (part.below.len(), part.above.len());
     let mut x = vec![0.0f64; nb + own + na];
@@ -357,24 +600,16 @@ pub fn iterate(
         for (&i, v) in part.border.iter().zip(border) {
             r[i] = v;
         }
-        let (norm, t, c) = gather(&r);
+        let (norm, t, c) = gather(&r)?;
         relative = norm / b_norm;
         time_up = t;
         cancelled = c;
     };
-    // The serial rule, on the gathered whole: any non-finite φ zeroes all of it.
-    let mut fluence = comm.all_gather(&x[nb..nb + own]);
-    if fluence.len() != n {
-        return Err(DecompositionError::Protocol { rank });
-    }
-    if fluence.iter().any(|v| !v.is_finite()) {
-        fluence.fill(0.0);
-    }
-    Ok(Steady {
-        fluence,
-        residuals: history.into_residuals(),
+    Ok((
+        x[nb..nb + own].to_vec(),
+        history.into_residuals(),
         stop_reason,
-    })
+    ))
 }
 
 /// [`iterate`] on `ranks` in-process ranks (threads joined by channels, sharing `system`):

@@ -167,6 +167,21 @@ pub fn row_scale(
     let diagonal: Vec<f64> = (0..n)
         .map(|i| a.get(i, i).copied().unwrap_or(0.0))
         .collect();
+    let gershgorin = a
+        .outer_iterator()
+        .map(|row| row.iter().map(|(_, v)| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    scale_rows(&diagonal, gershgorin, iteration, allow_unstable)
+}
+
+/// [`row_scale`] from the rows' diagonal and the largest Gershgorin sum max_i Σ_j |a_ij|
+/// of the whole system (a rank with some rows passes the maximum over every rank's).
+pub fn scale_rows(
+    diagonal: &[f64],
+    gershgorin: f64,
+    iteration: Iteration,
+    allow_unstable: bool,
+) -> Result<Vec<f64>, ExplicitError> {
     if diagonal.iter().any(|&d| d <= 0.0) {
         return Err(ExplicitError::Invalid(
             "the system has a non-positive diagonal".into(),
@@ -177,7 +192,7 @@ pub fn row_scale(
             time_step,
             cell_volume,
         } => {
-            let limit = ftcs_limit(system, cell_volume);
+            let limit = 2.0 * cell_volume / gershgorin;
             if !(time_step > 0.0 && time_step.is_finite()) {
                 return Err(ExplicitError::Invalid(format!("time step {time_step}")));
             }
@@ -189,7 +204,7 @@ pub fn row_scale(
                     requested: time_step,
                 });
             }
-            vec![time_step / cell_volume; n]
+            vec![time_step / cell_volume; diagonal.len()]
         }
         Iteration::Jacobi { omega } => {
             if !(omega > 0.0 && omega <= 1.0) {

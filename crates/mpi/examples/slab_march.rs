@@ -17,19 +17,18 @@
 //! volume, marches it serially and compares its layers (bits; exit status 1 if they
 //! differ), for CI. Without the `mpi` feature, `--ranks N` in-process ranks.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use glam::DVec3;
 use lucent_explicit::Lattice;
 use lucent_explicit::convection::{Light, Model, UpwindSettings, propagate};
 use lucent_explicit::wavefront::{owned_layers, propagate_slab, read_layers};
-use lucent_grid::io::layers::{
-    Layers, create_npy, read_npy_layers, read_nrrd_layers, read_raw_layers, write_npy_layers,
-};
+use lucent_grid::io::layers::{Layers, create_npy, write_npy_layers};
 use lucent_grid::io::raw::RawLayout;
-use lucent_grid::io::{LoadOptions, ScalarType};
 use lucent_mpi::Communicator;
+
+mod slabs;
 
 struct Args {
     volume: PathBuf,
@@ -42,45 +41,14 @@ struct Args {
 }
 
 fn parse(args: &[String]) -> Result<Args, String> {
-    let value = |name: &str| {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
-    let numbers = |text: &str| -> Result<Vec<f64>, String> {
-        text.split(',')
-            .map(|v| v.trim().parse().map_err(|_| format!("not a number: {v}")))
-            .collect()
-    };
+    let value = |name: &str| slabs::value(args, name);
     let volume = args
         .first()
         .filter(|a| !a.starts_with('-'))
         .ok_or("usage: slab_march VOLUME -o OUT.npy [--raw NX,NY,NZ,TYPE] [--scale S] [--direction X,Y,Z] [--check]")?;
-    let raw = value("--raw")
-        .map(|text| -> Result<RawLayout, String> {
-            let parts: Vec<&str> = text.split(',').collect();
-            let [x, y, z, kind] = parts[..] else {
-                return Err(format!("--raw {text}: NX,NY,NZ,TYPE"));
-            };
-            let dim = |v: &str| v.parse::<usize>().map_err(|_| format!("--raw: {v}"));
-            let scalar = match kind {
-                "u8" => ScalarType::U8,
-                "u16" => ScalarType::U16,
-                "i16" => ScalarType::I16,
-                "f32" => ScalarType::F32,
-                "f64" => ScalarType::F64,
-                other => {
-                    return Err(format!(
-                        "--raw: sample type {other} (u8, u16, i16, f32, f64)"
-                    ));
-                }
-            };
-            Ok(RawLayout::new([dim(x)?, dim(y)?, dim(z)?], scalar))
-        })
-        .transpose()?;
+    let raw = value("--raw").map(|t| slabs::raw_layout(&t)).transpose()?;
     let direction = match value("--direction") {
-        Some(text) => match numbers(&text)?[..] {
+        Some(text) => match slabs::numbers(&text)?[..] {
             [x, y, z] => DVec3::new(x, y, z),
             _ => return Err(format!("--direction {text}: X,Y,Z")),
         },
@@ -90,7 +58,7 @@ fn parse(args: &[String]) -> Result<Args, String> {
         volume: PathBuf::from(volume),
         out: PathBuf::from(value("-o").ok_or("-o OUT.npy is needed")?),
         raw,
-        scale: value("--scale").map_or(Ok(1.0), |v| numbers(&v).map(|n| n[0]))?,
+        scale: value("--scale").map_or(Ok(1.0), |v| slabs::numbers(&v).map(|n| n[0]))?,
         direction,
         check: args.iter().any(|a| a == "--check"),
     })
@@ -98,21 +66,7 @@ fn parse(args: &[String]) -> Result<Args, String> {
 
 /// Layers `layers` of the volume (the whole volume's dims come with them).
 fn read(args: &Args, layers: std::ops::Range<usize>) -> Result<Layers, String> {
-    let options = LoadOptions::default();
-    let path: &Path = &args.volume;
-    let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("");
-    match (&args.raw, extension) {
-        (Some(layout), _) => read_raw_layers(path, layout, layers, &options),
-        (None, "npy") => read_npy_layers(path, layers, &options),
-        (None, "nrrd" | "nhdr") => read_nrrd_layers(path, layers, &options),
-        _ => {
-            return Err(format!(
-                "{}: a .npy or .nrrd, or --raw for a raw file",
-                path.display()
-            ));
-        }
-    }
-    .map_err(|e| e.to_string())
+    slabs::read(&args.volume, args.raw.as_ref(), layers)
 }
 
 /// The whole volume's dims and cell side, from its first layer's read.
@@ -125,17 +79,6 @@ fn shape(args: &Args) -> Result<([usize; 3], f64), String> {
     Ok((first.whole.dims(), spacing.x))
 }
 
-/// `result` on this rank, once every rank has said whether its step worked: a step that
-/// failed on one rank (a bad layer, a full disk) stops every rank, none waits forever.
-fn agree<T>(comm: &(impl Communicator + ?Sized), result: Result<T, String>) -> Result<T, String> {
-    let flags = comm.all_gather(&[if result.is_ok() { 1.0 } else { 0.0 }]);
-    let value = result?;
-    match flags.iter().position(|&f| f != 1.0) {
-        Some(rank) => Err(format!("rank {rank} failed (it says why)")),
-        None => Ok(value),
-    }
-}
-
 fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String> {
     let (size, rank) = (comm.size(), comm.rank());
     let (dims, spacing) = shape(args)?;
@@ -143,7 +86,7 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
     let layer = dims[0] * dims[1];
     let reads = read_layers(dims[2], size, rank);
     let owned = owned_layers(dims[2], size, rank);
-    let sigma: Vec<f64> = agree(comm, read(args, reads.clone()))?
+    let sigma: Vec<f64> = slabs::agree(comm, read(args, reads.clone()))?
         .grid
         .data()
         .iter()
@@ -166,10 +109,10 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
     } else {
         Ok(())
     };
-    agree(comm, created)?;
+    slabs::agree(comm, created)?;
     let values: Vec<f32> = rho.iter().map(|&v| v as f32).collect();
     let written = write_npy_layers(&args.out, dims, owned.clone(), &values);
-    agree(comm, written.map_err(|e| e.to_string()))?;
+    slabs::agree(comm, written.map_err(|e| e.to_string()))?;
     // σ_a and ρ of the layers read (f64), the layers as read (f32), ρ of the owned
     // layers returned and written (f64 and f32).
     let held = reads.len() * layer * (8 + 8 + 4) + rho.len() * (8 + 4);

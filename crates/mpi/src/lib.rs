@@ -22,11 +22,14 @@
 //! travel with each gather, so all ranks stop on the same sweep or cycle.
 //!
 //! **Memory.** Through the registry every rank still builds the whole problem (only its
-//! slab is iterated), so memory does not yet scale with ranks there. The absorption march
-//! has a slab-local form (`lucent_explicit::wavefront::propagate_slab`: σ_a and ρ of the
-//! rank's layers and a two-layer halo); the `slab_march` example feeds it by positioned
-//! reads of a volume file and writes its layers of the result into one `.npy`
-//! (`lucent_grid::io::layers`), so no rank holds the whole volume.
+//! slab is iterated), so memory does not yet scale with ranks there. Two solvers have a
+//! slab-local form: the absorption march (`lucent_explicit::wavefront::propagate_slab`: σ_a
+//! and ρ of the rank's layers and a two-layer halo; the `slab_march` example) and FTCS and
+//! Jacobi diffusion in a medium filling the box (`lucent_explicit::ranks::iterate_block`
+//! on the rows `lucent_diffusion::SlabSystem::block` builds from the rank's layers and D's
+//! layer on either side; the `slab_diffusion` example). The examples read the rank's
+//! layers of a volume file by positioned reads and write its layers of the result into
+//! one `.npy` (`lucent_grid::io::layers`), so no rank holds the whole volume.
 //!
 //! **Cost model per sweep and rank** (slab of n_x·n_y·n_z/P cells): two halo messages of
 //! one layer each (≤ 8 n_x n_y bytes), overlapped with the interior rows, and one

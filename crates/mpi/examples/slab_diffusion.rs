@@ -1,0 +1,264 @@
+//! Diffusion through a volume file on ranks, no rank holding the whole volume or system:
+//! each rank reads its z-layers of the volume and one on either side (positioned reads of
+//! `.raw`, `.npy` or raw-encoded NRRD), builds its layers' rows
+//! (`lucent_diffusion::SlabSystem::block`), iterates Jacobi or FTCS to the steady state
+//! with its neighbours (`lucent_explicit::ranks::iterate_block`), and writes its layers of
+//! the fluence into one `.npy` by positioned writes.
+//!
+//! ```sh
+//! cargo build --profile examples -p lucent-mpi --features mpi --example slab_diffusion
+//! mpirun -n 4 target/examples/examples/slab_diffusion "$LUCENT_DATA/nucleon.nrrd" \
+//!     --scale 0.05 -o fluence.npy
+//! ```
+//!
+//! The medium fills the volume's box (its cells, its spacing as the file gives it, in cm):
+//! σ_t = `--background` + `--scale` × sample (1/cm, defaults 0.1 and 0.02), albedo
+//! `--albedo` (default 0.9, isotropic scattering): σ_a = (1 − albedo) σ_t and
+//! D = 1/(3 σ_t). A point source of 1 W at `--source X,Y,Z` (fractions of the box,
+//! default its centre); Robin faces with boundary factor `--robin A` (default 1, index
+//! matched). `--method jacobi` (default, ω = 1) or `ftcs` (0.9 of the bound over every
+//! rank's rows); `--tolerance` (default 1e-4) and `--max-sweeps` (default 20 000).
+//! `--check`: every rank also reads the whole volume, assembles the whole system, iterates
+//! it serially and compares its layers and the history (bits; exit status 1 if they
+//! differ), for CI. Without the `mpi` feature, `--ranks N` in-process ranks.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use glam::DVec3;
+use lucent_core::Stopping;
+use lucent_diffusion::slab::{BlockFields, PointShares};
+use lucent_diffusion::{
+    Boundaries, CellGeometry, Condition, DiffusionProblem, SlabSystem, Sources,
+};
+use lucent_explicit::ranks::{block_ftcs_limit, iterate_block};
+use lucent_explicit::steady::{Iteration, SteadySettings, ftcs_limit, iterate};
+use lucent_grid::io::layers::{create_npy, write_npy_layers};
+use lucent_grid::io::raw::RawLayout;
+use lucent_mpi::Communicator;
+
+mod slabs;
+
+struct Args {
+    volume: PathBuf,
+    out: PathBuf,
+    raw: Option<RawLayout>,
+    scale: f64,
+    background: f64,
+    albedo: f64,
+    robin: f64,
+    source: DVec3,
+    ftcs: bool,
+    tolerance: f64,
+    max_sweeps: usize,
+    check: bool,
+}
+
+fn parse(args: &[String]) -> Result<Args, String> {
+    let value = |name: &str| slabs::value(args, name);
+    let number = |name: &str, default: f64| -> Result<f64, String> {
+        value(name).map_or(Ok(default), |v| slabs::numbers(&v).map(|n| n[0]))
+    };
+    let volume = args.first().filter(|a| !a.starts_with('-')).ok_or(
+        "usage: slab_diffusion VOLUME -o OUT.npy [--raw NX,NY,NZ,TYPE] [--scale S] \
+         [--background B] [--albedo A] [--robin A] [--source X,Y,Z] [--method jacobi|ftcs] \
+         [--tolerance T] [--max-sweeps N] [--check]",
+    )?;
+    let source = match value("--source") {
+        Some(text) => match slabs::numbers(&text)?[..] {
+            [x, y, z] => DVec3::new(x, y, z),
+            _ => return Err(format!("--source {text}: X,Y,Z")),
+        },
+        None => DVec3::splat(0.5),
+    };
+    let ftcs = match value("--method").as_deref() {
+        None | Some("jacobi") => false,
+        Some("ftcs") => true,
+        Some(other) => return Err(format!("--method {other}: jacobi or ftcs")),
+    };
+    let albedo = number("--albedo", 0.9)?;
+    if !(0.0..1.0).contains(&albedo) {
+        return Err(format!("--albedo {albedo}: in [0, 1)"));
+    }
+    Ok(Args {
+        volume: PathBuf::from(volume),
+        out: PathBuf::from(value("-o").ok_or("-o OUT.npy is needed")?),
+        raw: value("--raw").map(|t| slabs::raw_layout(&t)).transpose()?,
+        scale: number("--scale", 0.02)?,
+        background: number("--background", 0.1)?,
+        albedo,
+        robin: number("--robin", 1.0)?,
+        source,
+        ftcs,
+        tolerance: number("--tolerance", 1e-4)?,
+        max_sweeps: number("--max-sweeps", 20_000.0)? as usize,
+        check: args.iter().any(|a| a == "--check"),
+    })
+}
+
+/// (D, σ_a) of samples.
+fn coefficients(args: &Args, samples: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    samples
+        .iter()
+        .map(|&s| {
+            let sigma_t = args.background + args.scale * f64::from(s);
+            (
+                (1.0 / (3.0 * sigma_t)) as f32,
+                ((1.0 - args.albedo) * sigma_t) as f32,
+            )
+        })
+        .unzip()
+}
+
+fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String> {
+    let (size, rank) = (comm.size(), comm.rank());
+    let geometry = slabs::read(&args.volume, args.raw.as_ref(), 0..1)?.whole;
+    let [nx, ny, nz] = geometry.dims();
+    let slab = nx * ny;
+    if size > nz {
+        return Err(format!(
+            "{size} ranks for {nz} layers: one layer per rank at least"
+        ));
+    }
+    let owned = rank * nz / size..(rank + 1) * nz / size;
+    let reads = owned.start.saturating_sub(1)..(owned.end + 1).min(nz);
+    let samples = slabs::agree(
+        comm,
+        slabs::read(&args.volume, args.raw.as_ref(), reads.clone()),
+    )?;
+    let (d, sigma_a) = coefficients(args, samples.grid.data());
+    let q0 = vec![0.0f32; d.len()];
+    let boundaries = Boundaries::uniform(Condition::Robin { a: args.robin });
+    let (lo, hi) = geometry.bounds();
+    let point = (lo + (hi - lo) * args.source, 1.0);
+    let built = SlabSystem::new(geometry, boundaries)
+        .and_then(|system| {
+            let shares: Vec<PointShares> =
+                system.point_weights(point.0, point.1).into_iter().collect();
+            let fields = BlockFields {
+                first: reads.start,
+                diffusion: &d,
+                absorption: &sigma_a,
+                source: &q0,
+            };
+            system.block(owned.clone(), fields, &shares)
+        })
+        .map_err(|e| e.to_string());
+    let block = slabs::agree(comm, built)?;
+    let volume = geometry.cell_volume();
+    let iteration = if args.ftcs {
+        let limit = block_ftcs_limit(&block, volume, comm).map_err(|e| e.to_string())?;
+        Iteration::Ftcs {
+            time_step: 0.9 * limit,
+            cell_volume: volume,
+        }
+    } else {
+        Iteration::Jacobi { omega: 1.0 }
+    };
+    let settings = SteadySettings {
+        stopping: Stopping {
+            relative_tolerance: args.tolerance,
+            max_iterations: args.max_sweeps,
+            ..Stopping::default()
+        },
+        allow_unstable: false,
+    };
+    let started = std::time::Instant::now();
+    let steady =
+        iterate_block(&block, slab, iteration, &settings, comm).map_err(|e| e.to_string())?;
+    let seconds = started.elapsed().as_secs_f64();
+    let created = if rank == 0 {
+        create_npy(&args.out, [nx, ny, nz]).map_err(|e| e.to_string())
+    } else {
+        Ok(())
+    };
+    slabs::agree(comm, created)?;
+    let values: Vec<f32> = steady.fluence.iter().map(|&v| v as f32).collect();
+    let written = write_npy_layers(&args.out, [nx, ny, nz], owned.clone(), &values);
+    slabs::agree(comm, written.map_err(|e| e.to_string()))?;
+    // The block (CSR: 7 entries of 16 bytes per row, an index per row, the right-hand
+    // side), the samples and coefficients read (f32 × 4), and the iteration's vectors (φ
+    // with its halo, r, b and the scale: f64 × 4).
+    let rows = block.matrix.rows();
+    let held =
+        block.matrix.nnz() * 16 + rows * 16 + reads.len() * slab * 16 + (rows + 2 * slab) * 32;
+    if rank == 0 {
+        eprintln!(
+            "{} sweeps, {}, {seconds:.3} s",
+            steady.residuals.len() - 1,
+            steady.stop_reason
+        );
+    }
+    eprintln!(
+        "rank {rank} of {size}: read layers {reads:?} of {nz}, wrote {owned:?}; held {:.1} MB",
+        held as f64 / 1e6
+    );
+    let mut agrees = true;
+    if args.check {
+        let whole = slabs::read(&args.volume, args.raw.as_ref(), 0..nz)?;
+        let (d, sigma_a) = coefficients(args, whole.grid.data());
+        let problem =
+            DiffusionProblem::new(CellGeometry::full_box(geometry), d, sigma_a, boundaries)
+                .map_err(|e| e.to_string())?;
+        let sources = Sources {
+            points: vec![point],
+            ..Sources::default()
+        };
+        let system = problem.assemble(&sources).map_err(|e| e.to_string())?;
+        let iteration = match iteration {
+            Iteration::Ftcs { cell_volume, .. } => Iteration::Ftcs {
+                time_step: 0.9 * ftcs_limit(&system, cell_volume),
+                cell_volume,
+            },
+            jacobi => jacobi,
+        };
+        let serial = iterate(&system, slab, iteration, &settings).map_err(|e| e.to_string())?;
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        agrees = bits(&serial.fluence[owned.start * slab..owned.end * slab])
+            == bits(&steady.fluence)
+            && bits(&serial.residuals) == bits(&steady.residuals)
+            && serial.stop_reason == steady.stop_reason;
+        eprintln!(
+            "rank {rank}: the serial iteration's bits on the assembled whole ({:.1} MB of matrix): {}",
+            (system.matrix.nnz() * 16) as f64 / 1e6,
+            if agrees { "yes" } else { "NO" }
+        );
+    }
+    Ok(agrees)
+}
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let parsed = match parse(&args) {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("slab_diffusion: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    match run_on_ranks(&args, &parsed) {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::FAILURE,
+        Err(e) => {
+            eprintln!("slab_diffusion: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(feature = "mpi")]
+fn run_on_ranks(_: &[String], args: &Args) -> Result<bool, String> {
+    let world = lucent_mpi::World::initialise().map_err(|e| e.to_string())?;
+    run(&world.ranks(), args)
+}
+
+#[cfg(not(feature = "mpi"))]
+fn run_on_ranks(raw: &[String], args: &Args) -> Result<bool, String> {
+    let ranks: usize = slabs::value(raw, "--ranks")
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(2);
+    lucent_mpi::Threads::run(ranks, |comm| run(comm, args))
+        .into_iter()
+        .map(|r| r.ok_or_else(|| "a rank panicked".to_owned())?)
+        .try_fold(true, |all, r| r.map(|same| all && same))
+}

@@ -1,0 +1,83 @@
+//! What the slab examples share: reading some z-layers of a volume file by positioned
+//! reads, `--raw NX,NY,NZ,TYPE`, and agreeing on a step that can fail on one rank.
+
+use std::path::Path;
+
+use lucent_grid::io::layers::{Layers, read_npy_layers, read_nrrd_layers, read_raw_layers};
+use lucent_grid::io::raw::RawLayout;
+use lucent_grid::io::{LoadOptions, ScalarType};
+use lucent_mpi::Communicator;
+
+/// `--raw NX,NY,NZ,TYPE`: a headerless file's dims and sample type.
+pub(crate) fn raw_layout(text: &str) -> Result<RawLayout, String> {
+    let parts: Vec<&str> = text.split(',').collect();
+    let [x, y, z, kind] = parts[..] else {
+        return Err(format!("--raw {text}: NX,NY,NZ,TYPE"));
+    };
+    let dim = |v: &str| v.parse::<usize>().map_err(|_| format!("--raw: {v}"));
+    let scalar = match kind {
+        "u8" => ScalarType::U8,
+        "u16" => ScalarType::U16,
+        "i16" => ScalarType::I16,
+        "f32" => ScalarType::F32,
+        "f64" => ScalarType::F64,
+        other => {
+            return Err(format!(
+                "--raw: sample type {other} (u8, u16, i16, f32, f64)"
+            ));
+        }
+    };
+    Ok(RawLayout::new([dim(x)?, dim(y)?, dim(z)?], scalar))
+}
+
+/// Layers `layers` of the volume at `path` (the whole volume's geometry comes with them):
+/// a `.raw` with its `raw` layout, a `.npy`, or a raw-encoded NRRD.
+pub(crate) fn read(
+    path: &Path,
+    raw: Option<&RawLayout>,
+    layers: std::ops::Range<usize>,
+) -> Result<Layers, String> {
+    let options = LoadOptions::default();
+    let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    match (raw, extension) {
+        (Some(layout), _) => read_raw_layers(path, layout, layers, &options),
+        (None, "npy") => read_npy_layers(path, layers, &options),
+        (None, "nrrd" | "nhdr") => read_nrrd_layers(path, layers, &options),
+        _ => {
+            return Err(format!(
+                "{}: a .npy or .nrrd, or --raw for a raw file",
+                path.display()
+            ));
+        }
+    }
+    .map_err(|e| e.to_string())
+}
+
+/// `result` on this rank, once every rank has said whether its step worked: a step that
+/// failed on one rank (a bad layer, a full disk) stops every rank, none waits forever.
+pub(crate) fn agree<T>(
+    comm: &(impl Communicator + ?Sized),
+    result: Result<T, String>,
+) -> Result<T, String> {
+    let flags = comm.all_gather(&[if result.is_ok() { 1.0 } else { 0.0 }]);
+    let value = result?;
+    match flags.iter().position(|&f| f != 1.0) {
+        Some(rank) => Err(format!("rank {rank} failed (it says why)")),
+        None => Ok(value),
+    }
+}
+
+/// The value after `name` in `args`.
+pub(crate) fn value(args: &[String], name: &str) -> Option<String> {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .cloned()
+}
+
+/// `text` as comma-separated numbers.
+pub(crate) fn numbers(text: &str) -> Result<Vec<f64>, String> {
+    text.split(',')
+        .map(|v| v.trim().parse().map_err(|_| format!("not a number: {v}")))
+        .collect()
+}
