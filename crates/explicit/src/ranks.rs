@@ -150,6 +150,64 @@ fn halo_of(
     out
 }
 
+/// Rows `rows` of `a` (columns: global unknowns) with their columns renumbered into a local
+/// vector [`below` | the owned unknowns `owned` | `above`] (an order-preserving map, so each
+/// row's products are summed in the serial order).
+fn renumber(
+    a: &CsMat<f64>,
+    rows: std::ops::Range<usize>,
+    owned: std::ops::Range<usize>,
+    below: &[usize],
+    above: &[usize],
+) -> Result<LocalRows, DecompositionError> {
+    let own = owned.len();
+    let local = |j: usize| -> usize {
+        if j < owned.start {
+            below.binary_search(&j).unwrap_or(0)
+        } else if j < owned.end {
+            below.len() + (j - owned.start)
+        } else {
+            below.len() + own + above.binary_search(&j).unwrap_or(0)
+        }
+    };
+    let mut indptr = vec![0usize];
+    let (mut indices, mut data) = (Vec::new(), Vec::new());
+    let (mut interior, mut border) = (Vec::new(), Vec::new());
+    for (t, i) in rows.clone().enumerate() {
+        let mut reads_halo = false;
+        if let Some(row) = a.outer_view(i) {
+            for (j, &v) in row.iter() {
+                reads_halo |= !owned.contains(&j);
+                indices.push(local(j));
+                data.push(v);
+            }
+        }
+        indptr.push(indices.len());
+        if reads_halo {
+            &mut border
+        } else {
+            &mut interior
+        }
+        .push(t);
+    }
+    let width = below.len() + own + above.len();
+    let matrix = CsMat::try_new((rows.len(), width), indptr, indices, data)
+        .map_err(|e| DecompositionError::Matrix(e.3.to_string()))?;
+    Ok(LocalRows {
+        matrix,
+        interior,
+        border,
+    })
+}
+
+/// [`renumber`]'s rows: the matrix in local columns, and its rows (local) that read no
+/// halo value and those that do.
+struct LocalRows {
+    matrix: CsMat<f64>,
+    interior: Vec<usize>,
+    border: Vec<usize>,
+}
+
 impl Part {
     fn new(
         a: &CsMat<f64>,
@@ -166,38 +224,11 @@ impl Part {
         {
             return Err(DecompositionError::StencilTooWide { rank });
         }
-        let local = |j: usize| -> usize {
-            if j < u0 {
-                below.binary_search(&j).unwrap_or(0)
-            } else if j < u1 {
-                below.len() + (j - u0)
-            } else {
-                below.len() + (u1 - u0) + above.binary_search(&j).unwrap_or(0)
-            }
-        };
-        let mut indptr = vec![0usize];
-        let (mut indices, mut data) = (Vec::new(), Vec::new());
-        let (mut interior, mut border) = (Vec::new(), Vec::new());
-        for i in u0..u1 {
-            let mut reads_halo = false;
-            if let Some(row) = a.outer_view(i) {
-                for (j, &v) in row.iter() {
-                    reads_halo |= !(u0..u1).contains(&j);
-                    indices.push(local(j));
-                    data.push(v);
-                }
-            }
-            indptr.push(indices.len());
-            if reads_halo {
-                &mut border
-            } else {
-                &mut interior
-            }
-            .push(i - u0);
-        }
-        let width = below.len() + (u1 - u0) + above.len();
-        let rows = CsMat::try_new((u1 - u0, width), indptr, indices, data)
-            .map_err(|e| DecompositionError::Matrix(e.3.to_string()))?;
+        let LocalRows {
+            matrix: rows,
+            interior,
+            border,
+        } = renumber(a, u0..u1, u0..u1, &below, &above)?;
         // What the neighbours read of ours: their halos, computed from their rows.
         let send_below = if rank > 0 {
             let (v0, v1) = bounds[rank - 1];
@@ -398,38 +429,11 @@ pub fn iterate_block(
     }
     let gershgorin = flags.iter().map(|f| f[2]).fold(0.0, f64::max);
     let scale = scale_rows(&diagonal, gershgorin, iteration, settings.allow_unstable)?;
-    let local = |j: usize| -> usize {
-        if j < u0 {
-            below.binary_search(&j).unwrap_or(0)
-        } else if j < u1 {
-            below.len() + (j - u0)
-        } else {
-            below.len() + own + above.binary_search(&j).unwrap_or(0)
-        }
-    };
-    let mut indptr = vec![0usize];
-    let (mut indices, mut data) = (Vec::new(), Vec::new());
-    let (mut interior, mut border) = (Vec::new(), Vec::new());
-    for i in 0..own {
-        let mut reads_halo = false;
-        if let Some(row) = a.outer_view(i) {
-            for (j, &v) in row.iter() {
-                reads_halo |= !(u0..u1).contains(&j);
-                indices.push(local(j));
-                data.push(v);
-            }
-        }
-        indptr.push(indices.len());
-        if reads_halo {
-            &mut border
-        } else {
-            &mut interior
-        }
-        .push(i);
-    }
-    let width = below.len() + own + above.len();
-    let rows = CsMat::try_new((own, width), indptr, indices, data)
-        .map_err(|e| DecompositionError::Matrix(e.3.to_string()))?;
+    let LocalRows {
+        matrix: rows,
+        interior,
+        border,
+    } = renumber(a, 0..own, u0..u1, &below, &above)?;
     let part = Part {
         u0,
         u1,

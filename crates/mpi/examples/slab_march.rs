@@ -145,40 +145,5 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
 }
 
 fn main() -> ExitCode {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let parsed = match parse(&args) {
-        Ok(a) => a,
-        Err(e) => {
-            eprintln!("slab_march: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    match run_on_ranks(&args, &parsed) {
-        Ok(true) => ExitCode::SUCCESS,
-        Ok(false) => ExitCode::FAILURE,
-        Err(e) => {
-            eprintln!("slab_march: {e}");
-            ExitCode::FAILURE
-        }
-    }
-}
-
-#[cfg(feature = "mpi")]
-fn run_on_ranks(_: &[String], args: &Args) -> Result<bool, String> {
-    let world = lucent_mpi::World::initialise().map_err(|e| e.to_string())?;
-    run(&world.ranks(), args)
-}
-
-#[cfg(not(feature = "mpi"))]
-fn run_on_ranks(raw: &[String], args: &Args) -> Result<bool, String> {
-    let ranks: usize = raw
-        .iter()
-        .position(|a| a == "--ranks")
-        .and_then(|i| raw.get(i + 1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(2);
-    lucent_mpi::Threads::run(ranks, |comm| run(comm, args))
-        .into_iter()
-        .map(|r| r.ok_or_else(|| "a rank panicked".to_owned())?)
-        .try_fold(true, |all, r| r.map(|same| all && same))
+    slabs::main("slab_march", parse, |comm, args| run(comm, args))
 }

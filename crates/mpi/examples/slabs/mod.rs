@@ -2,6 +2,7 @@
 //! reads, `--raw NX,NY,NZ,TYPE`, and agreeing on a step that can fail on one rank.
 
 use std::path::Path;
+use std::process::ExitCode;
 
 use lucent_grid::io::layers::{Layers, read_npy_layers, read_nrrd_layers, read_raw_layers};
 use lucent_grid::io::raw::RawLayout;
@@ -80,4 +81,55 @@ pub(crate) fn numbers(text: &str) -> Result<Vec<f64>, String> {
     text.split(',')
         .map(|v| v.trim().parse().map_err(|_| format!("not a number: {v}")))
         .collect()
+}
+
+/// A slab example's `main`: parses the arguments, runs on the ranks of `mpirun` (feature
+/// `mpi`) or on `--ranks N` in-process ranks (default 2), and exits 0 when every rank
+/// reports agreement, 1 when one does not or a rank fails, 2 for bad arguments.
+pub(crate) fn main<A: Sync>(
+    name: &str,
+    parse: fn(&[String]) -> Result<A, String>,
+    run: impl Fn(&dyn Communicator, &A) -> Result<bool, String> + Sync,
+) -> ExitCode {
+    let raw: Vec<String> = std::env::args().skip(1).collect();
+    let args = match parse(&raw) {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("{name}: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    match on_ranks(&raw, &args, run) {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::FAILURE,
+        Err(e) => {
+            eprintln!("{name}: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(feature = "mpi")]
+fn on_ranks<A: Sync>(
+    _: &[String],
+    args: &A,
+    run: impl Fn(&dyn Communicator, &A) -> Result<bool, String> + Sync,
+) -> Result<bool, String> {
+    let world = lucent_mpi::World::initialise().map_err(|e| e.to_string())?;
+    run(&world.ranks(), args)
+}
+
+#[cfg(not(feature = "mpi"))]
+fn on_ranks<A: Sync>(
+    raw: &[String],
+    args: &A,
+    run: impl Fn(&dyn Communicator, &A) -> Result<bool, String> + Sync,
+) -> Result<bool, String> {
+    let ranks: usize = value(raw, "--ranks")
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(2);
+    lucent_mpi::Threads::run(ranks, |comm| run(comm, args))
+        .into_iter()
+        .map(|r| r.ok_or_else(|| "a rank panicked".to_owned())?)
+        .try_fold(true, |all, r| r.map(|same| all && same))
 }
