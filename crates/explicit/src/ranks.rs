@@ -377,7 +377,7 @@ pub fn iterate_block(
             .map(|&j| {
                 let whole = j >= 0.0 && j.fract() == 0.0;
                 let j = j as usize;
-                (whole && (u0..u1).contains(&j)).then_some(j - u0)
+                (whole && (u0..u1).contains(&j)).then(|| j - u0)
             })
             .collect()
     };
