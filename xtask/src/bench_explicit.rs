@@ -6,7 +6,7 @@
 use glam::DVec3;
 use lucent::core::Stopping;
 use lucent::explicit::Lattice;
-use lucent::explicit::convection::{Light, UpwindSettings, propagate};
+use lucent::explicit::convection::{Light, Model, UpwindSettings, propagate};
 use lucent::explicit::ftcs::{Edges, FtcsDiffusion, GradientSign, March};
 use lucent::explicit::ordinates::{OrdinatesSettings, march as ordinates};
 use lucent::explicit::p1::{Damping, Layout, P1Edges, P1Settings, march as p1};
@@ -147,6 +147,22 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
     line(
         "zhang-ma absorption, one light to steady state",
         t_abs,
+        cells as f64,
+        24.0,
+        parallel,
+    );
+    // The characteristic model (the registry's default): the exact attenuation along
+    // short characteristics, one pass plane by plane.
+    let characteristic = UpwindSettings {
+        model: Model::Characteristic,
+        ..UpwindSettings::default()
+    };
+    let t_char = best_of(5, || {
+        let _ = propagate(&lattice, &absorption, &light, &characteristic);
+    });
+    line(
+        "zhang-ma absorption, characteristic model (the registry's default)",
+        t_char,
         cells as f64,
         24.0,
         parallel,

@@ -790,26 +790,23 @@ pub fn propagate(
                     (light, settings.model, settings.edges)
                 {
                     // Every cell comes after its whole upstream stencil: exact in one
-                    // pass, plane by plane (the march a paged medium runs too).
+                    // pass, plane by plane, a plane's cells in parallel (each reads ρ of
+                    // the upstream plane only). The paged march runs the same planes
+                    // through two-plane buffers (`PlaneMarch::run`); here the fields are
+                    // whole, so each cell reads them directly: the same arithmetic
+                    // (`Setup::characteristic_with`), the same bits.
                     let s = lattice.strides();
                     let planes = PlaneMarch::new(&setup);
-                    let index = |p: usize, local: usize| planes.cell(p, local, s);
-                    planes
-                        .run(
-                            |p, out| {
-                                for (local, v) in out.iter_mut().enumerate() {
-                                    *v = absorption[index(p, local)];
-                                }
-                                Ok::<_, std::convert::Infallible>(())
-                            },
-                            |p, values| {
-                                for (local, v) in values.iter().enumerate() {
-                                    next[index(p, local)] = *v;
-                                }
-                                Ok(())
-                            },
-                        )
-                        .unwrap_or_else(|never| match never {});
+                    let mut values = vec![0.0f64; planes.plane_len()];
+                    for &p in &planes.order {
+                        let (setup, upstream) = (&setup, &next);
+                        values.par_iter_mut().enumerate().for_each(|(local, v)| {
+                            *v = setup.characteristic_from(planes.cell(p, local, s), upstream, 0);
+                        });
+                        for (local, v) in values.iter().enumerate() {
+                            next[planes.cell(p, local, s)] = *v;
+                        }
+                    }
                     iteration += 1;
                     return stop(StopReason::Exact, next, vec![0.0], iteration);
                 }
