@@ -7,11 +7,12 @@
 //! each of its levels (level L + i owns layers [k₀/2^i, ⌈k₁/2^i⌉)) and on the next
 //! stage's first level: a coarse cell's eight children are on one rank, and restriction
 //! and constant prolongation need no halo. m is the largest with p·2^m ≤ n_z (every rank
-//! keeps a unit) and every level of the stage but the fine one at least
-//! `coarse_cells_per_rank` cells per rank. The next stage takes p' = min(p, ⌊n_z'/2⌋, cells'/`coarse_cells_per_rank`)
-//! ranks, about half as many, as HPGMG and AMReX agglomerate coarse levels; the stage on
-//! one rank (always the coarsest level's) is rank 0's, which cycles it serially. The
-//! K-cycle splits its fine level only (its coarse Krylov steps run on rank 0).
+//! keeps a unit) that leaves the coarsest level out and keeps every level of the stage but
+//! the fine one at `coarse_cells_per_rank` cells per rank or more. The next stage takes
+//! p' = min(p, ⌊n_z'/2⌋, cells'/`coarse_cells_per_rank`) ranks, about half as many, as
+//! HPGMG and AMReX agglomerate coarse levels; the stage on one rank (always the coarsest
+//! level's) is rank 0's, which cycles it serially. The K-cycle splits its fine level only
+//! (its coarse Krylov steps run on rank 0).
 //!
 //! **A cycle on a split level** (as [`Multigrid`]'s, the same arithmetic per cell):
 //! - red–black Gauss–Seidel: each colour starts by sending the slab's first and last
