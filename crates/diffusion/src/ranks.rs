@@ -69,13 +69,16 @@ impl Stage {
     }
 
     /// Rank `rank`'s layers of level `level`, which may be the next stage's first level
-    /// (the layers its slab restricts to); empty for a rank outside the stage.
+    /// (the layers its slab restricts to); empty for a rank outside the stage or a level
+    /// above it.
     pub fn owned(&self, rank: usize, level: usize) -> Range<usize> {
-        let Some(&(k0, k1)) = self.layers.get(rank) else {
+        let (Some(&(k0, k1)), Some(shift)) =
+            (self.layers.get(rank), level.checked_sub(self.first_level))
+        else {
             return 0..0;
         };
-        let shift = level - self.first_level;
-        (k0 >> shift)..(k1 + (1 << shift) - 1) >> shift
+        let shift = shift.min(usize::BITS as usize - 1);
+        (k0 >> shift)..k1.div_ceil(1 << shift)
     }
 }
 

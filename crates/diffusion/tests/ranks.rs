@@ -344,6 +344,11 @@ fn the_layout_keeps_coarse_cells_on_one_rank_and_agglomerates_onto_fewer() {
         .map(|s| (s.ranks(), s.levels))
         .collect();
     assert_eq!(stages, [(64, 3), (62, 1), (31, 1), (8, 1), (1, 2)]);
+    // A level above a stage, or a rank outside it, owns nothing (no panic).
+    let second = &layout.stages[1];
+    assert_eq!(second.owned(0, 0), 0..0);
+    assert_eq!(second.owned(63, 3), 0..0);
+    assert_eq!(second.owned(61, 3), 122..125);
 }
 
 #[test]

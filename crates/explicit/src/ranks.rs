@@ -21,7 +21,7 @@
 //! gather, so no rank stops alone.
 
 use crate::ExplicitError;
-use crate::steady::{Iteration, Layers, Steady, SteadySettings, row_scale, scale_rows};
+use crate::steady::{Iteration, Layers, Steady, SteadySettings, gershgorin, row_scale, scale_rows};
 use lucent_core::{History, StopReason, Stopping};
 use lucent_diffusion::AssembledSystem;
 use rayon::prelude::*;
@@ -347,8 +347,10 @@ pub struct BlockSteady {
 /// # Errors
 /// [`DecompositionError::Scheme`] for what the serial iteration refuses (a non-positive
 /// diagonal, an FTCS step beyond the bound, a damping outside (0, 1]);
-/// [`DecompositionError::StencilTooWide`] for blocks that do not join up; a rank that left
-/// the protocol.
+/// [`DecompositionError::Blocks`] for blocks that are not consecutive runs of layers
+/// covering the grid; [`DecompositionError::StencilTooWide`] for rows that read past the
+/// neighbouring blocks (or rows and right-hand side that do not fit the block's layers); a
+/// rank that left the protocol.
 pub fn iterate_block(
     block: &lucent_diffusion::slab::Block,
     slab_len: usize,
@@ -392,15 +394,11 @@ pub fn iterate_block(
     let diagonal: Vec<f64> = (0..own)
         .map(|i| a.get(i, u0 + i).copied().unwrap_or(0.0))
         .collect();
-    let gershgorin = a
-        .outer_iterator()
-        .map(|row| row.iter().map(|(_, v)| v.abs()).sum::<f64>())
-        .fold(0.0, f64::max);
     let layer_count = block.layers.len() as f64;
     let agreed = comm.all_gather(&[
         f64::from(u8::from(too_wide)),
         f64::from(u8::from(diagonal.iter().any(|&d| d <= 0.0))),
-        gershgorin,
+        gershgorin(a),
         block.layers.start as f64,
         layer_count,
     ]);
@@ -427,8 +425,8 @@ pub fn iterate_block(
     if flags.iter().any(|f| f[1] != 0.0) {
         return Err(ExplicitError::Invalid("the system has a non-positive diagonal".into()).into());
     }
-    let gershgorin = flags.iter().map(|f| f[2]).fold(0.0, f64::max);
-    let scale = scale_rows(&diagonal, gershgorin, iteration, settings.allow_unstable)?;
+    let largest = flags.iter().map(|f| f[2]).fold(0.0, f64::max);
+    let scale = scale_rows(&diagonal, largest, iteration, settings.allow_unstable)?;
     let LocalRows {
         matrix: rows,
         interior,
@@ -479,12 +477,7 @@ pub fn block_ftcs_limit(
     cell_volume: f64,
     comm: &(impl Communicator + ?Sized),
 ) -> Result<f64, DecompositionError> {
-    let gershgorin = block
-        .matrix
-        .outer_iterator()
-        .map(|row| row.iter().map(|(_, v)| v.abs()).sum::<f64>())
-        .fold(0.0, f64::max);
-    let all = comm.all_gather(&[gershgorin]);
+    let all = comm.all_gather(&[gershgorin(&block.matrix)]);
     if all.len() != comm.size() {
         return Err(DecompositionError::Protocol { rank: comm.rank() });
     }

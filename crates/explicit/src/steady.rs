@@ -57,12 +57,16 @@ pub struct Steady {
 
 /// The FTCS step limit 2V / (max_i a_ii + Σ|a_ij|).
 pub fn ftcs_limit(system: &AssembledSystem, cell_volume: f64) -> f64 {
-    let gershgorin = system
-        .matrix
-        .outer_iterator()
+    2.0 * cell_volume / gershgorin(&system.matrix)
+}
+
+/// The largest Gershgorin row sum max_i Σ_j |a_ij| of `rows` (each row summed in its
+/// stored order): the bound on λ_max behind [`ftcs_limit`], for the whole system or, on
+/// ranks, for one rank's rows (the maximum over ranks is exact, whatever the split).
+pub fn gershgorin(rows: &sprs::CsMat<f64>) -> f64 {
+    rows.outer_iterator()
         .map(|row| row.iter().map(|(_, v)| v.abs()).sum::<f64>())
-        .fold(0.0, f64::max);
-    2.0 * cell_volume / gershgorin
+        .fold(0.0, f64::max)
 }
 
 /// Iterates from zero to the stopping rule. `slab_len` is the grid's n_x·n_y: norms are
@@ -167,11 +171,7 @@ pub fn row_scale(
     let diagonal: Vec<f64> = (0..n)
         .map(|i| a.get(i, i).copied().unwrap_or(0.0))
         .collect();
-    let gershgorin = a
-        .outer_iterator()
-        .map(|row| row.iter().map(|(_, v)| v.abs()).sum::<f64>())
-        .fold(0.0, f64::max);
-    scale_rows(&diagonal, gershgorin, iteration, allow_unstable)
+    scale_rows(&diagonal, gershgorin(a), iteration, allow_unstable)
 }
 
 /// [`row_scale`] from the rows' diagonal and the largest Gershgorin sum max_i Σ_j |a_ij|
