@@ -63,6 +63,7 @@
 mod direct;
 pub mod driver;
 mod error;
+pub mod exact;
 mod index;
 mod iteration;
 pub mod memory;

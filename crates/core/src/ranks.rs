@@ -74,6 +74,28 @@ pub fn exchange<R>(
     }
 }
 
+/// [`Communicator::exchange_with`] with an `interior` that returns a value: (one message
+/// from each rank of `from`, `interior`'s result).
+pub fn exchange_among<R>(
+    comm: &(impl Communicator + ?Sized),
+    sends: &[(usize, &[f64])],
+    from: &[usize],
+    interior: impl FnOnce() -> R,
+) -> (Vec<Vec<f64>>, R) {
+    let mut interior = Some(interior);
+    let mut result = None;
+    let received = comm.exchange_with(sends, from, &mut || {
+        if let Some(f) = interior.take() {
+            result = Some(f());
+        }
+    });
+    match (result, interior) {
+        (Some(r), _) => (received, r),
+        (None, Some(f)) => (received, f()),
+        (None, None) => unreachable!("the closure takes `interior` only to store its result"),
+    }
+}
+
 /// One rank alone: nothing to exchange.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Alone;
