@@ -5,7 +5,7 @@
 //! a box-filling medium lit from outside, a thin slab).
 //!
 //! - `ftcs-diffusion`, `jacobi-diffusion`, `ftcs-p1` and `convection-diffusion`: the serial
-//!   bits.
+//!   bits (the steady iterations over z-slabs and over grids of boxes).
 //! - `diffusion-mg`: the serial fluence to 1e-10 of its largest value and the same cycle
 //!   count ± 1 (the norms add layer sums in z order, the serial solve slabs in a tree; the
 //!   fluence has come out bit-equal on every scene measured), and the same bits on every
@@ -110,18 +110,19 @@ fn steady_explicit_schemes_give_the_serial_bits_on_ranks() {
         let problem = problem(scene);
         for name in ["ftcs-diffusion", "jacobi-diffusion"] {
             let serial = solve(name, &problem, 1);
-            for ranks in [2, 3] {
-                let split = solve(name, &problem, ranks);
-                assert_eq!(
-                    fluence_bits(&split),
-                    fluence_bits(&serial),
-                    "{name} on {scene}, {ranks} ranks"
+            for (ranks, decomposition) in [(2, "slabs"), (3, "slabs"), (2, "boxes"), (4, "boxes")] {
+                let mut p = params(ranks);
+                p.0.insert(
+                    "decomposition".into(),
+                    ParamValue::Text(decomposition.into()),
                 );
-                assert_eq!(
-                    history_bits(&split),
-                    history_bits(&serial),
-                    "{name} on {scene}, {ranks} ranks"
-                );
+                let split = lucent::registry()
+                    .build(name, &p)
+                    .and_then(|s| s.solve(&problem, &options(name)))
+                    .unwrap_or_else(|e| panic!("{name} on {ranks} {decomposition}: {e}"));
+                let case = format!("{name} on {scene}, {ranks} ranks, {decomposition}");
+                assert_eq!(fluence_bits(&split), fluence_bits(&serial), "{case}");
+                assert_eq!(history_bits(&split), history_bits(&serial), "{case}");
                 assert_eq!(split.report.stop_reason, serial.report.stop_reason);
             }
             let processes = solve_as_processes(name, &problem, 2);
@@ -365,4 +366,22 @@ fn what_cannot_split_says_so() {
         .solve(&problem, &SolveOptions::default())
         .unwrap_err();
     assert!(e.to_string().contains("33 ranks for 32 z-layers"), "{e}");
+    // A decomposition that is not one, and boxes that cannot be cut: more ranks than the
+    // 8 × 8 × 32 slab can cut (251 is prime: 251 boxes along one axis, which none has).
+    let mut cubes = params(2);
+    cubes
+        .0
+        .insert("decomposition".into(), ParamValue::Text("cubes".into()));
+    let e = registry.build("ftcs-diffusion", &cubes).err().unwrap();
+    assert!(e.to_string().contains("decomposition"), "{e}");
+    let mut boxes = params(251);
+    boxes
+        .0
+        .insert("decomposition".into(), ParamValue::Text("boxes".into()));
+    let e = registry
+        .build("jacobi-diffusion", &boxes)
+        .unwrap()
+        .solve(&problem, &SolveOptions::default())
+        .unwrap_err();
+    assert!(e.to_string().contains("grid of boxes"), "{e}");
 }

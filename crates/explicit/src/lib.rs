@@ -23,9 +23,12 @@
 //! `ftcs-p1` and `ftcs-ordinates` (the state twice in f64 slab pages, each step from a ring
 //! of three old slabs).
 //!
-//! On several ranks, [`ranks::iterate`] runs `steady`'s FTCS and Jacobi (and
-//! [`ranks::iterate_block`] the same from rows each rank builds for its own layers of a
-//! box medium, so no rank holds the whole system),
+//! On several ranks, [`ranks::iterate_on`] runs `steady`'s FTCS and Jacobi over z-slabs or
+//! a Cartesian grid of boxes ([`ranks::Boxes`]; [`ranks::iterate_block`] the same over
+//! z-slabs from rows each rank builds for its own layers of a box medium, so no rank holds
+//! the whole system); their norms sum fixed runs of eight cells along x and add the run
+//! sums exactly (`lucent_core::exact`), so the bits do not depend on the split
+//! (`docs/ranks.md`);
 //! [`ranks::march_p1`] the P1 march (zero edges), and [`wavefront::propagate_on_ranks`]
 //! Zhang & Ma's one-pass absorption march of a distant light (a pipelined wavefront where
 //! the light crosses the slabs, planes in lock step where it runs along them), over
@@ -74,7 +77,7 @@ pub mod wavefront;
 pub use error::ExplicitError;
 pub use lattice::{GrowthMonitor, Lattice};
 pub use params::{
-    ConvectionParams, FtcsDiffusionParams, JacobiDiffusionParams, OrdinatesParams, P1Params,
-    SweepParam,
+    ConvectionParams, DecompositionParam, FtcsDiffusionParams, JacobiDiffusionParams,
+    OrdinatesParams, P1Params, SweepParam,
 };
 pub use solver::{ExplicitSolver, lattice, point_and_emission};

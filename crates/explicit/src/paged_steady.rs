@@ -16,8 +16,8 @@
 //!    side are the assembled matrix's bits);
 //! 3. each iteration is one pass over z that updates φ on slab z and the residual
 //!    r = b − Aφ on slab z − 1 (a ring of three slabs of the new φ), summing r² over the
-//!    slab in cell order and the slab sums in z order, which is the in-memory norm's
-//!    order (`steady::Layers`).
+//!    runs of eight cells of each x-line and adding the run sums exactly, which is the
+//!    in-memory norm (`steady::Layers`).
 //!
 //! Every value is computed by the in-memory arithmetic in the in-memory order, so the
 //! residual history, the stopping decision and the fluence have the in-memory bits
@@ -31,6 +31,7 @@
 use std::sync::Arc;
 
 use lucent_core::driver::{Coefficients, Record, UNCOLLIDED_SHARE};
+use lucent_core::exact::ExactSum;
 use lucent_core::{
     History, Light, PagedFirstCollisions, PagedProblem, PagedSolution, Progress, SingularCell,
     SolveError, SolveOptions, SolveReport, Stopping, paging_error, point_source_singular_cells,
@@ -41,6 +42,8 @@ use lucent_diffusion::slab::{PointShares, Window};
 use lucent_optics::PhaseFunction;
 use lucent_paging::{Eviction, FileStore, PagedGrid, PagedSlabs, Pager, PagerOptions, PagingError};
 use rayon::prelude::*;
+
+use crate::steady::add_layer_squares;
 
 /// Which iteration, with its parameter.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -410,7 +413,7 @@ impl Channel<'_> {
         let mut q0 = vec![0.0f32; slab];
         let mut b = vec![0.0f64; slab];
         let mut scale = vec![0.0f64; slab];
-        let mut b_squares = 0.0f64;
+        let mut b_squares = ExactSum::new();
         let mut gershgorin = 0.0f64;
         for z in 0..nz {
             d_ring.hold_around(z, nz, &mut read_d).map_err(err)?;
@@ -458,15 +461,15 @@ impl Channel<'_> {
                     scale[index] = omega / diagonal;
                 }
             }
-            // By layers, as the in-memory norm sums (`steady::Layers`).
-            b_squares += b.iter().map(|v| v * v).sum::<f64>();
+            // By runs, as the in-memory norm sums (`steady::Layers`).
+            add_layer_squares(&b, nx, &mut b_squares);
             b_pages.write_slab(z, &b).map_err(err)?;
             r_pages.write_slab(z, &b).map_err(err)?;
             if let Some(pages) = &scale_pages {
                 pages.write_slab(z, &scale).map_err(err)?;
             }
         }
-        let b_norm = b_squares.sqrt().max(f64::MIN_POSITIVE);
+        let b_norm = b_squares.value().sqrt().max(f64::MIN_POSITIVE);
         let volume = geometry.cell_volume();
         let step_scale = match self.kind {
             Kind::Ftcs { fraction } => Some(fraction * (2.0 * volume / gershgorin) / volume),
@@ -489,7 +492,7 @@ impl Channel<'_> {
                 break stop;
             }
             phi_ring.held = [None; 3];
-            let mut r_squares = 0.0f64;
+            let mut r_squares = ExactSum::new();
             finite = true;
             for z in 0..=nz {
                 if z < nz {
@@ -539,11 +542,11 @@ impl Channel<'_> {
                             *ri = rows_b[index] - ax;
                         }
                     });
-                    r_squares += r.iter().map(|v| v * v).sum::<f64>();
+                    add_layer_squares(&r, nx, &mut r_squares);
                     r_pages.write_slab(w, &r).map_err(err)?;
                 }
             }
-            relative = r_squares.sqrt() / b_norm;
+            relative = r_squares.value().sqrt() / b_norm;
         };
         let record = Record::from_residuals(history.into_residuals(), stop_reason, 0);
 

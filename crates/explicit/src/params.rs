@@ -24,6 +24,24 @@ const ALLOW_UNSTABLE: (&str, &str) = (
     "true: run a step beyond the stability bound anyway (to study the blow-up)",
 );
 
+const DECOMPOSITION: (&str, &str) = (
+    "decomposition",
+    "how ranks split the grid: slabs (z-slabs balanced by unknowns, one layer per rank at least) or boxes (the grid of boxes that cuts least, x cut at multiples of 8); the serial bits either way",
+);
+
+/// How the steady iterations split the grid over ranks
+/// ([`crate::ranks::Decomposition`], the grid of boxes chosen by
+/// [`crate::ranks::Boxes::auto`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DecompositionParam {
+    /// z-slabs balanced by unknowns.
+    #[default]
+    Slabs,
+    /// The grid of boxes with the least cut area.
+    Boxes,
+}
+
 fn check_fraction(fraction: f64) -> Result<(), SolveError> {
     if fraction > 0.0 && fraction.is_finite() {
         Ok(())
@@ -40,8 +58,10 @@ pub struct FtcsDiffusionParams {
     pub step_fraction: f64,
     /// Run beyond the bound anyway.
     pub allow_unstable: bool,
-    /// In-process ranks to split the iteration over (z-slabs).
+    /// In-process ranks to split the iteration over.
     pub ranks: usize,
+    /// How the ranks split the grid.
+    pub decomposition: DecompositionParam,
 }
 
 impl Default for FtcsDiffusionParams {
@@ -50,13 +70,18 @@ impl Default for FtcsDiffusionParams {
             step_fraction: 0.9,
             allow_unstable: false,
             ranks: 1,
+            decomposition: DecompositionParam::Slabs,
         }
     }
 }
 
 impl SolverParams for FtcsDiffusionParams {
-    const MEANINGS: &'static [(&'static str, &'static str)] =
-        &[STEP_FRACTION, ALLOW_UNSTABLE, lucent_diffusion::RANKS];
+    const MEANINGS: &'static [(&'static str, &'static str)] = &[
+        STEP_FRACTION,
+        ALLOW_UNSTABLE,
+        lucent_diffusion::RANKS,
+        DECOMPOSITION,
+    ];
 
     fn validate(&self) -> Result<(), SolveError> {
         check_fraction(self.step_fraction)?;
@@ -70,8 +95,10 @@ impl SolverParams for FtcsDiffusionParams {
 pub struct JacobiDiffusionParams {
     /// Damping ω, in (0, 1].
     pub omega: f64,
-    /// In-process ranks to split the iteration over (z-slabs).
+    /// In-process ranks to split the iteration over.
     pub ranks: usize,
+    /// How the ranks split the grid.
+    pub decomposition: DecompositionParam,
 }
 
 impl Default for JacobiDiffusionParams {
@@ -79,6 +106,7 @@ impl Default for JacobiDiffusionParams {
         Self {
             omega: 1.0,
             ranks: 1,
+            decomposition: DecompositionParam::Slabs,
         }
     }
 }
@@ -87,6 +115,7 @@ impl SolverParams for JacobiDiffusionParams {
     const MEANINGS: &'static [(&'static str, &'static str)] = &[
         ("omega", "Jacobi damping ω in (0, 1]"),
         lucent_diffusion::RANKS,
+        DECOMPOSITION,
     ];
 
     fn validate(&self) -> Result<(), SolveError> {

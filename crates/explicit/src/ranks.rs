@@ -1,27 +1,38 @@
-//! The explicit schemes split over ranks by z-slabs, the same bits on any number of ranks:
-//! [`iterate`], FTCS and Jacobi to steady state on an assembled diffusion system (the twin
-//! of [`crate::steady::iterate`]), [`iterate_block`], the same from rows each rank builds
-//! for its own layers of a medium filling the box (no rank holds the whole system), and
-//! [`march_p1`], P1 by FTCS (the twin of [`crate::p1::march`]). For the steady iterations:
+//! The explicit schemes split over ranks, the same bits on any number of ranks:
+//! [`iterate`] and [`iterate_on`], FTCS and Jacobi to steady state on an assembled
+//! diffusion system (the twin of [`crate::steady::iterate`]) over z-slabs or a Cartesian
+//! grid of boxes ([`Decomposition`]); [`iterate_block`], the same from rows each rank
+//! builds for its own layers of a medium filling the box (no rank holds the whole
+//! system); and [`march_p1`], P1 by FTCS over z-slabs (the twin of [`crate::p1::march`]).
+//! For the steady iterations:
 //!
-//! Each rank owns the unknowns of a run of z-layers (contiguous in the system's order:
-//! cells ascend, z slowest), keeps its rows with their columns renumbered into a local
-//! vector laid out as [halo below | owned | halo above] — an order-preserving map, so each
-//! row's products are summed in the serial order —, and per sweep
+//! Each rank owns the unknowns of its cells (a slab's layers, or a box's cells) and keeps
+//! their rows with the columns renumbered into a local vector [owned | halo], the halo
+//! grouped by the rank that owns it. A row's products stay in their stored (global column)
+//! order, so each row's sum has the serial bits. Per sweep, each rank
 //!
 //! 1. updates its owned φ from its residual (elementwise, as serially);
-//! 2. starts sending the owned values its neighbours' rows read, computes the rows that
-//!    read no halo while they travel, then the rows next to the neighbours;
-//! 3. sums r² per layer, left to right, and all-gathers the layer sums with each rank's
-//!    time-budget and cancel flags; every rank adds the layer sums in z order (the serial
-//!    `Layers::norm`) and takes one stopping decision.
+//! 2. sends each neighbour the owned values its rows read (non-blocking), computes the
+//!    rows that read no halo while they travel, receives, then computes the rest;
+//! 3. sums r² over its runs of eight cells along x (each run left to right, as serially)
+//!    into an exact accumulator, and all-gathers the accumulators with each rank's
+//!    time-budget and cancel flags; the merged sum is the serial norm's exact sum
+//!    (`steady::Layers`), so every rank takes the serial stopping decision.
 //!
 //! Deterministic stops (tolerances, iteration limit, divergence) follow from the identical
 //! residual; the time budget and cancellation, which differ per rank, travel with the
 //! gather, so no rank stops alone.
+//!
+//! Boxes beat slabs on many ranks: a slab's halo is two whole layers however thin the
+//! slab, a box's shrinks with its faces (`docs/ranks.md` has the model), and z-slabs stop
+//! at n_z ranks.
 
 use crate::ExplicitError;
-use crate::steady::{Iteration, Layers, Steady, SteadySettings, gershgorin, row_scale, scale_rows};
+use crate::steady::{
+    Iteration, Layers, NORM_RUN, Steady, SteadySettings, gershgorin, norm_run, row_scale,
+    scale_rows, squares,
+};
+use lucent_core::exact::ExactSum;
 use lucent_core::{History, StopReason, Stopping};
 use lucent_diffusion::AssembledSystem;
 use rayon::prelude::*;
@@ -39,6 +50,18 @@ pub enum DecompositionError {
         ranks: usize,
         /// Layers there are.
         layers: usize,
+    },
+    /// A grid of boxes that does not fit the cells or the ranks.
+    #[error(
+        "a {grid:?} grid of boxes on {dims:?} cells for {ranks} ranks: it needs one box per rank, and each box a cell in y and z and a run of {NORM_RUN} cells in x"
+    )]
+    BoxGrid {
+        /// Boxes along x, y and z (all ones when no grid was given and none fits).
+        grid: [usize; 3],
+        /// The grid's cells.
+        dims: [usize; 3],
+        /// Ranks there are.
+        ranks: usize,
     },
     /// A row reads beyond the neighbouring slabs (slabs thinner than the stencil).
     #[error("rank {rank}: the stencil reaches past the neighbouring slabs (use fewer ranks)")]
@@ -73,7 +96,7 @@ pub enum DecompositionError {
     },
 }
 
-use lucent_core::ranks::{Communicator, exchange};
+use lucent_core::ranks::{Communicator, exchange, exchange_among};
 
 /// Which layers (indices into [`Layers::ranges`]) each rank owns: contiguous runs in z,
 /// balanced by unknowns (each rank takes layers until it holds its share).
@@ -114,24 +137,197 @@ impl Slabs {
     }
 }
 
-/// One rank's rows of the system, renumbered locally.
+/// A Cartesian grid of p_x × p_y × p_z boxes over a grid's cells; the box (i, j, k) is
+/// rank i + p_x (j + p_y k). The cuts are as even as they can be, those in x at multiples
+/// of [`NORM_RUN`] so that each of the norm's runs lies in one box (what keeps the bits).
+/// Boxes split cells, not unknowns: boxes outside an embedded shape hold fewer.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Boxes {
+    dims: [usize; 3],
+    /// Per axis, the p + 1 cut positions from 0 to n.
+    cuts: [Vec<usize>; 3],
+}
+
+impl Boxes {
+    /// `grid` = [p_x, p_y, p_z] boxes over `dims` cells.
+    ///
+    /// # Errors
+    /// [`DecompositionError::BoxGrid`] if an axis has no boxes, or more than its cells
+    /// (in x, its runs of [`NORM_RUN`]).
+    pub fn new(dims: [usize; 3], grid: [usize; 3]) -> Result<Self, DecompositionError> {
+        let units = Self::units(dims);
+        if (0..3).any(|a| grid[a] == 0 || grid[a] > units[a]) {
+            return Err(DecompositionError::BoxGrid {
+                grid,
+                dims,
+                ranks: grid.iter().product(),
+            });
+        }
+        let cuts = std::array::from_fn(|a| {
+            let width = if a == 0 { NORM_RUN } else { 1 };
+            (0..=grid[a])
+                .map(|k| (k * units[a] / grid[a] * width).min(dims[a]))
+                .collect()
+        });
+        Ok(Self { dims, cuts })
+    }
+
+    /// The grid of `ranks` boxes over `dims` with the least cut area (the halo each sweep
+    /// sends), ties going to more cuts in z, then in y (boxes of whole x-lines and layers
+    /// send contiguous runs). Like `MPI_Dims_create`, but weighing the grid's own shape.
+    ///
+    /// # Errors
+    /// [`DecompositionError::BoxGrid`] (grid [1, 1, 1]) if no grid of `ranks` boxes fits.
+    pub fn auto(dims: [usize; 3], ranks: usize) -> Result<Self, DecompositionError> {
+        let units = Self::units(dims);
+        let divisors = |n: usize| (1..=n).rev().filter(move |p| n.is_multiple_of(*p));
+        let mut best: Option<([usize; 3], usize)> = None;
+        for pz in divisors(ranks) {
+            for py in divisors(ranks / pz) {
+                let grid = [ranks / pz / py, py, pz];
+                if (0..3).any(|a| grid[a] > units[a]) {
+                    continue;
+                }
+                let [nx, ny, nz] = dims;
+                let area =
+                    (grid[0] - 1) * ny * nz + (grid[1] - 1) * nx * nz + (grid[2] - 1) * nx * ny;
+                if best.is_none_or(|(_, least)| area < least) {
+                    best = Some((grid, area));
+                }
+            }
+        }
+        match best {
+            Some((grid, _)) => Self::new(dims, grid),
+            None => Err(DecompositionError::BoxGrid {
+                grid: [1, 1, 1],
+                dims,
+                ranks,
+            }),
+        }
+    }
+
+    /// What an axis can be cut into: x's runs, y's and z's cells.
+    fn units(dims: [usize; 3]) -> [usize; 3] {
+        [dims[0].div_ceil(NORM_RUN), dims[1], dims[2]]
+    }
+
+    /// The grid's cells.
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    /// Boxes along x, y and z.
+    pub fn grid(&self) -> [usize; 3] {
+        self.cuts.clone().map(|c| c.len() - 1)
+    }
+
+    /// How many boxes (ranks).
+    pub fn ranks(&self) -> usize {
+        self.grid().iter().product()
+    }
+
+    /// The cells of box `rank` along each axis.
+    pub fn bounds(&self, rank: usize) -> [std::ops::Range<usize>; 3] {
+        let [px, py, _] = self.grid();
+        let at = [rank % px, (rank / px) % py, rank / (px * py)];
+        std::array::from_fn(|a| self.cuts[a][at[a]]..self.cuts[a][at[a] + 1])
+    }
+
+    /// The box (rank) holding cell `c` (flat index, x fastest).
+    pub fn rank_of(&self, c: usize) -> usize {
+        let [nx, ny, _] = self.dims;
+        let at = [c % nx, (c / nx) % ny, c / (nx * ny)];
+        let [px, py, _] = self.grid();
+        let index = |a: usize| self.cuts[a].partition_point(|&cut| cut <= at[a]) - 1;
+        index(0) + px * (index(1) + py * index(2))
+    }
+}
+
+/// How [`iterate_on`] splits the grid over ranks.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum Decomposition {
+    /// z-slabs balanced by unknowns ([`Slabs`]); at most one rank per layer.
+    #[default]
+    Slabs,
+    /// A Cartesian grid of boxes, one per rank.
+    Boxes(Boxes),
+}
+
+/// One rank's rows of the system, renumbered into its local vector x = [owned | halo].
 struct Part {
-    /// The owned unknowns [u0, u1) of the global system.
-    u0: usize,
-    u1: usize,
-    /// Global indices of the halo below and above, ascending.
-    below: Vec<usize>,
-    above: Vec<usize>,
-    /// Owned rows, columns in local numbering ([below | owned | above]).
-    rows: CsMat<f64>,
+    /// Owned unknowns (the first `own` entries of x).
+    own: usize,
+    /// Halo entries after them, grouped by the owning rank in `receives`' order.
+    halo: usize,
+    rows: LocalRows,
+    /// (rank, owned positions that rank's rows read), ascending by rank.
+    sends: Vec<(usize, Vec<usize>)>,
+    /// (rank, how many of the halo's values it sends), ascending by rank: consecutive
+    /// blocks of the halo.
+    receives: Vec<(usize, usize)>,
+    /// The norm's runs of owned unknowns, [start, end) in owned positions.
+    runs: Vec<(usize, usize)>,
+}
+
+/// Owned rows in local columns: compressed rows, each row's entries in their stored
+/// (global) order, which is the serial order of its products.
+struct LocalRows {
+    indptr: Vec<usize>,
+    indices: Vec<usize>,
+    data: Vec<f64>,
     /// Rows that read no halo value (computed while the halo travels), and the others.
     interior: Vec<usize>,
     border: Vec<usize>,
-    /// Owned positions (local to the owned block) whose values rank − 1 and rank + 1 read.
-    send_below: Vec<usize>,
-    send_above: Vec<usize>,
 }
 
+impl LocalRows {
+    /// Rows `rows` of `a` (global columns), each column mapped by `local` to (its place in
+    /// x, whether it is a halo value).
+    fn new(
+        a: &CsMat<f64>,
+        rows: impl Iterator<Item = usize>,
+        local: impl Fn(usize) -> (usize, bool),
+    ) -> Self {
+        let mut out = Self {
+            indptr: vec![0],
+            indices: Vec::new(),
+            data: Vec::new(),
+            interior: Vec::new(),
+            border: Vec::new(),
+        };
+        for (t, i) in rows.enumerate() {
+            let mut reads_halo = false;
+            if let Some(row) = a.outer_view(i) {
+                for (j, &v) in row.iter() {
+                    let (at, halo) = local(j);
+                    reads_halo |= halo;
+                    out.indices.push(at);
+                    out.data.push(v);
+                }
+            }
+            out.indptr.push(out.indices.len());
+            if reads_halo {
+                out.border.push(t);
+            } else {
+                out.interior.push(t);
+            }
+        }
+        out
+    }
+
+    /// The residual b_i − (Ax)_i of row `i`, reading the local vector `x`.
+    fn residual(&self, b: &[f64], x: &[f64], i: usize) -> f64 {
+        let (s, e) = (self.indptr[i], self.indptr[i + 1]);
+        let ax: f64 = self.indices[s..e]
+            .iter()
+            .zip(&self.data[s..e])
+            .map(|(&j, v)| v * x[j])
+            .sum();
+        b[i] - ax
+    }
+}
+
+/// The global columns `a`'s rows `rows` read that `keep` selects, ascending, once each.
 fn halo_of(
     a: &CsMat<f64>,
     rows: std::ops::Range<usize>,
@@ -150,165 +346,205 @@ fn halo_of(
     out
 }
 
-/// Rows `rows` of `a` (columns: global unknowns) with their columns renumbered into a local
-/// vector [`below` | the owned unknowns `owned` | `above`] (an order-preserving map, so each
-/// row's products are summed in the serial order).
-fn renumber(
-    a: &CsMat<f64>,
-    rows: std::ops::Range<usize>,
-    owned: std::ops::Range<usize>,
-    below: &[usize],
-    above: &[usize],
-) -> Result<LocalRows, DecompositionError> {
-    let own = owned.len();
-    let local = |j: usize| -> usize {
-        if j < owned.start {
-            below.binary_search(&j).unwrap_or(0)
-        } else if j < owned.end {
-            below.len() + (j - owned.start)
-        } else {
-            below.len() + own + above.binary_search(&j).unwrap_or(0)
+/// Groups sorted (rank, value) pairs by rank.
+fn by_rank(pairs: &[(usize, usize)]) -> Vec<(usize, Vec<usize>)> {
+    let mut out: Vec<(usize, Vec<usize>)> = Vec::new();
+    for &(rank, v) in pairs {
+        match out.last_mut() {
+            Some((r, values)) if *r == rank => values.push(v),
+            _ => out.push((rank, vec![v])),
         }
-    };
-    let mut indptr = vec![0usize];
-    let (mut indices, mut data) = (Vec::new(), Vec::new());
-    let (mut interior, mut border) = (Vec::new(), Vec::new());
-    for (t, i) in rows.clone().enumerate() {
-        let mut reads_halo = false;
-        if let Some(row) = a.outer_view(i) {
-            for (j, &v) in row.iter() {
-                reads_halo |= !owned.contains(&j);
-                indices.push(local(j));
-                data.push(v);
-            }
-        }
-        indptr.push(indices.len());
-        if reads_halo {
-            &mut border
-        } else {
-            &mut interior
-        }
-        .push(t);
     }
-    let width = below.len() + own + above.len();
-    let matrix = CsMat::try_new((rows.len(), width), indptr, indices, data)
-        .map_err(|e| DecompositionError::Matrix(e.3.to_string()))?;
-    Ok(LocalRows {
-        matrix,
-        interior,
-        border,
-    })
+    out
 }
 
-/// [`renumber`]'s rows: the matrix in local columns, and its rows (local) that read no
-/// halo value and those that do.
-struct LocalRows {
-    matrix: CsMat<f64>,
-    interior: Vec<usize>,
-    border: Vec<usize>,
+/// The norm's runs of `cells` (consecutive entries in the same run of a grid `nx` wide),
+/// as [start, end) positions.
+fn runs_of(cells: impl Iterator<Item = usize>, nx: usize) -> Vec<(usize, usize)> {
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    let mut last = None;
+    for (u, c) in cells.enumerate() {
+        let run = norm_run(c, nx);
+        match runs.last_mut() {
+            Some((_, end)) if last == Some(run) => *end = u + 1,
+            _ => runs.push((u, u + 1)),
+        }
+        last = Some(run);
+    }
+    runs
 }
 
 impl Part {
-    fn new(
+    /// Rank `rank`'s part of the whole system `a`, each unknown's rank in `owner` and its
+    /// cell in `cells` (a grid `nx` wide). Every rank holds `a`, so each finds by itself
+    /// what it receives (the columns its rows read elsewhere) and what it sends (its
+    /// unknowns the other ranks' rows read): the two sides of each message agree.
+    fn from_system(
         a: &CsMat<f64>,
-        bounds: &[(usize, usize)],
+        cells: &[usize],
+        owner: &[usize],
         rank: usize,
-    ) -> Result<Self, DecompositionError> {
-        let (u0, u1) = bounds[rank];
-        let below = halo_of(a, u0..u1, |j| j < u0);
-        let above = halo_of(a, u0..u1, |j| j >= u1);
-        // The stencil reaches the neighbouring slabs only.
-        let lowest = if rank > 0 { bounds[rank - 1].0 } else { 0 };
-        let highest = bounds.get(rank + 1).map_or(u1, |b| b.1);
-        if below.first().is_some_and(|&j| j < lowest) || above.last().is_some_and(|&j| j >= highest)
-        {
-            return Err(DecompositionError::StencilTooWide { rank });
-        }
-        let LocalRows {
-            matrix: rows,
-            interior,
-            border,
-        } = renumber(a, u0..u1, u0..u1, &below, &above)?;
-        // What the neighbours read of ours: their halos, computed from their rows.
-        let send_below = if rank > 0 {
-            let (v0, v1) = bounds[rank - 1];
-            halo_of(a, v0..v1, |j| (u0..u1).contains(&j))
-                .iter()
-                .map(|j| j - u0)
-                .collect()
-        } else {
-            Vec::new()
-        };
-        let send_above = if let Some(&(w0, w1)) = bounds.get(rank + 1) {
-            halo_of(a, w0..w1, |j| (u0..u1).contains(&j))
-                .iter()
-                .map(|j| j - u0)
-                .collect()
-        } else {
-            Vec::new()
-        };
-        Ok(Self {
-            u0,
-            u1,
-            below,
-            above,
+        nx: usize,
+    ) -> Self {
+        let n = owner.len();
+        let owned: Vec<usize> = (0..n).filter(|&u| owner[u] == rank).collect();
+        let (indptr, indices) = (a.proper_indptr(), a.indices());
+        let columns = |i: usize| indices[indptr[i]..indptr[i + 1]].iter().copied();
+        // (owner, column) of what this rank's rows read elsewhere: the halo, in order.
+        let mut halo: Vec<(usize, usize)> = owned
+            .iter()
+            .flat_map(|&i| columns(i))
+            .filter(|&j| owner[j] != rank)
+            .map(|j| (owner[j], j))
+            .collect();
+        halo.sort_unstable();
+        halo.dedup();
+        // (reader, column) of this rank's unknowns other ranks' rows read.
+        let mut wanted: Vec<(usize, usize)> = (0..n)
+            .into_par_iter()
+            .filter(|&i| owner[i] != rank)
+            .flat_map_iter(|i| {
+                columns(i)
+                    .filter(|&j| owner[j] == rank)
+                    .map(move |j| (owner[i], j))
+            })
+            .collect();
+        wanted.sort_unstable();
+        wanted.dedup();
+        let own = owned.len();
+        let place = |j: usize| owned.binary_search(&j).unwrap_or(0);
+        let rows = LocalRows::new(a, owned.iter().copied(), |j| {
+            if owner[j] == rank {
+                (place(j), false)
+            } else {
+                (own + halo.binary_search(&(owner[j], j)).unwrap_or(0), true)
+            }
+        });
+        let sends = by_rank(&wanted)
+            .into_iter()
+            .map(|(r, js)| (r, js.into_iter().map(place).collect()))
+            .collect();
+        let receives = by_rank(&halo)
+            .into_iter()
+            .map(|(r, js)| (r, js.len()))
+            .collect();
+        Self {
+            own,
+            halo: halo.len(),
             rows,
-            interior,
-            border,
-            send_below,
-            send_above,
-        })
+            sends,
+            receives,
+            runs: runs_of(owned.iter().map(|&u| cells[u]), nx),
+        }
     }
 }
 
-/// The residual b − Aφ of owned row `i` (local), reading the local vector `x`.
-fn row_residual(rows: &CsMat<f64>, b: &[f64], x: &[f64], i: usize) -> f64 {
-    let ax: f64 = rows
-        .outer_view(i)
-        .map_or(0.0, |row| row.iter().map(|(j, v)| v * x[j]).sum());
-    b[i] - ax
-}
-
-/// Iterates `system` (the whole system, as every rank assembles it) from zero to the
-/// stopping rule on the ranks of `comm`, each doing its slab's rows; `slab_len` is the
-/// grid's n_x·n_y. Returns the whole φ on every rank (gathered at the end) and the
-/// residual history: the bits of `lucent_explicit::steady::iterate` on one rank.
-/// [`iterate_block`] is the same iteration from rows each rank builds for its own layers.
+/// [`iterate_on`] over z-slabs ([`Decomposition::Slabs`]).
+///
+/// # Errors
+/// As [`iterate_on`].
 pub fn iterate(
     system: &AssembledSystem,
-    slab_len: usize,
+    dims: [usize; 3],
+    iteration: Iteration,
+    settings: &SteadySettings,
+    comm: &(impl Communicator + ?Sized),
+) -> Result<Steady, DecompositionError> {
+    iterate_on(
+        system,
+        dims,
+        &Decomposition::Slabs,
+        iteration,
+        settings,
+        comm,
+    )
+}
+
+/// Iterates `system` (the whole system, as every rank assembles it, on a grid of `dims`
+/// cells) from zero to the stopping rule on the ranks of `comm`, each doing the rows of
+/// its part of `decomposition`. Returns the whole φ on every rank (gathered at the end)
+/// and the residual history: the bits of `lucent_explicit::steady::iterate` on one rank,
+/// whatever the decomposition. [`iterate_block`] is the same iteration from rows each
+/// rank builds for its own layers.
+///
+/// # Errors
+/// [`DecompositionError::Scheme`] for what the serial iteration refuses;
+/// [`DecompositionError::TooManyRanks`] for more slabs than layers with unknowns;
+/// [`DecompositionError::BoxGrid`] for boxes of another grid or rank count;
+/// [`DecompositionError::Matrix`] for a system whose sizes do not agree; a rank that left
+/// the protocol.
+pub fn iterate_on(
+    system: &AssembledSystem,
+    dims: [usize; 3],
+    decomposition: &Decomposition,
     iteration: Iteration,
     settings: &SteadySettings,
     comm: &(impl Communicator + ?Sized),
 ) -> Result<Steady, DecompositionError> {
     let a = &system.matrix;
     let n = system.rhs.len();
-    let layers = Layers::new(&system.cells, slab_len);
-    let slabs = Slabs::new(&layers, comm.size())?;
-    let ranges = layers.ranges();
-    let bounds: Vec<(usize, usize)> = slabs
-        .layers
-        .iter()
-        .map(|&(l0, l1)| (ranges[l0].1, ranges[l1 - 1].2))
-        .collect();
+    let size = comm.size();
+    if a.rows() != n || a.cols() != n || system.cells.len() != n || !a.is_csr() {
+        return Err(DecompositionError::Matrix(format!(
+            "a {}×{} matrix for {n} right-hand sides and {} cells",
+            a.rows(),
+            a.cols(),
+            system.cells.len()
+        )));
+    }
+    let owner: Vec<usize> = match decomposition {
+        Decomposition::Slabs => {
+            let layers = Layers::new(&system.cells, dims);
+            let slabs = Slabs::new(&layers, size)?;
+            let ranges = layers.ranges();
+            let mut owner = vec![0; n];
+            for (rank, &(l0, l1)) in slabs.layers.iter().enumerate() {
+                owner[ranges[l0].1..ranges[l1 - 1].2].fill(rank);
+            }
+            owner
+        }
+        Decomposition::Boxes(boxes) => {
+            if boxes.ranks() != size || boxes.dims() != dims {
+                return Err(DecompositionError::BoxGrid {
+                    grid: boxes.grid(),
+                    dims,
+                    ranks: size,
+                });
+            }
+            system.cells.iter().map(|&c| boxes.rank_of(c)).collect()
+        }
+    };
     let rank = comm.rank();
-    let part = Part::new(a, &bounds, rank)?;
-    let (l0, l1) = slabs.layers[rank];
-    let my_layers: Vec<(usize, usize)> = ranges[l0..l1]
-        .iter()
-        .map(|&(_, s, e)| (s - part.u0, e - part.u0))
-        .collect();
+    let part = Part::from_system(a, &system.cells, &owner, rank, dims[0].max(1));
     // The serial iteration's checks and per-row scale, then this rank's rows of it.
-    let scale = row_scale(system, iteration, settings.allow_unstable)?[part.u0..part.u1].to_vec();
-    let counts: Vec<usize> = slabs.layers.iter().map(|&(a, b)| b - a).collect();
-    let b = &system.rhs[part.u0..part.u1];
-    let (owned, residuals, stop_reason) =
-        sweep(&part, b, &scale, &my_layers, &counts, settings, comm)?;
-    // The serial rule, on the gathered whole: any non-finite φ zeroes all of it.
-    let mut fluence = comm.all_gather(&owned);
-    if fluence.len() != n {
+    let scale_all = row_scale(system, iteration, settings.allow_unstable)?;
+    let mine =
+        |v: &[f64]| -> Vec<f64> { (0..n).filter(|&u| owner[u] == rank).map(|u| v[u]).collect() };
+    let (scale, b) = (mine(&scale_all), mine(&system.rhs));
+    let (owned, residuals, stop_reason) = sweep(&part, &b, &scale, settings, comm)?;
+    // The ranks' φ in rank order, each rank's unknowns ascending: back to the global order.
+    let gathered = comm.all_gather(&owned);
+    if gathered.len() != n {
         return Err(DecompositionError::Protocol { rank });
     }
+    let mut next = vec![0usize; size];
+    for &o in &owner {
+        next[o] += 1;
+    }
+    let mut at = 0;
+    for count in &mut next {
+        let start = at;
+        at += *count;
+        *count = start;
+    }
+    let mut fluence: Vec<f64> = owner
+        .iter()
+        .map(|&o| {
+            next[o] += 1;
+            gathered[next[o] - 1]
+        })
+        .collect();
+    // The serial rule, on the gathered whole: any non-finite φ zeroes all of it.
     if fluence.iter().any(|v| !v.is_finite()) {
         fluence.fill(0.0);
     }
@@ -334,10 +570,10 @@ pub struct BlockSteady {
 /// [`iterate`] from the rows of a medium that fills the box, each rank holding only its
 /// own: `block` is this rank's layers' rows and right-hand side
 /// (`lucent_diffusion::SlabSystem::block`, built from its layers of the coefficients and
-/// D's layer on either side), `slab_len` the grid's n_x·n_y. The blocks of ranks 0, 1, …
-/// must be consecutive runs of layers from the first to the last. No rank holds more than
-/// its rows, four vectors of its layers and a halo layer each side; the ranks learn what
-/// to send each other from one exchange of the columns their rows read, and agree on the
+/// D's layer on either side), `dims` the grid's cells. The blocks of ranks 0, 1, … must
+/// be consecutive runs of layers from the first to the last. No rank holds more than its
+/// rows, four vectors of its layers and a halo layer each side; the ranks learn what to
+/// send each other from one exchange of the columns their rows read, and agree on the
 /// checks (the diagonal, the FTCS bound from the largest Gershgorin sum of all rows, a
 /// stencil that reaches no further than the neighbours, a missing layer) before the first
 /// sweep, so a bad block stops every rank with the same error. On return each rank holds
@@ -353,13 +589,14 @@ pub struct BlockSteady {
 /// rank that left the protocol.
 pub fn iterate_block(
     block: &lucent_diffusion::slab::Block,
-    slab_len: usize,
+    dims: [usize; 3],
     iteration: Iteration,
     settings: &SteadySettings,
     comm: &(impl Communicator + ?Sized),
 ) -> Result<BlockSteady, DecompositionError> {
     let rank = comm.rank();
-    let slab = slab_len.max(1);
+    let nx = dims[0].max(1);
+    let slab = (dims[0] * dims[1]).max(1);
     let a = &block.matrix;
     let own = a.rows();
     let u0 = block.layers.start * slab;
@@ -427,29 +664,40 @@ pub fn iterate_block(
     }
     let largest = flags.iter().map(|f| f[2]).fold(0.0, f64::max);
     let scale = scale_rows(&diagonal, largest, iteration, settings.allow_unstable)?;
-    let LocalRows {
-        matrix: rows,
-        interior,
-        border,
-    } = renumber(a, 0..own, u0..u1, &below, &above)?;
-    let part = Part {
-        u0,
-        u1,
-        below,
-        above,
-        rows,
-        interior,
-        border,
-        send_below: send_below.unwrap_or_default(),
-        send_above: send_above.unwrap_or_default(),
+    // x = [owned | halo below (rank − 1's) | halo above (rank + 1's)].
+    let (nb, na) = (below.len(), above.len());
+    let rows = LocalRows::new(a, 0..own, |j| {
+        if j < u0 {
+            (own + below.binary_search(&j).unwrap_or(0), true)
+        } else if j < u1 {
+            (j - u0, false)
+        } else {
+            (own + nb + above.binary_search(&j).unwrap_or(0), true)
+        }
+    });
+    let neighbours = |low: Vec<usize>, high: Vec<usize>| {
+        [(rank.wrapping_sub(1), low), (rank + 1, high)]
+            .into_iter()
+            .filter(|(_, v)| !v.is_empty())
+            .collect::<Vec<_>>()
     };
-    let my_layers: Vec<(usize, usize)> = (0..block.layers.len())
-        .map(|t| (t * slab, (t + 1) * slab))
+    let sends = neighbours(
+        send_below.unwrap_or_default(),
+        send_above.unwrap_or_default(),
+    );
+    let receives = [(rank.wrapping_sub(1), nb), (rank + 1, na)]
+        .into_iter()
+        .filter(|&(_, count)| count > 0)
         .collect();
-    let counts: Vec<usize> = flags.iter().map(|f| f[4] as usize).collect();
-    let (mut fluence, residuals, stop_reason) = sweep(
-        &part, &block.rhs, &scale, &my_layers, &counts, settings, comm,
-    )?;
+    let part = Part {
+        own,
+        halo: nb + na,
+        rows,
+        sends,
+        receives,
+        runs: runs_of(u0..u1, nx),
+    };
+    let (mut fluence, residuals, stop_reason) = sweep(&part, &block.rhs, &scale, settings, comm)?;
     // The serial rule: any non-finite φ anywhere zeroes all of it.
     let finite = f64::from(u8::from(fluence.iter().all(|v| v.is_finite())));
     let all = comm.all_gather(&[finite]);
@@ -485,21 +733,18 @@ pub fn block_ftcs_limit(
 }
 
 /// The sweeps from zero: this rank's owned φ, the residual history and the stop reason.
-/// `b` and `scale` are the owned rows'; `my_layers` the owned unknowns' ranges per layer
-/// (local), `counts` every rank's number of layers.
+/// `b` and `scale` are the owned rows'.
 fn sweep(
     part: &Part,
     b: &[f64],
     scale: &[f64],
-    my_layers: &[(usize, usize)],
-    counts: &[usize],
     settings: &SteadySettings,
     comm: &(impl Communicator + ?Sized),
 ) -> Result<(Vec<f64>, Vec<f64>, StopReason), DecompositionError> {
     let rank = comm.rank();
-    let own = part.u1 - part.u0;
+    let own = part.own;
     // Deterministic stops from the shared residual; the clock and the cancel flag are
-    // each rank's own and travel with the layer sums.
+    // each rank's own and travel with the sums.
     let shared = Stopping {
         time_budget: None,
         cancel: None,
@@ -525,35 +770,31 @@ fn sweep(
             )),
         ]
     };
-    // Layer sums of squares of v (owned), gathered with flags: (norm, any time, any cancel).
+    // Σ v² (owned) over this rank's runs, gathered with the flags: (norm, any time, any
+    // cancel). The merged accumulators are the exact sum of all runs, in any order.
+    let words = 2 + ExactSum::WORDS;
     let gather = |v: &[f64]| -> Result<(f64, bool, bool), DecompositionError> {
         let mut local = local_flags().to_vec();
-        local.extend(
-            my_layers
-                .par_iter()
-                .map(|&(s, e)| v[s..e].iter().map(|x| x * x).sum::<f64>())
-                .collect::<Vec<f64>>(),
-        );
+        local.extend(squares(v, &part.runs).to_words());
         let all = comm.all_gather(&local);
-        if all.len() != counts.iter().map(|c| c + 2).sum::<usize>() {
+        if all.len() != words * comm.size() {
             return Err(DecompositionError::Protocol { rank });
         }
-        let (mut sum, mut time, mut cancel, mut at) = (0.0f64, false, false, 0);
-        for &c in counts {
-            time |= all[at] != 0.0;
-            cancel |= all[at + 1] != 0.0;
-            for s in &all[at + 2..at + 2 + c] {
-                sum += s;
-            }
-            at += 2 + c;
+        let (mut sum, mut time, mut cancel) = (ExactSum::new(), false, false);
+        for each in all.chunks(words) {
+            time |= each[0] != 0.0;
+            cancel |= each[1] != 0.0;
+            let part_sum =
+                ExactSum::from_words(&each[2..]).ok_or(DecompositionError::Protocol { rank })?;
+            sum.merge(&part_sum);
         }
-        Ok((sum.sqrt(), time, cancel))
+        Ok((sum.value().sqrt(), time, cancel))
     };
     let (b_norm, mut time_up, mut cancelled) = gather(b)?;
     let b_norm = b_norm.max(f64::MIN_POSITIVE);
-    let (nb, na) = (part.below.len(), part.above.len());
-    let mut x = vec![0.0f64; nb + own + na];
+    let mut x = vec![0.0f64; own + part.halo];
     let mut r = b.to_vec();
+    let from: Vec<usize> = part.receives.iter().map(|&(q, _)| q).collect();
     let mut relative = 1.0;
     let stop_reason = loop {
         if let Some(reason) = history.record(&shared, relative, relative * b_norm) {
@@ -565,36 +806,45 @@ fn sweep(
         if cancelled {
             break StopReason::Interrupted { residual: relative };
         }
-        x[nb..nb + own]
+        x[..own]
             .par_iter_mut()
             .zip(r.par_iter())
             .zip(scale.par_iter())
             .for_each(|((p, r), s)| *p += s * r);
-        let owned = &x[nb..nb + own];
-        let to_below: Vec<f64> = part.send_below.iter().map(|&i| owned[i]).collect();
-        let to_above: Vec<f64> = part.send_above.iter().map(|&i| owned[i]).collect();
+        let outgoing: Vec<(usize, Vec<f64>)> = part
+            .sends
+            .iter()
+            .map(|(q, at)| (*q, at.iter().map(|&i| x[i]).collect()))
+            .collect();
+        let sends: Vec<(usize, &[f64])> =
+            outgoing.iter().map(|(q, v)| (*q, v.as_slice())).collect();
         let xs = &x;
-        let (from_below, from_above, interior) = exchange(comm, &to_below, &to_above, || {
-            part.interior
+        let (received, interior) = exchange_among(comm, &sends, &from, || {
+            part.rows
+                .interior
                 .par_iter()
-                .map(|&i| row_residual(&part.rows, b, xs, i))
+                .map(|&i| part.rows.residual(b, xs, i))
                 .collect::<Vec<f64>>()
         });
-        if from_below.len() != nb || from_above.len() != na {
-            return Err(DecompositionError::Protocol { rank });
+        let mut at = own;
+        for (values, &(_, count)) in received.iter().zip(&part.receives) {
+            if values.len() != count {
+                return Err(DecompositionError::Protocol { rank });
+            }
+            x[at..at + count].copy_from_slice(values);
+            at += count;
         }
-        x[..nb].copy_from_slice(&from_below);
-        x[nb + own..].copy_from_slice(&from_above);
-        for (&i, v) in part.interior.iter().zip(interior) {
+        for (&i, v) in part.rows.interior.iter().zip(interior) {
             r[i] = v;
         }
         let xs = &x;
         let border: Vec<f64> = part
+            .rows
             .border
             .par_iter()
-            .map(|&i| row_residual(&part.rows, b, xs, i))
+            .map(|&i| part.rows.residual(b, xs, i))
             .collect();
-        for (&i, v) in part.border.iter().zip(border) {
+        for (&i, v) in part.rows.border.iter().zip(border) {
             r[i] = v;
         }
         let (norm, t, c) = gather(&r)?;
@@ -602,24 +852,25 @@ fn sweep(
         time_up = t;
         cancelled = c;
     };
-    Ok((
-        x[nb..nb + own].to_vec(),
-        history.into_residuals(),
-        stop_reason,
-    ))
+    x.truncate(own);
+    Ok((x, history.into_residuals(), stop_reason))
 }
 
-/// [`iterate`] on `ranks` in-process ranks (threads joined by channels, sharing `system`):
-/// rank 0's result, which every rank holds.
+/// [`iterate_on`] on `ranks` in-process ranks (threads joined by channels, sharing
+/// `system`): rank 0's result, which every rank holds.
+///
+/// # Errors
+/// As [`iterate_on`].
 pub fn iterate_on_threads(
     system: &AssembledSystem,
-    slab_len: usize,
+    dims: [usize; 3],
+    decomposition: &Decomposition,
     iteration: Iteration,
     settings: &SteadySettings,
     ranks: usize,
 ) -> Result<Steady, DecompositionError> {
     on_threads(ranks, |comm| {
-        iterate(system, slab_len, iteration, settings, comm)
+        iterate_on(system, dims, decomposition, iteration, settings, comm)
     })
 }
 

@@ -46,8 +46,10 @@ use crate::convection::{
 use crate::error::ExplicitError;
 use crate::lattice::Lattice;
 use crate::params::{
-    ConvectionParams, FtcsDiffusionParams, JacobiDiffusionParams, OrdinatesParams, P1Params,
+    ConvectionParams, DecompositionParam, FtcsDiffusionParams, JacobiDiffusionParams,
+    OrdinatesParams, P1Params,
 };
+use crate::ranks::{Boxes, Decomposition, iterate_on, iterate_on_threads};
 use crate::steady::{Iteration, SteadySettings, ftcs_limit, iterate};
 
 fn invalid(name: &str, reason: impl Into<String>) -> SolveError {
@@ -88,6 +90,8 @@ enum Scheme {
         allow_unstable: bool,
         /// In-process ranks.
         ranks: usize,
+        /// How ranks split the grid.
+        decomposition: DecompositionParam,
     },
     Convection {
         settings: UpwindSettings,
@@ -130,6 +134,7 @@ impl ExplicitSolver {
                     },
                     allow_unstable: p.allow_unstable,
                     ranks: p.ranks,
+                    decomposition: p.decomposition,
                 },
             }))
         },
@@ -149,6 +154,7 @@ impl ExplicitSolver {
                     iteration: SteadyKind::Jacobi { omega: p.omega },
                     allow_unstable: false,
                     ranks: p.ranks,
+                    decomposition: p.decomposition,
                 },
             }))
         },
@@ -283,6 +289,7 @@ impl Solver for ExplicitSolver {
             iteration,
             allow_unstable,
             ranks,
+            ..
         } = &self.scheme
         {
             options.validate()?;
@@ -347,7 +354,7 @@ impl Solver for ExplicitSolver {
     fn capabilities(&self) -> Capabilities {
         let diffusion = DiffusionSolver::custom(self.name).capabilities();
         match &self.scheme {
-            // `ranks::iterate` splits the iteration over z-slabs.
+            // `ranks::iterate_on` splits the iteration over z-slabs or boxes.
             Scheme::Steady { .. } => Capabilities {
                 ranks: true,
                 ..diffusion
@@ -399,6 +406,7 @@ impl Solver for ExplicitSolver {
                 iteration,
                 allow_unstable,
                 ranks,
+                decomposition,
             } => {
                 if let SteadyKind::Ftcs { fraction } = iteration {
                     self.check_fraction(*fraction, *allow_unstable)?;
@@ -406,12 +414,19 @@ impl Solver for ExplicitSolver {
                 let world = options.ranks.as_ref().filter(|r| r.size() > 1);
                 let on = ranks_of(world, *ranks)?;
                 let volume = problem.geometry().cell_volume();
-                let (iteration, allow_unstable) = (*iteration, *allow_unstable);
+                let (iteration, allow_unstable, decomposition) =
+                    (*iteration, *allow_unstable, *decomposition);
                 let memory = self.memory_bytes(problem);
                 // `steady` splits over the world itself.
                 let diffusion = DiffusionSolver::custom(self.name).splitting();
                 diffusion.solve_with(problem, options, memory, &|d, s, stop| {
-                    steady(d, s, stop, iteration, allow_unstable, volume, on)
+                    let how = Steadily {
+                        iteration,
+                        allow_unstable,
+                        decomposition,
+                        volume,
+                    };
+                    steady(d, s, stop, how, on)
                 })
             }
             Scheme::Convection {
@@ -452,16 +467,30 @@ fn ranks_of(world: Option<&lucent_core::Ranks>, ranks: usize) -> Result<RanksOf<
     })
 }
 
+/// What [`steady`] runs: the iteration, its step check, how ranks split the grid, and the
+/// cell volume.
+#[derive(Clone, Copy)]
+struct Steadily {
+    iteration: SteadyKind,
+    allow_unstable: bool,
+    decomposition: DecompositionParam,
+    volume: f64,
+}
+
 /// FTCS or Jacobi to steady state on one channel's assembled diffusion system.
 fn steady(
     d: &lucent_diffusion::DiffusionProblem,
     s: &lucent_diffusion::Sources,
     stop: &lucent_core::Stopping,
-    iteration: SteadyKind,
-    allow_unstable: bool,
-    volume: f64,
+    how: Steadily,
     on: RanksOf<'_>,
 ) -> Result<DiffusionSolution, lucent_diffusion::DiffusionError> {
+    let Steadily {
+        iteration,
+        allow_unstable,
+        decomposition,
+        volume,
+    } = how;
     let t0 = Instant::now();
     let system = d.assemble(s)?;
     let kind = match iteration {
@@ -476,16 +505,29 @@ fn steady(
         stopping: stop.clone(),
         allow_unstable,
     };
-    let [nx, ny, _] = d.cells().geometry().dims();
-    let slab = nx * ny;
+    let dims = d.cells().geometry().dims();
+    let ranks_error = |e: crate::ranks::DecompositionError| {
+        lucent_diffusion::DiffusionError::Ranks(e.to_string())
+    };
+    let split = |ranks: usize| -> Result<Decomposition, lucent_diffusion::DiffusionError> {
+        Ok(match decomposition {
+            DecompositionParam::Slabs => Decomposition::Slabs,
+            DecompositionParam::Boxes => {
+                Decomposition::Boxes(Boxes::auto(dims, ranks).map_err(ranks_error)?)
+            }
+        })
+    };
     let out = match on {
-        RanksOf::Alone => iterate(&system, slab, kind, &settings)
+        RanksOf::Alone => iterate(&system, dims, kind, &settings)
             .map_err(|e| lucent_diffusion::DiffusionError::Invalid(e.to_string()))?,
-        RanksOf::Communicator(comm) => crate::ranks::iterate(&system, slab, kind, &settings, comm)
-            .map_err(|e| lucent_diffusion::DiffusionError::Ranks(e.to_string()))?,
+        RanksOf::Communicator(comm) => {
+            let decomposition = split(comm.size())?;
+            iterate_on(&system, dims, &decomposition, kind, &settings, comm).map_err(ranks_error)?
+        }
         RanksOf::Threads(count) => {
-            crate::ranks::iterate_on_threads(&system, slab, kind, &settings, count)
-                .map_err(|e| lucent_diffusion::DiffusionError::Ranks(e.to_string()))?
+            let decomposition = split(count)?;
+            iterate_on_threads(&system, dims, &decomposition, kind, &settings, count)
+                .map_err(ranks_error)?
         }
     };
     let mut fluence = vec![0.0; d.cells().geometry().voxel_count()];

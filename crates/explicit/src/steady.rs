@@ -12,6 +12,7 @@
 //! Both converge at rate 1 − O(h²): explicit schemes pay for steady states with
 //! thousands of sweeps, which is what the pareto charts show against multigrid.
 
+use lucent_core::exact::ExactSum;
 use lucent_core::{History, StopReason, Stopping};
 use lucent_diffusion::AssembledSystem;
 use rayon::prelude::*;
@@ -69,11 +70,12 @@ pub fn gershgorin(rows: &sprs::CsMat<f64>) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Iterates from zero to the stopping rule. `slab_len` is the grid's n_x·n_y: norms are
-/// summed by z-layers ([`Layers`]), the order a z-slab decomposition over ranks keeps.
+/// Iterates from zero to the stopping rule on a grid of `dims` cells. Norms are summed by
+/// runs of [`NORM_RUN`] cells along x ([`Layers`]), the same bits however the grid is
+/// split over ranks (`crate::ranks`).
 pub fn iterate(
     system: &AssembledSystem,
-    slab_len: usize,
+    dims: [usize; 3],
     iteration: Iteration,
     settings: &SteadySettings,
 ) -> Result<Steady, ExplicitError> {
@@ -81,7 +83,7 @@ pub fn iterate(
     let b = &system.rhs;
     let n = b.len();
     let scale = row_scale(system, iteration, settings.allow_unstable)?;
-    let layers = Layers::new(&system.cells, slab_len);
+    let layers = Layers::new(&system.cells, dims);
     let b_norm = layers.norm(b).max(f64::MIN_POSITIVE);
     let mut phi = vec![0.0f64; n];
     let mut r = b.clone();
@@ -112,30 +114,47 @@ pub fn iterate(
     }
 }
 
-/// The unknowns of an assembled system grouped by the z-layer of their cell, for norms
-/// summed in an order that does not depend on how the layers are split: Σ over each layer
-/// left to right (the unknowns' order), then the layer sums left to right in z. A z-slab
-/// decomposition over ranks (`lucent-mpi`) sums its own layers, gathers the layer sums and
-/// adds them in the same order, so one rank and many give the same bits.
+/// Cells along x in one run of a norm: ‖v‖² is Σ over runs of (Σ v² over the run, left
+/// to right), the run sums added exactly ([`ExactSum`]). A run is the unknowns of one
+/// x-line's cells [8k, 8k + 8) (the last one of a line shorter). A decomposition whose
+/// boxes start in x at multiples of this (z-slabs, y-slabs and boxes cut so) sums whole
+/// runs on each rank, and one rank and many give the same bits — the blocking factor of
+/// AMReX, for reproducibility instead of coarsening.
+pub const NORM_RUN: usize = 8;
+
+/// The unknowns of an assembled system by z-layer, and the runs of [`NORM_RUN`] cells
+/// their norms sum (see there): the norm does not depend on how the grid is split over
+/// ranks or threads.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Layers {
     /// Unknown ranges [start, end) per non-empty layer, in z order, with the layer's z.
     ranges: Vec<(usize, usize, usize)>,
+    /// Unknown ranges [start, end) of the norm's runs, ascending.
+    runs: Vec<(usize, usize)>,
 }
 
 impl Layers {
-    /// The layers of `cells` (each unknown's flat cell, ascending) on a grid of
-    /// `slab_len` = n_x·n_y cells per z-layer.
-    pub fn new(cells: &[usize], slab_len: usize) -> Self {
+    /// The layers and runs of `cells` (each unknown's flat cell, ascending) on a grid of
+    /// `dims` cells.
+    pub fn new(cells: &[usize], dims: [usize; 3]) -> Self {
+        let (nx, slab_len) = (dims[0].max(1), (dims[0] * dims[1]).max(1));
         let mut ranges: Vec<(usize, usize, usize)> = Vec::new();
+        let mut runs: Vec<(usize, usize)> = Vec::new();
+        let mut last_run = None;
         for (u, &c) in cells.iter().enumerate() {
-            let z = c / slab_len.max(1);
+            let z = c / slab_len;
             match ranges.last_mut() {
                 Some((layer, _, end)) if *layer == z => *end = u + 1,
                 _ => ranges.push((z, u, u + 1)),
             }
+            let run = norm_run(c, nx);
+            match runs.last_mut() {
+                Some((_, end)) if last_run == Some(run) => *end = u + 1,
+                _ => runs.push((u, u + 1)),
+            }
+            last_run = Some(run);
         }
-        Self { ranges }
+        Self { ranges, runs }
     }
 
     /// (z, start, end) of every non-empty layer, in z order.
@@ -143,17 +162,45 @@ impl Layers {
         &self.ranges
     }
 
-    /// Σ v² per layer, each left to right (in parallel across layers).
-    pub fn squares(&self, v: &[f64]) -> Vec<f64> {
-        self.ranges
-            .par_iter()
-            .map(|&(_, start, end)| v[start..end].iter().map(|x| x * x).sum::<f64>())
-            .collect()
+    /// The norm's runs of unknowns, [start, end), ascending.
+    pub fn runs(&self) -> &[(usize, usize)] {
+        &self.runs
     }
 
-    /// ‖v‖₂ by [`Layers::squares`], the layer sums added in z order.
+    /// ‖v‖₂: Σ v² by [`squares`] over the runs.
     pub fn norm(&self, v: &[f64]) -> f64 {
-        self.squares(v).iter().sum::<f64>().sqrt()
+        squares(v, &self.runs).value().sqrt()
+    }
+}
+
+/// Which norm run cell `c` of a grid `nx` cells wide belongs to: (its x-line, x / 8).
+pub fn norm_run(c: usize, nx: usize) -> (usize, usize) {
+    (c / nx, (c % nx) / NORM_RUN)
+}
+
+/// Σ v² over `runs` of `v`, each run left to right, the run sums added exactly (in
+/// parallel, any order: the same bits).
+pub fn squares(v: &[f64], runs: &[(usize, usize)]) -> ExactSum {
+    runs.par_chunks(1024)
+        .map(|runs| {
+            runs.iter()
+                .map(|&(s, e)| v[s..e].iter().map(|x| x * x).sum::<f64>())
+                .collect::<ExactSum>()
+        })
+        .reduce(ExactSum::new, |mut a, b| {
+            a.merge(&b);
+            a
+        })
+}
+
+/// [`squares`] of whole layers of a box filled with unknowns, `nx` cells wide: its x-lines
+/// cut into runs of [`NORM_RUN`], added to `sum` (the paged iteration's norm).
+pub fn add_layer_squares(v: &[f64], nx: usize, sum: &mut ExactSum) {
+    for line in v.chunks(nx.max(1)) {
+        sum.extend(
+            line.chunks(NORM_RUN)
+                .map(|run| run.iter().map(|x| x * x).sum::<f64>()),
+        );
     }
 }
 

@@ -107,12 +107,12 @@ fn assembled(m: &Medium) -> lucent_diffusion::AssembledSystem {
 fn on_ranks(
     ranks: usize,
     blocks: impl Fn(usize) -> Block + Sync,
-    slab: usize,
+    dims: [usize; 3],
     iteration: Iteration,
     settings: &SteadySettings,
 ) -> Vec<Result<BlockSteady, DecompositionError>> {
     Threads::run(ranks, |comm| {
-        iterate_block(&blocks(comm.rank()), slab, iteration, settings, comm)
+        iterate_block(&blocks(comm.rank()), dims, iteration, settings, comm)
     })
     .into_iter()
     .map(Option::unwrap)
@@ -154,7 +154,6 @@ fn blocks_on_any_rank_count_give_the_serial_bits_of_the_assembled_whole() {
     for (case, (dims, faces)) in cases.into_iter().enumerate() {
         let m = medium(dims, faces, case);
         let system = assembled(&m);
-        let slab = dims[0] * dims[1];
         let volume = m.geometry.cell_volume();
         for iteration in [
             Iteration::Ftcs {
@@ -164,13 +163,13 @@ fn blocks_on_any_rank_count_give_the_serial_bits_of_the_assembled_whole() {
             Iteration::Jacobi { omega: 0.9 },
         ] {
             let settings = settings(1e-6, 20_000);
-            let reference = serial(&system, slab, iteration, &settings).unwrap();
+            let reference = serial(&system, dims, iteration, &settings).unwrap();
             assert!(
                 reference.stop_reason.is_converged(),
                 "{dims:?} {iteration:?}"
             );
             for ranks in 1..=5 {
-                let outs = on_ranks(ranks, |r| block(&m, r, ranks), slab, iteration, &settings);
+                let outs = on_ranks(ranks, |r| block(&m, r, ranks), dims, iteration, &settings);
                 let mut fluence = Vec::new();
                 for (rank, out) in outs.into_iter().enumerate() {
                     let out = out.unwrap();
@@ -192,7 +191,7 @@ fn blocks_on_any_rank_count_give_the_serial_bits_of_the_assembled_whole() {
 #[test]
 fn blocks_that_do_not_join_up_stop_every_rank_with_the_same_error() {
     let m = medium([6, 5, 8], [Condition::Robin { a: 2.0 }; 6], 0);
-    let slab = 30;
+    let dims = [6, 5, 8];
     let jacobi = Iteration::Jacobi { omega: 1.0 };
     // Rank 1 builds layers 5..8 instead of 4..8: layer 4 belongs to no one.
     let outs = on_ranks(
@@ -204,7 +203,7 @@ fn blocks_that_do_not_join_up_stop_every_rank_with_the_same_error() {
                 shifted(&m, 5..8)
             }
         },
-        slab,
+        dims,
         jacobi,
         &settings(1e-6, 100),
     );
@@ -212,7 +211,7 @@ fn blocks_that_do_not_join_up_stop_every_rank_with_the_same_error() {
         assert_eq!(out.unwrap_err(), DecompositionError::Blocks { rank: 1 });
     }
     // Both ranks build the first half: the grid's upper half is missing.
-    let outs = on_ranks(2, |_| block(&m, 0, 2), slab, jacobi, &settings(1e-6, 100));
+    let outs = on_ranks(2, |_| block(&m, 0, 2), dims, jacobi, &settings(1e-6, 100));
     for out in outs {
         assert!(matches!(
             out.unwrap_err(),
@@ -260,7 +259,13 @@ fn an_ftcs_step_beyond_the_whole_systems_bound_is_refused_on_every_rank() {
         time_step: 0.99 * own_bound,
         cell_volume: volume,
     };
-    let outs = on_ranks(2, |r| block(&m, r, 2), slab, ftcs, &settings(1e-6, 100));
+    let outs = on_ranks(
+        2,
+        |r| block(&m, r, 2),
+        m.geometry.dims(),
+        ftcs,
+        &settings(1e-6, 100),
+    );
     for out in outs {
         let e = out.unwrap_err();
         assert!(
@@ -277,7 +282,7 @@ fn an_ftcs_step_beyond_the_whole_systems_bound_is_refused_on_every_rank() {
         allow_unstable: true,
         ..settings(1e-6, 400)
     };
-    let reference = serial(&assembled(&m), slab, ftcs, &unstable).unwrap();
+    let reference = serial(&assembled(&m), m.geometry.dims(), ftcs, &unstable).unwrap();
     assert!(
         matches!(
             reference.stop_reason,
@@ -287,7 +292,7 @@ fn an_ftcs_step_beyond_the_whole_systems_bound_is_refused_on_every_rank() {
         reference.stop_reason
     );
     let mut fluence = Vec::new();
-    for out in on_ranks(2, |r| block(&m, r, 2), slab, ftcs, &unstable) {
+    for out in on_ranks(2, |r| block(&m, r, 2), m.geometry.dims(), ftcs, &unstable) {
         let out = out.unwrap();
         assert_eq!(out.stop_reason, reference.stop_reason);
         fluence.extend(out.fluence);

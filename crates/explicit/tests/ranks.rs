@@ -1,7 +1,8 @@
-//! The decomposed explicit schemes give the serial bits on 1 to 5 in-process ranks. The
-//! steady iterations: fluence, residual history and stop reason, for FTCS and Jacobi, on a
-//! heterogeneous problem with an embedded sphere on a grid whose sides are not multiples
-//! of 8; P1 below.
+//! The decomposed explicit schemes give the serial bits on 1 to 12 in-process ranks. The
+//! steady iterations: fluence, residual history and stop reason, for FTCS and Jacobi, on
+//! heterogeneous problems with an embedded sphere on grids whose sides are not multiples
+//! of 8, over z-slabs and over grids of boxes (cut in x, y and z, some boxes holding no
+//! unknowns); P1 below.
 
 use glam::DVec3;
 use lucent_core::ranks::Threads;
@@ -9,20 +10,25 @@ use lucent_core::{StopReason, Stopping};
 use lucent_diffusion::{
     AssembledSystem, Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Sources,
 };
-use lucent_explicit::ranks::{DecompositionError, iterate as decomposed};
+use lucent_explicit::ranks::{Boxes, Decomposition, DecompositionError, iterate_on};
 use lucent_explicit::steady::{Iteration, Steady, SteadySettings, ftcs_limit, iterate as serial};
 use lucent_grid::GridGeometry;
 
-fn system(dims: [usize; 3]) -> (AssembledSystem, usize, f64) {
+/// Diffusion in a sphere of `radius` (the box is 6 × 5 × 7) with a point source off the
+/// centre: D varies cell to cell, Robin on the sphere.
+fn system(dims: [usize; 3], radius: f64) -> (AssembledSystem, f64) {
     let grid = GridGeometry::from_bounds(
         dims,
         DVec3::new(-3.0, -2.5, -3.5),
         DVec3::new(3.0, 2.5, 3.5),
     )
     .unwrap();
-    let cells =
-        CellGeometry::from_sdf(grid, |p| p.length() - 2.4, Discretisation::EmbeddedBoundary)
-            .unwrap();
+    let cells = CellGeometry::from_sdf(
+        grid,
+        |p| p.length() - radius,
+        Discretisation::EmbeddedBoundary,
+    )
+    .unwrap();
     let n = grid.voxel_count();
     let d: Vec<f32> = (0..n).map(|c| 0.1 + 0.1 * ((c * 7) % 5) as f32).collect();
     let problem = DiffusionProblem::new(
@@ -36,81 +42,204 @@ fn system(dims: [usize; 3]) -> (AssembledSystem, usize, f64) {
         points: vec![(DVec3::new(0.2, -0.1, 0.3), 1.0)],
         ..Sources::default()
     };
-    (
-        problem.assemble(&sources).unwrap(),
-        dims[0] * dims[1],
-        grid.cell_volume(),
-    )
+    (problem.assemble(&sources).unwrap(), grid.cell_volume())
 }
 
 fn on_ranks(
     ranks: usize,
     system: &AssembledSystem,
-    slab: usize,
+    dims: [usize; 3],
+    decomposition: &Decomposition,
     iteration: Iteration,
     settings: &SteadySettings,
 ) -> Vec<Result<Steady, DecompositionError>> {
-    std::thread::scope(|scope| {
-        let handles: Vec<_> = Threads::world(ranks)
-            .into_iter()
-            .map(|comm| scope.spawn(move || decomposed(system, slab, iteration, settings, &comm)))
-            .collect();
-        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    Threads::run(ranks, |comm| {
+        iterate_on(system, dims, decomposition, iteration, settings, comm)
     })
+    .into_iter()
+    .map(Option::unwrap)
+    .collect()
 }
 
 fn bits(v: &[f64]) -> Vec<u64> {
     v.iter().map(|x| x.to_bits()).collect()
 }
 
-#[test]
-fn every_rank_count_gives_the_serial_bits() {
-    let (system, slab, volume) = system([13, 11, 19]);
-    let settings = SteadySettings {
+fn converging() -> SteadySettings {
+    SteadySettings {
         stopping: Stopping {
             relative_tolerance: 1e-7,
             max_iterations: 50_000,
             ..Stopping::default()
         },
         allow_unstable: false,
-    };
+    }
+}
+
+/// Every rank's result is the serial fluence, history and stop reason, to the bit.
+fn assert_serial_bits(
+    system: &AssembledSystem,
+    volume: f64,
+    dims: [usize; 3],
+    decompositions: &[(usize, Decomposition)],
+) {
+    let settings = converging();
     for iteration in [
         Iteration::Ftcs {
-            time_step: 0.9 * ftcs_limit(&system, volume),
+            time_step: 0.9 * ftcs_limit(system, volume),
             cell_volume: volume,
         },
         Iteration::Jacobi { omega: 0.8 },
     ] {
-        let reference = serial(&system, slab, iteration, &settings).unwrap();
+        let reference = serial(system, dims, iteration, &settings).unwrap();
         assert!(reference.stop_reason.is_converged(), "{iteration:?}");
-        for ranks in 1..=5 {
-            for (rank, out) in on_ranks(ranks, &system, slab, iteration, &settings)
+        for (ranks, decomposition) in decompositions {
+            for (rank, out) in on_ranks(*ranks, system, dims, decomposition, iteration, &settings)
                 .into_iter()
                 .enumerate()
             {
+                let case = format!("{iteration:?}, {decomposition:?}, rank {rank} of {ranks}");
                 let out = out.unwrap();
-                assert_eq!(
-                    out.stop_reason, reference.stop_reason,
-                    "{iteration:?}, {ranks} ranks, rank {rank}"
-                );
-                assert_eq!(
-                    bits(&out.residuals),
-                    bits(&reference.residuals),
-                    "{iteration:?}, {ranks} ranks"
-                );
-                assert_eq!(
-                    bits(&out.fluence),
-                    bits(&reference.fluence),
-                    "{iteration:?}, {ranks} ranks"
-                );
+                assert_eq!(out.stop_reason, reference.stop_reason, "{case}");
+                assert_eq!(bits(&out.residuals), bits(&reference.residuals), "{case}");
+                assert_eq!(bits(&out.fluence), bits(&reference.fluence), "{case}");
             }
         }
     }
 }
 
 #[test]
+fn every_slab_count_gives_the_serial_bits() {
+    let dims = [13, 11, 19];
+    let (system, volume) = system(dims, 2.4);
+    let slabs: Vec<_> = (1..=5).map(|p| (p, Decomposition::Slabs)).collect();
+    assert_serial_bits(&system, volume, dims, &slabs);
+}
+
+#[test]
+fn every_grid_of_boxes_gives_the_serial_bits() {
+    // 21 cells in x: three runs of 8 (the last of 5), so up to three boxes along x.
+    let dims = [21, 11, 19];
+    let (system, volume) = system(dims, 2.4);
+    let grids = [
+        [1, 1, 1],
+        [2, 1, 1],
+        [3, 1, 1],
+        [1, 2, 1],
+        [1, 1, 2],
+        [2, 2, 1],
+        [3, 1, 3],
+        [2, 3, 2],
+    ];
+    let boxes: Vec<_> = grids
+        .iter()
+        .map(|&g| {
+            let boxes = Boxes::new(dims, g).unwrap();
+            (boxes.ranks(), Decomposition::Boxes(boxes))
+        })
+        .collect();
+    assert_serial_bits(&system, volume, dims, &boxes);
+}
+
+#[test]
+fn boxes_with_no_unknowns_wait_and_keep_the_bits() {
+    // A small sphere: the eight corner boxes of 3 × 3 × 3 lie wholly outside it.
+    let dims = [24, 10, 13];
+    let (system, volume) = system(dims, 1.4);
+    let boxes = Boxes::new(dims, [3, 3, 3]).unwrap();
+    let empty = (0..boxes.ranks())
+        .filter(|&r| !system.cells.iter().any(|&c| boxes.rank_of(c) == r))
+        .count();
+    assert!(empty >= 8, "{empty} empty boxes");
+    assert_serial_bits(&system, volume, dims, &[(27, Decomposition::Boxes(boxes))]);
+}
+
+#[test]
+fn the_automatic_grid_cuts_least_and_covers_every_cell() {
+    // Least cut area; ties to more cuts in z, then y.
+    for (dims, ranks, grid) in [
+        ([64, 64, 64], 8, [2, 2, 2]),
+        // docs/ranks.md's model.
+        ([1024, 1024, 1024], 1024, [8, 8, 16]),
+        ([1024, 1024, 1024], 64, [4, 4, 4]),
+        ([64, 64, 64], 2, [1, 1, 2]),
+        ([64, 64, 64], 4, [1, 2, 2]),
+        ([64, 64, 8], 4, [2, 2, 1]),
+        ([256, 16, 16], 4, [4, 1, 1]),
+        ([13, 11, 19], 6, [2, 1, 3]),
+        ([7, 3, 2], 3, [1, 3, 1]),
+    ] {
+        assert_eq!(
+            Boxes::auto(dims, ranks).unwrap().grid(),
+            grid,
+            "{dims:?} on {ranks}"
+        );
+    }
+    // Nothing fits: five ranks on a grid with one run in x, one cell in y and 4 in z.
+    assert_eq!(
+        Boxes::auto([8, 1, 4], 5),
+        Err(DecompositionError::BoxGrid {
+            grid: [1, 1, 1],
+            dims: [8, 1, 4],
+            ranks: 5
+        })
+    );
+    assert!(Boxes::new([17, 4, 4], [4, 1, 1]).is_err());
+    assert!(Boxes::new([17, 4, 4], [3, 1, 0]).is_err());
+    // Every cell in exactly the box whose bounds hold it; x cuts at multiples of 8.
+    for (dims, grid) in [
+        ([17, 5, 6], [3, 2, 4]),
+        ([40, 3, 7], [5, 3, 7]),
+        ([9, 9, 9], [1, 1, 1]),
+    ] {
+        let boxes = Boxes::new(dims, grid).unwrap();
+        let mut count = vec![0usize; boxes.ranks()];
+        for c in 0..dims.iter().product() {
+            let r = boxes.rank_of(c);
+            let at = [
+                c % dims[0],
+                (c / dims[0]) % dims[1],
+                c / (dims[0] * dims[1]),
+            ];
+            let bounds = boxes.bounds(r);
+            assert!(
+                (0..3).all(|a| bounds[a].contains(&at[a])),
+                "{dims:?} cell {c}"
+            );
+            count[r] += 1;
+        }
+        for r in 0..boxes.ranks() {
+            let b = boxes.bounds(r);
+            assert_eq!(count[r], b.iter().map(|r| r.len()).product::<usize>());
+            assert!(count[r] > 0);
+            assert!(b[0].start.is_multiple_of(8), "{dims:?} {grid:?} rank {r}");
+        }
+    }
+}
+
+#[test]
+fn boxes_for_another_rank_count_or_grid_are_refused_on_every_rank() {
+    let dims = [13, 11, 19];
+    let (system, _) = system(dims, 2.4);
+    let settings = converging();
+    let jacobi = Iteration::Jacobi { omega: 1.0 };
+    let four = Decomposition::Boxes(Boxes::new(dims, [1, 2, 2]).unwrap());
+    for out in on_ranks(3, &system, dims, &four, jacobi, &settings) {
+        assert!(matches!(
+            out,
+            Err(DecompositionError::BoxGrid { ranks: 3, .. })
+        ));
+    }
+    let other = Decomposition::Boxes(Boxes::new([13, 11, 18], [1, 1, 2]).unwrap());
+    for out in on_ranks(2, &system, dims, &other, jacobi, &settings) {
+        assert!(matches!(out, Err(DecompositionError::BoxGrid { .. })));
+    }
+}
+
+#[test]
 fn a_time_limit_stops_every_rank_on_the_same_sweep() {
-    let (system, slab, _) = system([12, 12, 16]);
+    let dims = [12, 12, 16];
+    let (system, _) = system(dims, 2.4);
     let settings = SteadySettings {
         stopping: Stopping {
             relative_tolerance: 0.0,
@@ -120,26 +249,31 @@ fn a_time_limit_stops_every_rank_on_the_same_sweep() {
         },
         allow_unstable: false,
     };
-    let outs: Vec<Steady> = on_ranks(
-        3,
-        &system,
-        slab,
-        Iteration::Jacobi { omega: 1.0 },
-        &settings,
-    )
-    .into_iter()
-    .map(Result::unwrap)
-    .collect();
-    assert!(matches!(outs[0].stop_reason, StopReason::TimeLimit { .. }));
-    for out in &outs[1..] {
-        assert_eq!(out.residuals.len(), outs[0].residuals.len());
-        assert_eq!(bits(&out.fluence), bits(&outs[0].fluence));
+    let boxes = Decomposition::Boxes(Boxes::new(dims, [1, 2, 2]).unwrap());
+    for (ranks, decomposition) in [(3, Decomposition::Slabs), (4, boxes)] {
+        let outs: Vec<Steady> = on_ranks(
+            ranks,
+            &system,
+            dims,
+            &decomposition,
+            Iteration::Jacobi { omega: 1.0 },
+            &settings,
+        )
+        .into_iter()
+        .map(Result::unwrap)
+        .collect();
+        assert!(matches!(outs[0].stop_reason, StopReason::TimeLimit { .. }));
+        for out in &outs[1..] {
+            assert_eq!(out.residuals.len(), outs[0].residuals.len());
+            assert_eq!(bits(&out.fluence), bits(&outs[0].fluence));
+        }
     }
 }
 
 #[test]
 fn more_ranks_than_layers_is_an_error() {
-    let (system, slab, _) = system([6, 6, 4]);
+    let dims = [6, 6, 4];
+    let (system, _) = system(dims, 2.4);
     let settings = SteadySettings {
         stopping: Stopping::default(),
         allow_unstable: false,
@@ -147,7 +281,8 @@ fn more_ranks_than_layers_is_an_error() {
     for out in on_ranks(
         7,
         &system,
-        slab,
+        dims,
+        &Decomposition::Slabs,
         Iteration::Jacobi { omega: 1.0 },
         &settings,
     ) {
@@ -160,11 +295,13 @@ fn more_ranks_than_layers_is_an_error() {
 
 #[test]
 fn what_the_serial_iteration_refuses_every_rank_refuses() {
-    let (system, slab, volume) = system([9, 10, 11]);
+    let dims = [9, 10, 11];
+    let (system, volume) = system(dims, 2.4);
     let settings = SteadySettings {
         stopping: Stopping::default(),
         allow_unstable: false,
     };
+    let boxes = Decomposition::Boxes(Boxes::new(dims, [1, 2, 1]).unwrap());
     for iteration in [
         Iteration::Jacobi { omega: 1.5 },
         Iteration::Ftcs {
@@ -172,12 +309,14 @@ fn what_the_serial_iteration_refuses_every_rank_refuses() {
             cell_volume: volume,
         },
     ] {
-        let serial_error = serial(&system, slab, iteration, &settings).unwrap_err();
-        for out in on_ranks(2, &system, slab, iteration, &settings) {
-            assert_eq!(
-                out.unwrap_err(),
-                DecompositionError::Scheme(serial_error.clone())
-            );
+        let serial_error = serial(&system, dims, iteration, &settings).unwrap_err();
+        for decomposition in [&Decomposition::Slabs, &boxes] {
+            for out in on_ranks(2, &system, dims, decomposition, iteration, &settings) {
+                assert_eq!(
+                    out.unwrap_err(),
+                    DecompositionError::Scheme(serial_error.clone())
+                );
+            }
         }
     }
 }

@@ -61,8 +61,7 @@ fn ftcs_and_jacobi_reach_the_multigrid_solution() {
         },
         Iteration::Jacobi { omega: 1.0 },
     ] {
-        let slab = grid.dims()[0] * grid.dims()[1];
-        let out = iterate(&system, slab, iteration, &settings).unwrap();
+        let out = iterate(&system, grid.dims(), iteration, &settings).unwrap();
         assert!(
             out.stop_reason.is_converged(),
             "{iteration:?}: {:?}",
@@ -88,7 +87,7 @@ fn ftcs_and_jacobi_reach_the_multigrid_solution() {
         cell_volume: volume,
     };
     assert!(matches!(
-        iterate(&system, grid.dims()[0] * grid.dims()[1], too_big, &settings),
+        iterate(&system, grid.dims(), too_big, &settings),
         Err(ExplicitError::Unstable { .. })
     ));
 }

@@ -164,8 +164,8 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
         allow_unstable: false,
     };
     let started = std::time::Instant::now();
-    let steady =
-        iterate_block(&block, slab, iteration, &settings, comm).map_err(|e| e.to_string())?;
+    let steady = iterate_block(&block, [nx, ny, nz], iteration, &settings, comm)
+        .map_err(|e| e.to_string())?;
     let seconds = started.elapsed().as_secs_f64();
     let created = if rank == 0 {
         create_npy(&args.out, [nx, ny, nz]).map_err(|e| e.to_string())
@@ -212,7 +212,8 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
             },
             jacobi => jacobi,
         };
-        let serial = iterate(&system, slab, iteration, &settings).map_err(|e| e.to_string())?;
+        let serial =
+            iterate(&system, [nx, ny, nz], iteration, &settings).map_err(|e| e.to_string())?;
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         agrees = bits(&serial.fluence[owned.start * slab..owned.end * slab])
             == bits(&steady.fluence)

@@ -10,7 +10,9 @@
 //! The problem: a heterogeneous diffusion medium in an embedded cylinder along z with a
 //! point source, `n_z` = L·ranks layers of S × 5S/6 cells (the same slab per rank;
 //! `--layers L`, default 24, `--side S`, default 24). `--method ftcs` (default), `jacobi`
-//! or `mg` (`lucent_diffusion::Multigrid::solve_on_ranks`, V(2,2) from full multigrid;
+//! (both over z-slabs, or with `--boxes auto` or `--boxes PX,PY,PZ` over a grid of boxes,
+//! `lucent_explicit::ranks::Boxes`) or `mg` (`lucent_diffusion::Multigrid::solve_on_ranks`,
+//! V(2,2) from full multigrid;
 //! `--coarse-cells N` agglomerates coarse levels onto fewer ranks below N cells per rank,
 //! default `RankLayout::COARSE_CELLS_PER_RANK`, 0 splits every level as far as it goes);
 //! or Zhang & Ma's absorption march of a distant light through heterogeneous absorption on
@@ -31,6 +33,7 @@ use lucent_diffusion::{
     Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Multigrid,
     MultigridSettings, RankLayout, Sources,
 };
+use lucent_explicit::ranks::{Boxes, Decomposition, iterate_on};
 use lucent_explicit::steady::{Iteration, SteadySettings, ftcs_limit, iterate as serial};
 use lucent_grid::GridGeometry;
 use lucent_mpi::Communicator;
@@ -56,7 +59,7 @@ fn problem(
     ranks: usize,
     layers_per_rank: usize,
     side: usize,
-) -> Result<(DiffusionProblem, Sources, usize), String> {
+) -> Result<(DiffusionProblem, Sources, [usize; 3]), String> {
     let dims = [side, side * 5 / 6, layers_per_rank * ranks];
     let h = 6.0 / side as f64;
     let half = DVec3::new(3.0, 0.5 * h * dims[1] as f64, 0.5 * h * dims[2] as f64);
@@ -82,7 +85,7 @@ fn problem(
         points: vec![(DVec3::new(0.2, -0.1, 0.3), 1.0)],
         ..Sources::default()
     };
-    Ok((problem, sources, dims[0] * dims[1]))
+    Ok((problem, sources, dims))
 }
 
 fn bits(v: &[f64]) -> Vec<u64> {
@@ -104,17 +107,41 @@ fn best_of<T, E: ToString>(
     Ok((last.ok_or("no run")?, best))
 }
 
+/// How FTCS and Jacobi split the grid: z-slabs, or `--boxes auto` (the grid of boxes
+/// that cuts least) or `--boxes PX,PY,PZ`.
+fn decomposition(
+    boxes: Option<&str>,
+    dims: [usize; 3],
+    ranks: usize,
+) -> Result<Decomposition, String> {
+    let grid = match boxes {
+        None => return Ok(Decomposition::Slabs),
+        Some("auto") => Boxes::auto(dims, ranks),
+        Some(spec) => match spec
+            .split(',')
+            .map(str::parse)
+            .collect::<Result<Vec<usize>, _>>()
+            .as_deref()
+        {
+            Ok(&[px, py, pz]) => Boxes::new(dims, [px, py, pz]),
+            _ => return Err(format!("--boxes {spec}: auto or PX,PY,PZ")),
+        },
+    };
+    grid.map(Decomposition::Boxes).map_err(|e| e.to_string())
+}
+
 fn run(
     comm: &(impl Communicator + ?Sized),
     method: Method,
     layers_per_rank: usize,
     side: usize,
     repeat: usize,
+    boxes: Option<&str>,
 ) -> Result<Run, String> {
     if let Method::March(along_z) = method {
         return march(comm, along_z, layers_per_rank, side, repeat);
     }
-    let (problem, sources, slab) = problem(comm.size(), layers_per_rank, side)?;
+    let (problem, sources, dims) = problem(comm.size(), layers_per_rank, side)?;
     if let Method::Multigrid(coarse_cells) = method {
         let stopping = Stopping {
             relative_tolerance: 1e-10,
@@ -180,10 +207,17 @@ fn run(
         },
         allow_unstable: false,
     };
+    let decomposition = decomposition(boxes, dims, comm.size())?;
+    if comm.rank() == 0 {
+        match &decomposition {
+            Decomposition::Slabs => eprintln!("z-slabs"),
+            Decomposition::Boxes(b) => eprintln!("boxes: {:?} (x, y, z)", b.grid()),
+        }
+    }
     let (split, seconds) = best_of(repeat, || {
-        lucent_explicit::ranks::iterate(&system, slab, iteration, &settings, comm)
+        iterate_on(&system, dims, &decomposition, iteration, &settings, comm)
     })?;
-    let reference = serial(&system, slab, iteration, &settings).map_err(|e| e.to_string())?;
+    let reference = serial(&system, dims, iteration, &settings).map_err(|e| e.to_string())?;
     Ok(Run {
         iterations: split.residuals.len() - 1,
         stop: split.stop_reason.to_string(),
@@ -239,8 +273,9 @@ fn report(
     layers: usize,
     side: usize,
     repeat: usize,
+    boxes: Option<&str>,
 ) -> Result<bool, String> {
-    let out = run(comm, method, layers, side, repeat)?;
+    let out = run(comm, method, layers, side, repeat, boxes)?;
     if comm.rank() == 0 {
         let dims = [side, side * 5 / 6, layers * comm.size()];
         let (what, agree) = match method {
@@ -292,7 +327,12 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    match run_on_ranks(&args, method, layers, side, repeat) {
+    let boxes = value::<String>(&args, "--boxes");
+    if boxes.is_some() && !matches!(method, Method::Ftcs | Method::Jacobi) {
+        eprintln!("weak_scaling: --boxes splits FTCS and Jacobi only");
+        return ExitCode::from(2);
+    }
+    match run_on_ranks(&args, method, layers, side, repeat, boxes.as_deref()) {
         Ok(true) => ExitCode::SUCCESS,
         Ok(false) => ExitCode::FAILURE,
         Err(e) => {
@@ -309,9 +349,10 @@ fn run_on_ranks(
     layers: usize,
     side: usize,
     repeat: usize,
+    boxes: Option<&str>,
 ) -> Result<bool, String> {
     let world = lucent_mpi::World::initialise().map_err(|e| e.to_string())?;
-    report(&world.ranks(), method, layers, side, repeat)
+    report(&world.ranks(), method, layers, side, repeat, boxes)
 }
 
 #[cfg(not(feature = "mpi"))]
@@ -321,13 +362,14 @@ fn run_on_ranks(
     layers: usize,
     side: usize,
     repeat: usize,
+    boxes: Option<&str>,
 ) -> Result<bool, String> {
     let ranks: usize = value(args, "--ranks").unwrap_or(2);
     let worlds = lucent_mpi::Threads::world(ranks);
     std::thread::scope(|scope| {
         let runs: Vec<_> = worlds
             .into_iter()
-            .map(|comm| scope.spawn(move || report(&comm, method, layers, side, repeat)))
+            .map(|comm| scope.spawn(move || report(&comm, method, layers, side, repeat, boxes)))
             .collect();
         runs.into_iter()
             .map(|r| r.join().map_err(|_| "a rank panicked".to_owned())?)

@@ -1,8 +1,9 @@
 //! # lucent-mpi: lucent's solvers on MPI ranks
 //!
-//! The solvers that split over ranks take any `lucent_core::ranks::Communicator` (z-slabs):
-//! `lucent_diffusion::Multigrid::solve_on_ranks` (the distributed multigrid),
-//! `lucent_explicit::ranks::iterate` (FTCS and Jacobi to steady state),
+//! The solvers that split over ranks take any `lucent_core::ranks::Communicator`:
+//! `lucent_diffusion::Multigrid::solve_on_ranks` (the distributed multigrid, z-slabs),
+//! `lucent_explicit::ranks::iterate_on` (FTCS and Jacobi to steady state, z-slabs or a
+//! Cartesian grid of boxes),
 //! `lucent_explicit::ranks::march_p1` (P1 by FTCS), `lucent_explicit::wavefront`
 //! (Zhang & Ma's absorption march: a pipelined wavefront or planes in lock step), and
 //! through them the registry's `diffusion-mg`, `ftcs-diffusion`, `jacobi-diffusion`,
@@ -12,8 +13,11 @@
 //! Without the feature nothing of MPI is built; [`Alone`] and [`Threads`] (in-process
 //! ranks) are re-exported from `lucent-core`.
 //!
-//! **Reproducibility.** Norms are Σ per z-layer, then the layer sums in z order, on one
-//! rank and on many: a layer never straddles ranks, so the result does not depend on the
+//! **Reproducibility.** The multigrid's and P1's norms are Σ per z-layer, then the layer
+//! sums in z order, on one rank and on many: a layer never straddles ranks. FTCS and
+//! Jacobi sum runs of eight cells along x and add the run sums exactly
+//! (`lucent_core::exact::ExactSum`, merged across ranks in any order), so boxes, which
+//! split layers, keep the bits too (`docs/ranks.md`). The result does not depend on the
 //! rank count (the explicit schemes: the serial bits; the multigrid: the serial φ, and the
 //! same history on every rank count).
 //!
@@ -33,7 +37,8 @@
 //!
 //! **Cost model per sweep and rank** (slab of n_x·n_y·n_z/P cells): two halo messages of
 //! one layer each (≤ 8 n_x n_y bytes), overlapped with the interior rows, and one
-//! all-gather of 2 + (layers per rank) doubles, whose latency grows as log P.
+//! all-gather of the norm, whose latency grows as log P; boxes send six face messages
+//! instead, which shrink with the box (`docs/ranks.md` compares the two at 1024 ranks).
 //! `BENCHMARKS.md` ("Ranks") models 64 and 1024 ranks, multigrid's coarse levels included
 //! (agglomerated onto fewer ranks as they shrink, moved by `Communicator::exchange_with`'s
 //! point-to-point messages).
