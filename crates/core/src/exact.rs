@@ -1,7 +1,8 @@
 //! Sums of f64 that do not depend on the order of their terms: [`ExactSum`] keeps the
 //! exact sum of every finite f64 added to it as a fixed-point integer (a Kulisch
-//! accumulator: 2^-1074, the smallest subnormal, is its unit; 68 digits of 32 bits span
-//! the whole f64 range with 2^70 of headroom), and rounds once, to nearest, when asked.
+//! accumulator: 2^-1074, the smallest subnormal, is its unit; 68 digits of 32 bits, the
+//! top one signed, hold the sum of up to 2^99 terms of any finite size), and rounds
+//! once, to nearest, when asked.
 //!
 //! Norms on ranks use it to be bitwise reproducible whatever the decomposition: each rank
 //! adds its partial sums, the ranks exchange their accumulators as words

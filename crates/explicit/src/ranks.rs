@@ -471,8 +471,8 @@ pub fn iterate(
 /// [`DecompositionError::Scheme`] for what the serial iteration refuses;
 /// [`DecompositionError::TooManyRanks`] for more slabs than layers with unknowns;
 /// [`DecompositionError::BoxGrid`] for boxes of another grid or rank count;
-/// [`DecompositionError::Matrix`] for a system whose sizes do not agree; a rank that left
-/// the protocol.
+/// [`DecompositionError::Matrix`] for a system whose sizes do not agree or whose cells lie
+/// beyond `dims`; a rank that left the protocol.
 pub fn iterate_on(
     system: &AssembledSystem,
     dims: [usize; 3],
@@ -490,6 +490,12 @@ pub fn iterate_on(
             a.rows(),
             a.cols(),
             system.cells.len()
+        )));
+    }
+    let cells_in_grid: usize = dims.iter().product();
+    if let Some(&c) = system.cells.iter().find(|&&c| c >= cells_in_grid) {
+        return Err(DecompositionError::Matrix(format!(
+            "an unknown in cell {c}, beyond the {dims:?} grid"
         )));
     }
     let owner: Vec<usize> = match decomposition {

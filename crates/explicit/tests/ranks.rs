@@ -234,6 +234,18 @@ fn boxes_for_another_rank_count_or_grid_are_refused_on_every_rank() {
     for out in on_ranks(2, &system, dims, &other, jacobi, &settings) {
         assert!(matches!(out, Err(DecompositionError::BoxGrid { .. })));
     }
+    // A grid too small for the system's cells (nine layers missing): an error, not an
+    // unknown given to a rank that is not there.
+    let small = [13, 11, 10];
+    let boxes = Decomposition::Boxes(Boxes::new(small, [1, 1, 2]).unwrap());
+    for decomposition in [&Decomposition::Slabs, &boxes] {
+        for out in on_ranks(2, &system, small, decomposition, jacobi, &settings) {
+            assert!(
+                matches!(&out, Err(DecompositionError::Matrix(m)) if m.contains("beyond")),
+                "{out:?}"
+            );
+        }
+    }
 }
 
 #[test]
