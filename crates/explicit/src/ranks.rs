@@ -29,7 +29,7 @@
 
 use crate::ExplicitError;
 use crate::steady::{
-    Iteration, Layers, NORM_RUN, Steady, SteadySettings, gershgorin, norm_run, row_scale,
+    Iteration, Layers, NORM_RUN, Steady, SteadySettings, gershgorin, norm_runs, row_scale,
     scale_rows, squares,
 };
 use lucent_core::exact::ExactSum;
@@ -358,22 +358,6 @@ fn by_rank(pairs: &[(usize, usize)]) -> Vec<(usize, Vec<usize>)> {
     out
 }
 
-/// The norm's runs of `cells` (consecutive entries in the same run of a grid `nx` wide),
-/// as [start, end) positions.
-fn runs_of(cells: impl Iterator<Item = usize>, nx: usize) -> Vec<(usize, usize)> {
-    let mut runs: Vec<(usize, usize)> = Vec::new();
-    let mut last = None;
-    for (u, c) in cells.enumerate() {
-        let run = norm_run(c, nx);
-        match runs.last_mut() {
-            Some((_, end)) if last == Some(run) => *end = u + 1,
-            _ => runs.push((u, u + 1)),
-        }
-        last = Some(run);
-    }
-    runs
-}
-
 impl Part {
     /// Rank `rank`'s part of the whole system `a`, each unknown's rank in `owner` and its
     /// cell in `cells` (a grid `nx` wide). Every rank holds `a`, so each finds by itself
@@ -434,7 +418,7 @@ impl Part {
             rows,
             sends,
             receives,
-            runs: runs_of(owned.iter().map(|&u| cells[u]), nx),
+            runs: norm_runs(owned.iter().map(|&u| cells[u]), nx),
         }
     }
 }
@@ -701,7 +685,7 @@ pub fn iterate_block(
         rows,
         sends,
         receives,
-        runs: runs_of(u0..u1, nx),
+        runs: norm_runs(u0..u1, nx),
     };
     let (mut fluence, residuals, stop_reason) = sweep(&part, &block.rhs, &scale, settings, comm)?;
     // The serial rule: any non-finite φ anywhere zeroes all of it.

@@ -139,22 +139,17 @@ impl Layers {
     pub fn new(cells: &[usize], dims: [usize; 3]) -> Self {
         let (nx, slab_len) = (dims[0].max(1), (dims[0] * dims[1]).max(1));
         let mut ranges: Vec<(usize, usize, usize)> = Vec::new();
-        let mut runs: Vec<(usize, usize)> = Vec::new();
-        let mut last_run = None;
         for (u, &c) in cells.iter().enumerate() {
             let z = c / slab_len;
             match ranges.last_mut() {
                 Some((layer, _, end)) if *layer == z => *end = u + 1,
                 _ => ranges.push((z, u, u + 1)),
             }
-            let run = norm_run(c, nx);
-            match runs.last_mut() {
-                Some((_, end)) if last_run == Some(run) => *end = u + 1,
-                _ => runs.push((u, u + 1)),
-            }
-            last_run = Some(run);
         }
-        Self { ranges, runs }
+        Self {
+            ranges,
+            runs: norm_runs(cells.iter().copied(), nx),
+        }
     }
 
     /// (z, start, end) of every non-empty layer, in z order.
@@ -173,9 +168,21 @@ impl Layers {
     }
 }
 
-/// Which norm run cell `c` of a grid `nx` cells wide belongs to: (its x-line, x / 8).
-pub fn norm_run(c: usize, nx: usize) -> (usize, usize) {
-    (c / nx, (c % nx) / NORM_RUN)
+/// The norm's runs of `cells` (flat cells of a grid `nx` wide, ascending), as [start, end)
+/// positions: consecutive entries in the same x-line and the same [8k, 8k + 8) of it.
+pub fn norm_runs(cells: impl Iterator<Item = usize>, nx: usize) -> Vec<(usize, usize)> {
+    let nx = nx.max(1);
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    let mut last = None;
+    for (u, c) in cells.enumerate() {
+        let run = (c / nx, (c % nx) / NORM_RUN);
+        match runs.last_mut() {
+            Some((_, end)) if last == Some(run) => *end = u + 1,
+            _ => runs.push((u, u + 1)),
+        }
+        last = Some(run);
+    }
+    runs
 }
 
 /// Σ v² over `runs` of `v`, each run left to right, the run sums added exactly (in
