@@ -1,12 +1,16 @@
-//! Positioned reads of z-layers (`io::layers`): the layers of every whole-file read, for
-//! random grids, ranges and sample types (raw, npy) and for NRRD attached and detached; a
-//! 32 GiB (sparse) volume's two layers under a budget the whole could never fit; and typed
-//! errors for bad ranges, sizes and compressed payloads.
+//! Positioned reads of z-layers and boxes of cells (`io::layers`): the layers and boxes of
+//! every whole-file read, for random grids, ranges and sample types (raw, npy) and for
+//! NRRD attached and detached; a 32 GiB (sparse) volume's two layers and a box under a
+//! budget the whole could never fit; positioned writes of layers and boxes that make the
+//! whole file; and typed errors for bad ranges, sizes and compressed payloads.
 
 use std::io::Write;
 
 use glam::DVec3;
-use lucent_grid::io::layers::{read_npy_layers, read_nrrd_layers, read_raw_layers};
+use lucent_grid::io::layers::{
+    read_npy_layers, read_npy_region, read_nrrd_layers, read_nrrd_region, read_raw_layers,
+    read_raw_region,
+};
 use lucent_grid::io::raw::RawLayout;
 use lucent_grid::io::{Endian, LoadOptions, ScalarType, npy, nrrd, raw};
 use lucent_grid::{Grid, GridError, GridGeometry};
@@ -25,6 +29,66 @@ fn grid(dims: [usize; 3], seed: u64) -> Grid {
 fn slice(g: &Grid, z: std::ops::Range<usize>) -> Vec<f32> {
     let [nx, ny, _] = g.dims();
     g.data()[z.start * nx * ny..z.end * nx * ny].to_vec()
+}
+
+/// The box `cells` of `g`, x fastest.
+fn boxed(g: &Grid, cells: &[std::ops::Range<usize>; 3]) -> Vec<f32> {
+    let [nx, ny, _] = g.dims();
+    let mut out = Vec::new();
+    for k in cells[2].clone() {
+        for j in cells[1].clone() {
+            let row = nx * (j + ny * k);
+            out.extend_from_slice(&g.data()[row + cells[0].start..row + cells[0].end]);
+        }
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+    #[test]
+    fn boxes_are_the_whole_reads_boxes(
+        dims in (1usize..13, 1usize..11, 1usize..9),
+        cuts in proptest::collection::vec((0.0f64..1.0, 0.0f64..1.0), 3),
+        seed in any::<u64>(),
+        scalar in prop::sample::select(vec![ScalarType::U8, ScalarType::I16, ScalarType::F32, ScalarType::F64]),
+        big_endian in any::<bool>(),
+    ) {
+        let dims = [dims.0, dims.1, dims.2];
+        let cells: [std::ops::Range<usize>; 3] = std::array::from_fn(|a| {
+            let (u, v) = ((cuts[a].0 * dims[a] as f64) as usize, (cuts[a].1 * dims[a] as f64) as usize);
+            u.min(v)..(u.max(v) + 1).min(dims[a])
+        });
+        let g = grid(dims, seed);
+        let dir = tempfile::tempdir().unwrap();
+        let options = LoadOptions::default();
+
+        let npy_path = dir.path().join("v.npy");
+        npy::write(&npy_path, &g, scalar).unwrap();
+        let whole = npy::read(&npy_path, &options).unwrap();
+        let part = read_npy_region(&npy_path, cells.clone(), &options).unwrap();
+        prop_assert_eq!(part.whole, *whole.geometry());
+        prop_assert_eq!(part.origin, cells.clone().map(|r| r.start));
+        prop_assert_eq!(part.grid.dims(), cells.clone().map(|r| r.len()));
+        prop_assert_eq!(part.grid.data(), &boxed(&whole, &cells)[..]);
+
+        let endian = if big_endian { Endian::Big } else { Endian::Little };
+        let raw_path = dir.path().join("v.raw");
+        raw::write(&raw_path, &g, scalar, endian).unwrap();
+        let layout = RawLayout {
+            dims,
+            scalar,
+            endian,
+            spacing: DVec3::new(0.5, 0.25, 2.0),
+            origin: DVec3::new(-1.0, 3.0, 7.0),
+        };
+        let whole = raw::read(&raw_path, &layout, &options).unwrap();
+        let part = read_raw_region(&raw_path, &layout, cells.clone(), &options).unwrap();
+        prop_assert_eq!(part.grid.data(), &boxed(&whole, &cells)[..]);
+        let corner = DVec3::new(cells[0].start as f64, cells[1].start as f64, cells[2].start as f64);
+        prop_assert_eq!(part.grid.geometry().origin(), layout.origin + corner * layout.spacing);
+        prop_assert_eq!(part.grid.geometry().spacing(), layout.spacing);
+    }
 }
 
 proptest! {
@@ -106,6 +170,12 @@ fn two_layers_of_a_32_gib_volume_read_within_a_small_budget() {
         read_npy_layers(&path, 0..10, &options),
         Err(GridError::OverBudget { .. })
     ));
+    // A box of 128 × 128 × 256 cells through all the volume's depth (16 MiB): one
+    // positioned read per x-line.
+    let part = read_npy_region(&path, [512..640, 0..128, 4000..4256], &options).unwrap();
+    assert_eq!(part.grid.dims(), [128, 128, 256]);
+    assert_eq!(part.origin, [512, 0, 4000]);
+    assert!(part.grid.data().iter().all(|&v| v == 0.0));
 }
 
 #[test]
@@ -245,4 +315,93 @@ fn positioned_npy_writes_make_the_whole_file() {
         ));
     }
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn nrrd_boxes_and_bad_boxes() {
+    let dir = tempfile::tempdir().unwrap();
+    let options = LoadOptions::default();
+    let geometry = GridGeometry::new(
+        [7, 5, 9],
+        DVec3::new(0.5, 0.25, 2.0),
+        DVec3::new(-1.0, 3.0, 7.0),
+    )
+    .unwrap();
+    let g = Grid::from_vec(geometry, grid([7, 5, 9], 5).data().to_vec()).unwrap();
+    let path = dir.path().join("v.nrrd");
+    nrrd::write(&path, &g, ScalarType::F32, nrrd::Encoding::Raw).unwrap();
+    let whole = nrrd::read(&path, &options).unwrap();
+    for cells in [
+        [0..7, 0..5, 0..9],
+        [2..5, 1..4, 3..8],
+        [6..7, 4..5, 8..9],
+        [0..7, 2..3, 0..9],
+    ] {
+        let part = read_nrrd_region(&path, cells.clone(), &options).unwrap();
+        assert_eq!(part.grid.data(), &boxed(&whole, &cells)[..], "{cells:?}");
+    }
+    // Empty, past the grid.
+    for cells in [[0..0, 0..5, 0..9], [0..8, 0..5, 0..9], [0..7, 0..5, 9..10]] {
+        assert!(matches!(
+            read_nrrd_region(&path, cells, &options),
+            Err(GridError::InvalidParameter { .. })
+        ));
+    }
+    // A NaN inside the box is named by its cell in the whole volume; outside the box it
+    // is not read.
+    let mut data = g.data().to_vec();
+    let (i, j, k) = (3, 2, 6);
+    data[i + 7 * (j + 5 * k)] = f32::NAN;
+    let mut bytes = Vec::new();
+    for v in &data {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    let raw_path = dir.path().join("nan.raw");
+    std::fs::write(&raw_path, &bytes).unwrap();
+    let layout = RawLayout::new([7, 5, 9], ScalarType::F32);
+    match read_raw_region(&raw_path, &layout, [2..5, 1..4, 5..8], &options) {
+        Err(GridError::NonFinite { index, cell, .. }) => {
+            assert_eq!((index, cell), (i + 7 * (j + 5 * k), [i, j, k]));
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(read_raw_region(&raw_path, &layout, [4..7, 0..5, 0..9], &options).is_ok());
+}
+
+/// Boxes written by positioned writes, in any order, make the file the whole write makes,
+/// byte for byte; a bad box is refused.
+#[test]
+fn positioned_npy_box_writes_make_the_whole_file() {
+    use lucent_grid::io::layers::{create_npy, write_npy_region};
+    let dir = tempfile::tempdir().unwrap();
+    for dims in [[19, 6, 5], [1, 1, 1], [8, 3, 2]] {
+        let g = grid(dims, 13);
+        let whole = dir.path().join("whole.npy");
+        let parts = dir.path().join("parts.npy");
+        npy::write(&whole, &g, ScalarType::F32).unwrap();
+        create_npy(&parts, dims).unwrap();
+        let cut = |n: usize| [0, n / 2, n].to_vec();
+        let (xs, ys, zs) = (cut(dims[0]), cut(dims[1]), cut(dims[2]));
+        let mut boxes = Vec::new();
+        for z in zs.windows(2).filter(|w| w[0] < w[1]) {
+            for y in ys.windows(2).filter(|w| w[0] < w[1]) {
+                for x in xs.windows(2).filter(|w| w[0] < w[1]) {
+                    boxes.push([x[0]..x[1], y[0]..y[1], z[0]..z[1]]);
+                }
+            }
+        }
+        // The last box first: the order of the ranks' writes does not matter.
+        for cells in boxes.into_iter().rev() {
+            write_npy_region(&parts, dims, cells.clone(), &boxed(&g, &cells)).unwrap();
+        }
+        assert_eq!(
+            std::fs::read(&parts).unwrap(),
+            std::fs::read(&whole).unwrap(),
+            "{dims:?}"
+        );
+        assert!(matches!(
+            write_npy_region(&parts, dims, [0..1, 0..1, 0..1], &[1.0, 2.0]),
+            Err(GridError::InvalidParameter { .. })
+        ));
+    }
 }

@@ -1,16 +1,19 @@
-//! Some z-layers of a volume file, read by positioned reads (`pread`): a rank of a z-slab
-//! decomposition reads the header and its own layers' bytes, never the whole volume.
+//! Some z-layers, or a box of cells, of a volume file, read by positioned reads (`pread`):
+//! a rank of a z-slab decomposition or of a grid of boxes reads the header and its own
+//! cells' bytes, never the whole volume.
 //!
 //! Formats whose samples are stored uncompressed with x fastest and z slowest, so that a
-//! run of z-layers is one contiguous run of bytes: headerless `.raw` (with its
-//! [`RawLayout`]), `.npy` (C order (n_z, n_y, n_x) or Fortran order (n_x, n_y, n_z)), and
-//! NRRD with a `raw` payload, attached or detached (`byte skip` ≥ 0 or −1).
-//! The file's size is checked against its header (metadata, not a read) exactly as the
-//! whole-file readers check it, the budget covers the layers only, and a non-finite sample
-//! in the layers is refused by its cell, as everywhere.
+//! run of z-layers is one contiguous run of bytes, and a box one run per x-line (merged
+//! where they touch: one run per layer for whole x-lines, one in all for whole layers):
+//! headerless `.raw` (with its [`RawLayout`]), `.npy` (C order (n_z, n_y, n_x) or Fortran
+//! order (n_x, n_y, n_z)), and NRRD with a `raw` payload, attached or detached (`byte
+//! skip` ≥ 0 or −1). The file's size is checked against its header (metadata, not a read)
+//! exactly as the whole-file readers check it, the budget covers the cells read only, and
+//! a non-finite sample among them is refused by its cell, as everywhere.
 //!
-//! The other way, [`write_npy_layers`] writes a rank's layers of a result into one f32
-//! `.npy` by positioned writes (after [`create_npy`] on one rank).
+//! The other way, [`write_npy_layers`] and [`write_npy_region`] write a rank's layers or
+//! box of a result into one f32 `.npy` by positioned writes (after [`create_npy`] on one
+//! rank).
 
 use std::fs::File;
 use std::ops::Range;
@@ -34,6 +37,54 @@ pub struct Layers {
     /// The layers: the whole volume's n_x × n_y, its spacing, its origin moved up by
     /// `first` layers.
     pub grid: Grid,
+}
+
+/// A box of cells of a volume (`origin` + the grid's dims, along x, y and z).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Region {
+    /// The whole volume's geometry.
+    pub whole: GridGeometry,
+    /// The box's first cell along x, y and z.
+    pub origin: [usize; 3],
+    /// The box: its cells, the whole volume's spacing, its origin moved to the box's
+    /// first cell.
+    pub grid: Grid,
+}
+
+/// What to read: some z-layers, or a box of cells.
+#[derive(Debug, Clone)]
+enum Pick {
+    Layers(Range<usize>),
+    Cells([Range<usize>; 3]),
+}
+
+impl Region {
+    fn into_layers(self) -> Layers {
+        Layers {
+            whole: self.whole,
+            first: self.origin[2],
+            grid: self.grid,
+        }
+    }
+}
+
+/// The runs of bytes (offset from the first sample, length) that hold the box `cells` of
+/// a volume of `dims` with `size`-byte samples, x fastest, in the box's order; runs that
+/// touch are merged (whole x-lines make one run per layer, whole layers one in all).
+fn runs(dims: [usize; 3], cells: &[Range<usize>; 3], size: usize) -> Vec<(u64, usize)> {
+    let [nx, ny, _] = dims;
+    let mut out: Vec<(u64, usize)> = Vec::new();
+    for k in cells[2].clone() {
+        for j in cells[1].clone() {
+            let offset = ((cells[0].start + nx * (j + ny * k)) * size) as u64;
+            let len = cells[0].len() * size;
+            match out.last_mut() {
+                Some((o, l)) if *o + *l as u64 == offset => *l += len,
+                _ => out.push((offset, len)),
+            }
+        }
+    }
+    out
 }
 
 fn io_error(path: &Path) -> impl Fn(std::io::Error) -> GridError + '_ {
@@ -74,30 +125,41 @@ fn write_at(file: &File, path: &Path, bytes: &[u8], offset: u64) -> Result<(), G
 }
 
 /// Writes `values` (f32, x fastest) as layers `layers` of the C-order (n_z, n_y, n_x)
-/// f32 `.npy` array of `dims`, by positioned writes: every rank of a z-slab decomposition
-/// writes its own layers into one file, and the header, identical from every rank. The
-/// file is created if it is missing and never truncated, so one rank creates (or empties)
-/// it before the others write: [`create_npy`], then a barrier. Once every layer has been
-/// written the file is the array [`super::npy::write`] would have written.
+/// f32 `.npy` array of `dims`: [`write_npy_region`] of those whole layers.
 ///
 /// # Errors
-/// An empty range or one past n_z, `values` of another length
-/// ([`GridError::InvalidParameter`]), and I/O.
+/// As [`write_npy_region`].
 pub fn write_npy_layers(
     path: impl AsRef<Path>,
     dims: [usize; 3],
     layers: Range<usize>,
     values: &[f32],
 ) -> Result<(), GridError> {
+    write_npy_region(path, dims, [0..dims[0], 0..dims[1], layers], values)
+}
+
+/// Writes `values` (f32, x fastest) as the box `cells` of the C-order (n_z, n_y, n_x) f32
+/// `.npy` array of `dims`, by positioned writes: every rank of a decomposition writes its
+/// own cells into one file, and the header, identical from every rank. The file is
+/// created if it is missing and never truncated, so one rank creates (or empties) it
+/// before the others write: [`create_npy`], then a barrier. Once every cell has been
+/// written the file is the array [`super::npy::write`] would have written.
+///
+/// # Errors
+/// An empty box or one past the grid, `values` of another length
+/// ([`GridError::InvalidParameter`]), and I/O.
+pub fn write_npy_region(
+    path: impl AsRef<Path>,
+    dims: [usize; 3],
+    cells: [Range<usize>; 3],
+    values: &[f32],
+) -> Result<(), GridError> {
     let path = path.as_ref();
-    let [nx, ny, nz] = dims;
-    if layers.is_empty() || layers.end > nz || values.len() != layers.len() * nx * ny {
+    let count: usize = cells.iter().map(ExactSizeIterator::len).product();
+    if (0..3).any(|a| cells[a].is_empty() || cells[a].end > dims[a]) || values.len() != count {
         return Err(GridError::InvalidParameter {
-            name: "layers",
-            reason: format!(
-                "{layers:?} of {nx} × {ny} × {nz} with {} values",
-                values.len()
-            ),
+            name: "cells",
+            reason: format!("{cells:?} of {dims:?} with {} values", values.len()),
         });
     }
     let header = super::npy::header_bytes(dims, 1, ScalarType::F32);
@@ -109,8 +171,17 @@ pub fn write_npy_layers(
         .map_err(io_error(path))?;
     write_at(&file, path, &header, 0)?;
     let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
-    let offset = header.len() as u64 + (layers.start * nx * ny * 4) as u64;
-    write_at(&file, path, &bytes, offset)
+    let mut at = 0;
+    for (offset, len) in runs(dims, &cells, 4) {
+        write_at(
+            &file,
+            path,
+            &bytes[at..at + len],
+            header.len() as u64 + offset,
+        )?;
+        at += len;
+    }
+    Ok(())
 }
 
 /// Creates (or empties) the `.npy` file that [`write_npy_layers`] fills, with its header.
@@ -133,7 +204,28 @@ pub fn read_raw_layers(
     layers: Range<usize>,
     options: &LoadOptions,
 ) -> Result<Layers, GridError> {
-    let path = path.as_ref();
+    read_raw(path.as_ref(), layout, Pick::Layers(layers), options).map(Region::into_layers)
+}
+
+/// The box of cells `cells` (x, y and z ranges) of a raw file of `layout`.
+///
+/// # Errors
+/// As [`read_raw_layers`], for an empty box or one past the grid.
+pub fn read_raw_region(
+    path: impl AsRef<Path>,
+    layout: &RawLayout,
+    cells: [Range<usize>; 3],
+    options: &LoadOptions,
+) -> Result<Region, GridError> {
+    read_raw(path.as_ref(), layout, Pick::Cells(cells), options)
+}
+
+fn read_raw(
+    path: &Path,
+    layout: &RawLayout,
+    pick: Pick,
+    options: &LoadOptions,
+) -> Result<Region, GridError> {
     let whole = super::geometry(path, "raw", layout.dims, layout.spacing, layout.origin)?;
     let file = File::open(path).map_err(io_error(path))?;
     exact_size(&file, path, "raw", &whole, layout.scalar, 0)?;
@@ -144,7 +236,7 @@ pub fn read_raw_layers(
         whole,
         (layout.scalar, layout.endian),
         0,
-        layers,
+        pick,
         options,
     )
 }
@@ -161,7 +253,22 @@ pub fn read_npy_layers(
     layers: Range<usize>,
     options: &LoadOptions,
 ) -> Result<Layers, GridError> {
-    let path = path.as_ref();
+    read_npy(path.as_ref(), Pick::Layers(layers), options).map(Region::into_layers)
+}
+
+/// The box of cells `cells` of a `.npy` file.
+///
+/// # Errors
+/// As [`read_npy_layers`], for an empty box or one past the grid.
+pub fn read_npy_region(
+    path: impl AsRef<Path>,
+    cells: [Range<usize>; 3],
+    options: &LoadOptions,
+) -> Result<Region, GridError> {
+    read_npy(path.as_ref(), Pick::Cells(cells), options)
+}
+
+fn read_npy(path: &Path, pick: Pick, options: &LoadOptions) -> Result<Region, GridError> {
     let file = File::open(path).map_err(io_error(path))?;
     let len = file.metadata().map_err(io_error(path))?.len();
     // Magic (6), version (2) and the header's length (2 or 4), then the header.
@@ -188,7 +295,7 @@ pub fn read_npy_layers(
         whole,
         (header.scalar, header.endian),
         c.pos as u64,
-        layers,
+        pick,
         options,
     )
 }
@@ -230,7 +337,22 @@ pub fn read_nrrd_layers(
     layers: Range<usize>,
     options: &LoadOptions,
 ) -> Result<Layers, GridError> {
-    let path = path.as_ref();
+    read_nrrd(path.as_ref(), Pick::Layers(layers), options).map(Region::into_layers)
+}
+
+/// The box of cells `cells` of a raw-encoded NRRD volume, with its placement.
+///
+/// # Errors
+/// As [`read_nrrd_layers`], for an empty box or one past the grid.
+pub fn read_nrrd_region(
+    path: impl AsRef<Path>,
+    cells: [Range<usize>; 3],
+    options: &LoadOptions,
+) -> Result<Region, GridError> {
+    read_nrrd(path.as_ref(), Pick::Cells(cells), options)
+}
+
+fn read_nrrd(path: &Path, pick: Pick, options: &LoadOptions) -> Result<Region, GridError> {
     let malformed = |reason: &str| GridError::Malformed {
         path: path.to_owned(),
         format: "NRRD",
@@ -318,13 +440,13 @@ pub fn read_nrrd_layers(
         header.geometry,
         (header.scalar, header.endian),
         start,
-        layers,
+        pick,
         options,
     )
 }
 
-/// Reads `layers` of the samples stored from `offset` of `file` as `whole`'s cells (the
-/// file's size checked by the caller).
+/// Reads the cells `pick` of the samples stored from `offset` of `file` as `whole`'s
+/// cells (the file's size checked by the caller).
 #[allow(clippy::too_many_arguments)]
 fn positioned(
     file: &File,
@@ -333,36 +455,63 @@ fn positioned(
     whole: GridGeometry,
     (scalar, endian): (ScalarType, Endian),
     offset: u64,
-    layers: Range<usize>,
+    pick: Pick,
     options: &LoadOptions,
-) -> Result<Layers, GridError> {
-    let [nx, ny, nz] = whole.dims();
-    if layers.is_empty() || layers.end > nz {
-        return Err(GridError::InvalidParameter {
-            name: "layers",
-            reason: format!("{layers:?} of a volume of {nz} z-layers"),
-        });
+) -> Result<Region, GridError> {
+    let dims = whole.dims();
+    let cells = match pick {
+        Pick::Layers(layers) => {
+            if layers.is_empty() || layers.end > dims[2] {
+                return Err(GridError::InvalidParameter {
+                    name: "layers",
+                    reason: format!("{layers:?} of a volume of {} z-layers", dims[2]),
+                });
+            }
+            [0..dims[0], 0..dims[1], layers]
+        }
+        Pick::Cells(cells) => {
+            if (0..3).any(|a| cells[a].is_empty() || cells[a].end > dims[a]) {
+                return Err(GridError::InvalidParameter {
+                    name: "cells",
+                    reason: format!("{cells:?} of a volume of {dims:?} cells"),
+                });
+            }
+            cells
+        }
+    };
+    let count: [usize; 3] = std::array::from_fn(|a| cells[a].len());
+    let voxels = count.iter().product::<usize>();
+    options.reserve_voxels(path, voxels as u64, scalar)?;
+    let mut bytes = vec![0u8; voxels * scalar.size()];
+    let mut at = 0;
+    for (start, len) in runs(dims, &cells, scalar.size()) {
+        read_at(file, path, &mut bytes[at..at + len], offset + start)?;
+        at += len;
     }
-    let layer_bytes = (nx * ny * scalar.size()) as u64;
-    let count = layers.len();
-    options.reserve_voxels(path, (nx * ny * count) as u64, scalar)?;
-    let mut bytes = vec![0u8; layer_bytes as usize * count];
-    read_at(
-        file,
-        path,
-        &mut bytes,
-        offset + layers.start as u64 * layer_bytes,
-    )?;
+    let origin: [usize; 3] = std::array::from_fn(|a| cells[a].start);
+    let corner = DVec3::new(origin[0] as f64, origin[1] as f64, origin[2] as f64);
     let geometry = super::geometry(
         path,
         format,
-        [nx, ny, count],
+        count,
         whole.spacing(),
-        whole.origin() + DVec3::new(0.0, 0.0, layers.start as f64 * whole.spacing().z),
+        whole.origin() + corner * whole.spacing(),
     )?;
-    Ok(Layers {
+    let samples = decode(&bytes, scalar, endian);
+    // A non-finite sample is named by its cell in the whole volume.
+    if let Some(index) = samples.iter().position(|v| !v.is_finite()) {
+        let local = geometry.coords(index);
+        let cell: [usize; 3] = std::array::from_fn(|a| origin[a] + local[a]);
+        return Err(GridError::NonFinite {
+            path: path.to_owned(),
+            index: cell[0] + dims[0] * (cell[1] + dims[1] * cell[2]),
+            cell,
+            value: samples[index],
+        });
+    }
+    Ok(Region {
         whole,
-        first: layers.start,
-        grid: super::finite_grid(path, geometry, decode(&bytes, scalar, endian))?,
+        origin,
+        grid: Grid::from_vec(geometry, samples)?,
     })
 }
