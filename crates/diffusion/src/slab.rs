@@ -9,10 +9,11 @@
 //! harmonic mean, the patches' couplings and data fluxes, the point sources' trilinear
 //! weights) and summed in the order `assemble` sums it, so a row and a right-hand side
 //! have the bits of the assembled matrix's row and vector (test:
-//! `crates/diffusion/tests/slab_system.rs`). [`SlabSystem::block`] gathers a run of
-//! layers' rows into a CSR block with the whole grid's column numbers, what one rank of a
-//! z-slab decomposition iterates without the rest of the volume (test:
-//! `crates/diffusion/tests/slab_block.rs`).
+//! `crates/diffusion/tests/slab_system.rs`). [`SlabSystem::block`] gathers the rows of a
+//! box of cells (a z-slab is a box of whole layers) into a CSR block with the whole grid's
+//! column numbers, from the coefficients of that box and the cell beyond each of its faces:
+//! what one rank of a decomposition into boxes or slabs iterates without the rest of the
+//! volume (test: `crates/diffusion/tests/slab_block.rs`).
 
 use std::ops::Range;
 
@@ -176,22 +177,33 @@ impl SlabSystem {
     /// The row of cell `at` (in slab `at[2]`), whose `extra` is [`SlabSystem::extra`], with
     /// D from slabs around it.
     pub fn row(&self, at: [usize; 3], d: &Window<'_, f32>, extra: f32) -> Row {
-        let [nx, _, _] = self.geometry.dims();
-        let index = at[0] + nx * at[1];
-        let dc = d.here[index];
+        let index = at[0] + self.geometry.dims()[0] * at[1];
+        self.row_with(at, d.here[index], |_, o| self.d_at(d, index, o), extra)
+    }
+
+    /// The row of cell `at` of diffusion coefficient `dc`, `d_near(axis, offset)` giving D
+    /// of its neighbour along `axis`, `offset` cells away in the whole grid's numbering.
+    #[inline]
+    fn row_with(
+        &self,
+        at: [usize; 3],
+        dc: f32,
+        d_near: impl Fn(usize, isize) -> f32,
+        extra: f32,
+    ) -> Row {
         let mut diagonal = f64::from(extra);
         // Column order: −z, −y, −x, the cell, +x, +y, +z.
         let mut off = [None; 6];
         for (axis, [lower, upper]) in self.neighbours(at).into_iter().enumerate() {
             if let Some(o) = lower {
-                let c = self.coupling(axis, dc, self.d_at(d, index, o));
+                let c = self.coupling(axis, dc, d_near(axis, o));
                 if c > 0.0 {
                     diagonal += f64::from(c);
                     off[2 - axis] = Some((o, -f64::from(c)));
                 }
             }
             if let Some(o) = upper {
-                let c = self.coupling(axis, self.d_at(d, index, o), dc);
+                let c = self.coupling(axis, d_near(axis, o), dc);
                 if c > 0.0 {
                     diagonal += f64::from(c);
                     off[3 + axis] = Some((o, -f64::from(c)));
@@ -277,49 +289,82 @@ impl SlabSystem {
                     }
                 }
             }
-            for p in self.patches(at, dc) {
-                let q = match q1 {
-                    Some(q1) => DVec3::new(
-                        f64::from(q1[0].here[index]),
-                        f64::from(q1[1].here[index]),
-                        f64::from(q1[2].here[index]),
-                    )
-                    .dot(p.normal),
-                    None => 0.0,
-                };
-                value -= p.data_flux(self.boundaries.on(p.side), q);
-            }
-            let cell = index + slab * z;
-            for point in points {
-                for &(c, w) in &point.weights {
-                    if c == cell {
-                        value += point.power * w;
-                    }
-                }
-            }
+            let q1_here = q1.map(|q1| {
+                DVec3::new(
+                    f64::from(q1[0].here[index]),
+                    f64::from(q1[1].here[index]),
+                    f64::from(q1[2].here[index]),
+                )
+            });
+            value = self.boundary_and_points(at, dc, q1_here, points, value);
             *b = value;
         }
     }
+
+    /// `value` (a cell's right-hand side so far) less its boundary patches' data fluxes
+    /// (`q1_here`: the first moment in the cell, `None` without one), plus the `points`'
+    /// shares of the cell, in the order the assembled vector adds them.
+    fn boundary_and_points(
+        &self,
+        at: [usize; 3],
+        dc: f32,
+        q1_here: Option<DVec3>,
+        points: &[PointShares],
+        mut value: f64,
+    ) -> f64 {
+        for p in self.patches(at, dc) {
+            let q = q1_here.map_or(0.0, |q| q.dot(p.normal));
+            value -= p.data_flux(self.boundaries.on(p.side), q);
+        }
+        let [nx, ny, _] = self.geometry.dims();
+        let cell = at[0] + nx * (at[1] + ny * at[2]);
+        for point in points {
+            for &(c, w) in &point.weights {
+                if c == cell {
+                    value += point.power * w;
+                }
+            }
+        }
+        value
+    }
 }
 
-/// One rank's rows of the box system ([`SlabSystem::block`]).
+/// One rank's rows of the box system ([`SlabSystem::block`]): the rows of a box of cells
+/// (a z-slab is the box of whole layers).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Block {
-    /// Its z-layers.
-    pub layers: Range<usize>,
-    /// Row i is the row of cell `layers.start · n_x n_y + i`; columns are cells of the
-    /// whole grid, ascending (the assembled matrix's entries, bit for bit).
+    /// Its cells along x, y and z. Row i is the i-th of them, x fastest, then y, then z.
+    pub cells: [Range<usize>; 3],
+    /// Its rows; columns are cells of the whole grid, ascending (the assembled matrix's
+    /// entries, bit for bit).
     pub matrix: CsMat<f64>,
     /// Its rows' right-hand side.
     pub rhs: Vec<f64>,
 }
 
-/// The fields a [`Block`] is built from: layers `first..` of D (cm), σ_a (1/cm) and the
-/// volumetric source q0 (W/cm³), each a whole number of z-layers, the same number.
+impl Block {
+    /// The whole grid's cell of each row, in row order.
+    pub fn grid_cells(&self, dims: [usize; 3]) -> impl Iterator<Item = usize> + '_ {
+        let [nx, ny, _] = dims;
+        let [x, y, z] = self.cells.clone();
+        z.flat_map(move |k| {
+            let x = x.clone();
+            y.clone()
+                .flat_map(move |j| x.clone().map(move |i| i + nx * (j + ny * k)))
+        })
+    }
+}
+
+/// The fields a [`Block`] is built from: D (cm), σ_a (1/cm) and the volumetric source q0
+/// (W/cm³) over a box of cells (`dims` cells from `origin`, x fastest), the same box for
+/// all three. It covers the block's cells and, for D, the cell beyond each face of the
+/// block that the grid has (a slab's fields are its layers and the layer on either side).
 #[derive(Debug, Clone, Copy)]
 pub struct BlockFields<'a> {
-    /// The grid layer the fields start at.
-    pub first: usize,
+    /// The fields' first cell along x, y and z.
+    pub origin: [usize; 3],
+    /// Their cells along x, y and z.
+    pub dims: [usize; 3],
     /// D per cell.
     pub diffusion: &'a [f32],
     /// σ_a per cell.
@@ -329,111 +374,113 @@ pub struct BlockFields<'a> {
 }
 
 impl SlabSystem {
-    /// The rows and right-hand side of z-layers `layers` (without a first moment), from
-    /// the fields of those layers and, for D, the layer on either side that the box has:
-    /// what one rank of a z-slab decomposition builds without the rest of the volume. The
-    /// coefficients are checked as [`DiffusionProblem::new`](crate::DiffusionProblem::new)
-    /// checks them (D finite and positive, σ_a finite and ≥ 0; q0 finite).
+    /// The rows and right-hand side of the box of cells `cells` (without a first moment),
+    /// from the fields of that box and, for D, the cell beyond each face that the grid has:
+    /// what one rank of a decomposition into boxes (or z-slabs) builds without the rest of
+    /// the volume. The coefficients are checked as
+    /// [`DiffusionProblem::new`](crate::DiffusionProblem::new) checks them (D finite and
+    /// positive over the box grown by a cell, σ_a finite and ≥ 0, q0 finite over the box).
     ///
     /// # Errors
-    /// [`DiffusionError::Invalid`] for fields that are not whole layers, do not cover the
-    /// layers the block reads, or hold a value the problem refuses (named by its cell).
+    /// [`DiffusionError::Invalid`] for an empty box or one beyond the grid, fields that do
+    /// not cover the cells the block reads or whose lengths are not their box's, or a
+    /// value the problem refuses (named by its cell).
     pub fn block(
         &self,
-        layers: Range<usize>,
+        cells: [Range<usize>; 3],
         fields: BlockFields<'_>,
         points: &[PointShares],
     ) -> Result<Block, DiffusionError> {
-        let [nx, ny, nz] = self.geometry.dims();
-        let slab = nx * ny;
+        let dims = self.geometry.dims();
+        let [nx, ny, _] = dims;
         let BlockFields {
-            first,
+            origin,
+            dims: held,
             diffusion: d,
             absorption: sigma_a,
             source: q0,
         } = fields;
-        let held = d.len() / slab.max(1);
-        let reads = layers.start.saturating_sub(1)..(layers.end + 1).min(nz);
-        if layers.is_empty()
-            || layers.end > nz
-            || d.len() % slab != 0
-            || sigma_a.len() != d.len()
-            || q0.len() != d.len()
-            || first > reads.start
-            || first + held < reads.end
-        {
+        let reads: [Range<usize>; 3] = std::array::from_fn(|a| {
+            cells[a].start.saturating_sub(1)..(cells[a].end + 1).min(dims[a])
+        });
+        let count = held.iter().try_fold(1usize, |n, &h| n.checked_mul(h));
+        let fits = (0..3).all(|a| {
+            !cells[a].is_empty()
+                && cells[a].end <= dims[a]
+                && origin[a] <= reads[a].start
+                && origin[a].saturating_add(held[a]) >= reads[a].end
+        });
+        if !fits || count != Some(d.len()) || sigma_a.len() != d.len() || q0.len() != d.len() {
             return Err(DiffusionError::Invalid(format!(
-                "fields of {}, {} and {} values from layer {first} for the rows of layers \
-                 {layers:?}, which read D on layers {reads:?} of slabs of {slab} cells",
+                "fields of {}, {} and {} values on {held:?} cells from {origin:?} for the \
+                 rows of cells {cells:?} of a {dims:?} grid, which read D on {reads:?}",
                 d.len(),
                 sigma_a.len(),
                 q0.len()
             )));
         }
-        let at = |k: usize| (k - first) * slab..(k - first + 1) * slab;
-        for k in reads.clone() {
-            for (i, &v) in d[at(k)].iter().enumerate() {
-                if !(v.is_finite() && v > 0.0) {
-                    return Err(DiffusionError::Invalid(format!(
-                        "diffusion coefficient {v} in cell {}: it must be finite and positive",
-                        k * slab + i
-                    )));
-                }
+        // A cell's place in the fields, and in the whole grid.
+        let at = |[i, j, k]: [usize; 3]| {
+            (i - origin[0]) + held[0] * ((j - origin[1]) + held[1] * (k - origin[2]))
+        };
+        let cell = |[i, j, k]: [usize; 3]| i + nx * (j + ny * k);
+        let each = |b: &[Range<usize>; 3]| {
+            let [x, y, z] = b.clone();
+            z.flat_map(move |k| {
+                let x = x.clone();
+                y.clone()
+                    .flat_map(move |j| x.clone().map(move |i| [i, j, k]))
+            })
+        };
+        for p in each(&reads) {
+            let v = d[at(p)];
+            if !(v.is_finite() && v > 0.0) {
+                return Err(DiffusionError::Invalid(format!(
+                    "diffusion coefficient {v} in cell {}: it must be finite and positive",
+                    cell(p)
+                )));
             }
         }
-        for k in layers.clone() {
-            for (i, (&s, &q)) in sigma_a[at(k)].iter().zip(&q0[at(k)]).enumerate() {
-                let cell = k * slab + i;
-                if !(s.is_finite() && s >= 0.0) {
-                    return Err(DiffusionError::Invalid(format!(
-                        "absorption {s} in cell {cell}: it must be finite and ≥ 0"
-                    )));
-                }
-                if !q.is_finite() {
-                    return Err(DiffusionError::Invalid(format!(
-                        "source {q} in cell {cell}: it must be finite"
-                    )));
-                }
+        for p in each(&cells) {
+            let (s, q) = (sigma_a[at(p)], q0[at(p)]);
+            if !(s.is_finite() && s >= 0.0) {
+                return Err(DiffusionError::Invalid(format!(
+                    "absorption {s} in cell {}: it must be finite and ≥ 0",
+                    cell(p)
+                )));
+            }
+            if !q.is_finite() {
+                return Err(DiffusionError::Invalid(format!(
+                    "source {q} in cell {}: it must be finite",
+                    cell(p)
+                )));
             }
         }
-        let rows = layers.len() * slab;
+        let rows: usize = cells.iter().map(ExactSizeIterator::len).product();
         let mut indptr = Vec::with_capacity(rows + 1);
         indptr.push(0);
         let mut indices = Vec::with_capacity(7 * rows);
         let mut data = Vec::with_capacity(7 * rows);
-        let mut rhs = vec![0.0f64; rows];
-        for (t, k) in layers.clone().enumerate() {
-            let window = Window {
-                below: (k > 0).then(|| &d[at(k - 1)]),
-                here: &d[at(k)],
-                above: (k + 1 < nz).then(|| &d[at(k + 1)]),
+        let mut rhs = Vec::with_capacity(rows);
+        let volume = self.geometry.cell_volume();
+        for p in each(&cells) {
+            let (c, dc) = (cell(p), d[at(p)]);
+            let d_near = |axis: usize, offset: isize| {
+                let mut q = p;
+                q[axis] = q[axis].wrapping_add_signed(offset.signum());
+                d[at(q)]
             };
-            let (sigma, here) = (&sigma_a[at(k)], window.here);
-            for index in 0..slab {
-                let cell = k * slab + index;
-                let position = [index % nx, index / nx, k];
-                let extra = self.extra(position, here[index], sigma[index]);
-                for &(offset, value) in self.row(position, &window, extra).entries() {
-                    indices.push((cell as isize + offset) as usize);
-                    data.push(value);
-                }
-                indptr.push(indices.len());
+            let extra = self.extra(p, dc, sigma_a[at(p)]);
+            for &(offset, value) in self.row_with(p, dc, d_near, extra).entries() {
+                indices.push((c as isize + offset) as usize);
+                data.push(value);
             }
-            self.rhs_slab(
-                k,
-                &q0[at(k)],
-                None,
-                &window,
-                points,
-                &mut rhs[t * slab..(t + 1) * slab],
-            );
+            indptr.push(indices.len());
+            let source = f64::from(q0[at(p)]) * f64::from(1.0f32) * volume;
+            rhs.push(self.boundary_and_points(p, dc, None, points, 0.0 + source));
         }
-        let matrix = CsMat::try_new((rows, slab * nz), indptr, indices, data)
+        let matrix = CsMat::try_new((rows, nx * ny * dims[2]), indptr, indices, data)
             .map_err(|e| DiffusionError::Invalid(format!("a block's rows: {}", e.3)))?;
-        Ok(Block {
-            layers,
-            matrix,
-            rhs,
-        })
+        Ok(Block { cells, matrix, rhs })
     }
 }

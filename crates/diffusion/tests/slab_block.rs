@@ -1,8 +1,8 @@
-//! `SlabSystem::block`, the rows one rank builds from its layers (and D's neighbouring
-//! layers) alone, against `DiffusionProblem::assemble` on the whole box: the same columns,
-//! value bits and right-hand side, for any run of layers, on grids with sides that are not
-//! multiples of 8, under every boundary condition, with point sources; and the fields it
-//! refuses.
+//! `SlabSystem::block`, the rows one rank builds from its box of cells (and D's cells
+//! beyond its faces) alone, against `DiffusionProblem::assemble` on the whole grid: the
+//! same columns, value bits and right-hand side, for any box (whole layers among them), on
+//! grids with sides that are not multiples of 8, under every boundary condition, with
+//! point sources; and the fields it refuses.
 
 use glam::DVec3;
 use lucent_diffusion::slab::{BlockFields, PointShares};
@@ -36,12 +36,13 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(40))]
 
     #[test]
-    fn a_blocks_rows_are_the_assembled_rows_of_its_layers(
+    fn a_blocks_rows_are_the_assembled_rows_of_its_cells(
         dims in (1usize..9, 1usize..9, 1usize..12),
-        cut in (0.0f64..1.0, 0.0f64..1.0),
+        cuts in proptest::collection::vec((0.0f64..1.0, 0.0f64..1.0), 3),
+        whole_layers in any::<bool>(),
         kinds in proptest::collection::vec(0u8..3, 6),
         seed in any::<u64>(),
-        margin in (0usize..3, 0usize..3),
+        margins in proptest::collection::vec((0usize..3, 0usize..3), 3),
     ) {
         let dims = [dims.0, dims.1, dims.2];
         let geometry =
@@ -62,19 +63,33 @@ proptest! {
         let system = SlabSystem::new(geometry, boundaries).unwrap();
         let shares: Vec<PointShares> =
             points.iter().map(|&(p, w)| system.point_weights(p, w).unwrap()).collect();
-        let nz = dims[2];
-        let slab = dims[0] * dims[1];
-        let (a, b) = ((cut.0 * nz as f64) as usize, (cut.1 * nz as f64) as usize);
-        let layers = a.min(b)..(a.max(b) + 1).min(nz);
-        // The fields from a few layers below the block's reads to a few above.
-        let first = layers.start.saturating_sub(1 + margin.0);
-        let end = (layers.end + 1 + margin.1).min(nz);
-        let part = |f: &[f32]| f[first * slab..end * slab].to_vec();
+        // A box of cells (whole layers in x and y half the time, as a z-slab), and fields
+        // from a few cells below its reads to a few above along each axis.
+        let cells: [std::ops::Range<usize>; 3] = std::array::from_fn(|a| {
+            let (u, v) = ((cuts[a].0 * dims[a] as f64) as usize, (cuts[a].1 * dims[a] as f64) as usize);
+            if whole_layers && a < 2 { 0..dims[a] } else { u.min(v)..(u.max(v) + 1).min(dims[a]) }
+        });
+        let origin: [usize; 3] =
+            std::array::from_fn(|a| cells[a].start.saturating_sub(1 + margins[a].0));
+        let end: [usize; 3] =
+            std::array::from_fn(|a| (cells[a].end + 1 + margins[a].1).min(dims[a]));
+        let held: [usize; 3] = std::array::from_fn(|a| end[a] - origin[a]);
+        let part = |f: &[f32]| -> Vec<f32> {
+            let mut out = Vec::new();
+            for k in origin[2]..end[2] {
+                for j in origin[1]..end[1] {
+                    let row = dims[0] * (j + dims[1] * k);
+                    out.extend_from_slice(&f[row + origin[0]..row + end[0]]);
+                }
+            }
+            out
+        };
         let (dp, sp, qp) = (part(&d), part(&sigma_a), part(&q0));
-        let fields = BlockFields { first, diffusion: &dp, absorption: &sp, source: &qp };
-        let block = system.block(layers.clone(), fields, &shares).unwrap();
-        prop_assert_eq!(block.layers.clone(), layers.clone());
-        for (i, cell) in (layers.start * slab..layers.end * slab).enumerate() {
+        let fields = BlockFields { origin, dims: held, diffusion: &dp, absorption: &sp, source: &qp };
+        let block = system.block(cells.clone(), fields, &shares).unwrap();
+        prop_assert_eq!(block.cells.clone(), cells.clone());
+        prop_assert_eq!(block.matrix.rows(), cells.iter().map(|r| r.len()).product::<usize>());
+        for (i, cell) in block.grid_cells(dims).enumerate() {
             let expected: Vec<(usize, u64)> = assembled.matrix.outer_view(cell).unwrap()
                 .iter().map(|(j, v)| (j, v.to_bits())).collect();
             let got: Vec<(usize, u64)> = block.matrix.outer_view(i).unwrap()
@@ -94,12 +109,13 @@ fn fields_that_miss_a_layer_or_hold_a_bad_value_are_refused_by_cell() {
     let good = |layers: usize| vec![0.5f32; layers * slab];
     let build = |first: usize, d: &[f32], s: &[f32], q: &[f32]| {
         let fields = BlockFields {
-            first,
+            origin: [0, 0, first],
+            dims: [3, 2, d.len() / slab],
             diffusion: d,
             absorption: s,
             source: q,
         };
-        system.block(2..4, fields, &[])
+        system.block([0..3, 0..2, 2..4], fields, &[])
     };
     // Layers 2–3 read D on 1–4: fields from layer 2 miss layer 1.
     let (d, s, q) = (good(3), good(3), good(3));
@@ -130,4 +146,48 @@ fn fields_that_miss_a_layer_or_hold_a_bad_value_are_refused_by_cell() {
     let (d, s, q) = (good(4), good(4), good(4));
     let block = build(1, &d, &s, &q).unwrap();
     assert_eq!(block.matrix.rows(), 2 * slab);
+}
+
+#[test]
+fn a_box_without_the_cells_beyond_its_faces_or_beyond_the_grid_is_refused() {
+    let geometry = GridGeometry::new([6, 5, 4], DVec3::ONE, DVec3::ZERO).unwrap();
+    let system =
+        SlabSystem::new(geometry, Boundaries::uniform(Condition::Robin { a: 2.0 })).unwrap();
+    let build = |cells: [std::ops::Range<usize>; 3], origin: [usize; 3], held: [usize; 3]| {
+        let v = vec![0.5f32; held.iter().product()];
+        let fields = BlockFields {
+            origin,
+            dims: held,
+            diffusion: &v,
+            absorption: &v,
+            source: &v,
+        };
+        system.block(cells, fields, &[]).map(|b| b.matrix.rows())
+    };
+    // Cells x 2..4, y 1..3, z 1..3 read D on x 1..5, y 0..4, z 0..4.
+    assert_eq!(build([2..4, 1..3, 1..3], [1, 0, 0], [4, 4, 4]), Ok(8));
+    // The x column below (x = 1) or above (x = 4) missing; y above (y = 3) missing.
+    for (origin, held) in [
+        ([2, 0, 0], [3, 4, 4]),
+        ([1, 0, 0], [3, 4, 4]),
+        ([1, 0, 0], [4, 3, 4]),
+    ] {
+        let e = build([2..4, 1..3, 1..3], origin, held).unwrap_err();
+        assert!(
+            e.to_string().contains("read D on"),
+            "{origin:?} {held:?}: {e}"
+        );
+    }
+    // Fields of another length than their box, an empty box, a box past the grid.
+    let v = vec![0.5f32; 10];
+    let fields = BlockFields {
+        origin: [0; 3],
+        dims: [6, 5, 4],
+        diffusion: &v,
+        absorption: &v,
+        source: &v,
+    };
+    assert!(system.block([0..6, 0..5, 0..4], fields, &[]).is_err());
+    assert!(build([2..2, 0..5, 0..4], [0; 3], [6, 5, 4]).is_err());
+    assert!(build([0..7, 0..5, 0..4], [0; 3], [6, 5, 4]).is_err());
 }

@@ -69,10 +69,10 @@ pub enum DecompositionError {
         /// The rank.
         rank: usize,
     },
-    /// The ranks' blocks of rows are not consecutive runs of layers from the grid's first
-    /// to its last (`iterate_block`).
+    /// The ranks' blocks of rows do not form a grid of boxes covering the grid in rank
+    /// order (`iterate_block`).
     #[error(
-        "rank {rank}'s block of rows does not follow on from the previous rank's (blocks must be consecutive runs of layers covering the grid)"
+        "rank {rank}'s block of rows is out of place: the ranks' blocks must be a grid of boxes covering the grid, box (i, j, k) on rank i + p_x (j + p_y k), cut in x at multiples of {NORM_RUN}"
     )]
     Blocks {
         /// The first rank whose block is out of place.
@@ -172,6 +172,35 @@ impl Boxes {
         Ok(Self { dims, cuts })
     }
 
+    /// The boxes between `cuts` along each axis: per axis the cut positions from 0 to the
+    /// grid's cells, ascending (so box (i, j, k) spans `cuts[0][i]..cuts[0][i + 1]` in x,
+    /// and so on), for grids cut unevenly (by the load of each part, or by how a volume
+    /// was written). The cuts inside x fall at multiples of [`NORM_RUN`], so that each of
+    /// the norm's runs lies in one box.
+    ///
+    /// # Errors
+    /// [`DecompositionError::BoxGrid`] for cuts that do not start at 0, end at the grid's
+    /// cells, or rise strictly, or an x cut inside the grid off a multiple of [`NORM_RUN`].
+    pub fn from_cuts(dims: [usize; 3], cuts: [Vec<usize>; 3]) -> Result<Self, DecompositionError> {
+        let fits = (0..3).all(|a| {
+            let c = &cuts[a];
+            c.len() >= 2
+                && c[0] == 0
+                && c[c.len() - 1] == dims[a]
+                && c.windows(2).all(|w| w[0] < w[1])
+                && (a > 0 || c[1..c.len() - 1].iter().all(|x| x.is_multiple_of(NORM_RUN)))
+        });
+        if !fits {
+            let grid: [usize; 3] = std::array::from_fn(|a| cuts[a].len().saturating_sub(1));
+            return Err(DecompositionError::BoxGrid {
+                grid,
+                dims,
+                ranks: grid.iter().product(),
+            });
+        }
+        Ok(Self { dims, cuts })
+    }
+
     /// The grid of `ranks` boxes over `dims` with the least cut area (the halo each sweep
     /// sends), ties going to more cuts in z, then in y (boxes of whole x-lines and layers
     /// send contiguous runs). Like `MPI_Dims_create`, but weighing the grid's own shape.
@@ -228,9 +257,33 @@ impl Boxes {
 
     /// The cells of box `rank` along each axis.
     pub fn bounds(&self, rank: usize) -> [std::ops::Range<usize>; 3] {
-        let [px, py, _] = self.grid();
-        let at = [rank % px, (rank / px) % py, rank / (px * py)];
+        let at = self.position(rank);
         std::array::from_fn(|a| self.cuts[a][at[a]]..self.cuts[a][at[a] + 1])
+    }
+
+    /// Box `rank`'s place (i, j, k) in the grid of boxes.
+    fn position(&self, rank: usize) -> [usize; 3] {
+        let [px, py, _] = self.grid();
+        [rank % px, (rank / px) % py, rank / (px * py)]
+    }
+
+    /// The boxes that touch box `rank` at a face, edge or corner, ascending.
+    fn adjacent(&self, rank: usize) -> Vec<usize> {
+        let [px, py, pz] = self.grid();
+        let [i, j, k] = self.position(rank);
+        let near = |c: usize, p: usize| c.saturating_sub(1)..(c + 2).min(p);
+        let mut out = Vec::new();
+        for z in near(k, pz) {
+            for y in near(j, py) {
+                for x in near(i, px) {
+                    let q = x + px * (y + py * z);
+                    if q != rank {
+                        out.push(q);
+                    }
+                }
+            }
+        }
+        out
     }
 
     /// The box (rank) holding cell `c` (flat index, x fastest).
@@ -325,25 +378,6 @@ impl LocalRows {
             .sum();
         b[i] - ax
     }
-}
-
-/// The global columns `a`'s rows `rows` read that `keep` selects, ascending, once each.
-fn halo_of(
-    a: &CsMat<f64>,
-    rows: std::ops::Range<usize>,
-    keep: impl Fn(usize) -> bool,
-) -> Vec<usize> {
-    let mut out: Vec<usize> = rows
-        .flat_map(|i| {
-            a.outer_view(i)
-                .into_iter()
-                .flat_map(|r| r.indices().to_vec())
-        })
-        .filter(|&j| keep(j))
-        .collect();
-    out.sort_unstable();
-    out.dedup();
-    out
 }
 
 /// Groups sorted (rank, value) pairs by rank.
@@ -557,26 +591,29 @@ pub struct BlockSteady {
     pub stop_reason: StopReason,
 }
 
-/// [`iterate`] from the rows of a medium that fills the box, each rank holding only its
-/// own: `block` is this rank's layers' rows and right-hand side
-/// (`lucent_diffusion::SlabSystem::block`, built from its layers of the coefficients and
-/// D's layer on either side), `dims` the grid's cells. The blocks of ranks 0, 1, … must
-/// be consecutive runs of layers from the first to the last. No rank holds more than its
-/// rows, four vectors of its layers and a halo layer each side; the ranks learn what to
-/// send each other from one exchange of the columns their rows read, and agree on the
-/// checks (the diagonal, the FTCS bound from the largest Gershgorin sum of all rows, a
-/// stencil that reaches no further than the neighbours, a missing layer) before the first
-/// sweep, so a bad block stops every rank with the same error. On return each rank holds
-/// its layers of φ (zeroed, on every rank, if any is not finite, as the serial rule does);
-/// they and the history are the bits of `steady::iterate` on the assembled whole.
+/// [`iterate_on`] from the rows of a medium that fills the box, each rank holding only its
+/// own: `block` is this rank's box of cells' rows and right-hand side
+/// (`lucent_diffusion::SlabSystem::block`, built from its cells of the coefficients and
+/// D's cells beyond its faces), `dims` the grid's cells. The ranks' boxes must form a grid
+/// of boxes covering the grid, box (i, j, k) on rank i + p_x (j + p_y k) and the x cuts at
+/// multiples of [`NORM_RUN`] (z-slabs, consecutive runs of whole layers on ranks 0, 1, …,
+/// are the grid 1 × 1 × P; any cuts, not only [`Boxes::new`]'s). No rank holds more than
+/// its rows, four vectors of its cells and their halo. The ranks learn the grid of boxes
+/// from one gather of their bounds, and what to send each other from one exchange, with
+/// each box that touches theirs, of the columns their rows read; they agree on the checks
+/// (the diagonal, the FTCS bound from the largest Gershgorin sum of all rows, a stencil
+/// that reaches no further than the touching boxes) before the first sweep, so a bad
+/// block stops every rank with the same error. On return each rank holds φ of its cells
+/// (zeroed, on every rank, if any is not finite, as the serial rule does); they and the
+/// history are the bits of `steady::iterate` on the assembled whole.
 ///
 /// # Errors
 /// [`DecompositionError::Scheme`] for what the serial iteration refuses (a non-positive
 /// diagonal, an FTCS step beyond the bound, a damping outside (0, 1]);
-/// [`DecompositionError::Blocks`] for blocks that are not consecutive runs of layers
-/// covering the grid; [`DecompositionError::StencilTooWide`] for rows that read past the
-/// neighbouring blocks (or rows and right-hand side that do not fit the block's layers); a
-/// rank that left the protocol.
+/// [`DecompositionError::Blocks`] for blocks that do not form such a grid of boxes;
+/// [`DecompositionError::StencilTooWide`] for rows that read past the touching boxes (or
+/// rows and right-hand side that do not fit the block's cells); a rank that left the
+/// protocol.
 pub fn iterate_block(
     block: &lucent_diffusion::slab::Block,
     dims: [usize; 3],
@@ -584,114 +621,135 @@ pub fn iterate_block(
     settings: &SteadySettings,
     comm: &(impl Communicator + ?Sized),
 ) -> Result<BlockSteady, DecompositionError> {
-    let rank = comm.rank();
-    let nx = dims[0].max(1);
-    let slab = (dims[0] * dims[1]).max(1);
+    let (rank, size) = (comm.rank(), comm.size());
     let a = &block.matrix;
     let own = a.rows();
-    let u0 = block.layers.start * slab;
-    let u1 = u0 + own;
-    let lengths_fit = own == block.layers.len() * slab && block.rhs.len() == own;
-    // The columns this block reads beyond its rows, as global indices.
-    let below = halo_of(a, 0..own, |j| j < u0);
-    let above = halo_of(a, 0..own, |j| j >= u1);
-    let encode = |v: &[usize]| -> Vec<f64> { v.iter().map(|&j| j as f64).collect() };
-    // Tell each neighbour what this block reads of it; learn what it reads of this one.
-    let (wants_below, wants_above) = {
-        let (b, a, ()) = exchange(comm, &encode(&below), &encode(&above), || ());
-        (b, a)
+    let grid_cells: usize = dims.iter().product();
+    let in_grid = (0..3).all(|k| block.cells[k].start < block.cells[k].end)
+        && (0..3).all(|k| block.cells[k].end <= dims[k]);
+    let lengths_fit = in_grid
+        && own
+            == block
+                .cells
+                .iter()
+                .map(ExactSizeIterator::len)
+                .product::<usize>()
+        && block.rhs.len() == own
+        && a.cols() == grid_cells
+        && a.is_csr();
+    let cells: Vec<usize> = if lengths_fit {
+        block.grid_cells(dims).collect()
+    } else {
+        Vec::new()
     };
-    let decode = |v: &[f64]| -> Option<Vec<usize>> {
-        v.iter()
-            .map(|&j| {
-                let whole = j >= 0.0 && j.fract() == 0.0;
-                let j = j as usize;
-                (whole && (u0..u1).contains(&j)).then(|| j - u0)
-            })
-            .collect()
-    };
-    let (send_below, send_above) = (decode(&wants_below), decode(&wants_above));
-    // Reads past the ends, or requests for cells this block does not hold, or holes
-    // between neighbouring blocks: the blocks do not join up.
-    let reads_past = (rank == 0 && !below.is_empty())
-        || (rank + 1 == comm.size() && !above.is_empty())
-        || below.first().is_some_and(|&j| j + slab < u0)
-        || above.last().is_some_and(|&j| j >= u1 + slab);
-    let too_wide = !lengths_fit || reads_past || send_below.is_none() || send_above.is_none();
-    let diagonal: Vec<f64> = (0..own)
-        .map(|i| a.get(i, u0 + i).copied().unwrap_or(0.0))
+    let diagonal: Vec<f64> = cells
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| a.get(i, c).copied().unwrap_or(0.0))
         .collect();
-    let layer_count = block.layers.len() as f64;
-    let agreed = comm.all_gather(&[
-        f64::from(u8::from(too_wide)),
+    // Every rank's bounds, whether its rows fit them, a non-positive diagonal, and its
+    // largest Gershgorin sum.
+    let mut local: Vec<f64> = block
+        .cells
+        .iter()
+        .flat_map(|r| [r.start as f64, r.end as f64])
+        .collect();
+    local.extend([
+        f64::from(u8::from(!lengths_fit)),
         f64::from(u8::from(diagonal.iter().any(|&d| d <= 0.0))),
         gershgorin(a),
-        block.layers.start as f64,
-        layer_count,
     ]);
-    if agreed.len() != 5 * comm.size() {
+    const WORDS: usize = 9;
+    let agreed = comm.all_gather(&local);
+    if agreed.len() != WORDS * size {
         return Err(DecompositionError::Protocol { rank });
     }
-    let flags: Vec<&[f64]> = agreed.chunks(5).collect();
-    // Consecutive blocks from the first layer to the last.
-    let mut next = 0.0;
-    for (r, f) in flags.iter().enumerate() {
-        if f[3] != next || f[4] < 1.0 {
-            return Err(DecompositionError::Blocks { rank: r });
-        }
-        next = f[3] + f[4];
-    }
-    if next != (a.cols() / slab) as f64 {
-        return Err(DecompositionError::Blocks {
-            rank: comm.size() - 1,
-        });
-    }
-    if let Some(r) = flags.iter().position(|f| f[0] != 0.0) {
+    let flags: Vec<&[f64]> = agreed.chunks(WORDS).collect();
+    let boxes = boxes_of(&flags, dims)?;
+    if let Some(r) = flags.iter().position(|f| f[6] != 0.0) {
         return Err(DecompositionError::StencilTooWide { rank: r });
     }
-    if flags.iter().any(|f| f[1] != 0.0) {
+    if flags.iter().any(|f| f[7] != 0.0) {
         return Err(ExplicitError::Invalid("the system has a non-positive diagonal".into()).into());
     }
-    let largest = flags.iter().map(|f| f[2]).fold(0.0, f64::max);
+    let largest = flags.iter().map(|f| f[8]).fold(0.0, f64::max);
     let scale = scale_rows(&diagonal, largest, iteration, settings.allow_unstable)?;
-    // x = [owned | halo below (rank − 1's) | halo above (rank + 1's)].
-    let (nb, na) = (below.len(), above.len());
-    let rows = LocalRows::new(a, 0..own, |j| {
-        if j < u0 {
-            (own + below.binary_search(&j).unwrap_or(0), true)
-        } else if j < u1 {
-            (j - u0, false)
-        } else {
-            (own + nb + above.binary_search(&j).unwrap_or(0), true)
+    // The columns read beyond this box, by (owning rank, column), and the boxes that touch
+    // this one: the only ones a row may read.
+    let place = |j: usize| cells.binary_search(&j).ok();
+    let mut halo: Vec<(usize, usize)> = a
+        .indices()
+        .iter()
+        .filter(|&&j| place(j).is_none())
+        .map(|&j| (boxes.rank_of(j), j))
+        .collect();
+    halo.sort_unstable();
+    halo.dedup();
+    let adjacent = boxes.adjacent(rank);
+    let mut too_wide = halo.iter().any(|(q, _)| adjacent.binary_search(q).is_err());
+    // Tell each touching box what this one reads of it; learn what it reads of this one.
+    let requests: Vec<Vec<f64>> = adjacent
+        .iter()
+        .map(|&q| {
+            halo.iter()
+                .filter(|(owner, _)| *owner == q)
+                .map(|&(_, j)| j as f64)
+                .collect()
+        })
+        .collect();
+    let outgoing: Vec<(usize, &[f64])> = adjacent
+        .iter()
+        .zip(&requests)
+        .map(|(&q, v)| (q, v.as_slice()))
+        .collect();
+    let (wanted, ()) = exchange_among(comm, &outgoing, &adjacent, || ());
+    let mut sends = Vec::new();
+    for (&q, asked) in adjacent.iter().zip(&wanted) {
+        let at: Option<Vec<usize>> = asked
+            .iter()
+            .map(|&j| {
+                let whole = j >= 0.0 && j.fract() == 0.0;
+                whole.then(|| place(j as usize)).flatten()
+            })
+            .collect();
+        match at {
+            Some(at) if !at.is_empty() => sends.push((q, at)),
+            Some(_) => {}
+            None => too_wide = true,
+        }
+    }
+    let all = comm.all_gather(&[f64::from(u8::from(too_wide))]);
+    if all.len() != size {
+        return Err(DecompositionError::Protocol { rank });
+    }
+    if let Some(r) = all.iter().position(|&f| f != 0.0) {
+        return Err(DecompositionError::StencilTooWide { rank: r });
+    }
+    // x = [owned | halo grouped by owning rank, ascending].
+    let rows = LocalRows::new(a, 0..own, |j| match place(j) {
+        Some(i) => (i, false),
+        None => {
+            let at = halo.binary_search(&(boxes.rank_of(j), j)).unwrap_or(0);
+            (own + at, true)
         }
     });
-    let neighbours = |low: Vec<usize>, high: Vec<usize>| {
-        [(rank.wrapping_sub(1), low), (rank + 1, high)]
-            .into_iter()
-            .filter(|(_, v)| !v.is_empty())
-            .collect::<Vec<_>>()
-    };
-    let sends = neighbours(
-        send_below.unwrap_or_default(),
-        send_above.unwrap_or_default(),
-    );
-    let receives = [(rank.wrapping_sub(1), nb), (rank + 1, na)]
+    let receives = by_rank(&halo)
         .into_iter()
-        .filter(|&(_, count)| count > 0)
+        .map(|(q, js)| (q, js.len()))
         .collect();
     let part = Part {
         own,
-        halo: nb + na,
+        halo: halo.len(),
         rows,
         sends,
         receives,
-        runs: norm_runs(u0..u1, nx),
+        runs: norm_runs(cells.iter().copied(), dims[0]),
     };
     let (mut fluence, residuals, stop_reason) = sweep(&part, &block.rhs, &scale, settings, comm)?;
     // The serial rule: any non-finite φ anywhere zeroes all of it.
     let finite = f64::from(u8::from(fluence.iter().all(|v| v.is_finite())));
     let all = comm.all_gather(&[finite]);
-    if all.len() != comm.size() {
+    if all.len() != size {
         return Err(DecompositionError::Protocol { rank });
     }
     if all.contains(&0.0) {
@@ -702,6 +760,45 @@ pub fn iterate_block(
         residuals,
         stop_reason,
     })
+}
+
+/// The grid of boxes the ranks' gathered bounds (the first six words of each rank's
+/// entry: x, y and z as start, end) form, or the first rank whose box is out of place.
+fn boxes_of(bounds: &[&[f64]], dims: [usize; 3]) -> Result<Boxes, DecompositionError> {
+    let whole = |v: f64| (v >= 0.0 && v.fract() == 0.0).then_some(v as usize);
+    let mut cuts: [Vec<usize>; 3] = Default::default();
+    for (a, axis) in cuts.iter_mut().enumerate() {
+        for (r, b) in bounds.iter().enumerate() {
+            axis.push(whole(b[2 * a]).ok_or(DecompositionError::Blocks { rank: r })?);
+        }
+        axis.push(dims[a]);
+        axis.sort_unstable();
+        axis.dedup();
+    }
+    let out_of_place = |r: usize| DecompositionError::Blocks { rank: r };
+    // Cuts that are not a grid's: blame the first box that starts off a multiple of the
+    // norm's run in x (or else the first).
+    let off_run = || {
+        let r = bounds
+            .iter()
+            .position(|b| whole(b[0]).is_some_and(|x| !x.is_multiple_of(NORM_RUN) && x != dims[0]));
+        out_of_place(r.unwrap_or(0))
+    };
+    let boxes = Boxes::from_cuts(dims, cuts).map_err(|_| off_run())?;
+    if boxes.ranks() != bounds.len() {
+        return Err(out_of_place(bounds.len().min(boxes.ranks())));
+    }
+    for (r, b) in bounds.iter().enumerate() {
+        let expected = boxes.bounds(r);
+        let agrees = (0..3).all(|a| {
+            whole(b[2 * a]) == Some(expected[a].start)
+                && whole(b[2 * a + 1]) == Some(expected[a].end)
+        });
+        if !agrees {
+            return Err(out_of_place(r));
+        }
+    }
+    Ok(boxes)
 }
 
 /// The FTCS step bound of the system whose rows the ranks' blocks hold, on every rank:

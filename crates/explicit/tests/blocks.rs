@@ -1,9 +1,11 @@
 //! `ranks::iterate_block`: FTCS and Jacobi from rows each rank builds for its own layers
-//! (`SlabSystem::block`, no rank holding the whole system) give the bits of the serial
-//! iteration on the assembled whole, fluence, history and stop reason, on 1 to 5 ranks,
-//! for heterogeneous media filling boxes whose sides are not multiples of 8, under Robin,
-//! Dirichlet and Neumann faces, with a point source and a volumetric one; the checks the
-//! ranks agree on before the first sweep stop every rank alike.
+//! or box of cells (`SlabSystem::block`, no rank holding the whole system) give the bits
+//! of the serial iteration on the assembled whole, fluence, history and stop reason, on 1
+//! to 5 slabs and on grids of up to 12 boxes (even and uneven cuts), for heterogeneous
+//! media filling boxes whose sides are not multiples of 8, under Robin, Dirichlet and
+//! Neumann faces, with a point source and a volumetric one; the checks the ranks agree on
+//! before the first sweep (blocks out of place, rows reading past the touching boxes, the
+//! FTCS bound) stop every rank alike.
 
 use glam::DVec3;
 use lucent_core::ranks::{Communicator, Threads};
@@ -13,7 +15,7 @@ use lucent_diffusion::{
     Boundaries, CellGeometry, Condition, DiffusionProblem, SlabSystem, Sources,
 };
 use lucent_explicit::ExplicitError;
-use lucent_explicit::ranks::{BlockSteady, DecompositionError, iterate_block};
+use lucent_explicit::ranks::{BlockSteady, Boxes, DecompositionError, iterate_block};
 use lucent_explicit::steady::{Iteration, SteadySettings, ftcs_limit, iterate as serial};
 use lucent_grid::GridGeometry;
 
@@ -68,23 +70,44 @@ fn medium(dims: [usize; 3], faces: [Condition; 6], seed: usize) -> Medium {
 /// and one each side only.
 fn block(m: &Medium, rank: usize, ranks: usize) -> Block {
     let [nx, ny, nz] = m.geometry.dims();
-    let slab = nx * ny;
-    let layers = rank * nz / ranks..(rank + 1) * nz / ranks;
-    let (first, end) = (layers.start.saturating_sub(1), (layers.end + 1).min(nz));
-    let part = |f: &[f32]| f[first * slab..end * slab].to_vec();
+    cells_block(
+        m,
+        [0..nx, 0..ny, rank * nz / ranks..(rank + 1) * nz / ranks],
+        true,
+    )
+}
+
+/// The block of the box `cells`, built from the fields of that box grown by a cell (where
+/// the grid has one) only, with the point source or without.
+fn cells_block(m: &Medium, cells: [std::ops::Range<usize>; 3], point: bool) -> Block {
+    let dims = m.geometry.dims();
+    let origin: [usize; 3] = std::array::from_fn(|a| cells[a].start.saturating_sub(1));
+    let end: [usize; 3] = std::array::from_fn(|a| (cells[a].end + 1).min(dims[a]));
+    let part = |f: &[f32]| -> Vec<f32> {
+        let mut out = Vec::new();
+        for k in origin[2]..end[2] {
+            for j in origin[1]..end[1] {
+                let row = dims[0] * (j + dims[1] * k);
+                out.extend_from_slice(&f[row + origin[0]..row + end[0]]);
+            }
+        }
+        out
+    };
     let (d, s, q) = (part(&m.d), part(&m.sigma_a), part(&m.q0));
     let system = SlabSystem::new(m.geometry, m.boundaries).unwrap();
     let shares: Vec<PointShares> = system
         .point_weights(m.point.0, m.point.1)
         .into_iter()
+        .filter(|_| point)
         .collect();
     let fields = BlockFields {
-        first,
+        origin,
+        dims: std::array::from_fn(|a| end[a] - origin[a]),
         diffusion: &d,
         absorption: &s,
         source: &q,
     };
-    system.block(layers, fields, &shares).unwrap()
+    system.block(cells, fields, &shares).unwrap()
 }
 
 /// The whole system, assembled as one process does.
@@ -208,7 +231,10 @@ fn blocks_that_do_not_join_up_stop_every_rank_with_the_same_error() {
         &settings(1e-6, 100),
     );
     for out in outs {
-        assert_eq!(out.unwrap_err(), DecompositionError::Blocks { rank: 1 });
+        assert!(
+            matches!(out.unwrap_err(), DecompositionError::Blocks { .. }),
+            "a hole between the slabs"
+        );
     }
     // Both ranks build the first half: the grid's upper half is missing.
     let outs = on_ranks(2, |_| block(&m, 0, 2), dims, jacobi, &settings(1e-6, 100));
@@ -221,19 +247,8 @@ fn blocks_that_do_not_join_up_stop_every_rank_with_the_same_error() {
 }
 
 fn shifted(m: &Medium, layers: std::ops::Range<usize>) -> Block {
-    let [nx, ny, nz] = m.geometry.dims();
-    let slab = nx * ny;
-    let (first, end) = (layers.start - 1, (layers.end + 1).min(nz));
-    let part = |f: &[f32]| f[first * slab..end * slab].to_vec();
-    let (d, s, q) = (part(&m.d), part(&m.sigma_a), part(&m.q0));
-    let system = SlabSystem::new(m.geometry, m.boundaries).unwrap();
-    let fields = BlockFields {
-        first,
-        diffusion: &d,
-        absorption: &s,
-        source: &q,
-    };
-    system.block(layers, fields, &[]).unwrap()
+    let [nx, ny, _] = m.geometry.dims();
+    cells_block(m, [0..nx, 0..ny, layers], false)
 }
 
 #[test]
@@ -298,4 +313,162 @@ fn an_ftcs_step_beyond_the_whole_systems_bound_is_refused_on_every_rank() {
         fluence.extend(out.fluence);
     }
     assert_eq!(bits(&fluence), bits(&reference.fluence));
+}
+
+/// The ranks' φ, each of its block's cells, put back in the grid's order.
+fn scatter(blocks: &[Block], fluence: &[Vec<f64>], dims: [usize; 3]) -> Vec<f64> {
+    let mut out = vec![f64::NAN; dims.iter().product()];
+    for (b, phi) in blocks.iter().zip(fluence) {
+        for (c, &v) in b.grid_cells(dims).zip(phi) {
+            out[c] = v;
+        }
+    }
+    out
+}
+
+#[test]
+fn boxes_even_and_uneven_give_the_serial_bits_of_the_assembled_whole() {
+    let robin = Condition::Robin { a: 2.341 };
+    let faces = [
+        Condition::Dirichlet { value: 0.1 },
+        robin,
+        Condition::Neumann { flux: 0.0 },
+        robin,
+        robin,
+        Condition::Neumann { flux: -0.1 },
+    ];
+    // 19 cells in x: three runs of 8 (the last short), so up to three boxes along x.
+    let dims = [19, 7, 9];
+    let m = medium(dims, faces, 3);
+    let system = assembled(&m);
+    let volume = m.geometry.cell_volume();
+    let grids: Vec<Boxes> = [
+        [1, 1, 1],
+        [2, 1, 1],
+        [1, 2, 2],
+        [3, 1, 2],
+        [2, 3, 2],
+        [3, 2, 2],
+    ]
+    .into_iter()
+    .map(|g| Boxes::new(dims, g).unwrap())
+    .chain([
+        // Uneven cuts: a thin box in every axis, the last x box a short run.
+        Boxes::from_cuts(dims, [vec![0, 16, 19], vec![0, 1, 7], vec![0, 8, 9]]).unwrap(),
+        Boxes::from_cuts(dims, [vec![0, 8, 19], vec![0, 7], vec![0, 1, 2, 9]]).unwrap(),
+    ])
+    .collect();
+    for iteration in [
+        Iteration::Ftcs {
+            time_step: 0.9 * ftcs_limit(&system, volume),
+            cell_volume: volume,
+        },
+        Iteration::Jacobi { omega: 0.9 },
+    ] {
+        let settings = settings(1e-6, 20_000);
+        let reference = serial(&system, dims, iteration, &settings).unwrap();
+        assert!(reference.stop_reason.is_converged(), "{iteration:?}");
+        for boxes in &grids {
+            let blocks: Vec<Block> = (0..boxes.ranks())
+                .map(|r| cells_block(&m, boxes.bounds(r), true))
+                .collect();
+            let outs = on_ranks(
+                boxes.ranks(),
+                |r| blocks[r].clone(),
+                dims,
+                iteration,
+                &settings,
+            );
+            let mut fluence = Vec::new();
+            for (rank, out) in outs.into_iter().enumerate() {
+                let out = out.unwrap();
+                let case = format!("{:?} {iteration:?}, rank {rank}", boxes.grid());
+                assert_eq!(out.stop_reason, reference.stop_reason, "{case}");
+                assert_eq!(bits(&out.residuals), bits(&reference.residuals), "{case}");
+                fluence.push(out.fluence);
+            }
+            assert_eq!(
+                bits(&scatter(&blocks, &fluence, dims)),
+                bits(&reference.fluence),
+                "{:?} {iteration:?}",
+                boxes.grid()
+            );
+        }
+    }
+}
+
+#[test]
+fn boxes_out_of_place_or_rows_reading_past_the_touching_boxes_stop_every_rank() {
+    let dims = [19, 6, 8];
+    let m = medium(dims, [Condition::Robin { a: 2.0 }; 6], 2);
+    let jacobi = Iteration::Jacobi { omega: 1.0 };
+    let run = |blocks: &[Block]| {
+        on_ranks(
+            blocks.len(),
+            |r| blocks[r].clone(),
+            dims,
+            jacobi,
+            &settings(1e-6, 50),
+        )
+    };
+    // An x cut off a multiple of 8 (a norm's run would straddle two ranks): rank 1 is
+    // out of place.
+    let off = [
+        cells_block(&m, [0..5, 0..6, 0..8], true),
+        cells_block(&m, [5..19, 0..6, 0..8], true),
+    ];
+    for out in run(&off) {
+        assert_eq!(out.unwrap_err(), DecompositionError::Blocks { rank: 1 });
+    }
+    // Boxes in the wrong rank order (y before x).
+    let boxes = Boxes::new(dims, [2, 2, 1]).unwrap();
+    let swapped: Vec<Block> = [0, 2, 1, 3]
+        .into_iter()
+        .map(|r| cells_block(&m, boxes.bounds(r), true))
+        .collect();
+    for out in run(&swapped) {
+        assert!(matches!(
+            out.unwrap_err(),
+            DecompositionError::Blocks { .. }
+        ));
+    }
+    // Overlapping boxes, and boxes that leave cells to no one.
+    let overlap = [
+        cells_block(&m, [0..8, 0..6, 0..8], true),
+        cells_block(&m, [0..19, 0..6, 0..8], true),
+    ];
+    let hole = [
+        cells_block(&m, [0..8, 0..6, 0..8], true),
+        cells_block(&m, [8..19, 0..6, 0..7], true),
+    ];
+    for blocks in [&overlap[..], &hole[..]] {
+        for out in run(blocks) {
+            assert!(matches!(
+                out.unwrap_err(),
+                DecompositionError::Blocks { .. }
+            ));
+        }
+    }
+    // Three slabs; rank 0's first row also reads a cell of rank 2's (not a touching box):
+    // every rank stops, naming rank 0.
+    let nx_ny = dims[0] * dims[1];
+    let mut far = [0..3, 3..5, 5..8].map(|l| cells_block(&m, [0..19, 0..6, l], true));
+    let a = &far[0].matrix;
+    let (mut indptr, mut indices, mut data) = (
+        a.indptr().to_proper().to_vec(),
+        a.indices().to_vec(),
+        a.data().to_vec(),
+    );
+    indices.insert(indptr[1], 6 * nx_ny);
+    data.insert(indptr[1], -1e-3);
+    for p in &mut indptr[1..] {
+        *p += 1;
+    }
+    far[0].matrix = sprs::CsMat::new(a.shape(), indptr, indices, data);
+    for out in run(&far) {
+        assert_eq!(
+            out.unwrap_err(),
+            DecompositionError::StencilTooWide { rank: 0 }
+        );
+    }
 }

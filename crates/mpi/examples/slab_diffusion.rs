@@ -1,14 +1,14 @@
 //! Diffusion through a volume file on ranks, no rank holding the whole volume or system:
-//! each rank reads its z-layers of the volume and one on either side (positioned reads of
-//! `.raw`, `.npy` or raw-encoded NRRD), builds its layers' rows
-//! (`lucent_diffusion::SlabSystem::block`), iterates Jacobi or FTCS to the steady state
-//! with its neighbours (`lucent_explicit::ranks::iterate_block`), and writes its layers of
-//! the fluence into one `.npy` by positioned writes.
+//! each rank reads its z-layers (or its box of cells, `--boxes`) of the volume and the
+//! cells beyond its faces (positioned reads of `.raw`, `.npy` or raw-encoded NRRD), builds
+//! its cells' rows (`lucent_diffusion::SlabSystem::block`), iterates Jacobi or FTCS to the
+//! steady state with its neighbours (`lucent_explicit::ranks::iterate_block`), and writes
+//! its cells of the fluence into one `.npy` by positioned writes.
 //!
 //! ```sh
 //! cargo build --profile examples -p lucent-mpi --features mpi --example slab_diffusion
 //! mpirun -n 4 target/examples/examples/slab_diffusion "$LUCENT_DATA/nucleon.nrrd" \
-//!     --scale 0.05 -o fluence.npy
+//!     --scale 0.05 --boxes auto -o fluence.npy
 //! ```
 //!
 //! The medium fills the volume's box (its cells, its spacing as the file gives it, in cm):
@@ -18,6 +18,8 @@
 //! default its centre); Robin faces with boundary factor `--robin A` (default 1, index
 //! matched). `--method jacobi` (default, ω = 1) or `ftcs` (0.9 of the bound over every
 //! rank's rows); `--tolerance` (default 1e-4) and `--max-sweeps` (default 20 000).
+//! `--boxes auto` (the grid of boxes with the least cut area, `ranks::Boxes::auto`) or
+//! `--boxes PX,PY,PZ` splits the volume into boxes instead of z-slabs.
 //! `--check`: every rank also reads the whole volume, assembles the whole system, iterates
 //! it serially and compares its layers and the history (bits; exit status 1 if they
 //! differ), for CI. Without the `mpi` feature, `--ranks N` in-process ranks.
@@ -31,9 +33,9 @@ use lucent_diffusion::slab::{BlockFields, PointShares};
 use lucent_diffusion::{
     Boundaries, CellGeometry, Condition, DiffusionProblem, SlabSystem, Sources,
 };
-use lucent_explicit::ranks::{block_ftcs_limit, iterate_block};
+use lucent_explicit::ranks::{Boxes, block_ftcs_limit, iterate_block};
 use lucent_explicit::steady::{Iteration, SteadySettings, ftcs_limit, iterate};
-use lucent_grid::io::layers::{create_npy, write_npy_layers};
+use lucent_grid::io::layers::{create_npy, write_npy_region};
 use lucent_grid::io::raw::RawLayout;
 use lucent_mpi::Communicator;
 
@@ -52,6 +54,8 @@ struct Args {
     tolerance: f64,
     max_sweeps: usize,
     check: bool,
+    /// `--boxes`: `None` for z-slabs, `Some(None)` for `auto`, or the grid of boxes.
+    boxes: Option<Option<[usize; 3]>>,
 }
 
 fn parse(args: &[String]) -> Result<Args, String> {
@@ -62,7 +66,7 @@ fn parse(args: &[String]) -> Result<Args, String> {
     let volume = args.first().filter(|a| !a.starts_with('-')).ok_or(
         "usage: slab_diffusion VOLUME -o OUT.npy [--raw NX,NY,NZ,TYPE] [--scale S] \
          [--background B] [--albedo A] [--robin A] [--source X,Y,Z] [--method jacobi|ftcs] \
-         [--tolerance T] [--max-sweeps N] [--check]",
+         [--tolerance T] [--max-sweeps N] [--boxes auto|PX,PY,PZ] [--check]",
     )?;
     let source = match value("--source") {
         Some(text) => match slabs::numbers(&text)?[..] {
@@ -75,6 +79,16 @@ fn parse(args: &[String]) -> Result<Args, String> {
         None | Some("jacobi") => false,
         Some("ftcs") => true,
         Some(other) => return Err(format!("--method {other}: jacobi or ftcs")),
+    };
+    let boxes = match value("--boxes").as_deref() {
+        None => None,
+        Some("auto") => Some(None),
+        Some(text) => match slabs::numbers(text)?[..] {
+            [x, y, z] if [x, y, z].iter().all(|v| *v >= 1.0 && v.fract() == 0.0) => {
+                Some(Some([x as usize, y as usize, z as usize]))
+            }
+            _ => return Err(format!("--boxes {text}: auto or PX,PY,PZ")),
+        },
     };
     let albedo = number("--albedo", 0.9)?;
     if !(0.0..1.0).contains(&albedo) {
@@ -93,6 +107,7 @@ fn parse(args: &[String]) -> Result<Args, String> {
         tolerance: number("--tolerance", 1e-4)?,
         max_sweeps: number("--max-sweeps", 20_000.0)? as usize,
         check: args.iter().any(|a| a == "--check"),
+        boxes,
     })
 }
 
@@ -113,18 +128,40 @@ fn coefficients(args: &Args, samples: &[f32]) -> (Vec<f32>, Vec<f32>) {
 fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String> {
     let (size, rank) = (comm.size(), comm.rank());
     let geometry = slabs::read(&args.volume, args.raw.as_ref(), 0..1)?.whole;
-    let [nx, ny, nz] = geometry.dims();
-    let slab = nx * ny;
-    if size > nz {
-        return Err(format!(
-            "{size} ranks for {nz} layers: one layer per rank at least"
-        ));
-    }
-    let owned = rank * nz / size..(rank + 1) * nz / size;
-    let reads = owned.start.saturating_sub(1)..(owned.end + 1).min(nz);
+    let dims = geometry.dims();
+    let [nx, ny, nz] = dims;
+    // This rank's cells: a box of the grid of boxes, or a z-slab of whole layers.
+    let owned: [std::ops::Range<usize>; 3] = match args.boxes {
+        Some(grid) => {
+            let boxes = match grid {
+                Some(grid) => Boxes::new(dims, grid),
+                None => Boxes::auto(dims, size),
+            }
+            .map_err(|e| e.to_string())?;
+            if boxes.ranks() != size {
+                return Err(format!(
+                    "--boxes {:?}: {} boxes for {size} ranks",
+                    boxes.grid(),
+                    boxes.ranks()
+                ));
+            }
+            boxes.bounds(rank)
+        }
+        None => {
+            if size > nz {
+                return Err(format!(
+                    "{size} ranks for {nz} layers: one layer per rank at least"
+                ));
+            }
+            [0..nx, 0..ny, rank * nz / size..(rank + 1) * nz / size]
+        }
+    };
+    // Its cells and the cells beyond its faces (D's neighbours).
+    let reads: [std::ops::Range<usize>; 3] =
+        std::array::from_fn(|a| owned[a].start.saturating_sub(1)..(owned[a].end + 1).min(dims[a]));
     let samples = slabs::agree(
         comm,
-        slabs::read(&args.volume, args.raw.as_ref(), reads.clone()),
+        slabs::region(&args.volume, args.raw.as_ref(), reads.clone()),
     )?;
     let (d, sigma_a) = coefficients(args, samples.grid.data());
     let q0 = vec![0.0f32; d.len()];
@@ -136,7 +173,8 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
             let shares: Vec<PointShares> =
                 system.point_weights(point.0, point.1).into_iter().collect();
             let fields = BlockFields {
-                first: reads.start,
+                origin: samples.origin,
+                dims: samples.grid.dims(),
                 diffusion: &d,
                 absorption: &sigma_a,
                 source: &q0,
@@ -164,24 +202,25 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
         allow_unstable: false,
     };
     let started = std::time::Instant::now();
-    let steady = iterate_block(&block, [nx, ny, nz], iteration, &settings, comm)
-        .map_err(|e| e.to_string())?;
+    let steady =
+        iterate_block(&block, dims, iteration, &settings, comm).map_err(|e| e.to_string())?;
     let seconds = started.elapsed().as_secs_f64();
     let created = if rank == 0 {
-        create_npy(&args.out, [nx, ny, nz]).map_err(|e| e.to_string())
+        create_npy(&args.out, dims).map_err(|e| e.to_string())
     } else {
         Ok(())
     };
     slabs::agree(comm, created)?;
     let values: Vec<f32> = steady.fluence.iter().map(|&v| v as f32).collect();
-    let written = write_npy_layers(&args.out, [nx, ny, nz], owned.clone(), &values);
+    let written = write_npy_region(&args.out, dims, owned.clone(), &values);
     slabs::agree(comm, written.map_err(|e| e.to_string()))?;
     // The block (CSR: 7 entries of 16 bytes per row, an index per row, the right-hand
     // side), the samples and coefficients read (f32 × 4), and the iteration's vectors (φ
-    // with its halo, r, b and the scale: f64 × 4).
+    // with its halo, r, b and the scale: f64 × 4; the halo at most the cells read less
+    // the box's).
     let rows = block.matrix.rows();
-    let held =
-        block.matrix.nnz() * 16 + rows * 16 + reads.len() * slab * 16 + (rows + 2 * slab) * 32;
+    let read = samples.grid.data().len();
+    let held = block.matrix.nnz() * 16 + rows * 16 + read * 16 + (rows + read) * 32;
     if rank == 0 {
         eprintln!(
             "{} sweeps, {}, {seconds:.3} s",
@@ -190,7 +229,7 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
         );
     }
     eprintln!(
-        "rank {rank} of {size}: read layers {reads:?} of {nz}, wrote {owned:?}; held {:.1} MB",
+        "rank {rank} of {size}: read cells {reads:?} of {dims:?}, wrote {owned:?}; held {:.1} MB",
         held as f64 / 1e6
     );
     let mut agrees = true;
@@ -212,11 +251,10 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
             },
             jacobi => jacobi,
         };
-        let serial =
-            iterate(&system, [nx, ny, nz], iteration, &settings).map_err(|e| e.to_string())?;
+        let serial = iterate(&system, dims, iteration, &settings).map_err(|e| e.to_string())?;
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        agrees = bits(&serial.fluence[owned.start * slab..owned.end * slab])
-            == bits(&steady.fluence)
+        let mine: Vec<f64> = block.grid_cells(dims).map(|c| serial.fluence[c]).collect();
+        agrees = bits(&mine) == bits(&steady.fluence)
             && bits(&serial.residuals) == bits(&steady.residuals)
             && serial.stop_reason == steady.stop_reason;
         eprintln!(

@@ -1,10 +1,11 @@
-//! What the slab examples share: reading some z-layers of a volume file by positioned
-//! reads, `--raw NX,NY,NZ,TYPE`, and agreeing on a step that can fail on one rank.
+//! What the slab examples share: reading some z-layers or a box of cells of a volume file
+//! by positioned reads, `--raw NX,NY,NZ,TYPE`, and agreeing on a step that can fail on one
+//! rank.
 
 use std::path::Path;
 use std::process::ExitCode;
 
-use lucent_grid::io::layers::{Layers, read_npy_layers, read_nrrd_layers, read_raw_layers};
+use lucent_grid::io::layers::{Layers, Region, read_npy_region, read_nrrd_region, read_raw_region};
 use lucent_grid::io::raw::RawLayout;
 use lucent_grid::io::{LoadOptions, ScalarType};
 use lucent_mpi::Communicator;
@@ -38,12 +39,28 @@ pub(crate) fn read(
     raw: Option<&RawLayout>,
     layers: std::ops::Range<usize>,
 ) -> Result<Layers, String> {
+    // The header alone first (one cell), for the layers' x and y.
+    let [nx, ny, _] = region(path, raw, [0..1, 0..1, 0..1])?.whole.dims();
+    let part = region(path, raw, [0..nx, 0..ny, layers])?;
+    Ok(Layers {
+        whole: part.whole,
+        first: part.origin[2],
+        grid: part.grid,
+    })
+}
+
+/// The box of cells `cells` of the volume at `path`, as [`read`] reads layers.
+pub(crate) fn region(
+    path: &Path,
+    raw: Option<&RawLayout>,
+    cells: [std::ops::Range<usize>; 3],
+) -> Result<Region, String> {
     let options = LoadOptions::default();
     let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("");
     match (raw, extension) {
-        (Some(layout), _) => read_raw_layers(path, layout, layers, &options),
-        (None, "npy") => read_npy_layers(path, layers, &options),
-        (None, "nrrd" | "nhdr") => read_nrrd_layers(path, layers, &options),
+        (Some(layout), _) => read_raw_region(path, layout, cells, &options),
+        (None, "npy") => read_npy_region(path, cells, &options),
+        (None, "nrrd" | "nhdr") => read_nrrd_region(path, cells, &options),
         _ => {
             return Err(format!(
                 "{}: a .npy or .nrrd, or --raw for a raw file",
