@@ -25,8 +25,8 @@
 //!
 //! On several ranks, [`ranks::iterate_on`] runs `steady`'s FTCS and Jacobi over z-slabs or
 //! a Cartesian grid of boxes ([`ranks::Boxes`]; [`ranks::iterate_block`] the same over
-//! z-slabs from rows each rank builds for its own layers of a box medium, so no rank holds
-//! the whole system); their norms sum fixed runs of eight cells along x and add the run
+//! slabs or boxes from rows each rank builds for its own cells of a box medium, so no rank
+//! holds the whole system); their norms sum fixed runs of eight cells along x and add the run
 //! sums exactly (`lucent_core::exact`), so the bits do not depend on the split
 //! (`docs/ranks.md`);
 //! [`ranks::march_p1`] the P1 march (zero edges), and [`wavefront::propagate_on_ranks`]

@@ -220,7 +220,7 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
     // the box's).
     let rows = block.matrix.rows();
     let read = samples.grid.data().len();
-    let held = block.matrix.nnz() * 16 + rows * 16 + read * 16 + (rows + read) * 32;
+    let held = block.matrix.nnz() * 16 + rows * 16 + read * 16 + read * 32;
     if rank == 0 {
         eprintln!(
             "{} sweeps, {}, {seconds:.3} s",

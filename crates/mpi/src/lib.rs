@@ -30,10 +30,11 @@
 //! slab-local form: the absorption march (`lucent_explicit::wavefront::propagate_slab`: σ_a
 //! and ρ of the rank's layers and a two-layer halo; the `slab_march` example) and FTCS and
 //! Jacobi diffusion in a medium filling the box (`lucent_explicit::ranks::iterate_block`
-//! on the rows `lucent_diffusion::SlabSystem::block` builds from the rank's layers and D's
-//! layer on either side; the `slab_diffusion` example). The examples read the rank's
-//! layers of a volume file by positioned reads and write its layers of the result into
-//! one `.npy` (`lucent_grid::io::layers`), so no rank holds the whole volume.
+//! on the rows `lucent_diffusion::SlabSystem::block` builds from the rank's layers or box
+//! and D's cells beyond its faces; the `slab_diffusion` example, `--boxes` for a grid of
+//! boxes). The examples read the rank's layers or box of a volume file by positioned reads
+//! and write its cells of the result into one `.npy` (`lucent_grid::io::layers`), so no
+//! rank holds the whole volume.
 //!
 //! **Cost model per sweep and rank** (slab of n_x·n_y·n_z/P cells): two halo messages of
 //! one layer each (≤ 8 n_x n_y bytes), overlapped with the interior rows, and one
