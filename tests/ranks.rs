@@ -5,7 +5,7 @@
 //! a box-filling medium lit from outside, a thin slab).
 //!
 //! - `ftcs-diffusion`, `jacobi-diffusion`, `ftcs-p1` and `convection-diffusion`: the serial
-//!   bits (the steady iterations over z-slabs and over grids of boxes).
+//!   bits (the steady iterations and P1 over z-slabs and over grids of boxes).
 //! - `diffusion-mg`: the serial fluence to 1e-10 of its largest value and the same cycle
 //!   count ± 1 (the norms add layer sums in z order, the serial solve slabs in a tree; the
 //!   fluence has come out bit-equal on every scene measured), and the same bits on every
@@ -147,13 +147,22 @@ fn p1_gives_the_serial_bits_on_ranks() {
     for scene in ["suite/point_inside.toml", "suite/absorber_point.toml"] {
         let problem = problem(scene);
         let serial = solve("ftcs-p1", &problem, 1);
-        for ranks in [2, 3, 4] {
-            let split = solve("ftcs-p1", &problem, ranks);
+        for (ranks, decomposition) in [(2, "slabs"), (3, "slabs"), (4, "slabs"), (4, "boxes")] {
+            let mut p = params(ranks);
+            p.0.insert(
+                "decomposition".into(),
+                ParamValue::Text(decomposition.into()),
+            );
+            let split = lucent::registry()
+                .build("ftcs-p1", &p)
+                .and_then(|s| s.solve(&problem, &options("ftcs-p1")))
+                .unwrap_or_else(|e| panic!("ftcs-p1 on {ranks} {decomposition}: {e}"));
             assert_eq!(
                 fluence_bits(&split),
                 fluence_bits(&serial),
-                "{scene}, {ranks} ranks"
+                "{scene}, {ranks} ranks, {decomposition}"
             );
+            assert_eq!(history_bits(&split), history_bits(&serial), "{scene}");
             assert_eq!(
                 split.report.stop_reason, serial.report.stop_reason,
                 "{scene}"

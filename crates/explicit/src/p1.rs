@@ -16,11 +16,21 @@
 //! Stability ([`crate::stability::p1`]): collocated (1 − K_φ)(1 − K_E) + r² ≤ 1, staggered
 //! (1 − K_φ)(1 − K_E) + 4r² ≤ 1; the thesis's "K < 1 and r/2 < 1" is not sufficient.
 //! Periodic edges (studies) or zero beyond the grid.
+//!
+//! The step's change norm, ‖φ′ − φ‖ / ‖φ′‖, sums the squares over runs of eight cells
+//! along x (each run left to right) and adds the run sums exactly
+//! ([`lucent_core::exact::ExactSum`]), as the steady iterations do: any split of the grid
+//! into slabs or boxes whose x cuts fall at multiples of eight sums the same runs, so the
+//! ranks' history is the serial bits (`docs/ranks.md`).
 
+use std::ops::Range;
+
+use lucent_core::exact::ExactSum;
 use lucent_core::{History, StopReason, Stopping};
 
 use crate::error::ExplicitError;
 use crate::lattice::{GrowthMonitor, Lattice};
+use crate::steady::NORM_RUN;
 
 /// Where the flux lives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -221,8 +231,9 @@ pub fn march(
     );
     let mut history = History::start();
     let mut step = 0;
-    let slab = lattice.dims[0] * lattice.dims[1];
     let all = 0..lattice.dims[2];
+    let [nx, ny, nz] = lattice.dims;
+    let runs = box_runs([0; 3], lattice.dims, &[0..nx, 0..ny, 0..nz]);
     loop {
         step += 1;
         let mut next_phi = vec![0.0; n];
@@ -247,17 +258,8 @@ pub fn march(
                 stop_reason,
             });
         }
-        // Per z-layer, then the layers in z order: the sums on ranks are the same bits.
-        let (mut change, mut size) = (0.0, 0.0);
-        for (c, z) in layer_norms(&next_phi, &phi, slab, all.clone()) {
-            change += c;
-            size += z;
-        }
-        let last_change = if size > 0.0 {
-            (change / size).sqrt()
-        } else {
-            change.sqrt()
-        };
+        let (change, size) = change_sums(&next_phi, &phi, &runs);
+        let (change, last_change) = change_norms(&change, &size);
         phi = next_phi;
         flux = next_flux;
         if let Some(stop_reason) =
@@ -320,22 +322,58 @@ pub(crate) fn step_layers(
     }
 }
 
-/// Per z-layer of `layers`: (Σ (φ′ − φ)², Σ φ′²), each summed in cell order.
-pub(crate) fn layer_norms(
+/// The norm's runs of the box of cells `cells` in fields that hold the box of `held`
+/// cells from `origin` (x fastest): each x-line of `cells` cut where the whole grid's x is
+/// a multiple of [`NORM_RUN`], as [start, end) positions in the fields.
+pub(crate) fn box_runs(
+    origin: [usize; 3],
+    held: [usize; 3],
+    cells: &[Range<usize>; 3],
+) -> Vec<(usize, usize)> {
+    let mut runs = Vec::new();
+    for k in cells[2].clone() {
+        for j in cells[1].clone() {
+            let line = held[0] * ((j - origin[1]) + held[1] * (k - origin[2]));
+            let mut x = cells[0].start;
+            while x < cells[0].end {
+                let end = ((x / NORM_RUN + 1) * NORM_RUN).min(cells[0].end);
+                runs.push((line + x - origin[0], line + end - origin[0]));
+                x = end;
+            }
+        }
+    }
+    runs
+}
+
+/// (Σ (φ′ − φ)², Σ φ′²) over `runs` of `next` and `now`, each run left to right, the run
+/// sums added exactly.
+pub(crate) fn change_sums(
     next: &[f64],
     now: &[f64],
-    slab: usize,
-    layers: std::ops::Range<usize>,
-) -> Vec<(f64, f64)> {
-    layers
-        .map(|k| {
-            let range = k * slab..(k + 1) * slab;
-            next[range.clone()]
-                .iter()
-                .zip(&now[range])
-                .fold((0.0, 0.0), |(c, s), (a, b)| {
-                    (c + (a - b).powi(2), s + a * a)
-                })
-        })
-        .collect()
+    runs: &[(usize, usize)],
+) -> (ExactSum, ExactSum) {
+    let (mut change, mut size) = (ExactSum::new(), ExactSum::new());
+    for &(s, e) in runs {
+        let (c, z) = next[s..e]
+            .iter()
+            .zip(&now[s..e])
+            .fold((0.0, 0.0), |(c, z), (a, b)| {
+                (c + (a - b).powi(2), z + a * a)
+            });
+        change.add(c);
+        size.add(z);
+    }
+    (change, size)
+}
+
+/// (Σ (φ′ − φ)², the step's relative change ‖φ′ − φ‖ / ‖φ′‖, or the absolute one while
+/// φ′ is zero) from the exact sums of squares.
+pub(crate) fn change_norms(change: &ExactSum, size: &ExactSum) -> (f64, f64) {
+    let (change, size) = (change.value(), size.value());
+    let relative = if size > 0.0 {
+        (change / size).sqrt()
+    } else {
+        change.sqrt()
+    };
+    (change, relative)
 }

@@ -7,8 +7,8 @@
 //! a step reads the old state through a ring of three slabs and writes the new one slab by
 //! slab, with the cell update of the in-memory march (`p1::StepCoefficients::cell`,
 //! `ordinates::cell_step`) and the step's reductions — the growth monitor's largest value,
-//! the change and size norms — added as in memory (P1: in cell order per slab, then slab by
-//! slab; ordinates: in cell order). Then the two swap. So
+//! the change and size norms — added as in memory (P1: runs of eight cells along x, the
+//! run sums added exactly; ordinates: in cell order). Then the two swap. So
 //! the stopping decisions and the fluence have the in-memory bits
 //! (`crates/explicit/tests/paged_march.rs`).
 //!
@@ -33,6 +33,8 @@ use rayon::prelude::*;
 use crate::ordinates::{Cell, cell_fluence, cell_step};
 use crate::p1::StepCoefficients;
 use crate::paged_steady::Ring;
+use crate::steady::NORM_RUN;
+use lucent_core::exact::ExactSum;
 
 /// Which march, with its registry parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -324,7 +326,6 @@ struct Sums {
     finite: Vec<bool>,
     largest: Vec<f64>,
     change: f64,
-    size: f64,
 }
 
 impl Sums {
@@ -333,7 +334,6 @@ impl Sums {
             finite: vec![true; fields],
             largest: vec![0.0; fields],
             change: 0.0,
-            size: 0.0,
         }
     }
 
@@ -433,32 +433,37 @@ impl Channel<'_> {
         loop {
             step += 1;
             let mut sums = Sums::new(4);
+            let (mut change, mut size) = (ExactSum::new(), ExactSum::new());
             self.pass(now, next, &mut ring, &mut compute, &mut |old, new| {
-                // One z-slab: its sums in cell order, then added to the slabs before it
-                // (as `p1::march` adds its layer sums).
-                let (mut change, mut size) = (0.0, 0.0);
-                for (o, n) in old.chunks(4).zip(new.chunks(4)) {
+                for n in new.chunks(4) {
                     for (field, v) in n.iter().enumerate() {
                         sums.see(field, *v);
                     }
-                    change += (n[0] - o[0]).powi(2);
-                    size += n[0] * n[0];
                 }
-                sums.change += change;
-                sums.size += size;
+                // The norm's runs of eight cells along x, each left to right, the run
+                // sums added exactly (as `p1::march` sums them).
+                let line = 4 * nx;
+                for (o, n) in old.chunks(line).zip(new.chunks(line)) {
+                    for (o, n) in o.chunks(4 * NORM_RUN).zip(n.chunks(4 * NORM_RUN)) {
+                        let (c, z) = o
+                            .chunks(4)
+                            .zip(n.chunks(4))
+                            .fold((0.0, 0.0), |(c, z), (o, n)| {
+                                (c + (n[0] - o[0]).powi(2), z + n[0] * n[0])
+                            });
+                        change.add(c);
+                        size.add(z);
+                    }
+                }
             })
             .map_err(err)?;
             if let Some(stop_reason) = sums.verdict(&monitor, step) {
                 return Ok(p1_record(self.problem, step, stop_reason));
             }
-            let last_change = if sums.size > 0.0 {
-                (sums.change / sums.size).sqrt()
-            } else {
-                sums.change.sqrt()
-            };
+            let (change, last_change) = crate::p1::change_norms(&change, &size);
             std::mem::swap(now, next);
             if let Some(stop_reason) =
-                history.record_step(&settings.stopping, step, last_change, sums.change.sqrt())
+                history.record_step(&settings.stopping, step, last_change, change.sqrt())
             {
                 return Ok(p1_record(self.problem, step, stop_reason));
             }

@@ -29,7 +29,12 @@ const DECOMPOSITION: (&str, &str) = (
     "how ranks split the grid: slabs (z-slabs balanced by unknowns, one layer per rank at least) or boxes (the grid of boxes that cuts least, x cut at multiples of 8); the serial bits either way",
 );
 
-/// How the steady iterations split the grid over ranks
+const P1_DECOMPOSITION: (&str, &str) = (
+    "decomposition",
+    "how ranks split the grid: slabs (z-layers r·n_z/P..(r+1)·n_z/P, one layer per rank at least) or boxes (the grid of boxes that cuts least, x cut at multiples of 8); the serial bits either way",
+);
+
+/// How the steady iterations and P1 split the grid over ranks
 /// ([`crate::ranks::Decomposition`], the grid of boxes chosen by
 /// [`crate::ranks::Boxes::auto`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -232,8 +237,10 @@ pub struct P1Params {
     pub step_fraction: f64,
     /// Run beyond the bound anyway.
     pub allow_unstable: bool,
-    /// In-process ranks to split the march over (z-slabs).
+    /// In-process ranks to split the march over.
     pub ranks: usize,
+    /// How the ranks split the grid.
+    pub decomposition: DecompositionParam,
 }
 
 impl Default for P1Params {
@@ -243,6 +250,7 @@ impl Default for P1Params {
             step_fraction: 0.9,
             allow_unstable: false,
             ranks: 1,
+            decomposition: DecompositionParam::Slabs,
         }
     }
 }
@@ -256,6 +264,7 @@ impl SolverParams for P1Params {
         STEP_FRACTION,
         ALLOW_UNSTABLE,
         lucent_diffusion::RANKS,
+        P1_DECOMPOSITION,
     ];
 
     fn validate(&self) -> Result<(), SolveError> {

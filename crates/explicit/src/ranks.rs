@@ -96,7 +96,10 @@ pub enum DecompositionError {
     },
 }
 
-use lucent_core::ranks::{Communicator, exchange, exchange_among};
+use lucent_core::ranks::{Communicator, exchange_among};
+
+/// A box of cells: its ranges along x, y and z.
+type Cells = [std::ops::Range<usize>; 3];
 
 /// Which layers (indices into [`Layers::ranges`]) each rank owns: contiguous runs in z,
 /// balanced by unknowns (each rank takes layers until it holds its share).
@@ -975,53 +978,170 @@ pub(crate) fn on_threads<T: Send>(
     Ok(results.swap_remove(0))
 }
 
-/// [`crate::p1::march`] from zero, split over the ranks of `comm` by z-layers (balanced by
-/// count): per step each rank sends its first and last layer of (φ, E) to its neighbours,
-/// steps its inner layers while they travel, then its two edge layers; the growth
-/// monitor's largest values and finiteness, the change and size sums per layer, and the
-/// time and cancel flags are all-gathered, and every rank takes the serial decision. A
-/// rank holds the state of its layers and one halo layer each side only (eight f64 fields
-/// of (owned + 2) layers); the whole state is gathered on every rank at the end, the
-/// serial bits on any number of ranks.
+/// [`march_p1_on`] over z-slabs ([`Decomposition::Slabs`]: layers r·n_z/P..(r+1)·n_z/P).
 ///
 /// # Errors
-/// The serial march's refusals ([`DecompositionError::Scheme`]); periodic edges on more
-/// than one rank (the decomposition has no wrap-around neighbours); more ranks than
-/// layers; a rank that left the protocol.
+/// As [`march_p1_on`].
 pub fn march_p1(
     lattice: &crate::Lattice,
     source: &[f64],
     settings: &crate::p1::P1Settings,
     comm: &(impl Communicator + ?Sized),
 ) -> Result<crate::p1::P1State, DecompositionError> {
-    use crate::p1::{P1Edges, P1State, StepCoefficients, growth_monitor, layer_norms, step_layers};
+    march_p1_on(lattice, source, &Decomposition::Slabs, settings, comm)
+}
+
+/// [`crate::p1::march`] from zero, split over the ranks of `comm` by `decomposition`
+/// (z-slabs of layers r·n_z/P..(r+1)·n_z/P, or a grid of boxes): per step each rank sends
+/// the cells of (φ, E) on each face it shares with another box to that box, steps the
+/// cells that read no halo while they travel, then the rest; the growth monitor's largest
+/// values and finiteness, the exact change and size sums of its norm's runs, and the time
+/// and cancel flags are all-gathered, and every rank takes the serial decision. A rank
+/// holds the state of its cells and one halo cell beyond each face only (eight f64 fields
+/// of its box grown by a cell); the whole state is gathered on every rank at the end, the
+/// serial bits on any number of ranks and any decomposition.
+///
+/// # Errors
+/// The serial march's refusals ([`DecompositionError::Scheme`]); periodic edges on more
+/// than one rank (the decomposition has no wrap-around neighbours); more slabs than
+/// layers; boxes of another grid or rank count; a rank that left the protocol.
+pub fn march_p1_on(
+    lattice: &crate::Lattice,
+    source: &[f64],
+    decomposition: &Decomposition,
+    settings: &crate::p1::P1Settings,
+    comm: &(impl Communicator + ?Sized),
+) -> Result<crate::p1::P1State, DecompositionError> {
+    use crate::p1::{
+        P1Edges, P1State, StepCoefficients, box_runs, change_norms, change_sums, growth_monitor,
+    };
+    use std::ops::Range;
     lattice.check_field("source", source)?;
     let step_of = StepCoefficients::checked(settings, lattice.spacing)?;
     let (size, rank) = (comm.size(), comm.rank());
-    let [nx, ny, nz] = lattice.dims;
-    if size == 0 || size > nz {
-        return Err(DecompositionError::TooManyRanks {
-            ranks: size,
-            layers: nz,
-        });
-    }
+    let dims = lattice.dims;
+    let boxes = match decomposition {
+        Decomposition::Slabs => {
+            if size == 0 || size > dims[2] {
+                return Err(DecompositionError::TooManyRanks {
+                    ranks: size,
+                    layers: dims[2],
+                });
+            }
+            Boxes::new(dims, [1, 1, size])?
+        }
+        Decomposition::Boxes(boxes) => {
+            if boxes.ranks() != size || boxes.dims() != dims {
+                return Err(DecompositionError::BoxGrid {
+                    grid: boxes.grid(),
+                    dims,
+                    ranks: size,
+                });
+            }
+            boxes.clone()
+        }
+    };
     if size > 1 && settings.edges == P1Edges::Periodic {
         return Err(DecompositionError::Scheme(crate::ExplicitError::Invalid(
             "periodic edges do not split over ranks (no wrap-around neighbours): use zero edges"
                 .into(),
         )));
     }
-    let bounds: Vec<(usize, usize)> = (0..size)
-        .map(|r| (r * nz / size, (r + 1) * nz / size))
-        .collect();
-    let (k0, k1) = bounds[rank];
-    let slab = nx * ny;
-    let n = lattice.len();
-    // This rank's layers and one halo layer each side within the grid: all it holds of
-    // the state (cell g of the grid at g − first).
-    let (lo, hi) = (k0.saturating_sub(1), (k1 + 1).min(nz));
-    let (first, len) = (lo * slab, (hi - lo) * slab);
-    let local_source = &source[first..first + len];
+    // This rank's box, and the box it holds: grown by a cell where the grid goes on.
+    let own = boxes.bounds(rank);
+    let origin: [usize; 3] = std::array::from_fn(|a| own[a].start.saturating_sub(1));
+    let held: [usize; 3] = std::array::from_fn(|a| (own[a].end + 1).min(dims[a]) - origin[a]);
+    let len: usize = held.iter().product();
+    let stride = [1, held[0], held[0] * held[1]];
+    let place = |p: [usize; 3]| -> usize { (0..3).map(|a| (p[a] - origin[a]) * stride[a]).sum() };
+    let cells_of = |b: &[Range<usize>; 3]| {
+        let [x, y, z] = b.clone();
+        z.flat_map(move |k| {
+            let x = x.clone();
+            y.clone()
+                .flat_map(move |j| x.clone().map(move |i| [i, j, k]))
+        })
+    };
+    let [nx, ny, _] = dims;
+    let mut local_source = vec![0.0; len];
+    for p in cells_of(&own) {
+        local_source[place(p)] = source[p[0] + nx * (p[1] + ny * p[2])];
+    }
+    // The boxes sharing a face with this one: (rank, the cells sent, the halo received).
+    let at = boxes.position(rank);
+    let grid = boxes.grid();
+    let mut faces: Vec<(usize, Cells, Cells)> = Vec::new();
+    for a in 0..3 {
+        for upper in [false, true] {
+            if (!upper && at[a] == 0) || (upper && at[a] + 1 == grid[a]) {
+                continue;
+            }
+            let mut q = at;
+            q[a] = if upper { at[a] + 1 } else { at[a] - 1 };
+            let (mut send, mut receive) = (own.clone(), own.clone());
+            let (s, e) = (own[a].start, own[a].end);
+            (send[a], receive[a]) = if upper {
+                (e - 1..e, e..e + 1)
+            } else {
+                (s..s + 1, s - 1..s)
+            };
+            faces.push((q[0] + grid[0] * (q[1] + grid[1] * q[2]), send, receive));
+        }
+    }
+    // The cells that read no halo: the box less a cell on each side it shares.
+    let inner: [Range<usize>; 3] = std::array::from_fn(|a| {
+        let shared = |upper: bool| {
+            faces
+                .iter()
+                .any(|(_, _, r)| r[a] != own[a] && (r[a].start >= own[a].end) == upper)
+        };
+        let s = own[a].start + usize::from(shared(false));
+        let e = own[a].end - usize::from(shared(true));
+        s..e.max(s)
+    });
+    let inner_empty = inner.iter().any(|r| r.is_empty());
+    let edges = settings.edges;
+    // One FTCS step of the cells `cells` (less `skip`'s), the serial cell update.
+    let step_cells = |(phi, flux): (&[f64], &[Vec<f64>; 3]),
+                      (next_phi, next_flux): (&mut [f64], &mut [Vec<f64>; 3]),
+                      cells: &[Range<usize>; 3],
+                      skip: Option<&[Range<usize>; 3]>| {
+        for k in cells[2].clone() {
+            for j in cells[1].clone() {
+                let skipped = skip
+                    .filter(|s| s[1].contains(&j) && s[2].contains(&k))
+                    .map_or(0..0, |s| s[0].clone());
+                for i in cells[0].clone().filter(|i| !skipped.contains(i)) {
+                    let p = [i, j, k];
+                    let l = place(p);
+                    let out = step_of.cell(local_source[l], |component, axis, offset| {
+                        let field = if component == 0 {
+                            phi
+                        } else {
+                            &flux[component - 1]
+                        };
+                        if offset == 0 {
+                            return field[l];
+                        }
+                        let n = dims[axis] as isize;
+                        let to = p[axis] as isize + offset;
+                        let moved = match edges {
+                            P1Edges::Periodic => to.rem_euclid(n),
+                            P1Edges::Zero if (0..n).contains(&to) => to,
+                            P1Edges::Zero => return 0.0,
+                        } as usize;
+                        field[l + (moved - origin[axis]) * stride[axis]
+                            - (p[axis] - origin[axis]) * stride[axis]]
+                    });
+                    next_phi[l] = out[0];
+                    for c in 0..3 {
+                        next_flux[c][l] = out[1 + c];
+                    }
+                }
+            }
+        }
+    };
+    let runs = box_runs(origin, held, &own);
     let largest = source.iter().fold(0.0f64, |a, b| a.max(b.abs()));
     let monitor = growth_monitor(0.0, largest, settings);
     let shared = Stopping {
@@ -1043,74 +1163,46 @@ pub fn march_p1(
         )
     };
     let ((mut phi, mut flux), (mut next_phi, mut next_flux)) = (fields(), fields());
-    // The layers that read no halo (stepped while the halos travel), and the others.
-    let (inner, edges) = if k1 - k0 <= 2 {
-        (k0..k0, (k0..k1).map(|k| k..k + 1).collect::<Vec<_>>())
-    } else {
-        (k0 + 1..k1 - 1, vec![k0..k0 + 1, k1 - 1..k1])
-    };
-    let layer = |fields: (&[f64], &[Vec<f64>; 3]), k: usize| -> Vec<f64> {
-        let range = (k - lo) * slab..(k - lo + 1) * slab;
-        let mut out = fields.0[range.clone()].to_vec();
-        for f in fields.1 {
-            out.extend_from_slice(&f[range.clone()]);
-        }
-        out
-    };
-    let counts: Vec<usize> = bounds.iter().map(|&(a, b)| b - a).collect();
+    let from: Vec<usize> = faces.iter().map(|f| f.0).collect();
+    let words = 10 + 2 * ExactSum::WORDS;
     let mut step = 0;
     let stop_reason = loop {
         step += 1;
-        let to_below = if rank > 0 {
-            layer((&phi, &flux), k0)
-        } else {
-            Vec::new()
-        };
-        let to_above = if rank + 1 < size {
-            layer((&phi, &flux), k1 - 1)
-        } else {
-            Vec::new()
-        };
-        let (from_below, from_above, ()) = exchange(comm, &to_below, &to_above, || {
-            step_layers(
-                lattice,
-                &step_of,
-                settings.edges,
-                (&phi, &flux),
-                (&mut next_phi, &mut next_flux),
-                (local_source, first),
-                inner.clone(),
-            );
-        });
-        for (received, k, present) in [
-            (from_below, k0.wrapping_sub(1), rank > 0),
-            (from_above, k1, rank + 1 < size),
-        ] {
-            if !present {
-                continue;
+        // Each face's cells of φ, then E_x, E_y, E_z.
+        let outgoing: Vec<Vec<f64>> = faces
+            .iter()
+            .map(|(_, send, _)| {
+                std::iter::once(&phi)
+                    .chain(&flux)
+                    .flat_map(|f| cells_of(send).map(|p| f[place(p)]))
+                    .collect()
+            })
+            .collect();
+        let sends: Vec<(usize, &[f64])> = faces
+            .iter()
+            .zip(&outgoing)
+            .map(|(f, v)| (f.0, v.as_slice()))
+            .collect();
+        let (received, ()) = exchange_among(comm, &sends, &from, || {
+            if !inner_empty {
+                step_cells((&phi, &flux), (&mut next_phi, &mut next_flux), &inner, None);
             }
-            if received.len() != 4 * slab {
+        });
+        for ((_, _, receive), values) in faces.iter().zip(&received) {
+            let count = cells_of(receive).count();
+            if values.len() != 4 * count {
                 return Err(DecompositionError::Protocol { rank });
             }
-            let range = (k - lo) * slab..(k - lo + 1) * slab;
-            phi[range.clone()].copy_from_slice(&received[..slab]);
-            for (a, f) in flux.iter_mut().enumerate() {
-                f[range.clone()].copy_from_slice(&received[(a + 1) * slab..(a + 2) * slab]);
+            let mut values = values.iter();
+            for f in std::iter::once(&mut phi).chain(&mut flux) {
+                for p in cells_of(receive) {
+                    f[place(p)] = *values.next().unwrap_or(&0.0);
+                }
             }
         }
-        for edge in &edges {
-            step_layers(
-                lattice,
-                &step_of,
-                settings.edges,
-                (&phi, &flux),
-                (&mut next_phi, &mut next_flux),
-                (local_source, first),
-                edge.clone(),
-            );
-        }
-        // [time, cancel, finite ×4, largest ×4, (change, size) per layer].
-        let owned = (k0 - lo) * slab..(k1 - lo) * slab;
+        let skip = (!inner_empty).then_some(&inner);
+        step_cells((&phi, &flux), (&mut next_phi, &mut next_flux), &own, skip);
+        // [time, cancel, finite ×4, largest ×4, Σ change² words, Σ size² words].
         let mut local = vec![
             f64::from(u8::from(
                 settings
@@ -1126,38 +1218,41 @@ pub fn march_p1(
                     .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)),
             )),
         ];
-        let fields = [&next_phi, &next_flux[0], &next_flux[1], &next_flux[2]];
-        for f in fields {
-            local.push(f64::from(u8::from(
-                f[owned.clone()].iter().all(|v| v.is_finite()),
-            )));
+        let new = [&next_phi, &next_flux[0], &next_flux[1], &next_flux[2]];
+        let owned = |f: &[f64]| -> Vec<f64> {
+            runs.iter()
+                .flat_map(|&(s, e)| f[s..e].iter().copied())
+                .collect()
+        };
+        let values: Vec<Vec<f64>> = new.iter().map(|f| owned(f)).collect();
+        for v in &values {
+            local.push(f64::from(u8::from(v.iter().all(|x| x.is_finite()))));
         }
-        for f in fields {
-            local.push(f[owned.clone()].iter().fold(0.0f64, |a, b| a.max(b.abs())));
+        for v in &values {
+            local.push(v.iter().fold(0.0f64, |a, b| a.max(b.abs())));
         }
-        for (c, s) in layer_norms(&next_phi, &phi, slab, k0 - lo..k1 - lo) {
-            local.extend([c, s]);
-        }
+        let (change, size_sum) = change_sums(&next_phi, &phi, &runs);
+        local.extend(change.to_words());
+        local.extend(size_sum.to_words());
         let all = comm.all_gather(&local);
-        if all.len() != counts.iter().map(|c| 10 + 2 * c).sum::<usize>() {
+        if all.len() != words * size {
             return Err(DecompositionError::Protocol { rank });
         }
         let (mut time_up, mut cancelled) = (false, false);
         let (mut finite, mut largest) = ([true; 4], [0.0f64; 4]);
-        let (mut change, mut size_sum) = (0.0, 0.0);
-        let mut at = 0;
-        for &c in &counts {
-            time_up |= all[at] != 0.0;
-            cancelled |= all[at + 1] != 0.0;
+        let (mut change, mut size_sum) = (ExactSum::new(), ExactSum::new());
+        for each in all.chunks(words) {
+            time_up |= each[0] != 0.0;
+            cancelled |= each[1] != 0.0;
             for f in 0..4 {
-                finite[f] &= all[at + 2 + f] != 0.0;
-                largest[f] = largest[f].max(all[at + 6 + f]);
+                finite[f] &= each[2 + f] != 0.0;
+                largest[f] = largest[f].max(each[6 + f]);
             }
-            for pair in all[at + 10..at + 10 + 2 * c].chunks(2) {
-                change += pair[0];
-                size_sum += pair[1];
-            }
-            at += 10 + 2 * c;
+            let (c, s) = each[10..].split_at(ExactSum::WORDS);
+            let part =
+                |w: &[f64]| ExactSum::from_words(w).ok_or(DecompositionError::Protocol { rank });
+            change.merge(&part(c)?);
+            size_sum.merge(&part(s)?);
         }
         // The serial monitor's order: φ, then E_x, E_y, E_z.
         let stop = (0..4).find_map(|f| {
@@ -1170,11 +1265,7 @@ pub fn march_p1(
         if let Some(stop) = stop {
             break stop;
         }
-        let last_change = if size_sum > 0.0 {
-            (change / size_sum).sqrt()
-        } else {
-            change.sqrt()
-        };
+        let (change, last_change) = change_norms(&change, &size_sum);
         std::mem::swap(&mut phi, &mut next_phi);
         std::mem::swap(&mut flux, &mut next_flux);
         if let Some(reason) = history.record_step(&shared, step, last_change, change.sqrt()) {
@@ -1191,11 +1282,19 @@ pub fn march_p1(
             };
         }
     };
-    let owned = (k0 - lo) * slab..(k1 - lo) * slab;
+    // Every rank's box in rank order, each x fastest: back to the grid's order.
     let gathered = |f: &[f64]| -> Result<Vec<f64>, DecompositionError> {
-        let whole = comm.all_gather(&f[owned.clone()]);
-        if whole.len() != n {
+        let mine: Vec<f64> = cells_of(&own).map(|p| f[place(p)]).collect();
+        let all = comm.all_gather(&mine);
+        if all.len() != lattice.len() {
             return Err(DecompositionError::Protocol { rank });
+        }
+        let mut whole = vec![0.0; all.len()];
+        let mut values = all.into_iter();
+        for r in 0..size {
+            for p in cells_of(&boxes.bounds(r)) {
+                whole[p[0] + nx * (p[1] + ny * p[2])] = values.next().unwrap_or(0.0);
+            }
         }
         Ok(whole)
     };
@@ -1211,12 +1310,18 @@ pub fn march_p1(
     })
 }
 
-/// [`march_p1`] on `ranks` in-process ranks: rank 0's state, which every rank holds.
+/// [`march_p1_on`] on `ranks` in-process ranks: rank 0's state, which every rank holds.
+///
+/// # Errors
+/// As [`march_p1_on`].
 pub fn march_p1_on_threads(
     lattice: &crate::Lattice,
     source: &[f64],
+    decomposition: &Decomposition,
     settings: &crate::p1::P1Settings,
     ranks: usize,
 ) -> Result<crate::p1::P1State, DecompositionError> {
-    on_threads(ranks, |comm| march_p1(lattice, source, settings, comm))
+    on_threads(ranks, |comm| {
+        march_p1_on(lattice, source, decomposition, settings, comm)
+    })
 }

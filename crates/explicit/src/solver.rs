@@ -105,6 +105,7 @@ enum Scheme {
         allow_unstable: bool,
         /// In-process ranks.
         ranks: usize,
+        decomposition: DecompositionParam,
     },
     Ordinates {
         order: usize,
@@ -200,6 +201,7 @@ impl ExplicitSolver {
                     fraction: p.step_fraction,
                     allow_unstable: p.allow_unstable,
                     ranks: p.ranks,
+                    decomposition: p.decomposition,
                 },
             }))
         },
@@ -382,7 +384,7 @@ impl Solver for ExplicitSolver {
                 ..Capabilities::default()
             },
             Scheme::P1 { .. } | Scheme::Ordinates { .. } => Capabilities {
-                // `ranks::march_p1` splits P1 over z-slabs.
+                // `ranks::march_p1_on` splits P1 over z-slabs or boxes.
                 ranks: matches!(self.scheme, Scheme::P1 { .. }),
                 anisotropic: matches!(self.scheme, Scheme::P1 { .. }),
                 heterogeneous: matches!(self.scheme, Scheme::Ordinates { .. }),
@@ -819,9 +821,11 @@ impl ChannelMethod for ExplicitSolver {
                 fraction,
                 allow_unstable,
                 ranks,
+                decomposition,
             } => {
                 let on = ranks_of(world.as_ref(), *ranks)?;
-                p1(l, &channel, &q, *layout, *fraction, *allow_unstable, on)?
+                let how = (*layout, *fraction, *allow_unstable, *decomposition);
+                p1(l, &channel, &q, how, on)?
             }
             Scheme::Ordinates {
                 order,
@@ -844,9 +848,12 @@ fn p1(
     l: &Lattice,
     channel: &Channel<'_>,
     q: &[f64],
-    layout: crate::p1::Layout,
-    fraction: f64,
-    allow_unstable: bool,
+    (layout, fraction, allow_unstable, decomposition): (
+        crate::p1::Layout,
+        f64,
+        bool,
+        DecompositionParam,
+    ),
     on: RanksOf<'_>,
 ) -> Result<(Vec<f64>, Record), SolveError> {
     let g = channel.problem.medium().phase.mean_cosine();
@@ -860,13 +867,24 @@ fn p1(
         channel.stopping.clone(),
     )?;
     let ranks_error = |e: crate::ranks::DecompositionError| invalid("ranks", e.to_string());
+    let split = |ranks: usize| -> Result<Decomposition, SolveError> {
+        Ok(match decomposition {
+            DecompositionParam::Slabs => Decomposition::Slabs,
+            DecompositionParam::Boxes => {
+                Decomposition::Boxes(Boxes::auto(l.dims, ranks).map_err(ranks_error)?)
+            }
+        })
+    };
     let out = match on {
         RanksOf::Alone => crate::p1::march(l, q, &settings, None).map_err(explicit_error)?,
         RanksOf::Communicator(comm) => {
-            crate::ranks::march_p1(l, q, &settings, comm).map_err(ranks_error)?
+            let decomposition = split(comm.size())?;
+            crate::ranks::march_p1_on(l, q, &decomposition, &settings, comm).map_err(ranks_error)?
         }
         RanksOf::Threads(count) => {
-            crate::ranks::march_p1_on_threads(l, q, &settings, count).map_err(ranks_error)?
+            let decomposition = split(count)?;
+            crate::ranks::march_p1_on_threads(l, q, &decomposition, &settings, count)
+                .map_err(ranks_error)?
         }
     };
     let mut record = Record::exact((l.len() * 8 * 8) as u64);

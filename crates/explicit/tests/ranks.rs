@@ -334,8 +334,8 @@ fn what_the_serial_iteration_refuses_every_rank_refuses() {
 }
 
 mod p1 {
-    //! P1 by FTCS on ranks (`ranks::march_p1`): the serial march's bits on 1 to 5 ranks,
-    //! both layouts, from a point source off the grid's centre on grids whose sides are
+    //! P1 by FTCS on ranks (`ranks::march_p1`, `march_p1_on`): the serial march's bits on
+    //! 1 to 5 slabs and on grids of up to 12 boxes (even and uneven cuts), both layouts, from a point source off the grid's centre on grids whose sides are
     //! not multiples of 8, to convergence, to the step limit, and past the stability bound
     //! (the growth monitor must stop every rank on the serial step).
 
@@ -418,6 +418,76 @@ mod p1 {
                 for out in on_ranks(ranks, &lattice, &source, &settings) {
                     let out = out.unwrap();
                     let case = format!("{layout:?} at {fraction}, {ranks} ranks");
+                    assert_eq!(out.stop_reason, reference.stop_reason, "{case}");
+                    assert_eq!(out.steps, reference.steps, "{case}");
+                    assert_eq!(bits(&out.fluence), bits(&reference.fluence), "{case}");
+                    for a in 0..3 {
+                        assert_eq!(bits(&out.flux[a]), bits(&reference.flux[a]), "{case}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn every_grid_of_boxes_gives_the_serial_bits() {
+        use lucent_explicit::ranks::{Boxes, Decomposition, march_p1_on};
+        // 19 cells in x: three runs of 8 (the last short); sources off the centre and on
+        // a box's face.
+        let lattice = Lattice::new([19, 7, 9], 1.0).unwrap();
+        let dims = lattice.dims;
+        let mut source = vec![0.0; lattice.len()];
+        source[5 + 19 * (2 + 7 * 4)] = 1.0;
+        source[8 + 19 * (3 + 7 * 5)] = 0.5;
+        let grids: Vec<Boxes> = [[2, 1, 1], [1, 2, 2], [3, 1, 2], [2, 3, 2], [1, 1, 4]]
+            .into_iter()
+            .map(|g| Boxes::new(dims, g).unwrap())
+            .chain([
+                Boxes::from_cuts(dims, [vec![0, 16, 19], vec![0, 1, 7], vec![0, 8, 9]]).unwrap(),
+            ])
+            .collect();
+        let cases = [
+            (Layout::Staggered, 0.9, 1e-6, 4000),
+            (Layout::Collocated, 0.9, 1e-6, 4000),
+            (Layout::Collocated, 0.5, 0.0, 23),
+            (Layout::Staggered, 1.3, 0.0, 400),
+        ];
+        for (layout, fraction, tolerance, steps) in cases {
+            let settings = settings(
+                layout,
+                fraction,
+                Stopping {
+                    relative_tolerance: tolerance,
+                    max_iterations: steps,
+                    ..Stopping::default()
+                },
+            );
+            let reference = march(&lattice, &source, &settings, None).unwrap();
+            let expected = match (fraction > 1.0, tolerance > 0.0) {
+                (true, _) => matches!(reference.stop_reason, StopReason::DivergedGrowth { .. }),
+                (false, true) => reference.stop_reason.is_converged(),
+                (false, false) => reference.steps == steps,
+            };
+            assert!(
+                expected,
+                "{layout:?} at {fraction}: {:?}",
+                reference.stop_reason
+            );
+            for boxes in &grids {
+                let decomposition = Decomposition::Boxes(boxes.clone());
+                let outs: Vec<_> = std::thread::scope(|scope| {
+                    let handles: Vec<_> = Threads::world(boxes.ranks())
+                        .into_iter()
+                        .map(|comm| {
+                            let (l, q, d, s) = (&lattice, &source, &decomposition, &settings);
+                            scope.spawn(move || march_p1_on(l, q, d, s, &comm))
+                        })
+                        .collect();
+                    handles.into_iter().map(|h| h.join().unwrap()).collect()
+                });
+                for (rank, out) in outs.into_iter().enumerate() {
+                    let out = out.unwrap();
+                    let case = format!("{layout:?} at {fraction}, {:?} rank {rank}", boxes.grid());
                     assert_eq!(out.stop_reason, reference.stop_reason, "{case}");
                     assert_eq!(out.steps, reference.steps, "{case}");
                     assert_eq!(bits(&out.fluence), bits(&reference.fluence), "{case}");

@@ -53,12 +53,22 @@ pub enum MpiError {
 impl World {
     /// Initialises MPI with serialised threading (one thread calls MPI at a time, not
     /// necessarily the main one).
+    ///
+    /// A panic on any thread of this process, after the usual message, aborts every rank
+    /// (`MPI_Abort`, exit status 101): unwinding would finalise MPI, a collective call that
+    /// waits for the other ranks, which wait for this one, so the job would hang instead
+    /// of failing.
     pub fn initialise() -> Result<Self, MpiError> {
         let (universe, threading) = mpi::initialize_with_threading(mpi::Threading::Serialized)
             .ok_or(MpiError::Initialise)?;
         if threading < mpi::Threading::Serialized {
             return Err(MpiError::Threading(threading));
         }
+        let report = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            report(info);
+            world().abort(101)
+        }));
         Ok(Self { universe })
     }
 
