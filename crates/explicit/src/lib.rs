@@ -29,7 +29,8 @@
 //! holds the whole system); their norms sum fixed runs of eight cells along x and add the run
 //! sums exactly (`lucent_core::exact`), so the bits do not depend on the split
 //! (`docs/ranks.md`);
-//! [`ranks::march_p1`] the P1 march (zero edges), and [`wavefront::propagate_on_ranks`]
+//! [`ranks::march_p1_on`] the P1 march (zero edges) over z-slabs or boxes, its change norm
+//! summed the same way; and [`wavefront::propagate_on_ranks`]
 //! Zhang & Ma's one-pass absorption march of a distant light (a pipelined wavefront where
 //! the light crosses the slabs, planes in lock step where it runs along them), over
 //! z-slabs (any `lucent_core::ranks::Communicator`: threads here, MPI through

@@ -3,7 +3,8 @@
 //! diffusion system (the twin of [`crate::steady::iterate`]) over z-slabs or a Cartesian
 //! grid of boxes ([`Decomposition`]); [`iterate_block`], the same from rows each rank
 //! builds for its own layers or box of a medium filling the grid's box (no rank holds the
-//! whole system); and [`march_p1`], P1 by FTCS over z-slabs (the twin of [`crate::p1::march`]).
+//! whole system); and [`march_p1_on`], P1 by FTCS over z-slabs or boxes (the twin of
+//! [`crate::p1::march`]; [`march_p1`] the slab case).
 //! For the steady iterations:
 //!
 //! Each rank owns the unknowns of its cells (a slab's layers, or a box's cells) and keeps

@@ -4,7 +4,8 @@
 //! `lucent_diffusion::Multigrid::solve_on_ranks` (the distributed multigrid, z-slabs),
 //! `lucent_explicit::ranks::iterate_on` (FTCS and Jacobi to steady state, z-slabs or a
 //! Cartesian grid of boxes),
-//! `lucent_explicit::ranks::march_p1` (P1 by FTCS), `lucent_explicit::wavefront`
+//! `lucent_explicit::ranks::march_p1_on` (P1 by FTCS, z-slabs or boxes),
+//! `lucent_explicit::wavefront`
 //! (Zhang & Ma's absorption march: a pipelined wavefront or planes in lock step), and
 //! through them the registry's `diffusion-mg`, `ftcs-diffusion`, `jacobi-diffusion`,
 //! `ftcs-p1` and `convection-diffusion` with `SolveOptions::ranks`. This crate adds the transport that runs them across processes:
@@ -13,9 +14,9 @@
 //! Without the feature nothing of MPI is built; [`Alone`] and [`Threads`] (in-process
 //! ranks) are re-exported from `lucent-core`.
 //!
-//! **Reproducibility.** The multigrid's and P1's norms are Σ per z-layer, then the layer
-//! sums in z order, on one rank and on many: a layer never straddles ranks. FTCS and
-//! Jacobi sum runs of eight cells along x and add the run sums exactly
+//! **Reproducibility.** The multigrid's norms are Σ per z-layer, then the layer sums in z
+//! order, on one rank and on many: a layer never straddles ranks. FTCS, Jacobi and P1 sum
+//! runs of eight cells along x and add the run sums exactly
 //! (`lucent_core::exact::ExactSum`, merged across ranks in any order), so boxes, which
 //! split layers, keep the bits too (`docs/ranks.md`). The result does not depend on the
 //! rank count (the explicit schemes: the serial bits; the multigrid: the serial φ, and the
