@@ -170,6 +170,21 @@ impl ExactSum {
         words
     }
 
+    /// Adds the sum the words `part` hold into the sum `words` hold, in place (both as
+    /// [`ExactSum::to_words`] writes them): the combining step of an all-reduce
+    /// ([`crate::ranks::all_reduce`]), exact, so the parts may meet in any order. `false`,
+    /// and `words` unchanged, if either is not words `to_words` could have written.
+    pub fn merge_words(words: &mut [f64], part: &[f64]) -> bool {
+        match (Self::from_words(words), Self::from_words(part)) {
+            (Some(mut sum), Some(other)) => {
+                sum.merge(&other);
+                words.copy_from_slice(&sum.to_words());
+                true
+            }
+            _ => false,
+        }
+    }
+
     /// The sum [`ExactSum::to_words`] wrote, or `None` for words it cannot have written.
     pub fn from_words(words: &[f64]) -> Option<Self> {
         if words.len() != Self::WORDS || words.iter().any(|w| w.fract() != 0.0) {
@@ -232,6 +247,26 @@ mod tests {
 
     fn exact(terms: &[f64]) -> f64 {
         terms.iter().copied().collect::<ExactSum>().value()
+    }
+
+    #[test]
+    fn merged_words_are_the_sum_of_both_and_bad_words_are_refused() {
+        let a: ExactSum = [1e16, 1.0, 0.25].into_iter().collect();
+        let b: ExactSum = [-1e16, 3e-300].into_iter().collect();
+        let mut words = a.to_words();
+        assert!(ExactSum::merge_words(&mut words, &b.to_words()));
+        let merged = ExactSum::from_words(&words).unwrap();
+        assert_eq!(merged.value().to_bits(), (1.25 + 3e-300f64).to_bits());
+        // Words it could not have written (a fraction, a digit out of range, too few)
+        // leave the target as it was.
+        let before = words.clone();
+        let mut bad = b.to_words();
+        bad[3] = 0.5;
+        assert!(!ExactSum::merge_words(&mut words, &bad));
+        bad[3] = 5e9;
+        assert!(!ExactSum::merge_words(&mut words, &bad));
+        assert!(!ExactSum::merge_words(&mut words, &bad[1..]));
+        assert_eq!(words, before);
     }
 
     #[test]

@@ -96,6 +96,72 @@ pub fn exchange_among<R>(
     }
 }
 
+/// Every rank's `local` combined into one vector, on every rank, by recursive doubling over
+/// point-to-point messages ([`Communicator::exchange_with`]): each rank sends and receives
+/// ⌈log₂ P⌉ messages of `local`'s length (two more on the ranks that fold in the ranks
+/// beyond the largest power of two), where an all-gather hands every rank P of them.
+/// `combine(acc, part)` folds another rank's (or group's) part into `acc` and must be
+/// associative and commutative *exactly* (max, min, exact sums such as
+/// [`crate::exact::ExactSum`]'s words), since ranks combine the parts in different orders;
+/// it returns `false` for a part it cannot read. Every rank calls it in the same sequence.
+/// `None` on every rank if any rank got a short message or a part `combine` refused (a
+/// rank that left the protocol): the failure travels with the parts.
+pub fn all_reduce(
+    comm: &(impl Communicator + ?Sized),
+    local: &[f64],
+    combine: impl Fn(&mut [f64], &[f64]) -> bool,
+) -> Option<Vec<f64>> {
+    let (rank, size) = (comm.rank(), comm.size());
+    if size <= 1 {
+        return Some(local.to_vec());
+    }
+    // [failed, local...]: a failure anywhere reaches every rank like the parts do.
+    let mut acc = Vec::with_capacity(local.len() + 1);
+    acc.push(0.0);
+    acc.extend_from_slice(local);
+    let fold = |acc: &mut Vec<f64>, got: Vec<Vec<f64>>| {
+        let part = got.into_iter().next().unwrap_or_default();
+        let fits = part.len() == acc.len() && part[0] == 0.0 && combine(&mut acc[1..], &part[1..]);
+        if !fits {
+            acc[0] = 1.0;
+        }
+    };
+    let send = |to: usize, values: &[f64]| {
+        comm.exchange_with(&[(to, values)], &[], &mut || {});
+    };
+    let receive = |from: usize| comm.exchange_with(&[], &[from], &mut || {});
+    // The largest power of two ≤ P: ranks beyond it fold into ranks 0, 1, … first and
+    // take the result from them last.
+    let p2 = 1usize << (usize::BITS - 1 - size.leading_zeros());
+    if rank >= p2 {
+        send(rank - p2, &acc);
+        let got = receive(rank - p2).into_iter().next().unwrap_or_default();
+        acc = if got.len() == acc.len() {
+            got
+        } else {
+            let mut failed = acc;
+            failed[0] = 1.0;
+            failed
+        };
+    } else {
+        if rank + p2 < size {
+            let got = receive(rank + p2);
+            fold(&mut acc, got);
+        }
+        let mut mask = 1;
+        while mask < p2 {
+            let partner = rank ^ mask;
+            let got = comm.exchange_with(&[(partner, &acc)], &[partner], &mut || {});
+            fold(&mut acc, got);
+            mask <<= 1;
+        }
+        if rank + p2 < size {
+            send(rank + p2, &acc);
+        }
+    }
+    (acc[0] == 0.0).then(|| acc.split_off(1))
+}
+
 /// One rank alone: nothing to exchange.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Alone;
@@ -360,6 +426,66 @@ mod tests {
                     .map(|&q| vec![(10 * q + round) as f64, r as f64])
                     .collect();
                 assert_eq!(received, &expected, "rank {r}, round {round}");
+            }
+        }
+    }
+
+    #[test]
+    fn all_reduce_combines_every_rank_on_every_rank_count() {
+        // Integers (exact in f64, so any order of addition gives the same sum) and a max:
+        // every rank gets every rank's contribution once, on power-of-two rank counts and
+        // on the others (which fold the ranks beyond the power of two in and out).
+        for size in 1..=9 {
+            let results = Threads::run(size, |comm| {
+                let r = comm.rank() as f64;
+                let out = all_reduce(comm, &[r + 1.0, r * r, -r], |acc, part| {
+                    acc[0] += part[0];
+                    acc[1] += part[1];
+                    acc[2] = acc[2].max(part[2]);
+                    true
+                });
+                // The same sequence again: the pairs' messages stay in step.
+                let again = all_reduce(comm, &[1.0], |acc, part| {
+                    acc[0] += part[0];
+                    true
+                });
+                (out, again)
+            });
+            let n = size as f64;
+            let expected = vec![
+                n * (n + 1.0) / 2.0,
+                (n - 1.0) * n * (2.0 * n - 1.0) / 6.0,
+                0.0,
+            ];
+            for r in results {
+                let (out, again) = r.unwrap();
+                assert_eq!(out, Some(expected.clone()), "{size} ranks");
+                assert_eq!(again, Some(vec![n]), "{size} ranks");
+            }
+        }
+    }
+
+    #[test]
+    fn a_part_that_does_not_fit_fails_the_reduction_on_every_rank() {
+        // Rank 2 of 5 (inside the power of two) and rank 4 (folded in) send a part of
+        // another length: every rank returns None, none hangs.
+        for odd in [2, 4] {
+            let results = Threads::run(5, |comm| {
+                let local = if comm.rank() == odd {
+                    vec![1.0, 2.0, 3.0]
+                } else {
+                    vec![1.0, 2.0]
+                };
+                all_reduce(comm, &local, |acc, part| {
+                    if part.len() != acc.len() {
+                        return false;
+                    }
+                    acc[0] += part[0];
+                    true
+                })
+            });
+            for r in results {
+                assert_eq!(r.unwrap(), None, "rank {odd} sent a longer part");
             }
         }
     }

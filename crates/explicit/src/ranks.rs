@@ -97,7 +97,7 @@ pub enum DecompositionError {
     },
 }
 
-use lucent_core::ranks::{Communicator, exchange_among};
+use lucent_core::ranks::{Communicator, all_reduce, exchange_among};
 
 /// A box of cells: its ranges along x, y and z.
 type Cells = [std::ops::Range<usize>; 3];
@@ -861,25 +861,19 @@ fn sweep(
             )),
         ]
     };
-    // Σ v² (owned) over this rank's runs, gathered with the flags: (norm, any time, any
-    // cancel). The merged accumulators are the exact sum of all runs, in any order.
-    let words = 2 + ExactSum::WORDS;
+    // Σ v² (owned) over this rank's runs, all-reduced with the flags: (norm, any time,
+    // any cancel). The merged accumulators are the exact sum of all runs, in any order.
     let gather = |v: &[f64]| -> Result<(f64, bool, bool), DecompositionError> {
         let mut local = local_flags().to_vec();
         local.extend(squares(v, &part.runs).to_words());
-        let all = comm.all_gather(&local);
-        if all.len() != words * comm.size() {
-            return Err(DecompositionError::Protocol { rank });
-        }
-        let (mut sum, mut time, mut cancel) = (ExactSum::new(), false, false);
-        for each in all.chunks(words) {
-            time |= each[0] != 0.0;
-            cancel |= each[1] != 0.0;
-            let part_sum =
-                ExactSum::from_words(&each[2..]).ok_or(DecompositionError::Protocol { rank })?;
-            sum.merge(&part_sum);
-        }
-        Ok((sum.value().sqrt(), time, cancel))
+        let all = all_reduce(comm, &local, |acc, other| {
+            acc[0] = acc[0].max(other[0]);
+            acc[1] = acc[1].max(other[1]);
+            ExactSum::merge_words(&mut acc[2..], &other[2..])
+        })
+        .ok_or(DecompositionError::Protocol { rank })?;
+        let sum = ExactSum::from_words(&all[2..]).ok_or(DecompositionError::Protocol { rank })?;
+        Ok((sum.value().sqrt(), all[0] != 0.0, all[1] != 0.0))
     };
     let (b_norm, mut time_up, mut cancelled) = gather(b)?;
     let b_norm = b_norm.max(f64::MIN_POSITIVE);
@@ -1235,26 +1229,29 @@ pub fn march_p1_on(
         let (change, size_sum) = change_sums(&next_phi, &phi, &runs);
         local.extend(change.to_words());
         local.extend(size_sum.to_words());
-        let all = comm.all_gather(&local);
-        if all.len() != words * size {
-            return Err(DecompositionError::Protocol { rank });
-        }
-        let (mut time_up, mut cancelled) = (false, false);
-        let (mut finite, mut largest) = ([true; 4], [0.0f64; 4]);
-        let (mut change, mut size_sum) = (ExactSum::new(), ExactSum::new());
-        for each in all.chunks(words) {
-            time_up |= each[0] != 0.0;
-            cancelled |= each[1] != 0.0;
-            for f in 0..4 {
-                finite[f] &= each[2 + f] != 0.0;
-                largest[f] = largest[f].max(each[6 + f]);
+        // Any time or cancel flag, every field finite, the largest values, the exact sums.
+        let all = all_reduce(comm, &local, |acc, other| {
+            for f in 0..2 {
+                acc[f] = acc[f].max(other[f]);
             }
-            let (c, s) = each[10..].split_at(ExactSum::WORDS);
-            let part =
-                |w: &[f64]| ExactSum::from_words(w).ok_or(DecompositionError::Protocol { rank });
-            change.merge(&part(c)?);
-            size_sum.merge(&part(s)?);
-        }
+            for f in 2..6 {
+                acc[f] = acc[f].min(other[f]);
+            }
+            for f in 6..10 {
+                acc[f] = acc[f].max(other[f]);
+            }
+            let (change, size) = acc[10..].split_at_mut(ExactSum::WORDS);
+            let (other_change, other_size) = other[10..].split_at(ExactSum::WORDS);
+            ExactSum::merge_words(change, other_change) && ExactSum::merge_words(size, other_size)
+        })
+        .filter(|all| all.len() == words)
+        .ok_or(DecompositionError::Protocol { rank })?;
+        let (time_up, cancelled) = (all[0] != 0.0, all[1] != 0.0);
+        let finite: [bool; 4] = std::array::from_fn(|f| all[2 + f] != 0.0);
+        let largest: [f64; 4] = std::array::from_fn(|f| all[6 + f]);
+        let (c, s) = all[10..].split_at(ExactSum::WORDS);
+        let part = |w: &[f64]| ExactSum::from_words(w).ok_or(DecompositionError::Protocol { rank });
+        let (change, size_sum) = (part(c)?, part(s)?);
         // The serial monitor's order: φ, then E_x, E_y, E_z.
         let stop = (0..4).find_map(|f| {
             if finite[f] {
