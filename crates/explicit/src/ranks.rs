@@ -16,8 +16,8 @@
 //! 2. sends each neighbour the owned values its rows read (non-blocking), computes the
 //!    rows that read no halo while they travel, receives, then computes the rest;
 //! 3. sums r² over its runs of eight cells along x (each run left to right, as serially)
-//!    into an exact accumulator, and all-gathers the accumulators with each rank's
-//!    time-budget and cancel flags; the merged sum is the serial norm's exact sum
+//!    into an exact accumulator, and all-reduces the accumulators with each rank's
+//!    time-budget and cancel flags (`lucent_core::ranks::all_reduce`: log₂P messages); the merged sum is the serial norm's exact sum
 //!    (`steady::Layers`), so every rank takes the serial stopping decision.
 //!
 //! Deterministic stops (tolerances, iteration limit, divergence) follow from the identical

@@ -39,7 +39,8 @@
 //!
 //! **Cost model per sweep and rank** (slab of n_x·n_y·n_z/P cells): two halo messages of
 //! one layer each (≤ 8 n_x n_y bytes), overlapped with the interior rows, and one
-//! all-gather of the norm, whose latency grows as log P; boxes send six face messages
+//! all-reduce of the norm (FTCS, Jacobi, P1: log₂P messages of 71 or 148 words; the
+//! multigrid all-gathers its layer sums); boxes send six face messages
 //! instead, which shrink with the box (`docs/ranks.md` compares the two at 1024 ranks).
 //! `BENCHMARKS.md` ("Ranks") models 64 and 1024 ranks, multigrid's coarse levels included
 //! (agglomerated onto fewer ranks as they shrink, moved by `Communicator::exchange_with`'s
