@@ -271,6 +271,18 @@ impl Boxes {
         [rank % px, (rank / px) % py, rank / (px * py)]
     }
 
+    /// These boxes, if they are a grid of `dims` cells for `ranks` ranks.
+    fn fitting(&self, dims: [usize; 3], ranks: usize) -> Result<&Self, DecompositionError> {
+        if self.ranks() != ranks || self.dims != dims {
+            return Err(DecompositionError::BoxGrid {
+                grid: self.grid(),
+                dims,
+                ranks,
+            });
+        }
+        Ok(self)
+    }
+
     /// The boxes that touch box `rank` at a face, edge or corner, ascending.
     fn adjacent(&self, rank: usize) -> Vec<usize> {
         let [px, py, pz] = self.grid();
@@ -532,13 +544,7 @@ pub fn iterate_on(
             owner
         }
         Decomposition::Boxes(boxes) => {
-            if boxes.ranks() != size || boxes.dims() != dims {
-                return Err(DecompositionError::BoxGrid {
-                    grid: boxes.grid(),
-                    dims,
-                    ranks: size,
-                });
-            }
+            boxes.fitting(dims, size)?;
             system.cells.iter().map(|&c| boxes.rank_of(c)).collect()
         }
     };
@@ -1025,16 +1031,7 @@ pub fn march_p1_on(
             }
             Boxes::new(dims, [1, 1, size])?
         }
-        Decomposition::Boxes(boxes) => {
-            if boxes.ranks() != size || boxes.dims() != dims {
-                return Err(DecompositionError::BoxGrid {
-                    grid: boxes.grid(),
-                    dims,
-                    ranks: size,
-                });
-            }
-            boxes.clone()
-        }
+        Decomposition::Boxes(boxes) => boxes.fitting(dims, size)?.clone(),
     };
     if size > 1 && settings.edges == P1Edges::Periodic {
         return Err(DecompositionError::Scheme(crate::ExplicitError::Invalid(

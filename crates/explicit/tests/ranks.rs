@@ -343,7 +343,7 @@ mod p1 {
     use lucent_core::{StopReason, Stopping};
     use lucent_explicit::Lattice;
     use lucent_explicit::p1::{Damping, Layout, P1Edges, P1Settings, P1State, march};
-    use lucent_explicit::ranks::{DecompositionError, march_p1};
+    use lucent_explicit::ranks::{Boxes, Decomposition, DecompositionError, march_p1_on};
 
     fn settings(layout: Layout, fraction: f64, stopping: Stopping) -> P1Settings {
         let (sigma_a, reduced) = (0.3, 2.0);
@@ -370,15 +370,29 @@ mod p1 {
         ranks: usize,
         lattice: &Lattice,
         source: &[f64],
+        decomposition: &Decomposition,
         settings: &P1Settings,
     ) -> Vec<Result<P1State, DecompositionError>> {
         std::thread::scope(|scope| {
             let handles: Vec<_> = Threads::world(ranks)
                 .into_iter()
-                .map(|comm| scope.spawn(move || march_p1(lattice, source, settings, &comm)))
+                .map(|comm| {
+                    scope
+                        .spawn(move || march_p1_on(lattice, source, decomposition, settings, &comm))
+                })
                 .collect();
             handles.into_iter().map(|h| h.join().unwrap()).collect()
         })
+    }
+
+    /// `out` is `reference` to the bit: stop, steps, φ and E.
+    fn assert_serial_bits(out: &P1State, reference: &P1State, case: &str) {
+        assert_eq!(out.stop_reason, reference.stop_reason, "{case}");
+        assert_eq!(out.steps, reference.steps, "{case}");
+        assert_eq!(bits(&out.fluence), bits(&reference.fluence), "{case}");
+        for a in 0..3 {
+            assert_eq!(bits(&out.flux[a]), bits(&reference.flux[a]), "{case}");
+        }
     }
 
     fn bits(v: &[f64]) -> Vec<u64> {
@@ -415,15 +429,10 @@ mod p1 {
                 );
             }
             for ranks in 1..=5 {
-                for out in on_ranks(ranks, &lattice, &source, &settings) {
-                    let out = out.unwrap();
+                let slabs = Decomposition::Slabs;
+                for out in on_ranks(ranks, &lattice, &source, &slabs, &settings) {
                     let case = format!("{layout:?} at {fraction}, {ranks} ranks");
-                    assert_eq!(out.stop_reason, reference.stop_reason, "{case}");
-                    assert_eq!(out.steps, reference.steps, "{case}");
-                    assert_eq!(bits(&out.fluence), bits(&reference.fluence), "{case}");
-                    for a in 0..3 {
-                        assert_eq!(bits(&out.flux[a]), bits(&reference.flux[a]), "{case}");
-                    }
+                    assert_serial_bits(&out.unwrap(), &reference, &case);
                 }
             }
         }
@@ -431,7 +440,6 @@ mod p1 {
 
     #[test]
     fn every_grid_of_boxes_gives_the_serial_bits() {
-        use lucent_explicit::ranks::{Boxes, Decomposition, march_p1_on};
         // 19 cells in x: three runs of 8 (the last short); sources off the centre and on
         // a box's face.
         let lattice = Lattice::new([19, 7, 9], 1.0).unwrap();
@@ -475,25 +483,10 @@ mod p1 {
             );
             for boxes in &grids {
                 let decomposition = Decomposition::Boxes(boxes.clone());
-                let outs: Vec<_> = std::thread::scope(|scope| {
-                    let handles: Vec<_> = Threads::world(boxes.ranks())
-                        .into_iter()
-                        .map(|comm| {
-                            let (l, q, d, s) = (&lattice, &source, &decomposition, &settings);
-                            scope.spawn(move || march_p1_on(l, q, d, s, &comm))
-                        })
-                        .collect();
-                    handles.into_iter().map(|h| h.join().unwrap()).collect()
-                });
+                let outs = on_ranks(boxes.ranks(), &lattice, &source, &decomposition, &settings);
                 for (rank, out) in outs.into_iter().enumerate() {
-                    let out = out.unwrap();
                     let case = format!("{layout:?} at {fraction}, {:?} rank {rank}", boxes.grid());
-                    assert_eq!(out.stop_reason, reference.stop_reason, "{case}");
-                    assert_eq!(out.steps, reference.steps, "{case}");
-                    assert_eq!(bits(&out.fluence), bits(&reference.fluence), "{case}");
-                    for a in 0..3 {
-                        assert_eq!(bits(&out.flux[a]), bits(&reference.flux[a]), "{case}");
-                    }
+                    assert_serial_bits(&out.unwrap(), &reference, &case);
                 }
             }
         }
@@ -505,11 +498,11 @@ mod p1 {
         let source = vec![0.1; lattice.len()];
         let mut periodic = settings(Layout::Staggered, 0.9, Stopping::default());
         periodic.edges = P1Edges::Periodic;
-        for out in on_ranks(2, &lattice, &source, &periodic) {
+        for out in on_ranks(2, &lattice, &source, &Decomposition::Slabs, &periodic) {
             assert!(matches!(out, Err(DecompositionError::Scheme(_))), "{out:?}");
         }
         let zero = settings(Layout::Staggered, 0.9, Stopping::default());
-        for out in on_ranks(5, &lattice, &source, &zero) {
+        for out in on_ranks(5, &lattice, &source, &Decomposition::Slabs, &zero) {
             assert!(matches!(
                 out,
                 Err(DecompositionError::TooManyRanks {
