@@ -248,30 +248,37 @@ fn main() -> ExitCode {
                 TableError::Optics(e) => Error::Optics(e),
             }),
     };
-    let status = match result {
+    #[cfg(feature = "mpi")]
+    let failed = result.is_err();
+    let code: u8 = match result {
         // Interrupted: what was computed has been written.
-        Ok(_) if interrupted() => ExitCode::from(EXIT_INTERRUPTED),
-        Ok(Ended::Done) => ExitCode::SUCCESS,
-        Ok(Ended::Unconverged) => ExitCode::from(EXIT_UNCONVERGED),
-        Ok(Ended::Diverged) => ExitCode::from(EXIT_DIVERGED),
-        Err(Error::Io { reason, .. }) if reason.contains("Broken pipe") => ExitCode::SUCCESS,
-        Err(e @ Error::Usage(_)) => {
-            let _ = writeln!(io::stderr(), "lucent: {e}");
-            ExitCode::from(2)
-        }
-        Err(e @ Error::Unconverged { diverged, .. }) => {
-            let _ = writeln!(io::stderr(), "lucent: {e}");
-            ExitCode::from(if diverged {
-                EXIT_DIVERGED
-            } else {
-                EXIT_UNCONVERGED
-            })
-        }
+        Ok(_) if interrupted() => EXIT_INTERRUPTED,
+        Ok(Ended::Done) => 0,
+        Ok(Ended::Unconverged) => EXIT_UNCONVERGED,
+        Ok(Ended::Diverged) => EXIT_DIVERGED,
+        Err(Error::Io { reason, .. }) if reason.contains("Broken pipe") => 0,
         Err(e) => {
-            let _ = writeln!(io::stderr(), "lucent: {e}");
-            ExitCode::FAILURE
+            // Under mpirun every rank says which it is.
+            let who = world().map_or(String::new(), |w| {
+                format!(" (rank {} of {})", w.rank(), w.size())
+            });
+            let _ = writeln!(io::stderr(), "lucent{who}: {e}");
+            match e {
+                Error::Usage(_) => 2,
+                Error::Unconverged { diverged: true, .. } => EXIT_DIVERGED,
+                Error::Unconverged { .. } => EXIT_UNCONVERGED,
+                _ => 1,
+            }
         }
     };
+    // An error on this rank may not be the others' (a file one node cannot read): end
+    // every rank now instead of finalising MPI, which would wait for ranks that wait for
+    // this one.
+    #[cfg(feature = "mpi")]
+    if failed && code != 0 && world().is_some() {
+        _mpi.abort(i32::from(code));
+    }
+    let status = ExitCode::from(code);
     if std::env::var_os("LUCENT_COUNTERS").is_some() {
         // For tests: proof that bad input was refused before any solving (last line).
         let _ = writeln!(

@@ -76,6 +76,13 @@ impl World {
     pub fn ranks(&self) -> Mpi {
         Mpi::world(&self.universe)
     }
+
+    /// Ends every rank's process with exit status `code` (`MPI_Abort`): for an error on
+    /// this rank that the others may not share. Returning would finalise MPI, which
+    /// waits for ranks that may be waiting for this one.
+    pub fn abort(&self, code: i32) -> ! {
+        world().abort(code)
+    }
 }
 
 /// The tag of [`Communicator::exchange_with`]'s messages (the halo exchange's are 0), so
