@@ -17,9 +17,11 @@
 //! default `RankLayout::COARSE_CELLS_PER_RANK`, 0 splits every level as far as it goes);
 //! or Zhang & Ma's absorption march of a distant light through heterogeneous absorption on
 //! the same grid (`lucent_explicit::wavefront`, short characteristics): `march` with the
-//! light along z (the pipelined wavefront), `march-x` along x (planes in lock step).
-//! Every rank also solves serially and compares: FTCS, Jacobi and the march must give the
-//! same bits; the multigrid the serial φ to 1e-10 of its largest value with the cycle
+//! light along z (the pipelined wavefront), `march-x` along x (planes in lock step); or
+//! `p1`, Murray's P1 by FTCS from a point source on the same grid, 400 steps
+//! (`lucent_explicit::ranks::march_p1_on`, z-slabs or `--boxes`).
+//! Every rank also solves serially and compares: FTCS, Jacobi, P1 and the march must give
+//! the same bits; the multigrid the serial φ to 1e-10 of its largest value with the cycle
 //! count ± 1. The
 //! exit status is 1 otherwise. Rank 0 prints the iterations, the stop reason and the wall
 //! time of the split solve (the best of `--repeat R` runs, default 1).
@@ -33,7 +35,7 @@ use lucent_diffusion::{
     Boundaries, CellGeometry, Condition, DiffusionProblem, Discretisation, Multigrid,
     MultigridSettings, RankLayout, Sources,
 };
-use lucent_explicit::ranks::{Boxes, Decomposition, iterate_on};
+use lucent_explicit::ranks::{Boxes, Decomposition, iterate_on, march_p1_on};
 use lucent_explicit::steady::{Iteration, SteadySettings, ftcs_limit, iterate as serial};
 use lucent_grid::GridGeometry;
 use lucent_mpi::Communicator;
@@ -46,6 +48,8 @@ enum Method {
     Multigrid(usize),
     /// The absorption march, the light's dominant axis z (`true`) or x.
     March(bool),
+    /// P1 by FTCS.
+    P1,
 }
 
 struct Run {
@@ -140,6 +144,9 @@ fn run(
 ) -> Result<Run, String> {
     if let Method::March(along_z) = method {
         return march(comm, along_z, layers_per_rank, side, repeat);
+    }
+    if method == Method::P1 {
+        return p1(comm, layers_per_rank, side, repeat, boxes);
     }
     let (problem, sources, dims) = problem(comm.size(), layers_per_rank, side)?;
     if let Method::Multigrid(coarse_cells) = method {
@@ -267,6 +274,53 @@ fn march(
     })
 }
 
+/// P1 by FTCS (staggered, consistent damping, 0.9 of the stable step) for 400 steps from
+/// a point source on the grid of [`problem`], against the serial march.
+fn p1(
+    comm: &(impl Communicator + ?Sized),
+    layers_per_rank: usize,
+    side: usize,
+    repeat: usize,
+    boxes: Option<&str>,
+) -> Result<Run, String> {
+    use lucent_explicit::p1::{Damping, Layout, P1Edges, P1Settings, march as serial_march};
+    let dims = [side, side * 5 / 6, layers_per_rank * comm.size()];
+    let h = 6.0 / side as f64;
+    let lattice = lucent_explicit::Lattice::new(dims, h).map_err(|e| e.to_string())?;
+    let mut source = vec![0.0; lattice.len()];
+    source[dims[0] / 3 + dims[0] * (dims[1] / 2 + dims[1] * (dims[2] / 2))] = 1.0;
+    let (sigma_a, reduced) = (0.3, 2.0);
+    let step = lucent_explicit::stability::p1::largest_step(true, sigma_a, reduced, h);
+    let settings = P1Settings {
+        layout: Layout::Staggered,
+        damping: Damping::Consistent {
+            sigma_a,
+            sigma_t_reduced: reduced,
+        },
+        time_step: 0.9 * step,
+        stopping: Stopping {
+            relative_tolerance: 0.0,
+            max_iterations: 400,
+            ..Stopping::default()
+        },
+        edges: P1Edges::Zero,
+        allow_unstable: false,
+    };
+    let decomposition = decomposition(boxes, dims, comm.size())?;
+    let (split, seconds) = best_of(repeat, || {
+        march_p1_on(&lattice, &source, &decomposition, &settings, comm)
+    })?;
+    let reference = serial_march(&lattice, &source, &settings, None).map_err(|e| e.to_string())?;
+    Ok(Run {
+        iterations: split.steps,
+        stop: split.stop_reason.to_string(),
+        seconds,
+        agrees: bits(&split.fluence) == bits(&reference.fluence)
+            && (0..3).all(|a| bits(&split.flux[a]) == bits(&reference.flux[a]))
+            && split.stop_reason == reference.stop_reason,
+    })
+}
+
 fn report(
     comm: &(impl Communicator + ?Sized),
     method: Method,
@@ -282,6 +336,7 @@ fn report(
             Method::Multigrid(_) => (["cycles", "cycle"], "within 1e-10 and ±1 cycle of"),
             Method::Jacobi | Method::Ftcs => (["sweeps", "sweep"], "the bits of"),
             Method::March(_) => (["passes", "pass"], "the bits of"),
+            Method::P1 => (["steps", "step"], "the bits of"),
         };
         eprintln!(
             "{} ranks, {}×{}×{} cells: {} {}, {}, {:.4} s split ({:.1} µs per {}); {} one rank's: {}",
@@ -322,14 +377,15 @@ fn main() -> ExitCode {
         ),
         Some("march") => Method::March(true),
         Some("march-x") => Method::March(false),
+        Some("p1") => Method::P1,
         Some(other) => {
-            eprintln!("weak_scaling: --method {other}: ftcs, jacobi, mg, march or march-x");
+            eprintln!("weak_scaling: --method {other}: ftcs, jacobi, mg, march, march-x or p1");
             return ExitCode::from(2);
         }
     };
     let boxes = value::<String>(&args, "--boxes");
-    if boxes.is_some() && !matches!(method, Method::Ftcs | Method::Jacobi) {
-        eprintln!("weak_scaling: --boxes splits FTCS and Jacobi only");
+    if boxes.is_some() && !matches!(method, Method::Ftcs | Method::Jacobi | Method::P1) {
+        eprintln!("weak_scaling: --boxes splits FTCS, Jacobi and P1 only");
         return ExitCode::from(2);
     }
     match run_on_ranks(&args, method, layers, side, repeat, boxes.as_deref()) {
