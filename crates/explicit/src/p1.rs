@@ -231,21 +231,26 @@ pub fn march(
     );
     let mut history = History::start();
     let mut step = 0;
-    let all = 0..lattice.dims[2];
     let [nx, ny, nz] = lattice.dims;
-    let runs = box_runs([0; 3], lattice.dims, &[0..nx, 0..ny, 0..nz]);
+    let whole = [0..nx, 0..ny, 0..nz];
+    let region = Region {
+        dims: lattice.dims,
+        origin: [0; 3],
+        held: lattice.dims,
+    };
+    let runs = box_runs([0; 3], lattice.dims, &whole);
+    let (mut next_phi, mut next_flux) = (vec![0.0; n], [vec![0.0; n], vec![0.0; n], vec![0.0; n]]);
     loop {
         step += 1;
-        let mut next_phi = vec![0.0; n];
-        let mut next_flux = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-        step_layers(
-            lattice,
+        step_box(
             &step_of,
             settings.edges,
+            &region,
             (&phi, &flux),
             (&mut next_phi, &mut next_flux),
-            (source, 0),
-            all.clone(),
+            source,
+            &whole,
+            None,
         );
         let stop = monitor
             .check(&next_phi, step)
@@ -260,8 +265,8 @@ pub fn march(
         }
         let (change, size) = change_sums(&next_phi, &phi, &runs);
         let (change, last_change) = change_norms(&change, &size);
-        phi = next_phi;
-        flux = next_flux;
+        std::mem::swap(&mut phi, &mut next_phi);
+        std::mem::swap(&mut flux, &mut next_flux);
         if let Some(stop_reason) =
             history.record_step(&settings.stopping, step, last_change, change.sqrt())
         {
@@ -275,50 +280,77 @@ pub fn march(
     }
 }
 
-/// One FTCS step of the cells of the z-layers `layers`: `next` from `now` (φ, E), reading
-/// the layers next to them; cells beyond the grid per `edges`. The fields and `source`
-/// hold the cells from `first` on (a rank's layers and halo; 0: the whole grid).
-pub(crate) fn step_layers(
-    lattice: &Lattice,
+/// Fields held over a box of a grid's cells: `held` cells from `origin` (x fastest), of a
+/// grid of `dims` (a rank's box grown by a cell; the whole grid in one process).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Region {
+    /// The whole grid's cells.
+    pub dims: [usize; 3],
+    /// The first cell held.
+    pub origin: [usize; 3],
+    /// The cells held along each axis.
+    pub held: [usize; 3],
+}
+
+impl Region {
+    /// Where cell `p` (grid coordinates) lies in the held fields.
+    #[inline]
+    pub(crate) fn place(&self, p: [usize; 3]) -> usize {
+        (p[0] - self.origin[0])
+            + self.held[0] * ((p[1] - self.origin[1]) + self.held[1] * (p[2] - self.origin[2]))
+    }
+}
+
+/// One FTCS step of the cells `cells` (less those of `skip`): `next` (φ, E) from `now`,
+/// fields and `source` held over `region`; a cell's neighbour beyond the grid is zero or
+/// wraps round (`edges`; wrapping needs the whole axis held). The one cell loop of the
+/// march, in one process and on ranks.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn step_box(
     step_of: &StepCoefficients,
     edges: P1Edges,
+    region: &Region,
     (phi, flux): (&[f64], &[Vec<f64>; 3]),
     (next_phi, next_flux): (&mut [f64], &mut [Vec<f64>; 3]),
-    (source, first): (&[f64], usize),
-    layers: std::ops::Range<usize>,
+    source: &[f64],
+    cells: &[Range<usize>; 3],
+    skip: Option<&[Range<usize>; 3]>,
 ) {
-    let s = lattice.strides();
-    let neighbour = |g: usize, axis: usize, step: isize| -> Option<usize> {
-        let at = lattice.coords(g);
-        let n = lattice.dims[axis] as isize;
-        let to = at[axis] as isize + step;
-        let moved = match edges {
-            P1Edges::Periodic => to.rem_euclid(n),
-            P1Edges::Zero if (0..n).contains(&to) => to,
-            P1Edges::Zero => return None,
-        } as usize;
-        Some(g - at[axis] * s[axis] + moved * s[axis])
-    };
-    // Fields hold the cells from `first` on (a rank's layers and halo; 0: all).
-    let at = |f: &[f64], g: Option<usize>| g.map_or(0.0, |g| f[g - first]);
-    for g in layers.start * s[2]..layers.end * s[2] {
-        let i = g - first;
-        let [p, fx, fy, fz] = step_of.cell(source[i], |component, axis, offset| {
-            let field = if component == 0 {
-                phi
-            } else {
-                &flux[component - 1]
-            };
-            if offset == 0 {
-                field[i]
-            } else {
-                at(field, neighbour(g, axis, offset))
+    let Region { dims, origin, held } = *region;
+    let stride = [1, held[0], held[0] * held[1]];
+    for k in cells[2].clone() {
+        for j in cells[1].clone() {
+            let skipped = skip
+                .filter(|s| s[1].contains(&j) && s[2].contains(&k))
+                .map_or(0..0, |s| s[0].clone());
+            for i in cells[0].clone().filter(|i| !skipped.contains(i)) {
+                let p = [i, j, k];
+                let l = region.place(p);
+                let out = step_of.cell(source[l], |component, axis, offset| {
+                    let field = if component == 0 {
+                        phi
+                    } else {
+                        &flux[component - 1]
+                    };
+                    if offset == 0 {
+                        return field[l];
+                    }
+                    let n = dims[axis] as isize;
+                    let to = p[axis] as isize + offset;
+                    let moved = match edges {
+                        P1Edges::Periodic => to.rem_euclid(n),
+                        P1Edges::Zero if (0..n).contains(&to) => to,
+                        P1Edges::Zero => return 0.0,
+                    } as usize;
+                    field[l + (moved - origin[axis]) * stride[axis]
+                        - (p[axis] - origin[axis]) * stride[axis]]
+                });
+                next_phi[l] = out[0];
+                for c in 0..3 {
+                    next_flux[c][l] = out[1 + c];
+                }
             }
-        });
-        next_phi[i] = p;
-        next_flux[0][i] = fx;
-        next_flux[1][i] = fy;
-        next_flux[2][i] = fz;
+        }
     }
 }
 

@@ -1014,7 +1014,8 @@ pub fn march_p1_on(
     comm: &(impl Communicator + ?Sized),
 ) -> Result<crate::p1::P1State, DecompositionError> {
     use crate::p1::{
-        P1Edges, P1State, StepCoefficients, box_runs, change_norms, change_sums, growth_monitor,
+        P1Edges, P1State, Region, StepCoefficients, box_runs, change_norms, change_sums,
+        growth_monitor, step_box,
     };
     use std::ops::Range;
     lattice.check_field("source", source)?;
@@ -1044,8 +1045,8 @@ pub fn march_p1_on(
     let origin: [usize; 3] = std::array::from_fn(|a| own[a].start.saturating_sub(1));
     let held: [usize; 3] = std::array::from_fn(|a| (own[a].end + 1).min(dims[a]) - origin[a]);
     let len: usize = held.iter().product();
-    let stride = [1, held[0], held[0] * held[1]];
-    let place = |p: [usize; 3]| -> usize { (0..3).map(|a| (p[a] - origin[a]) * stride[a]).sum() };
+    let region = Region { dims, origin, held };
+    let place = |p: [usize; 3]| region.place(p);
     let cells_of = |b: &[Range<usize>; 3]| {
         let [x, y, z] = b.clone();
         z.flat_map(move |k| {
@@ -1092,46 +1093,20 @@ pub fn march_p1_on(
         s..e.max(s)
     });
     let inner_empty = inner.iter().any(|r| r.is_empty());
-    let edges = settings.edges;
-    // One FTCS step of the cells `cells` (less `skip`'s), the serial cell update.
-    let step_cells = |(phi, flux): (&[f64], &[Vec<f64>; 3]),
-                      (next_phi, next_flux): (&mut [f64], &mut [Vec<f64>; 3]),
-                      cells: &[Range<usize>; 3],
-                      skip: Option<&[Range<usize>; 3]>| {
-        for k in cells[2].clone() {
-            for j in cells[1].clone() {
-                let skipped = skip
-                    .filter(|s| s[1].contains(&j) && s[2].contains(&k))
-                    .map_or(0..0, |s| s[0].clone());
-                for i in cells[0].clone().filter(|i| !skipped.contains(i)) {
-                    let p = [i, j, k];
-                    let l = place(p);
-                    let out = step_of.cell(local_source[l], |component, axis, offset| {
-                        let field = if component == 0 {
-                            phi
-                        } else {
-                            &flux[component - 1]
-                        };
-                        if offset == 0 {
-                            return field[l];
-                        }
-                        let n = dims[axis] as isize;
-                        let to = p[axis] as isize + offset;
-                        let moved = match edges {
-                            P1Edges::Periodic => to.rem_euclid(n),
-                            P1Edges::Zero if (0..n).contains(&to) => to,
-                            P1Edges::Zero => return 0.0,
-                        } as usize;
-                        field[l + (moved - origin[axis]) * stride[axis]
-                            - (p[axis] - origin[axis]) * stride[axis]]
-                    });
-                    next_phi[l] = out[0];
-                    for c in 0..3 {
-                        next_flux[c][l] = out[1 + c];
-                    }
-                }
-            }
-        }
+    let step_cells = |now: (&[f64], &[Vec<f64>; 3]),
+                      next: (&mut [f64], &mut [Vec<f64>; 3]),
+                      cells: &Cells,
+                      skip: Option<&Cells>| {
+        step_box(
+            &step_of,
+            settings.edges,
+            &region,
+            now,
+            next,
+            &local_source,
+            cells,
+            skip,
+        );
     };
     let runs = box_runs(origin, held, &own);
     let largest = source.iter().fold(0.0f64, |a, b| a.max(b.abs()));
@@ -1210,18 +1185,19 @@ pub fn march_p1_on(
                     .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)),
             )),
         ];
+        // Per field, over its owned cells (the runs): finite, and the largest magnitude.
         let new = [&next_phi, &next_flux[0], &next_flux[1], &next_flux[2]];
-        let owned = |f: &[f64]| -> Vec<f64> {
-            runs.iter()
-                .flat_map(|&(s, e)| f[s..e].iter().copied())
-                .collect()
-        };
-        let values: Vec<Vec<f64>> = new.iter().map(|f| owned(f)).collect();
-        for v in &values {
-            local.push(f64::from(u8::from(v.iter().all(|x| x.is_finite()))));
+        for f in new {
+            let finite = runs
+                .iter()
+                .all(|&(s, e)| f[s..e].iter().all(|x| x.is_finite()));
+            local.push(f64::from(u8::from(finite)));
         }
-        for v in &values {
-            local.push(v.iter().fold(0.0f64, |a, b| a.max(b.abs())));
+        for f in new {
+            let largest = runs.iter().fold(0.0f64, |a, &(s, e)| {
+                f[s..e].iter().fold(a, |a, b| a.max(b.abs()))
+            });
+            local.push(largest);
         }
         let (change, size_sum) = change_sums(&next_phi, &phi, &runs);
         local.extend(change.to_words());

@@ -310,7 +310,15 @@ fn p1(
     let (split, seconds) = best_of(repeat, || {
         march_p1_on(&lattice, &source, &decomposition, &settings, comm)
     })?;
+    let started = Instant::now();
     let reference = serial_march(&lattice, &source, &settings, None).map_err(|e| e.to_string())?;
+    if comm.rank() == 0 {
+        // The serial march's own cell loop, for comparison with one rank's.
+        eprintln!(
+            "serial p1::march: {:.1} µs per step",
+            started.elapsed().as_secs_f64() * 1e6 / reference.steps.max(1) as f64
+        );
+    }
     Ok(Run {
         iterations: split.steps,
         stop: split.stop_reason.to_string(),
