@@ -14,6 +14,25 @@ use lucent::explicit::scatter::Scatterer;
 
 use crate::bench_diffusion::{best_of, copy_bandwidth};
 
+/// What a timed run must have done, checked after the timing: `ran(name, steps, expected,
+/// result)` refuses a run that failed or stopped short, so a figure never times a refusal
+/// (an earlier version timed P1's refusal of an unstable step as if it were 5 steps).
+fn ran<T, E: std::fmt::Display>(
+    name: &str,
+    result: Result<T, E>,
+    steps: impl Fn(&T) -> usize,
+    expected: usize,
+) -> Result<(), String> {
+    match result {
+        Ok(out) if steps(&out) == expected => Ok(()),
+        Ok(out) => Err(format!(
+            "{name}: ran {} steps, not {expected}: the figure would not be a step's",
+            steps(&out)
+        )),
+        Err(e) => Err(format!("{name}: {e}")),
+    }
+}
+
 fn line(name: &str, seconds: f64, updates: f64, bytes_per_update: f64, copy: f64) {
     let gbs = updates * bytes_per_update / seconds / 1e9;
     println!(
@@ -66,9 +85,11 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
         allow_unstable: false,
         initial: Some(initial.clone()),
     };
+    let mut check = Ok(());
     let t = best_of(5, || {
-        let _ = problem.march(&march);
+        check = ran("ftcs-diffusion", problem.march(&march), |o| o.steps, 10);
     }) / 10.0;
+    check?;
     line(
         "ftcs-diffusion, per step of 10 (residual included)",
         t,
@@ -76,14 +97,18 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
         40.0,
         parallel,
     );
-    // P1 (staggered): φ and 3 E read and written, q read.
+    // P1 (staggered): φ and 3 E read and written, q read; 0.9 of the stable step (with
+    // Murray's damping σ_t damps both φ and E). The copy of the initial state is inside
+    // the timing: one step's traffic in ten steps.
+    let sigma_t = 0.1;
+    let stable = lucent::explicit::stability::p1::largest_step(true, sigma_t, sigma_t, 1.0);
     let settings = P1Settings {
         layout: Layout::Staggered,
-        damping: Damping::Murray { sigma_t: 0.1 },
-        time_step: 0.09,
+        damping: Damping::Murray { sigma_t },
+        time_step: 0.9 * stable,
         stopping: Stopping {
             relative_tolerance: 0.0,
-            max_iterations: 5,
+            max_iterations: 10,
             ..Stopping::default()
         },
         edges: P1Edges::Periodic,
@@ -93,11 +118,14 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
         initial.clone(),
         [initial.clone(), initial.clone(), initial.clone()],
     );
+    let mut check = Ok(());
     let t = best_of(5, || {
-        let _ = p1(&lattice, &q, &settings, Some(start.clone()));
-    }) / 5.0;
+        let out = p1(&lattice, &q, &settings, Some(start.clone()));
+        check = ran("ftcs-p1", out, |o| o.steps, 10);
+    }) / 10.0;
+    check?;
     line(
-        "ftcs-p1 staggered, per step of 5",
+        "ftcs-p1 staggered, per step of 10",
         t,
         cells as f64,
         72.0,
@@ -120,9 +148,12 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
         },
         allow_unstable: false,
     };
+    let mut check = Ok(());
     let t = best_of(3, || {
-        let _ = ordinates(&lattice, &quadrature, &st, &ss, &source, &settings);
+        let out = ordinates(&lattice, &quadrature, &st, &ss, &source, &settings);
+        check = ran("ftcs-ordinates", out, |o| o.steps, 3);
     }) / 3.0;
+    check?;
     line(
         "ftcs-ordinates S4, per step of 3 (cell-direction updates)",
         t,
@@ -139,11 +170,15 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
         density: 1.0,
     };
     let mut rho = Vec::new();
+    let mut check = Ok(());
     let t_abs = best_of(5, || {
-        if let Ok(out) = propagate(&lattice, &absorption, &light, &UpwindSettings::default()) {
-            rho = out.density;
+        match propagate(&lattice, &absorption, &light, &UpwindSettings::default()) {
+            Ok(out) if out.stop_reason.is_converged() => rho = out.density,
+            Ok(out) => check = Err(format!("zhang-ma absorption: {}", out.stop_reason)),
+            Err(e) => check = Err(format!("zhang-ma absorption: {e}")),
         }
     });
+    check?;
     line(
         "zhang-ma absorption, one light to steady state",
         t_abs,
@@ -157,9 +192,13 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
         model: Model::Characteristic,
         ..UpwindSettings::default()
     };
+    let mut check = Ok(());
     let t_char = best_of(5, || {
-        let _ = propagate(&lattice, &absorption, &light, &characteristic);
+        let out = propagate(&lattice, &absorption, &light, &characteristic);
+        // One pass, plane by plane.
+        check = ran("zhang-ma characteristic", out, |o| o.iterations, 1);
     });
+    check?;
     line(
         "zhang-ma absorption, characteristic model (the registry's default)",
         t_char,
@@ -168,12 +207,14 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
         parallel,
     );
     let scatterer = Scatterer::new(&lattice, 1.0).map_err(|e| err(&e))?;
-    let mut cycles = 0;
+    let mut cycles = Ok(0);
     let t_sc = best_of(5, || {
-        if let Ok((_, c, _)) = scatterer.step(&rho, 1e-4) {
-            cycles = c;
-        }
+        cycles = scatterer
+            .step(&rho, 1e-4)
+            .map(|(_, c, _)| c)
+            .map_err(|e| format!("zhang-ma scattering step: {e}"));
     });
+    let cycles = cycles?;
     println!(
         "| zhang-ma scattering step (a = 1, multigrid to 1e-4, {cycles} cycles; hierarchy kept) | {:.1} ms | | | | |",
         t_sc * 1e3

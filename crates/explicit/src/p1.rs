@@ -27,6 +27,7 @@ use std::ops::Range;
 
 use lucent_core::exact::ExactSum;
 use lucent_core::{History, StopReason, Stopping};
+use rayon::prelude::*;
 
 use crate::error::ExplicitError;
 use crate::lattice::{GrowthMonitor, Lattice};
@@ -304,7 +305,8 @@ impl Region {
 /// One FTCS step of the cells `cells` (less those of `skip`): `next` (φ, E) from `now`,
 /// fields and `source` held over `region`; a cell's neighbour beyond the grid is zero or
 /// wraps round (`edges`; wrapping needs the whole axis held). The one cell loop of the
-/// march, in one process and on ranks.
+/// march, in one process and on ranks, in parallel over z-layers (each cell's update is
+/// independent: the same bits on any number of threads).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn step_box(
     step_of: &StepCoefficients,
@@ -318,40 +320,53 @@ pub(crate) fn step_box(
 ) {
     let Region { dims, origin, held } = *region;
     let stride = [1, held[0], held[0] * held[1]];
-    for k in cells[2].clone() {
-        for j in cells[1].clone() {
-            let skipped = skip
-                .filter(|s| s[1].contains(&j) && s[2].contains(&k))
-                .map_or(0..0, |s| s[0].clone());
-            for i in cells[0].clone().filter(|i| !skipped.contains(i)) {
-                let p = [i, j, k];
-                let l = region.place(p);
-                let out = step_of.cell(source[l], |component, axis, offset| {
-                    let field = if component == 0 {
-                        phi
-                    } else {
-                        &flux[component - 1]
-                    };
-                    if offset == 0 {
-                        return field[l];
-                    }
-                    let n = dims[axis] as isize;
-                    let to = p[axis] as isize + offset;
-                    let moved = match edges {
-                        P1Edges::Periodic => to.rem_euclid(n),
-                        P1Edges::Zero if (0..n).contains(&to) => to,
-                        P1Edges::Zero => return 0.0,
-                    } as usize;
-                    field[l + (moved - origin[axis]) * stride[axis]
-                        - (p[axis] - origin[axis]) * stride[axis]]
-                });
-                next_phi[l] = out[0];
-                for c in 0..3 {
-                    next_flux[c][l] = out[1 + c];
+    let layer = stride[2];
+    let [f0, f1, f2] = next_flux;
+    // In parallel over the held layers (each writes only its own cells).
+    next_phi
+        .par_chunks_mut(layer)
+        .zip(f0.par_chunks_mut(layer))
+        .zip(f1.par_chunks_mut(layer))
+        .zip(f2.par_chunks_mut(layer))
+        .enumerate()
+        .filter(|(t, _)| cells[2].contains(&(origin[2] + t)))
+        .for_each(|(t, (((next_phi, f0), f1), f2))| {
+            let k = origin[2] + t;
+            let first = t * layer;
+            for j in cells[1].clone() {
+                let skipped = skip
+                    .filter(|s| s[1].contains(&j) && s[2].contains(&k))
+                    .map_or(0..0, |s| s[0].clone());
+                for i in cells[0].clone().filter(|i| !skipped.contains(i)) {
+                    let p = [i, j, k];
+                    let l = region.place(p);
+                    let out = step_of.cell(source[l], |component, axis, offset| {
+                        let field = if component == 0 {
+                            phi
+                        } else {
+                            &flux[component - 1]
+                        };
+                        if offset == 0 {
+                            return field[l];
+                        }
+                        let n = dims[axis] as isize;
+                        let to = p[axis] as isize + offset;
+                        let moved = match edges {
+                            P1Edges::Periodic => to.rem_euclid(n),
+                            P1Edges::Zero if (0..n).contains(&to) => to,
+                            P1Edges::Zero => return 0.0,
+                        } as usize;
+                        field[l + (moved - origin[axis]) * stride[axis]
+                            - (p[axis] - origin[axis]) * stride[axis]]
+                    });
+                    let at = l - first;
+                    next_phi[at] = out[0];
+                    f0[at] = out[1];
+                    f1[at] = out[2];
+                    f2[at] = out[3];
                 }
             }
-        }
-    }
+        });
 }
 
 /// The norm's runs of the box of cells `cells` in fields that hold the box of `held`
