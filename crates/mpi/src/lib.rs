@@ -45,6 +45,12 @@
 //! `BENCHMARKS.md` ("Ranks") models 64 and 1024 ranks, multigrid's coarse levels included
 //! (agglomerated onto fewer ranks as they shrink, moved by `Communicator::exchange_with`'s
 //! point-to-point messages).
+//!
+//! **Failure.** A rank that panics (after `World::initialise`) aborts every rank with
+//! `MPI_Abort`; `World::abort` does the same for an error one rank meets alone (the
+//! `lucent` binary calls it for any error under `mpirun`). Returning normally would
+//! finalise MPI, which waits for the other ranks, which may be waiting in a halo exchange
+//! or reduction for the one that failed: a hang instead of an error.
 
 #[cfg(feature = "mpi")]
 mod mpi_comm;
