@@ -69,6 +69,9 @@ pub struct P1State {
     pub flux: [Vec<f64>; 3],
     /// Steps run.
     pub steps: usize,
+    /// The relative change ‖φ′ − φ‖/‖φ′‖ of each step taken (the stopping rule's
+    /// residual).
+    pub changes: Vec<f64>,
     /// Why it stopped.
     pub stop_reason: StopReason,
 }
@@ -261,6 +264,7 @@ pub fn march(
                 fluence: phi,
                 flux,
                 steps: step,
+                changes: history.residuals().to_vec(),
                 stop_reason,
             });
         }
@@ -275,6 +279,7 @@ pub fn march(
                 fluence: phi,
                 flux,
                 steps: step,
+                changes: history.residuals().to_vec(),
                 stop_reason,
             });
         }

@@ -1277,6 +1277,7 @@ pub fn march_p1_on(
             gathered(&flux[2])?,
         ],
         steps: step,
+        changes: history.into_residuals(),
         stop_reason,
     })
 }

@@ -385,10 +385,12 @@ mod p1 {
         })
     }
 
-    /// `out` is `reference` to the bit: stop, steps, φ and E.
+    /// `out` is `reference` to the bit: stop, steps, every step's change (the norm's
+    /// bits), φ and E.
     fn assert_serial_bits(out: &P1State, reference: &P1State, case: &str) {
         assert_eq!(out.stop_reason, reference.stop_reason, "{case}");
         assert_eq!(out.steps, reference.steps, "{case}");
+        assert_eq!(bits(&out.changes), bits(&reference.changes), "{case}");
         assert_eq!(bits(&out.fluence), bits(&reference.fluence), "{case}");
         for a in 0..3 {
             assert_eq!(bits(&out.flux[a]), bits(&reference.flux[a]), "{case}");
