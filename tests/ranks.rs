@@ -162,7 +162,6 @@ fn p1_gives_the_serial_bits_on_ranks() {
                 fluence_bits(&serial),
                 "{scene}, {ranks} ranks, {decomposition}"
             );
-            assert_eq!(history_bits(&split), history_bits(&serial), "{scene}");
             assert_eq!(
                 split.report.stop_reason, serial.report.stop_reason,
                 "{scene}"
