@@ -15,6 +15,26 @@
 //! Non-finite terms: any NaN, or +∞ and −∞ together, make the sum NaN; otherwise an ∞
 //! term makes it that ∞. A finite exact sum beyond f64's range rounds to ±∞.
 
+/// Cells along x in one run of a grid norm: ‖v‖² is Σ over runs of (Σ v² over the run,
+/// left to right), the run sums added exactly ([`ExactSum`]). A run is one x-line's cells
+/// [8k, 8k + 8) (the last one of a line shorter). A decomposition whose boxes start in x
+/// at multiples of this (z-slabs, y-slabs and boxes cut so) sums whole runs on each rank,
+/// and one rank and many give the same bits: the blocking factor of AMReX, for
+/// reproducibility instead of coarsening.
+pub const NORM_RUN: usize = 8;
+
+/// Adds Σ v² of `lines` (whole x-lines `nx` cells long, one after another) to `sum`: each
+/// line cut into runs of [`NORM_RUN`], each run summed left to right in f64, the run sums
+/// added exactly.
+pub fn add_run_squares(lines: &[f64], nx: usize, sum: &mut ExactSum) {
+    for line in lines.chunks(nx.max(1)) {
+        sum.extend(
+            line.chunks(NORM_RUN)
+                .map(|run| run.iter().map(|x| x * x).sum::<f64>()),
+        );
+    }
+}
+
 /// Digits of 32 bits; digit k weighs 2^(32k − 1074).
 const DIGITS: usize = 68;
 /// Additions between carry propagations (each adds below 2^32 to three digits of i64).

@@ -109,6 +109,18 @@ impl Stopping {
         self
     }
 
+    /// The stops that differ from rank to rank, as of now: whether the time budget since
+    /// `started` is spent, and whether the cancel flag is set. Decomposed solves reduce
+    /// them with their norms (any rank's flag stops every rank, on the same iteration).
+    pub fn local_flags(&self, started: Instant) -> [bool; 2] {
+        [
+            self.time_budget.is_some_and(|t| started.elapsed() >= t),
+            self.cancel
+                .as_ref()
+                .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)),
+        ]
+    }
+
     /// Tells the progress callback, if any, about `iteration` at `relative` residual from
     /// `initial`: the fraction is how far ln(relative) has come from ln(initial) toward
     /// ln(tolerance), or toward the iteration limit if that is nearer.

@@ -13,6 +13,8 @@
 //! back empty or short, never as a hang: the callers check lengths and return an error.
 
 use std::sync::Mutex;
+
+use crate::exact::ExactSum;
 use std::sync::mpsc::{Receiver, Sender, channel};
 
 /// A group of ranks ordered 0..size along z (rank r's slab lies below rank r + 1's).
@@ -160,6 +162,41 @@ pub fn all_reduce(
         }
     }
     (acc[0] == 0.0).then(|| acc.split_off(1))
+}
+
+/// [`all_reduce`] of flags and exact sums, the reduction a solver's norms take: every
+/// rank's `flags` or-ed (a clock that ran out, a cancel) and its `sums` merged, the same
+/// on every rank and, since the sums are exact, the same bits however the terms were
+/// spread over the ranks. `None` on every rank if any rank sent another shape (a rank
+/// that left the protocol).
+pub fn all_reduce_sums(
+    comm: &(impl Communicator + ?Sized),
+    flags: &[bool],
+    sums: &[ExactSum],
+) -> Option<(Vec<bool>, Vec<ExactSum>)> {
+    let (f, words) = (flags.len(), ExactSum::WORDS);
+    let mut local: Vec<f64> = flags.iter().map(|&b| f64::from(u8::from(b))).collect();
+    for sum in sums {
+        local.extend(sum.to_words());
+    }
+    let all = all_reduce(comm, &local, |acc, part| {
+        if part.len() != acc.len() {
+            return false;
+        }
+        for (a, p) in acc[..f].iter_mut().zip(&part[..f]) {
+            *a = a.max(*p);
+        }
+        acc[f..]
+            .chunks_mut(words)
+            .zip(part[f..].chunks(words))
+            .all(|(a, p)| ExactSum::merge_words(a, p))
+    })
+    .filter(|all| all.len() == local.len())?;
+    let sums = all[f..]
+        .chunks(words)
+        .map(ExactSum::from_words)
+        .collect::<Option<Vec<_>>>()?;
+    Some((all[..f].iter().map(|&x| x != 0.0).collect(), sums))
 }
 
 /// One rank alone: nothing to exchange.
@@ -487,6 +524,44 @@ mod tests {
             for r in results {
                 assert_eq!(r.unwrap(), None, "rank {odd} sent a longer part");
             }
+        }
+    }
+
+    #[test]
+    fn flags_and_exact_sums_reduce_to_the_same_bits_on_every_rank_count() {
+        // Terms of wildly different sizes, spread over the ranks round robin: the merged sum
+        // is the one-rank exact sum (a plain f64 sum of these terms depends on the order),
+        // and a flag raised on one rank only reaches every rank.
+        let terms: Vec<f64> = (0..40)
+            .map(|i| (1.0 + f64::from(i) * 0.37) * 10f64.powi(i % 7 * 5 - 15))
+            .collect();
+        let whole: ExactSum = terms.iter().copied().collect();
+        for size in 1..=7 {
+            let results = Threads::run(size, |comm| {
+                let r = comm.rank();
+                let mine: ExactSum = terms.iter().skip(r).step_by(size).copied().collect();
+                let squares: ExactSum = terms.iter().skip(r).step_by(size).map(|t| t * t).collect();
+                all_reduce_sums(comm, &[r == size - 1, false], &[mine, squares])
+            });
+            for got in results {
+                let (flags, sums) = got.unwrap().expect("every rank sent the same shape");
+                assert_eq!(flags, [true, false], "{size} ranks");
+                assert_eq!(
+                    sums[0].value().to_bits(),
+                    whole.value().to_bits(),
+                    "{size} ranks"
+                );
+                let squares: ExactSum = terms.iter().map(|t| t * t).collect();
+                assert_eq!(sums[1].value().to_bits(), squares.value().to_bits());
+            }
+        }
+        // One rank with one sum fewer: None everywhere, no hang.
+        let results = Threads::run(3, |comm| {
+            let sums = vec![ExactSum::new(); if comm.rank() == 1 { 1 } else { 2 }];
+            all_reduce_sums(comm, &[false], &sums)
+        });
+        for got in results {
+            assert!(got.unwrap().is_none());
         }
     }
 

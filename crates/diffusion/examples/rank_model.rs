@@ -11,7 +11,9 @@
 //! each split level 9 halo exchanges (a colour of each of the four sweeps, one before the
 //! restriction) of one layer each way, as f64, of which what the colour's sweep of the
 //! inner layers does not hide is paid, and 9 · 2α of latency; at each stage boundary the
-//! right-hand side down and the correction up, 2 · (2α + a coarse owner's share / B).
+//! right-hand side down and the correction up, 2 · (2α + a coarse owner's share / B); and
+//! the norm's all-reduce, recursive doubling of one exact accumulator (71 words, 568
+//! bytes): ⌊log₂P⌋ rounds, two more where P is not a power of two, α + 568/B each.
 
 use lucent_diffusion::{Cycle, RankLayout};
 
@@ -81,7 +83,10 @@ fn main() {
                 hand_over += 2.0 * (2.0 * LATENCY + share * 8.0 / BANDWIDTH);
             }
         }
-        let total = compute + halo + latency + hand_over;
+        let power = usize::BITS - 1 - p.leading_zeros();
+        let rounds = f64::from(power) + if p.is_power_of_two() { 0.0 } else { 2.0 };
+        let norm = rounds * (LATENCY + 568.0 / BANDWIDTH);
+        let total = compute + halo + latency + hand_over + norm;
         let stages: Vec<String> = layout
             .stages
             .iter()
@@ -95,13 +100,14 @@ fn main() {
             })
             .collect();
         println!(
-            "{p} ranks [{}]: compute {:.1} ms, halo {:.2} ms, latency {:.2} ms, hand-overs {:.2} ms; \
-             {:.1} ms per cycle, {:.0}× one core ({:.0} % of {p})",
+            "{p} ranks [{}]: compute {:.1} ms, halo {:.2} ms, latency {:.2} ms, hand-overs {:.2} ms, \
+             norm {:.3} ms; {:.1} ms per cycle, {:.0}× one core ({:.0} % of {p})",
             stages.join(", "),
             compute * 1e3,
             halo * 1e3,
             latency * 1e3,
             hand_over * 1e3,
+            norm * 1e3,
             total * 1e3,
             serial / total,
             100.0 * serial / total / p as f64

@@ -26,7 +26,14 @@
 use std::ops::Range;
 
 use glam::DVec3;
+use lucent_core::exact::{ExactSum, add_run_squares};
 use rayon::prelude::*;
+
+/// Two exact sums merged (the reductions' combining step: exact, so in any order).
+fn merged(mut a: ExactSum, b: ExactSum) -> ExactSum {
+    a.merge(&b);
+    a
+}
 
 /// A level's operator.
 #[derive(Debug, Clone, PartialEq)]
@@ -90,35 +97,25 @@ impl Level {
         self.spans.iter().map(|[lo, hi]| (hi - lo) as usize).sum()
     }
 
-    /// Σ r² over the cells outside every row's span. Those cells are not unknowns (d = 0,
-    /// so every coupling to them is 0 too): (A x)_i = 0 there and no cycle changes their
-    /// residual, which is their right-hand side.
-    pub(crate) fn outside_sum_sq(&self, r: &[f64]) -> f64 {
-        self.outside_layers(r, self.all_layers()).iter().sum()
+    /// Σ v² over the slabs `layers` as the solves' norms sum it: every x-line cut into
+    /// runs of `NORM_RUN` cells (`lucent_core::exact`), each run left to right, the run
+    /// sums added exactly. The bits depend on the grid alone, never on the threads, nor
+    /// on how the slabs are split over ranks (each rank's sum merges exactly).
+    pub(crate) fn squares_layers(&self, v: &[f64], layers: Range<usize>) -> ExactSum {
+        let slab = self.slab();
+        v[layers.start * slab..layers.end * slab]
+            .par_chunks(slab.max(1))
+            .with_min_len(self.slabs_per_task())
+            .fold(ExactSum::new, |mut sum, v| {
+                add_run_squares(v, self.dims[0], &mut sum);
+                sum
+            })
+            .reduce(ExactSum::new, merged)
     }
 
-    /// [`Level::outside_sum_sq`] per slab of `layers`.
-    pub(crate) fn outside_layers(&self, r: &[f64], layers: Range<usize>) -> Vec<f64> {
-        let [nx, ny, _] = self.dims;
-        let slab = nx * ny;
-        r[layers.start * slab..layers.end * slab]
-            .par_chunks(slab.max(1))
-            .enumerate()
-            .map(|(i, r)| {
-                let k = layers.start + i;
-                r.chunks(nx.max(1))
-                    .enumerate()
-                    .map(|(j, row)| {
-                        let (lo, hi) = self.span(j, k);
-                        row[..lo]
-                            .iter()
-                            .chain(&row[hi..])
-                            .map(|v| v * v)
-                            .sum::<f64>()
-                    })
-                    .sum::<f64>()
-            })
-            .collect()
+    /// ‖v‖₂ by [`Level::squares_layers`] over every slab.
+    pub(crate) fn norm(&self, v: &[f64]) -> f64 {
+        self.squares_layers(v, self.all_layers()).value().sqrt()
     }
 
     /// Every slab: 0..n_z.
@@ -236,10 +233,11 @@ impl Level {
 
     /// y = A x in f64 (x may be f32 or f64).
     pub(crate) fn apply<T: Copy + Into<f64> + Sync>(&self, x: &[T], y: &mut [f64]) {
-        self.apply_then(x, y, self.all_layers(), |_, _| 0.0);
+        self.apply_then(x, y, self.all_layers(), |_, _| ())
+            .for_each(drop);
     }
 
-    /// r = b − A x in f64, in one pass; returns ‖r‖₂.
+    /// r = b − A x in f64, in one pass; returns ‖r‖₂ (summed as [`Level::norm`]).
     pub(crate) fn residual<T: Copy + Into<f64> + Sync>(
         &self,
         b: &[f64],
@@ -247,51 +245,51 @@ impl Level {
         r: &mut [f64],
     ) -> f64 {
         self.residual_layers(b, x, r, self.all_layers())
-            .iter()
-            .sum::<f64>()
+            .value()
             .sqrt()
     }
 
     /// r = b − A x on the slabs `layers` (reading x on the slabs next to them too); returns
-    /// Σ r² per slab.
+    /// Σ r² over them (as [`Level::squares_layers`]).
     pub(crate) fn residual_layers<T: Copy + Into<f64> + Sync>(
         &self,
         b: &[f64],
         x: &[T],
         r: &mut [f64],
         layers: Range<usize>,
-    ) -> Vec<f64> {
+    ) -> ExactSum {
         let slab = self.slab();
+        let nx = self.dims[0];
         self.apply_then(x, r, layers, |k, rs| {
-            let mut sum = 0.0;
             for (r, b) in rs.iter_mut().zip(&b[k * slab..]) {
                 *r = b - *r;
-                sum += *r * *r;
             }
+            let mut sum = ExactSum::new();
+            add_run_squares(rs, nx, &mut sum);
             sum
         })
+        .reduce(ExactSum::new, merged)
     }
 
     /// y = A x on the slabs `layers`, each slab then passed to `then(k, y_slab)` while it
-    /// is in cache; returns what `then` returns, per slab.
-    fn apply_then<T: Copy + Into<f64> + Sync>(
-        &self,
-        x: &[T],
-        y: &mut [f64],
+    /// is in cache; what `then` returns, per slab, as a parallel iterator.
+    fn apply_then<'a, T: Copy + Into<f64> + Sync, R: Send>(
+        &'a self,
+        x: &'a [T],
+        y: &'a mut [f64],
         layers: Range<usize>,
-        then: impl Fn(usize, &mut [f64]) -> f64 + Sync,
-    ) -> Vec<f64> {
+        then: impl Fn(usize, &mut [f64]) -> R + Sync + Send + 'a,
+    ) -> impl ParallelIterator<Item = R> + 'a {
         let slab = self.slab();
         y[layers.start * slab..layers.end * slab]
             .par_chunks_mut(slab)
             .with_min_len(self.slabs_per_task())
             .enumerate()
-            .map(|(i, y)| {
+            .map(move |(i, y)| {
                 let k = layers.start + i;
                 self.apply_slab(k, x, y);
                 then(k, y)
             })
-            .collect()
     }
 
     /// Slab k of A x into `y` (one slab long): computed on the rows' spans, 0 outside
@@ -330,15 +328,16 @@ impl Level {
 
     /// Applies a correction e in one pass over the rows' spans: φ += e, r −= A e (the
     /// residual of φ updated without recomputing A φ) and b = r in f32 for the next cycle;
-    /// returns Σ r² over the spans (outside them e = 0 and A e = 0: nothing changes).
+    /// returns ‖r‖₂ (summed as [`Level::norm`]; outside the spans e = 0 and A e = 0, so r
+    /// keeps its value there and counts as it is).
     pub(crate) fn correct(&self, e: &[f32], phi: &mut [f64], r: &mut [f64], b: &mut [f32]) -> f64 {
         self.correct_layers(e, phi, r, b, self.all_layers())
-            .iter()
-            .sum()
+            .value()
+            .sqrt()
     }
 
     /// [`Level::correct`] on the slabs `layers` (reading e on the slabs next to them too);
-    /// returns Σ r² over the spans per slab.
+    /// returns Σ r² over those slabs (as [`Level::squares_layers`]).
     pub(crate) fn correct_layers(
         &self,
         e: &[f32],
@@ -346,7 +345,7 @@ impl Level {
         r: &mut [f64],
         b: &mut [f32],
         layers: Range<usize>,
-    ) -> Vec<f64> {
+    ) -> ExactSum {
         let slab = self.slab();
         let nx = self.dims[0];
         let owned = layers.start * slab..layers.end * slab;
@@ -362,20 +361,20 @@ impl Level {
                     let k = layers.start + i;
                     self.apply_slab(k, e, ae);
                     let es = &e[k * slab..(k + 1) * slab];
-                    let mut sum = 0.0;
                     for j in 0..self.dims[1] {
                         let (lo, hi) = self.span(j, k);
                         for l in nx * j + lo..nx * j + hi {
                             phi[l] += f64::from(es[l]);
                             r[l] -= ae[l];
                             b[l] = r[l] as f32;
-                            sum += r[l] * r[l];
                         }
                     }
+                    let mut sum = ExactSum::new();
+                    add_run_squares(r, nx, &mut sum);
                     sum
                 },
             )
-            .collect()
+            .reduce(ExactSum::new, merged)
     }
 
     /// One red–black Gauss–Seidel sweep for A x = b, colours in the order `first`, then
@@ -1283,9 +1282,17 @@ mod tests {
             let mut phi = vec![1.0; n];
             let mut b = vec![0.0f32; n];
             let before = r.clone();
-            let span = lv.correct(&e, &mut phi, &mut r, &mut b);
-            let total: f64 = r.iter().map(|v| v * v).sum();
-            assert!((span + lv.outside_sum_sq(&r) - total).abs() <= 1e-12 * total);
+            let norm = lv.correct(&e, &mut phi, &mut r, &mut b);
+            // The norm counts every cell, inside the spans and out, as the exact sum of
+            // the runs' sums (exact: the same bits as summing the runs by hand).
+            let by_hand: ExactSum = r
+                .chunks(lv.dims[0])
+                .flat_map(|line| {
+                    line.chunks(8)
+                        .map(|run| run.iter().map(|v| v * v).sum::<f64>())
+                })
+                .collect();
+            assert_eq!(norm.to_bits(), by_hand.value().sqrt().to_bits());
             for g in 0..n {
                 assert!((r[g] - (before[g] - expected[g])).abs() <= 1e-12);
                 assert_eq!(phi[g], 1.0 + e64[g]);

@@ -41,7 +41,8 @@
 //! On several ranks (processes under MPI, or threads), `Multigrid::solve_on_ranks` runs
 //! the same cycles over z-slabs with one-layer halos, and agglomerates the coarse levels
 //! onto fewer ranks as they shrink, down to rank 0 for the coarsest ([`RankLayout`]); φ
-//! and the history are the same bits on any rank count.
+//! and the history are [`Multigrid::solve`]'s bits on any rank count (both sum their
+//! norms over runs of eight cells along x, added exactly).
 //!
 //! For solvers that stream their fields slab by slab (out of core), [`slab`] gives the
 //! same system row by row for a medium that fills the box: the assembled matrix's rows and

@@ -28,21 +28,24 @@
 //!   trilinear prolongation reads. Ranks that own nothing on a level exchange nothing on
 //!   it.
 //!
-//! **Norms** are Σ r² per fine layer, all-gathered and added one layer at a time in z
-//! order, so the residual history, the stopping decision and φ are the same bits on every
-//! rank count (tested on 1–5 ranks, with and without agglomeration). [`Multigrid::solve`]
-//! groups its norm differently (the spans' sums, then the cells outside them), so the
-//! history may differ in the last bits and a tolerance be crossed one cycle apart; φ has
-//! been the serial bits in every case tested (`tests/ranks.rs` asserts 1e-10 and ± 1
-//! cycle). The time budget and cancellation are each rank's own and travel with each
-//! gather, so all ranks stop on the same cycle.
+//! **Norms** are the serial solve's (`Level::norm`): every x-line of the fine level cut
+//! into runs of eight cells, each run summed left to right, the run sums added exactly
+//! (`lucent_core::exact::ExactSum`). Each rank sums the runs of its layers and the ranks
+//! all-reduce the accumulators with their time-budget and cancel flags
+//! (`lucent_core::ranks::all_reduce_sums`: log₂P messages of 71 words per norm). An exact
+//! sum does not depend on the order of its terms, so the residual history, the stopping
+//! decisions and φ are [`Multigrid::solve`]'s bits on every rank count (tested on 1–5
+//! ranks, every cycle and smoother, with and without agglomeration: the issue asked for
+//! 1e-10 and ± 1 cycle). The time budget and cancellation are each rank's own and travel
+//! with the reduction, so all ranks stop on the same cycle.
 //!
 //! **Not yet.** Every rank holds the whole hierarchy and full-length work vectors (it
 //! touches only its slabs and their halos), so memory does not scale with ranks.
 
 use std::ops::Range;
 
-use lucent_core::ranks::Communicator;
+use lucent_core::exact::ExactSum;
+use lucent_core::ranks::{Communicator, all_reduce_sums};
 use lucent_core::{StopReason, Stopping};
 
 use crate::error::DiffusionError;
@@ -583,8 +586,8 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
     }
 }
 
-/// What each gather carries besides the layer sums: whether any rank's clock ran out, or
-/// any rank was cancelled.
+/// A norm's reduction: the norm, whether any rank's clock ran out, whether any rank was
+/// cancelled.
 struct Gathered {
     norm: f64,
     time_up: bool,
@@ -725,44 +728,16 @@ impl Multigrid {
         let slab = fine.slab();
         let o = on.owned(0);
         let owned = o.start * slab..o.end * slab;
-        let counts: Vec<usize> = (0..comm.size())
-            .map(|r| on.layout.owned(r, 0).len())
-            .collect();
-        // Σ of the gathered layer sums in z order, with every rank's flags.
-        let gather = |layer_sums: &[f64]| -> Result<Gathered, DiffusionError> {
-            let s = &stopping;
-            let mut local = vec![
-                f64::from(u8::from(
-                    s.time_budget.is_some_and(|t| started.elapsed() >= t),
-                )),
-                f64::from(u8::from(
-                    s.cancel
-                        .as_ref()
-                        .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)),
-                )),
-            ];
-            local.extend_from_slice(layer_sums);
-            let all = comm.all_gather(&local);
-            if all.len() != counts.iter().map(|c| c + 2).sum::<usize>() {
-                return Err(protocol(on.rank, "a norm's gather"));
-            }
-            let mut g = Gathered {
-                norm: 0.0,
-                time_up: false,
-                cancelled: false,
-            };
-            let mut at = 0;
-            for &c in &counts {
-                g.time_up |= all[at] != 0.0;
-                g.cancelled |= all[at + 1] != 0.0;
-                // One layer at a time, so the grouping does not depend on the ranks.
-                for layer in &all[at + 2..at + 2 + c] {
-                    g.norm += layer;
-                }
-                at += 2 + c;
-            }
-            g.norm = g.norm.sqrt();
-            Ok(g)
+        // Σ of every rank's exact run sums, with every rank's flags: the serial norm's bits.
+        let gather = |sum: ExactSum| -> Result<Gathered, DiffusionError> {
+            let flags = stopping.local_flags(started);
+            let (flags, sums) = all_reduce_sums(comm, &flags, &[sum])
+                .ok_or_else(|| protocol(on.rank, "a norm's reduction"))?;
+            Ok(Gathered {
+                norm: sums[0].value().sqrt(),
+                time_up: flags[0],
+                cancelled: flags[1],
+            })
         };
         // The deterministic stops from the shared residual; the clock and the cancel flag
         // come with the gathers.
@@ -776,11 +751,9 @@ impl Multigrid {
             },
             ..stopping.clone()
         };
-        let rhs_layers: Vec<f64> = rhs[owned.clone()]
-            .chunks(slab)
-            .map(|l| l.iter().map(|v| v * v).sum())
-            .collect();
-        let b_norm = gather(&rhs_layers)?.norm.max(f64::MIN_POSITIVE);
+        let b_norm = gather(fine.squares_layers(rhs, o.clone()))?
+            .norm
+            .max(f64::MIN_POSITIVE);
         let (mut b, mut x, mut s) = self.work();
         if self.settings().full_multigrid {
             on.full_multigrid(rhs, &mut b, &mut x, &mut s)?;
@@ -789,13 +762,11 @@ impl Multigrid {
             }
         }
         let mut r = vec![0.0f64; n];
-        let true_residual = |phi: &mut [f64], r: &mut [f64]| -> Result<Vec<f64>, DiffusionError> {
+        let true_residual = |phi: &mut [f64], r: &mut [f64]| -> Result<ExactSum, DiffusionError> {
             on.halo(0, phi, |v| v, |v| v, |_| ())?;
             Ok(fine.residual_layers(rhs, phi, r, o.clone()))
         };
-        let mut gathered = gather(&true_residual(phi, &mut r)?)?;
-        // The residual outside the medium's spans, which no correction changes.
-        let outside = fine.outside_layers(&r, o.clone());
+        let mut gathered = gather(true_residual(phi, &mut r)?)?;
         let to_b = |b: &mut [f32], r: &[f64]| {
             for (b, r) in b[owned.clone()].iter_mut().zip(&r[owned.clone()]) {
                 *b = *r as f32;
@@ -811,7 +782,7 @@ impl Multigrid {
                 if !reason.is_converged() {
                     break reason;
                 }
-                gathered = gather(&true_residual(phi, &mut r)?)?;
+                gathered = gather(true_residual(phi, &mut r)?)?;
                 let norm = gathered.norm;
                 *residuals.last_mut().unwrap_or(&mut 0.0) = norm / b_norm;
                 if let Some(reason) = shared
@@ -832,9 +803,7 @@ impl Multigrid {
             on.zero(0, &mut x[0]);
             on.cycle(0, self.settings().cycle, &mut b, &mut x, &mut s)?;
             on.halo32(0, &mut x[0])?;
-            let spans = fine.correct_layers(&x[0], phi, &mut r, &mut b[0], o.clone());
-            let layers: Vec<f64> = spans.iter().zip(&outside).map(|(s, o)| s + o).collect();
-            gathered = gather(&layers)?;
+            gathered = gather(fine.correct_layers(&x[0], phi, &mut r, &mut b[0], o.clone()))?;
             residuals.push(gathered.norm / b_norm);
         };
         let whole = comm.all_gather(&phi[owned]);

@@ -43,7 +43,7 @@ use lucent_optics::PhaseFunction;
 use lucent_paging::{Eviction, FileStore, PagedGrid, PagedSlabs, Pager, PagerOptions, PagingError};
 use rayon::prelude::*;
 
-use crate::steady::add_layer_squares;
+use lucent_core::exact::add_run_squares;
 
 /// Which iteration, with its parameter.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -462,7 +462,7 @@ impl Channel<'_> {
                 }
             }
             // By runs, as the in-memory norm sums (`steady::Layers`).
-            add_layer_squares(&b, nx, &mut b_squares);
+            add_run_squares(&b, nx, &mut b_squares);
             b_pages.write_slab(z, &b).map_err(err)?;
             r_pages.write_slab(z, &b).map_err(err)?;
             if let Some(pages) = &scale_pages {
@@ -542,7 +542,7 @@ impl Channel<'_> {
                             *ri = rows_b[index] - ax;
                         }
                     });
-                    add_layer_squares(&r, nx, &mut r_squares);
+                    add_run_squares(&r, nx, &mut r_squares);
                     r_pages.write_slab(w, &r).map_err(err)?;
                 }
             }

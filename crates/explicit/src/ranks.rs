@@ -97,7 +97,7 @@ pub enum DecompositionError {
     },
 }
 
-use lucent_core::ranks::{Communicator, all_reduce, exchange_among};
+use lucent_core::ranks::{Communicator, all_reduce, all_reduce_sums, exchange_among};
 
 /// A box of cells: its ranges along x, y and z.
 type Cells = [std::ops::Range<usize>; 3];
@@ -854,32 +854,13 @@ fn sweep(
     };
     let mut history = History::start();
     let started = std::time::Instant::now();
-    let local_flags = || -> [f64; 2] {
-        let s = &settings.stopping;
-        [
-            f64::from(u8::from(
-                s.time_budget.is_some_and(|t| started.elapsed() >= t),
-            )),
-            f64::from(u8::from(
-                s.cancel
-                    .as_ref()
-                    .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)),
-            )),
-        ]
-    };
     // Σ v² (owned) over this rank's runs, all-reduced with the flags: (norm, any time,
     // any cancel). The merged accumulators are the exact sum of all runs, in any order.
     let gather = |v: &[f64]| -> Result<(f64, bool, bool), DecompositionError> {
-        let mut local = local_flags().to_vec();
-        local.extend(squares(v, &part.runs).to_words());
-        let all = all_reduce(comm, &local, |acc, other| {
-            acc[0] = acc[0].max(other[0]);
-            acc[1] = acc[1].max(other[1]);
-            ExactSum::merge_words(&mut acc[2..], &other[2..])
-        })
-        .ok_or(DecompositionError::Protocol { rank })?;
-        let sum = ExactSum::from_words(&all[2..]).ok_or(DecompositionError::Protocol { rank })?;
-        Ok((sum.value().sqrt(), all[0] != 0.0, all[1] != 0.0))
+        let flags = settings.stopping.local_flags(started);
+        let (flags, sums) = all_reduce_sums(comm, &flags, &[squares(v, &part.runs)])
+            .ok_or(DecompositionError::Protocol { rank })?;
+        Ok((sums[0].value().sqrt(), flags[0], flags[1]))
     };
     let (b_norm, mut time_up, mut cancelled) = gather(b)?;
     let b_norm = b_norm.max(f64::MIN_POSITIVE);
@@ -1170,21 +1151,9 @@ pub fn march_p1_on(
         let skip = (!inner_empty).then_some(&inner);
         step_cells((&phi, &flux), (&mut next_phi, &mut next_flux), &own, skip);
         // [time, cancel, finite ×4, largest ×4, Σ change² words, Σ size² words].
-        let mut local = vec![
-            f64::from(u8::from(
-                settings
-                    .stopping
-                    .time_budget
-                    .is_some_and(|t| started.elapsed() >= t),
-            )),
-            f64::from(u8::from(
-                settings
-                    .stopping
-                    .cancel
-                    .as_ref()
-                    .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)),
-            )),
-        ];
+        let mut local: Vec<f64> = (settings.stopping.local_flags(started))
+            .map(|f| f64::from(u8::from(f)))
+            .to_vec();
         // Per field, over its owned cells (the runs): finite, and the largest magnitude.
         let new = [&next_phi, &next_flux[0], &next_flux[1], &next_flux[2]];
         for f in new {

@@ -114,13 +114,9 @@ pub fn iterate(
     }
 }
 
-/// Cells along x in one run of a norm: ‖v‖² is Σ over runs of (Σ v² over the run, left
-/// to right), the run sums added exactly ([`ExactSum`]). A run is the unknowns of one
-/// x-line's cells [8k, 8k + 8) (the last one of a line shorter). A decomposition whose
-/// boxes start in x at multiples of this (z-slabs, y-slabs and boxes cut so) sums whole
-/// runs on each rank, and one rank and many give the same bits — the blocking factor of
-/// AMReX, for reproducibility instead of coarsening.
-pub const NORM_RUN: usize = 8;
+/// Cells along x in one run of a norm (`lucent_core::exact::NORM_RUN`, shared with the
+/// multigrid's norm): here a run is the *unknowns* among one x-line's cells [8k, 8k + 8).
+pub use lucent_core::exact::NORM_RUN;
 
 /// The unknowns of an assembled system by z-layer, and the runs of [`NORM_RUN`] cells
 /// their norms sum (see there): the norm does not depend on how the grid is split over
@@ -198,17 +194,6 @@ pub fn squares(v: &[f64], runs: &[(usize, usize)]) -> ExactSum {
             a.merge(&b);
             a
         })
-}
-
-/// [`squares`] of whole layers of a box filled with unknowns, `nx` cells wide: its x-lines
-/// cut into runs of [`NORM_RUN`], added to `sum` (the paged iteration's norm).
-pub fn add_layer_squares(v: &[f64], nx: usize, sum: &mut ExactSum) {
-    for line in v.chunks(nx.max(1)) {
-        sum.extend(
-            line.chunks(NORM_RUN)
-                .map(|run| run.iter().map(|x| x * x).sum::<f64>()),
-        );
-    }
 }
 
 /// The scale s_i of each row's residual in φ ← φ + s r: cΔt/V for FTCS (refused beyond

@@ -20,10 +20,9 @@
 //! light along z (the pipelined wavefront), `march-x` along x (planes in lock step); or
 //! `p1`, Murray's P1 by FTCS from a point source on the same grid, 400 steps
 //! (`lucent_explicit::ranks::march_p1_on`, z-slabs or `--boxes`).
-//! Every rank also solves serially and compares: FTCS, Jacobi, P1 and the march must give
-//! the same bits; the multigrid the serial φ to 1e-10 of its largest value with the cycle
-//! count ± 1. The
-//! exit status is 1 otherwise. Rank 0 prints the iterations, the stop reason and the wall
+//! Every rank also solves serially and compares: every method must give the serial bits
+//! (the multigrid its φ and residual history; the issue asked 1e-10 and ± 1 cycle of it).
+//! The exit status is 1 otherwise. Rank 0 prints the iterations, the stop reason and the wall
 //! time of the split solve (the best of `--repeat R` runs, default 1).
 
 use std::process::ExitCode;
@@ -183,17 +182,12 @@ fn run(
         })?;
         let mut alone = vec![0.0; rhs.len()];
         let reference = mg.solve(&rhs, &mut alone, &stopping);
-        let scale = alone.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let worst = alone
-            .iter()
-            .zip(&phi)
-            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
         return Ok(Run {
             iterations: split.iterations(),
             stop: split.stop_reason.to_string(),
             seconds,
-            agrees: worst <= 1e-10 * scale
-                && split.iterations().abs_diff(reference.iterations()) <= 1
+            agrees: bits(&phi) == bits(&alone)
+                && bits(&split.residuals) == bits(&reference.residuals)
                 && split.stop_reason.is_converged(),
         });
     }
@@ -340,14 +334,14 @@ fn report(
     let out = run(comm, method, layers, side, repeat, boxes)?;
     if comm.rank() == 0 {
         let dims = [side, side * 5 / 6, layers * comm.size()];
-        let (what, agree) = match method {
-            Method::Multigrid(_) => (["cycles", "cycle"], "within 1e-10 and ±1 cycle of"),
-            Method::Jacobi | Method::Ftcs => (["sweeps", "sweep"], "the bits of"),
-            Method::March(_) => (["passes", "pass"], "the bits of"),
-            Method::P1 => (["steps", "step"], "the bits of"),
+        let what = match method {
+            Method::Multigrid(_) => ["cycles", "cycle"],
+            Method::Jacobi | Method::Ftcs => ["sweeps", "sweep"],
+            Method::March(_) => ["passes", "pass"],
+            Method::P1 => ["steps", "step"],
         };
         eprintln!(
-            "{} ranks, {}×{}×{} cells: {} {}, {}, {:.4} s split ({:.1} µs per {}); {} one rank's: {}",
+            "{} ranks, {}×{}×{} cells: {} {}, {}, {:.4} s split ({:.1} µs per {}); the bits of one rank's: {}",
             comm.size(),
             dims[0],
             dims[1],
@@ -358,7 +352,6 @@ fn report(
             out.seconds,
             out.seconds * 1e6 / out.iterations.max(1) as f64,
             what[1],
-            agree,
             if out.agrees { "yes" } else { "NO" }
         );
     }

@@ -14,13 +14,11 @@
 //! Without the feature nothing of MPI is built; [`Alone`] and [`Threads`] (in-process
 //! ranks) are re-exported from `lucent-core`.
 //!
-//! **Reproducibility.** The multigrid's norms are Σ per z-layer, then the layer sums in z
-//! order, on one rank and on many: a layer never straddles ranks. FTCS, Jacobi and P1 sum
-//! runs of eight cells along x and add the run sums exactly
-//! (`lucent_core::exact::ExactSum`, merged across ranks in any order), so boxes, which
-//! split layers, keep the bits too (`docs/ranks.md`). The result does not depend on the
-//! rank count (the explicit schemes: the serial bits; the multigrid: the serial φ, and the
-//! same history on every rank count).
+//! **Reproducibility.** Every norm (FTCS, Jacobi, P1 and the multigrid) sums runs of eight
+//! cells along x, each left to right, and adds the run sums exactly
+//! (`lucent_core::exact::ExactSum`, merged across ranks in any order), so the result is
+//! the serial solve's bits on every rank count, over z-slabs and over boxes, which split
+//! layers (`docs/ranks.md`).
 //!
 //! **Stopping.** Tolerances, the iteration limit and divergence follow from the shared
 //! residual, identically on every rank; the time budget and cancellation are per rank and
@@ -39,8 +37,8 @@
 //!
 //! **Cost model per sweep and rank** (slab of n_x·n_y·n_z/P cells): two halo messages of
 //! one layer each (≤ 8 n_x n_y bytes), overlapped with the interior rows, and one
-//! all-reduce of the norm (FTCS, Jacobi, P1: log₂P messages of 71 or 148 words; the
-//! multigrid all-gathers its layer sums); boxes send six face messages
+//! all-reduce of the norm (log₂P messages of 71 words, 148 for P1); boxes send six face
+//! messages
 //! instead, which shrink with the box (`docs/ranks.md` compares the two at 1024 ranks).
 //! `BENCHMARKS.md` ("Ranks") models 64 and 1024 ranks, multigrid's coarse levels included
 //! (agglomerated onto fewer ranks as they shrink, moved by `Communicator::exchange_with`'s
