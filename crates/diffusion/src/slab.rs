@@ -18,7 +18,7 @@
 use std::ops::Range;
 
 use glam::DVec3;
-use lucent_grid::GridGeometry;
+use lucent_grid::{GridGeometry, box_cells};
 use sprs::CsMat;
 
 use crate::error::DiffusionError;
@@ -346,12 +346,7 @@ impl Block {
     /// The whole grid's cell of each row, in row order.
     pub fn grid_cells(&self, dims: [usize; 3]) -> impl Iterator<Item = usize> + '_ {
         let [nx, ny, _] = dims;
-        let [x, y, z] = self.cells.clone();
-        z.flat_map(move |k| {
-            let x = x.clone();
-            y.clone()
-                .flat_map(move |j| x.clone().map(move |i| i + nx * (j + ny * k)))
-        })
+        box_cells(&self.cells).map(move |[i, j, k]| i + nx * (j + ny * k))
     }
 }
 
@@ -424,15 +419,7 @@ impl SlabSystem {
             (i - origin[0]) + held[0] * ((j - origin[1]) + held[1] * (k - origin[2]))
         };
         let cell = |[i, j, k]: [usize; 3]| i + nx * (j + ny * k);
-        let each = |b: &[Range<usize>; 3]| {
-            let [x, y, z] = b.clone();
-            z.flat_map(move |k| {
-                let x = x.clone();
-                y.clone()
-                    .flat_map(move |j| x.clone().map(move |i| [i, j, k]))
-            })
-        };
-        for p in each(&reads) {
+        for p in box_cells(&reads) {
             let v = d[at(p)];
             if !(v.is_finite() && v > 0.0) {
                 return Err(DiffusionError::Invalid(format!(
@@ -441,7 +428,7 @@ impl SlabSystem {
                 )));
             }
         }
-        for p in each(&cells) {
+        for p in box_cells(&cells) {
             let (s, q) = (sigma_a[at(p)], q0[at(p)]);
             if !(s.is_finite() && s >= 0.0) {
                 return Err(DiffusionError::Invalid(format!(
@@ -463,7 +450,7 @@ impl SlabSystem {
         let mut data = Vec::with_capacity(7 * rows);
         let mut rhs = Vec::with_capacity(rows);
         let volume = self.geometry.cell_volume();
-        for p in each(&cells) {
+        for p in box_cells(&cells) {
             let (c, dc) = (cell(p), d[at(p)]);
             let d_near = |axis: usize, offset: isize| {
                 let mut q = p;

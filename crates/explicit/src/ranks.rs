@@ -98,6 +98,7 @@ pub enum DecompositionError {
 }
 
 use lucent_core::ranks::{Communicator, all_reduce, all_reduce_sums, exchange_among};
+use lucent_grid::box_cells;
 
 /// A box of cells: its ranges along x, y and z.
 type Cells = [std::ops::Range<usize>; 3];
@@ -1028,17 +1029,9 @@ pub fn march_p1_on(
     let len: usize = held.iter().product();
     let region = Region { dims, origin, held };
     let place = |p: [usize; 3]| region.place(p);
-    let cells_of = |b: &[Range<usize>; 3]| {
-        let [x, y, z] = b.clone();
-        z.flat_map(move |k| {
-            let x = x.clone();
-            y.clone()
-                .flat_map(move |j| x.clone().map(move |i| [i, j, k]))
-        })
-    };
     let [nx, ny, _] = dims;
     let mut local_source = vec![0.0; len];
-    for p in cells_of(&own) {
+    for p in box_cells(&own) {
         local_source[place(p)] = source[p[0] + nx * (p[1] + ny * p[2])];
     }
     // The boxes sharing a face with this one: (rank, the cells sent, the halo received).
@@ -1122,7 +1115,7 @@ pub fn march_p1_on(
             .map(|(_, send, _)| {
                 std::iter::once(&phi)
                     .chain(&flux)
-                    .flat_map(|f| cells_of(send).map(|p| f[place(p)]))
+                    .flat_map(|f| box_cells(send).map(|p| f[place(p)]))
                     .collect()
             })
             .collect();
@@ -1137,13 +1130,13 @@ pub fn march_p1_on(
             }
         });
         for ((_, _, receive), values) in faces.iter().zip(&received) {
-            let count = cells_of(receive).count();
+            let count = box_cells(receive).count();
             if values.len() != 4 * count {
                 return Err(DecompositionError::Protocol { rank });
             }
             let mut values = values.iter();
             for f in std::iter::once(&mut phi).chain(&mut flux) {
-                for p in cells_of(receive) {
+                for p in box_cells(receive) {
                     f[place(p)] = *values.next().unwrap_or(&0.0);
                 }
             }
@@ -1224,7 +1217,7 @@ pub fn march_p1_on(
     };
     // Every rank's box in rank order, each x fastest: back to the grid's order.
     let gathered = |f: &[f64]| -> Result<Vec<f64>, DecompositionError> {
-        let mine: Vec<f64> = cells_of(&own).map(|p| f[place(p)]).collect();
+        let mine: Vec<f64> = box_cells(&own).map(|p| f[place(p)]).collect();
         let all = comm.all_gather(&mine);
         if all.len() != lattice.len() {
             return Err(DecompositionError::Protocol { rank });
@@ -1232,7 +1225,7 @@ pub fn march_p1_on(
         let mut whole = vec![0.0; all.len()];
         let mut values = all.into_iter();
         for r in 0..size {
-            for p in cells_of(&boxes.bounds(r)) {
+            for p in box_cells(&boxes.bounds(r)) {
                 whole[p[0] + nx * (p[1] + ny * p[2])] = values.next().unwrap_or(0.0);
             }
         }

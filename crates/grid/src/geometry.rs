@@ -1,5 +1,7 @@
 //! Where a grid's cells are in the world.
 
+use std::ops::Range;
+
 use glam::DVec3;
 
 use crate::error::GridError;
@@ -245,6 +247,24 @@ impl GridGeometry {
             }
         }
     }
+}
+
+/// The cells (i, j, k) of a box of cells, `cells[a]` along axis a, in storage order: x
+/// fastest, then y, then z. The one loop over a box that decompositions share (a rank's
+/// box, a face it sends, the rows it builds).
+///
+/// ```
+/// let cells: Vec<[usize; 3]> = lucent_grid::box_cells(&[1..3, 0..2, 5..6]).collect();
+/// assert_eq!(cells, [[1, 0, 5], [2, 0, 5], [1, 1, 5], [2, 1, 5]]);
+/// assert_eq!(lucent_grid::box_cells(&[0..4, 3..3, 0..9]).count(), 0);
+/// ```
+pub fn box_cells(cells: &[Range<usize>; 3]) -> impl Iterator<Item = [usize; 3]> + Clone + use<> {
+    let [x, y, z] = cells.clone();
+    z.flat_map(move |k| {
+        let x = x.clone();
+        y.clone()
+            .flat_map(move |j| x.clone().map(move |i| [i, j, k]))
+    })
 }
 
 /// The parametric interval [t0, t1] (t ≥ 0) in which the ray `origin + t·dir` lies inside
