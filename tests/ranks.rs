@@ -166,7 +166,9 @@ fn p1_gives_the_serial_bits_on_ranks() {
                 "{scene}"
             );
             assert_eq!(split.report.iterations, serial.report.iterations, "{scene}");
+            assert_eq!(history_bits(&split), history_bits(&serial), "{scene}");
         }
+        assert!(!serial.report.residual_history.is_empty(), "{scene}");
         let processes = solve_as_processes("ftcs-p1", &problem, 3);
         assert_eq!(
             fluence_bits(&processes),

@@ -458,14 +458,16 @@ impl Channel<'_> {
             })
             .map_err(err)?;
             if let Some(stop_reason) = sums.verdict(&monitor, step) {
-                return Ok(p1_record(self.problem, step, stop_reason));
+                let changes = history.residuals().to_vec();
+                return Ok(p1_record(self.problem, step, stop_reason, changes));
             }
             let (change, last_change) = crate::p1::change_norms(&change, &size);
             std::mem::swap(now, next);
             if let Some(stop_reason) =
                 history.record_step(&settings.stopping, step, last_change, change.sqrt())
             {
-                return Ok(p1_record(self.problem, step, stop_reason));
+                let changes = history.into_residuals();
+                return Ok(p1_record(self.problem, step, stop_reason, changes));
             }
         }
     }
@@ -604,10 +606,17 @@ impl Channel<'_> {
     }
 }
 
-/// P1's record, as the in-memory march reports it (no residual history).
-fn p1_record(problem: &PagedProblem, steps: usize, stop_reason: StopReason) -> Record {
+/// P1's record, as the in-memory march reports it: the history is every step's relative
+/// change of φ (`P1State::changes`).
+fn p1_record(
+    problem: &PagedProblem,
+    steps: usize,
+    stop_reason: StopReason,
+    changes: Vec<f64>,
+) -> Record {
     let mut record = Record::exact((problem.geometry().voxel_count() * 8 * 8) as u64);
     record.iterations = steps;
     record.stop_reason = stop_reason;
+    record.residuals = changes;
     record
 }

@@ -890,6 +890,8 @@ fn p1(
     let mut record = Record::exact((l.len() * 8 * 8) as u64);
     record.iterations = out.steps;
     record.stop_reason = out.stop_reason;
+    // The history: every step's relative change of φ, as the paged march records it.
+    record.residuals = out.changes;
     Ok((out.fluence, record))
 }
 

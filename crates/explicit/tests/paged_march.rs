@@ -128,6 +128,15 @@ fn compare(
         bits(&memory.report.residual_history),
         "{what}: residual history"
     );
+    // Both record one relative change (P1) or residual per step, so the comparison above
+    // compares something.
+    assert!(
+        !memory.report.residual_history.is_empty()
+            && memory.report.residual_history.len() <= memory.report.iterations,
+        "{what}: {} values over {} steps",
+        memory.report.residual_history.len(),
+        memory.report.iterations
+    );
     assert_eq!(out.fluence.len(), memory.fluence.len(), "{what}");
     for (c, (p, m)) in out.fluence.iter().zip(&memory.fluence).enumerate() {
         let p = p.to_grid().unwrap();
