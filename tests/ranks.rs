@@ -185,8 +185,8 @@ fn multigrid_on_ranks_gives_the_serial_bits() {
         let serial = solve("diffusion-mg", &problem, 1);
         assert!(serial.report.stop_reason.is_converged(), "{scene}");
         // The norms sum the same runs exactly on any number of ranks, so the history, the
-        // stop and the fluence are the serial ones to the bit (the issue asks for 1e-10
-        // and ± 1 cycle), on every rank count and through both doors.
+        // stop and the fluence are the serial ones to the bit, on every rank count and
+        // through both doors.
         for ranks in [2, 3] {
             let split = solve("diffusion-mg", &problem, ranks);
             assert_eq!(

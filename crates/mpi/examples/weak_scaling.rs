@@ -21,7 +21,7 @@
 //! `p1`, Murray's P1 by FTCS from a point source on the same grid, 400 steps
 //! (`lucent_explicit::ranks::march_p1_on`, z-slabs or `--boxes`).
 //! Every rank also solves serially and compares: every method must give the serial bits
-//! (the multigrid its φ and residual history; the issue asked 1e-10 and ± 1 cycle of it).
+//! (the multigrid its φ and residual history).
 //! The exit status is 1 otherwise. Rank 0 prints the iterations, the stop reason and the wall
 //! time of the split solve (the best of `--repeat R` runs, default 1).
 
