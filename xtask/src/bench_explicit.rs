@@ -98,8 +98,9 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
         parallel,
     );
     // P1 (staggered): φ and 3 E read and written, q read; 0.9 of the stable step (with
-    // Murray's damping σ_t damps both φ and E). The copy of the initial state is inside
-    // the timing: one step's traffic in ten steps.
+    // Murray's damping σ_t damps both φ and E). The initial state is copied before each
+    // run's clock starts (the march's own next fields, allocated and first touched, are
+    // inside it: what a caller pays).
     let sigma_t = 0.1;
     let stable = lucent::explicit::stability::p1::largest_step(true, sigma_t, sigma_t, 1.0);
     let settings = P1Settings {
@@ -118,12 +119,15 @@ pub(crate) fn run(n: usize) -> Result<(), String> {
         initial.clone(),
         [initial.clone(), initial.clone(), initial.clone()],
     );
-    let mut check = Ok(());
-    let t = best_of(5, || {
-        let out = p1(&lattice, &q, &settings, Some(start.clone()));
-        check = ran("ftcs-p1", out, |o| o.steps, 10);
-    }) / 10.0;
-    check?;
+    let mut best = f64::INFINITY;
+    for _ in 0..5 {
+        let state = start.clone();
+        let clock = std::time::Instant::now();
+        let out = p1(&lattice, &q, &settings, Some(state));
+        best = best.min(clock.elapsed().as_secs_f64());
+        ran("ftcs-p1", out, |o| o.steps, 10)?;
+    }
+    let t = best / 10.0;
     line(
         "ftcs-p1 staggered, per step of 10",
         t,
