@@ -35,8 +35,9 @@
 //! (`lucent_core::ranks::all_reduce_sums`: log₂P messages of 71 words per norm). An exact
 //! sum does not depend on the order of its terms, so the residual history, the stopping
 //! decisions and φ are [`Multigrid::solve`]'s bits on every rank count (tested on 1–5
-//! ranks, every cycle and smoother, with and without agglomeration). The time budget and cancellation are each rank's own and travel
-//! with the reduction, so all ranks stop on the same cycle.
+//! ranks, every cycle and smoother, with and without agglomeration). The time budget and
+//! cancellation are each rank's own and travel with the reduction, so all ranks stop on
+//! the same cycle.
 //!
 //! **Not yet.** Every rank holds the whole hierarchy and full-length work vectors (it
 //! touches only its slabs and their halos), so memory does not scale with ranks.

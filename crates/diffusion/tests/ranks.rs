@@ -1,6 +1,7 @@
 //! Multigrid on ranks (`Multigrid::solve_on_ranks`) against the serial solve, on in-process
-//! ranks: the serial solve's bits (history, stop and φ) for every rank count, across grids whose sizes are not powers of two, media that fill the box
-//! or sit inside it, jumps of D, every cycle, both smoothers and both prolongations.
+//! ranks: the serial solve's bits (history, stop and φ) for every rank count, across
+//! grids whose sizes are not powers of two, media that fill the box or sit inside it,
+//! jumps of D, every cycle, both smoothers and both prolongations.
 
 use glam::DVec3;
 use lucent_core::Stopping;
