@@ -302,7 +302,7 @@ impl Setup<'_> {
     /// [`Setup::characteristic`] reading ρ and σ_a of cells by index through `rho` and
     /// `absorption`: the one definition the in-memory march and the paged one (which holds
     /// only the planes it needs) share, so both give the same bits.
-    fn characteristic_with(
+    pub(crate) fn characteristic_with(
         &self,
         c: usize,
         rho: &impl Fn(usize) -> f64,
@@ -1028,17 +1028,37 @@ pub(crate) fn paper_row(
         let c = row + i;
         let from_y = y_up.map_or(density, |r| rho[r + i]);
         let from_z = z_up.map_or(density, |r| rho[r + i]);
-        let inflow = w.x * x_up + w.y * from_y + w.z * from_z;
-        let sigma = setup.absorption[c];
-        let keep = (1.0 - sigma) * setup.courant;
-        let denominator = sigma + keep * total;
-        let value = if denominator > 0.0 {
-            keep * inflow / denominator
-        } else {
-            rho[c]
-        };
+        let value = paper_cell(
+            setup.courant,
+            (w, total),
+            [x_up, from_y, from_z],
+            setup.absorption[c],
+            rho[c],
+        );
         rho[c] = value;
         x_up = value;
+    }
+}
+
+/// One cell of the paper's one-pass march (Eq. 16 at its fixed point): ρ = (1 − σ)C
+/// Σ|u_a| ρ_a / (σ + (1 − σ)C Σ|u_a|) from the values `upwind` of its upwind neighbours
+/// along x, y and z (the light's density beyond an inflow face), with `w` = |u| and
+/// `total` = Σ|u_a|; `old` where the denominator vanishes. [`paper_row`] and the march
+/// over boxes (`wavefront::boxes`) share it, so both give the serial bits.
+pub(crate) fn paper_cell(
+    courant: f64,
+    (w, total): (DVec3, f64),
+    upwind: [f64; 3],
+    sigma: f64,
+    old: f64,
+) -> f64 {
+    let inflow = w.x * upwind[0] + w.y * upwind[1] + w.z * upwind[2];
+    let keep = (1.0 - sigma) * courant;
+    let denominator = sigma + keep * total;
+    if denominator > 0.0 {
+        keep * inflow / denominator
+    } else {
+        old
     }
 }
 

@@ -29,6 +29,11 @@ const DECOMPOSITION: (&str, &str) = (
     "how ranks split the grid: slabs (z-slabs balanced by unknowns, one layer per rank at least) or boxes (the grid of boxes that cuts least, x cut at multiples of 8); the serial bits either way",
 );
 
+const MARCH_DECOMPOSITION: (&str, &str) = (
+    "decomposition",
+    "how ranks split the grid: slabs (z-layers r·n_z/P..(r+1)·n_z/P; planes in lock step where the light runs along them) or boxes (the grid of boxes that cuts least, x cut at multiples of 8; a KBA sweep, pipelined across the cuts of all but one lateral axis); the serial bits either way",
+);
+
 const P1_DECOMPOSITION: (&str, &str) = (
     "decomposition",
     "how ranks split the grid: slabs (z-layers r·n_z/P..(r+1)·n_z/P, one layer per rank at least) or boxes (the grid of boxes that cuts least, x cut at multiples of 8); the serial bits either way",
@@ -172,9 +177,11 @@ pub struct ConvectionParams {
     pub scattering: f64,
     /// Run a Courant number beyond the bound anyway.
     pub allow_unstable: bool,
-    /// In-process ranks to split the march over (z-slabs; distant lights, ordered sweeps,
-    /// the characteristic or the paper's model).
+    /// In-process ranks to split the march over (distant lights, ordered sweeps, the
+    /// characteristic or the paper's model).
     pub ranks: usize,
+    /// How ranks split the grid: z-slabs or a grid of boxes.
+    pub decomposition: DecompositionParam,
 }
 
 impl Default for ConvectionParams {
@@ -186,6 +193,7 @@ impl Default for ConvectionParams {
             scattering: 0.0,
             allow_unstable: false,
             ranks: 1,
+            decomposition: DecompositionParam::Slabs,
         }
     }
 }
@@ -211,8 +219,9 @@ impl SolverParams for ConvectionParams {
         ALLOW_UNSTABLE,
         (
             "ranks",
-            "split each light's march over this many in-process ranks (z-slabs: a pipelined wavefront, or planes in lock step; the bits of one rank; distant lights with ordered sweeps and the characteristic or paper model; under mpirun the processes are the ranks: leave 1)",
+            "split each light's march over this many in-process ranks (a pipelined wavefront over z-slabs or boxes; the bits of one rank; distant lights with ordered sweeps and the characteristic or paper model; under mpirun the processes are the ranks: leave 1)",
         ),
+        MARCH_DECOMPOSITION,
     ];
 
     fn validate(&self) -> Result<(), SolveError> {

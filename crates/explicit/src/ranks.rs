@@ -273,7 +273,11 @@ impl Boxes {
     }
 
     /// These boxes, if they are a grid of `dims` cells for `ranks` ranks.
-    fn fitting(&self, dims: [usize; 3], ranks: usize) -> Result<&Self, DecompositionError> {
+    pub(crate) fn fitting(
+        &self,
+        dims: [usize; 3],
+        ranks: usize,
+    ) -> Result<&Self, DecompositionError> {
         if self.ranks() != ranks || self.dims != dims {
             return Err(DecompositionError::BoxGrid {
                 grid: self.grid(),
@@ -282,6 +286,31 @@ impl Boxes {
             });
         }
         Ok(self)
+    }
+
+    /// The whole field, on every rank, from each rank's `mine`: the values of its box, x
+    /// fastest (one all-gather).
+    ///
+    /// # Errors
+    /// [`DecompositionError::Protocol`] if the ranks' parts do not add up to the grid.
+    pub(crate) fn gather(
+        &self,
+        mine: &[f64],
+        comm: &(impl Communicator + ?Sized),
+    ) -> Result<Vec<f64>, DecompositionError> {
+        let [nx, ny, nz] = self.dims;
+        let all = comm.all_gather(mine);
+        if all.len() != nx * ny * nz || comm.size() != self.ranks() {
+            return Err(DecompositionError::Protocol { rank: comm.rank() });
+        }
+        let mut whole = vec![0.0; all.len()];
+        let mut values = all.into_iter();
+        for r in 0..self.ranks() {
+            for p in box_cells(&self.bounds(r)) {
+                whole[p[0] + nx * (p[1] + ny * p[2])] = values.next().unwrap_or(0.0);
+            }
+        }
+        Ok(whole)
     }
 
     /// The boxes that touch box `rank` at a face, edge or corner, ascending.
@@ -1215,21 +1244,9 @@ pub fn march_p1_on(
             };
         }
     };
-    // Every rank's box in rank order, each x fastest: back to the grid's order.
     let gathered = |f: &[f64]| -> Result<Vec<f64>, DecompositionError> {
         let mine: Vec<f64> = box_cells(&own).map(|p| f[place(p)]).collect();
-        let all = comm.all_gather(&mine);
-        if all.len() != lattice.len() {
-            return Err(DecompositionError::Protocol { rank });
-        }
-        let mut whole = vec![0.0; all.len()];
-        let mut values = all.into_iter();
-        for r in 0..size {
-            for p in box_cells(&boxes.bounds(r)) {
-                whole[p[0] + nx * (p[1] + ny * p[2])] = values.next().unwrap_or(0.0);
-            }
-        }
-        Ok(whole)
+        boxes.gather(&mine, comm)
     };
     Ok(P1State {
         fluence: gathered(&phi)?,

@@ -98,6 +98,8 @@ enum Scheme {
         scattering: f64,
         /// In-process ranks.
         ranks: usize,
+        /// How ranks split the grid.
+        decomposition: DecompositionParam,
     },
     P1 {
         layout: crate::p1::Layout,
@@ -181,6 +183,7 @@ impl ExplicitSolver {
                     },
                     scattering: p.scattering,
                     ranks: p.ranks,
+                    decomposition: p.decomposition,
                 },
             }))
         },
@@ -361,7 +364,8 @@ impl Solver for ExplicitSolver {
                 ranks: true,
                 ..diffusion
             },
-            // `wavefront::propagate_on_ranks` splits the one-pass marches over z-slabs.
+            // `wavefront::propagate_on_ranks` splits the one-pass marches over z-slabs or
+            // boxes.
             Scheme::Convection {
                 scattering,
                 settings,
@@ -435,6 +439,7 @@ impl Solver for ExplicitSolver {
                 settings,
                 scattering,
                 ranks,
+                decomposition,
             } => {
                 let world = options.ranks.as_ref().filter(|r| r.size() > 1);
                 let on = ranks_of(world, *ranks)?;
@@ -443,7 +448,7 @@ impl Solver for ExplicitSolver {
                     problem,
                     options,
                     self.memory_bytes(problem),
-                    |context| self.convection(context, settings, *scattering, on),
+                    |context| self.convection(context, settings, (*scattering, *decomposition), on),
                 )
             }
             Scheme::P1 { .. } | Scheme::Ordinates { .. } => {
@@ -579,11 +584,19 @@ impl ExplicitSolver {
         &self,
         context: &Context<'_>,
         settings: &UpwindSettings,
-        scattering: f64,
+        (scattering, decomposition): (f64, DecompositionParam),
         on: RanksOf<'_>,
     ) -> Result<Outcome, SolveError> {
         let problem = context.problem;
         let l = lattice(problem)?;
+        let split = |ranks: usize| -> Result<Decomposition, SolveError> {
+            Ok(match decomposition {
+                DecompositionParam::Slabs => Decomposition::Slabs,
+                DecompositionParam::Boxes => Decomposition::Boxes(
+                    Boxes::auto(l.dims, ranks).map_err(|e| self.decomposition_error(e))?,
+                ),
+            })
+        };
         let geometry = *problem.geometry();
         let mut record = Record::exact((l.len() * 8 * 4) as u64);
         let mut fluence = Vec::new();
@@ -656,6 +669,7 @@ impl ExplicitSolver {
                         &absorption,
                         &light,
                         &settings,
+                        &split(comm.size())?,
                         comm,
                     )
                     .map_err(|e| self.decomposition_error(e))?,
@@ -664,6 +678,7 @@ impl ExplicitSolver {
                         &absorption,
                         &light,
                         &settings,
+                        &split(count)?,
                         count,
                     )
                     .map_err(|e| self.decomposition_error(e))?,

@@ -56,7 +56,11 @@ use crate::Lattice;
 use crate::convection::{
     Edges, Light, Model, Propagation, Setup, Sweep, UpwindSettings, paper_row, propagate,
 };
-use crate::ranks::DecompositionError;
+use crate::ranks::{Decomposition, DecompositionError};
+use lucent_grid::box_cells;
+
+mod boxes;
+pub use boxes::{HALO, STEP_CELLS, TASK_CELLS, propagate_box, read_box};
 
 /// The z-layers rank `rank` of `size` owns: [rank·n_z/size, (rank + 1)·n_z/size).
 pub fn owned_layers(nz: usize, size: usize, rank: usize) -> Range<usize> {
@@ -79,17 +83,64 @@ fn splits(light: &Light, settings: &UpwindSettings) -> bool {
         && settings.model != Model::Conservative
 }
 
-/// Marches one light on the ranks of `comm`, each computing its z-slab; the same result as
-/// [`propagate`] on every rank. More than one rank takes the one-pass marches of a
-/// distant light only: [`Sweep::Ordered`], [`Edges::Inflow`] and [`Model::Paper`] or
+/// Why a march that [`splits`] refuses cannot run on more than one rank.
+fn unsupported(light: &Light) -> DecompositionError {
+    DecompositionError::Unsupported(
+        if matches!(light, Light::Point { .. }) {
+            "a point light's march over ranks (its cells go by distance from the light, \
+             in passes until they settle): distant lights split over ranks"
+        } else {
+            "this march over ranks: only the one-pass marches split (ordered sweeps, \
+             inflow edges, the paper's or the characteristic model)"
+        }
+        .into(),
+    )
+}
+
+/// The checks every split march runs first: this rank's part of the absorption has the
+/// length `wrong_length` accepts (it says why not) and passes the march's own checks.
+/// Every rank's verdict is gathered, so a part refused on one rank stops every rank.
+fn checked_part<'a>(
+    lattice: &'a Lattice,
+    absorption: &'a [f64],
+    light: &Light,
+    settings: &UpwindSettings,
+    comm: &(impl Communicator + ?Sized),
+    wrong_length: impl FnOnce(usize) -> Option<String>,
+) -> Result<Setup<'a>, DecompositionError> {
+    let (size, rank) = (comm.size(), comm.rank());
+    // This rank's checks (its part's length and values, the light), then everyone's.
+    let checked = match wrong_length(absorption.len()) {
+        None => crate::convection::prepare_part(lattice, absorption, light, settings),
+        Some(why) => Err(crate::ExplicitError::Invalid(format!("absorption: {why}"))),
+    };
+    let flags = comm.all_gather(&[if checked.is_ok() { 1.0 } else { 0.0 }]);
+    let setup = checked?;
+    if let Some(bad) = flags.iter().position(|&f| f != 1.0) {
+        return Err(DecompositionError::Scheme(crate::ExplicitError::Invalid(
+            format!("rank {bad} refused its part of the absorption (it says why)"),
+        )));
+    }
+    if flags.len() != size {
+        return Err(DecompositionError::Protocol { rank });
+    }
+    Ok(setup)
+}
+
+/// Marches one light on the ranks of `comm`, each computing its z-slab or box
+/// (`decomposition`: [`Decomposition::Slabs`] are the layers [`owned_layers`] names,
+/// [`Decomposition::Boxes`] one box per rank); the same result as [`propagate`] on every
+/// rank. More than one rank takes the one-pass marches of a distant light only:
+/// [`Sweep::Ordered`], [`Edges::Inflow`] and [`Model::Paper`] or
 /// [`Model::Characteristic`]; the rest is [`DecompositionError::Unsupported`]. Every rank
-/// holds the whole `absorption` and gets the whole ρ; [`propagate_slab`] is the march that
-/// holds only a rank's layers.
+/// holds the whole `absorption` and gets the whole ρ; [`propagate_slab`] and
+/// [`propagate_box`] are the marches that hold only a rank's layers or box.
 pub fn propagate_on_ranks(
     lattice: &Lattice,
     absorption: &[f64],
     light: &Light,
     settings: &UpwindSettings,
+    decomposition: &Decomposition,
     comm: &(impl Communicator + ?Sized),
 ) -> Result<Propagation, DecompositionError> {
     let (size, rank) = (comm.size(), comm.rank());
@@ -103,18 +154,26 @@ pub fn propagate_on_ranks(
         lattice.check_field("initial", initial)?;
     }
     let [nx, ny, nz] = lattice.dims;
-    let reads = read_layers(nz, size, rank);
-    let mine = propagate_slab(
-        lattice,
-        &absorption[reads.start * nx * ny..reads.end * nx * ny],
-        light,
-        settings,
-        comm,
-    )?;
-    let density = comm.all_gather(&mine);
-    if density.len() != lattice.len() {
-        return Err(DecompositionError::Protocol { rank });
-    }
+    let density = match decomposition {
+        Decomposition::Slabs => {
+            let reads = read_layers(nz, size, rank);
+            let part = &absorption[reads.start * nx * ny..reads.end * nx * ny];
+            let mine = propagate_slab(lattice, part, light, settings, comm)?;
+            let density = comm.all_gather(&mine);
+            if density.len() != lattice.len() {
+                return Err(DecompositionError::Protocol { rank });
+            }
+            density
+        }
+        Decomposition::Boxes(boxes) => {
+            let boxes = boxes.fitting(lattice.dims, size)?;
+            let part: Vec<f64> = box_cells(&read_box(boxes, rank))
+                .map(|p| absorption[p[0] + nx * (p[1] + ny * p[2])])
+                .collect();
+            let mine = propagate_box(lattice, &part, light, settings, boxes, comm)?;
+            boxes.gather(&mine, comm)?
+        }
+    };
     Ok(Propagation {
         density,
         iterations: 1,
@@ -143,16 +202,7 @@ pub fn propagate_slab(
         if size <= 1 {
             return Ok(propagate(lattice, absorption, light, settings)?.density);
         }
-        return Err(DecompositionError::Unsupported(
-            if matches!(light, Light::Point { .. }) {
-                "a point light's march over ranks (its cells go by distance from the light, \
-                 in passes until they settle): distant lights split over ranks"
-            } else {
-                "this march over ranks: only the one-pass marches split (ordered sweeps, \
-                 inflow edges, the paper's or the characteristic model)"
-            }
-            .into(),
-        ));
+        return Err(unsupported(light));
     }
     if size > nz {
         return Err(DecompositionError::TooManyRanks {
@@ -162,25 +212,10 @@ pub fn propagate_slab(
     }
     let layer_len = nx * ny;
     let reads = read_layers(nz, size, rank);
-    // This rank's checks (its layers' count and values, the light), then everyone's.
-    let checked = if absorption.len() == reads.len() * layer_len {
-        crate::convection::prepare_part(lattice, absorption, light, settings)
-    } else {
-        Err(crate::ExplicitError::Invalid(format!(
-            "absorption: {} values for layers {reads:?} of {nx} × {ny}",
-            absorption.len()
-        )))
-    };
-    let flags = comm.all_gather(&[if checked.is_ok() { 1.0 } else { 0.0 }]);
-    let setup = checked?;
-    if let Some(bad) = flags.iter().position(|&f| f != 1.0) {
-        return Err(DecompositionError::Scheme(crate::ExplicitError::Invalid(
-            format!("rank {bad} refused its layers of the absorption (it says why)"),
-        )));
-    }
-    if flags.len() != size {
-        return Err(DecompositionError::Protocol { rank });
-    }
+    let setup = checked_part(lattice, absorption, light, settings, comm, |len| {
+        (len != reads.len() * layer_len)
+            .then(|| format!("{len} values for layers {reads:?} of {nx} × {ny}"))
+    })?;
     let Light::Distant { direction, density } = setup.light else {
         unreachable!("`splits` admits distant lights only");
     };
@@ -216,10 +251,11 @@ pub fn propagate_on_threads(
     absorption: &[f64],
     light: &Light,
     settings: &UpwindSettings,
+    decomposition: &Decomposition,
     ranks: usize,
 ) -> Result<Propagation, DecompositionError> {
     crate::ranks::on_threads(ranks, |comm| {
-        propagate_on_ranks(lattice, absorption, light, settings, comm)
+        propagate_on_ranks(lattice, absorption, light, settings, decomposition, comm)
     })
 }
 

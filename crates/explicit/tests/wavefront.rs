@@ -8,7 +8,7 @@ use glam::DVec3;
 use lucent_core::StopReason;
 use lucent_explicit::Lattice;
 use lucent_explicit::convection::{Edges, Light, Model, Sweep, UpwindSettings, propagate};
-use lucent_explicit::ranks::DecompositionError;
+use lucent_explicit::ranks::{Boxes, Decomposition, DecompositionError};
 use lucent_explicit::wavefront::propagate_on_threads;
 use proptest::prelude::*;
 
@@ -61,7 +61,7 @@ proptest! {
         };
         let light = Light::Distant { direction, density: 1.5 };
         let serial = propagate(&lattice, &sigma, &light, &settings(model)).unwrap();
-        let split = propagate_on_threads(&lattice, &sigma, &light, &settings(model), ranks);
+        let split = propagate_on_threads(&lattice, &sigma, &light, &settings(model), &Decomposition::Slabs, ranks);
         let lockstep = model == Model::Characteristic
             && direction.normalize().abs().max_position() != 2;
         // Slabs of one layer are too thin for the lock step's halo when there are neighbours.
@@ -113,8 +113,15 @@ fn larger_grids_on_every_rank_count() {
             assert!(serial.density.iter().all(|v| v.is_finite() && *v > 0.0));
             for ranks in 1..=5 {
                 // One rank runs the split code too.
-                let split =
-                    propagate_on_threads(&lattice, sigma, &light, &settings(model), ranks).unwrap();
+                let split = propagate_on_threads(
+                    &lattice,
+                    sigma,
+                    &light,
+                    &settings(model),
+                    &Decomposition::Slabs,
+                    ranks,
+                )
+                .unwrap();
                 assert!(
                     split
                         .density
@@ -161,19 +168,34 @@ fn marches_that_do_not_split_are_refused_on_ranks_and_run_on_one() {
     ];
     for (light, settings) in cases {
         let serial = propagate(&lattice, &sigma, &light, &settings).unwrap();
-        let one = propagate_on_threads(&lattice, &sigma, &light, &settings, 1).unwrap();
-        assert_eq!(one, serial);
-        assert!(matches!(
-            propagate_on_threads(&lattice, &sigma, &light, &settings, 2),
-            Err(DecompositionError::Unsupported(_))
-        ));
+        for split in [
+            Decomposition::Slabs,
+            Decomposition::Boxes(Boxes::new([6, 5, 8], [1, 1, 1]).unwrap()),
+        ] {
+            let one = propagate_on_threads(&lattice, &sigma, &light, &settings, &split, 1);
+            assert_eq!(one.unwrap(), serial);
+        }
+        for split in [
+            Decomposition::Slabs,
+            Decomposition::Boxes(Boxes::new([6, 5, 8], [1, 2, 1]).unwrap()),
+        ] {
+            assert!(matches!(
+                propagate_on_threads(&lattice, &sigma, &light, &settings, &split, 2),
+                Err(DecompositionError::Unsupported(_))
+            ));
+        }
     }
     // Bad input is the serial march's error, on ranks too.
     let bad = vec![-1.0; lattice.len()];
-    assert!(matches!(
-        propagate_on_threads(&lattice, &bad, &distant, &settings(Model::Paper), 2),
-        Err(DecompositionError::Scheme(_))
-    ));
+    for split in [
+        Decomposition::Slabs,
+        Decomposition::Boxes(Boxes::new([6, 5, 8], [1, 1, 2]).unwrap()),
+    ] {
+        assert!(matches!(
+            propagate_on_threads(&lattice, &bad, &distant, &settings(Model::Paper), &split, 2),
+            Err(DecompositionError::Scheme(_))
+        ));
+    }
 }
 
 /// Each rank handed only the layers `read_layers` names (as it reads them from a file)
@@ -242,6 +264,240 @@ fn a_rank_needs_only_its_layers() {
                 matches!(e, DecompositionError::Scheme(_)),
                 "rank {rank}: {e}"
             );
+        }
+    }
+}
+
+/// A grid of boxes over `dims`: `grid` boxes per axis, cut evenly or, with `seed`, at
+/// random places (x at multiples of 8, as `Boxes` asks); `None` where the axis is too short.
+fn boxes(dims: [usize; 3], grid: [usize; 3], seed: Option<u64>) -> Option<Boxes> {
+    let Some(seed) = seed else {
+        return Boxes::new(dims, grid).ok();
+    };
+    let mut state = seed | 1;
+    let mut draw = |n: usize| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state % n as u64) as usize
+    };
+    let cuts: [Vec<usize>; 3] = std::array::from_fn(|a| {
+        let unit = if a == 0 { 8 } else { 1 };
+        let places = dims[a].div_ceil(unit);
+        let mut inner: Vec<usize> = (1..places).map(|p| p * unit).collect();
+        // Keep grid[a] − 1 of the inner places, dropped at random.
+        while inner.len() + 1 > grid[a] && !inner.is_empty() {
+            let at = draw(inner.len());
+            inner.remove(at);
+        }
+        let mut cuts = vec![0];
+        cuts.extend(inner);
+        cuts.push(dims[a]);
+        cuts
+    });
+    (0..3).all(|a| cuts[a].len() == grid[a] + 1).then_some(())?;
+    Boxes::from_cuts(dims, cuts).ok()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 96, ..ProptestConfig::default() })]
+
+    /// Over any grid of boxes (even or uneven cuts, boxes one cell thin, up to 8 ranks),
+    /// every light direction and both one-pass models: the serial bits.
+    #[test]
+    fn the_march_over_boxes_is_the_serial_march(
+        dims in (1usize..=20, 1usize..=11, 1usize..=11),
+        grid in (1usize..=3, 1usize..=3, 1usize..=3),
+        uneven in proptest::option::of(any::<u64>()),
+        u in (component(), component(), component()),
+        paper in any::<bool>(),
+        seed in any::<u64>(),
+        spacing in 0.05..0.5f64,
+    ) {
+        let dims = [dims.0, dims.1, dims.2];
+        let grid = [grid.0, grid.1, grid.2];
+        let direction = DVec3::new(u.0, u.1, u.2);
+        prop_assume!(direction.length() > 1e-3);
+        let Some(boxes) = boxes(dims, grid, uneven) else {
+            // Fewer places to cut than boxes asked for.
+            prop_assume!(false);
+            unreachable!()
+        };
+        prop_assume!(boxes.ranks() <= 8);
+        let lattice = Lattice::new(dims, spacing).unwrap();
+        let n = lattice.len();
+        let (model, sigma) = if paper {
+            (Model::Paper, absorption(n, seed, 0.9))
+        } else {
+            (Model::Characteristic, absorption(n, seed, 4.0))
+        };
+        let light = Light::Distant { direction, density: 1.5 };
+        let serial = propagate(&lattice, &sigma, &light, &settings(model)).unwrap();
+        let ranks = boxes.ranks();
+        let split = propagate_on_threads(
+            &lattice,
+            &sigma,
+            &light,
+            &settings(model),
+            &Decomposition::Boxes(boxes.clone()),
+            ranks,
+        )
+        .map_err(|e| TestCaseError::fail(format!("{boxes:?}: {e}")))?;
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        prop_assert_eq!(bits(&split.density), bits(&serial.density), "{:?}", boxes);
+        prop_assert_eq!(split.stop_reason, StopReason::Exact);
+    }
+}
+
+/// Larger grids over boxes cut along every axis, evenly and unevenly (boxes one and two
+/// cells thin, where the characteristic's stencil reaches past the next box), each axis
+/// dominant both ways, both models.
+#[test]
+fn larger_grids_over_boxes() {
+    let dims = [27, 19, 23];
+    let lattice = Lattice::new(dims, 0.1).unwrap();
+    let sigma = absorption(lattice.len(), 5, 3.0);
+    let paper_sigma = absorption(lattice.len(), 13, 0.5);
+    let grids = [
+        Boxes::new(dims, [2, 2, 1]).unwrap(),
+        Boxes::new(dims, [1, 2, 3]).unwrap(),
+        Boxes::new(dims, [2, 1, 2]).unwrap(),
+        Boxes::from_cuts(dims, [vec![0, 8, 27], vec![0, 1, 3, 19], vec![0, 22, 23]]).unwrap(),
+        Boxes::from_cuts(dims, [vec![0, 27], vec![0, 17, 18, 19], vec![0, 2, 3, 23]]).unwrap(),
+    ];
+    let directions = [
+        DVec3::new(0.3, -0.2, 1.0),
+        DVec3::new(-0.4, 0.5, -1.0),
+        DVec3::new(1.0, 0.6, -0.3),
+        DVec3::new(0.2, -1.0, 0.7),
+        DVec3::new(-1.0, -1.0, 0.0),
+        DVec3::new(0.0, 0.0, -1.0),
+    ];
+    for direction in directions {
+        let light = Light::Distant {
+            direction,
+            density: 1.0,
+        };
+        for (model, sigma) in [
+            (Model::Characteristic, &sigma),
+            (Model::Paper, &paper_sigma),
+        ] {
+            let serial = propagate(&lattice, sigma, &light, &settings(model)).unwrap();
+            assert!(serial.density.iter().all(|v| v.is_finite() && *v > 0.0));
+            for boxes in &grids {
+                let split = propagate_on_threads(
+                    &lattice,
+                    sigma,
+                    &light,
+                    &settings(model),
+                    &Decomposition::Boxes(boxes.clone()),
+                    boxes.ranks(),
+                )
+                .unwrap();
+                assert!(
+                    split
+                        .density
+                        .iter()
+                        .zip(&serial.density)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{model:?} {direction} over {:?}",
+                    boxes.grid()
+                );
+            }
+        }
+    }
+}
+
+/// Each rank handed only the cells `read_box` names (as it reads them from a file)
+/// returns its box of the serial ρ; a bad value in one rank's cells stops every rank with
+/// an error; boxes that do not fit the grid or the ranks are refused on every rank.
+#[test]
+fn a_rank_needs_only_its_box() {
+    use lucent_core::ranks::{Communicator, Threads};
+    use lucent_explicit::wavefront::{propagate_box, read_box};
+    use lucent_grid::box_cells;
+    let dims = [17, 11, 9];
+    let lattice = Lattice::new(dims, 0.15).unwrap();
+    let at = |p: [usize; 3]| p[0] + dims[0] * (p[1] + dims[1] * p[2]);
+    let sigma = absorption(lattice.len(), 3, 2.5);
+    let boxes = Boxes::new(dims, [2, 2, 2]).unwrap();
+    for direction in [DVec3::new(0.2, 0.3, -1.0), DVec3::new(0.9, -0.3, 0.4)] {
+        let light = Light::Distant {
+            direction,
+            density: 2.0,
+        };
+        for model in [Model::Characteristic, Model::Paper] {
+            let sigma: Vec<f64> = match model {
+                Model::Paper => sigma.iter().map(|s| s / 3.0).collect(),
+                _ => sigma.clone(),
+            };
+            let serial = propagate(&lattice, &sigma, &light, &settings(model)).unwrap();
+            let parts = Threads::run(8, |comm| {
+                let mine: Vec<f64> = box_cells(&read_box(&boxes, comm.rank()))
+                    .map(|p| sigma[at(p)])
+                    .collect();
+                propagate_box(&lattice, &mine, &light, &settings(model), &boxes, comm)
+            });
+            for (rank, part) in parts.into_iter().enumerate() {
+                let part = part.unwrap().unwrap();
+                let expected: Vec<u64> = box_cells(&boxes.bounds(rank))
+                    .map(|p| serial.density[at(p)].to_bits())
+                    .collect();
+                let got: Vec<u64> = part.iter().map(|v| v.to_bits()).collect();
+                assert_eq!(got, expected, "{model:?} {direction}: rank {rank}");
+            }
+        }
+        // A NaN in rank 5's cells only, or one value short on rank 2: every rank returns
+        // an error (none waits).
+        let light = Light::Distant {
+            direction,
+            density: 1.0,
+        };
+        for bad_rank in [5, 2] {
+            let results = Threads::run(8, |comm| {
+                let mut mine: Vec<f64> = box_cells(&read_box(&boxes, comm.rank()))
+                    .map(|p| sigma[at(p)])
+                    .collect();
+                if comm.rank() == bad_rank {
+                    if bad_rank == 5 {
+                        mine[3] = f64::NAN;
+                    } else {
+                        mine.pop();
+                    }
+                }
+                let settings = settings(Model::Characteristic);
+                propagate_box(&lattice, &mine, &light, &settings, &boxes, comm)
+            });
+            for (rank, result) in results.into_iter().enumerate() {
+                let e = result.unwrap().unwrap_err();
+                assert!(
+                    matches!(e, DecompositionError::Scheme(_)),
+                    "rank {rank}: {e}"
+                );
+            }
+        }
+    }
+    // Boxes for another grid, or for another rank count.
+    let light = Light::Distant {
+        direction: DVec3::Z,
+        density: 1.0,
+    };
+    for (other, ranks) in [(Boxes::new([16, 11, 9], [2, 1, 1]).unwrap(), 2), (boxes, 4)] {
+        let results = Threads::run(ranks, |comm| {
+            propagate_box(
+                &lattice,
+                &sigma,
+                &light,
+                &settings(Model::Paper),
+                &other,
+                comm,
+            )
+        });
+        for result in results {
+            assert!(matches!(
+                result.unwrap(),
+                Err(DecompositionError::BoxGrid { .. })
+            ));
         }
     }
 }
