@@ -5,7 +5,7 @@
 //! a box-filling medium lit from outside, a thin slab).
 //!
 //! - `ftcs-diffusion`, `jacobi-diffusion`, `ftcs-p1` and `convection-diffusion`: the serial
-//!   bits (the steady iterations and P1 over z-slabs and over grids of boxes).
+//!   bits (over z-slabs and over grids of boxes).
 //! - `diffusion-mg`: the serial bits too (fluence, history and stop), on every rank count
 //!   and through both doors: its norms sum runs of eight cells exactly, as the serial
 //!   solve's do.
@@ -258,8 +258,12 @@ fn the_absorption_march_gives_the_serial_bits_on_ranks() {
             .iter()
             .filter(|v| isotropic || v.len() != 1 || v[0].0 != "scattering")
         {
-            let with = |ranks: i64| {
+            let with = |ranks: i64, decomposition: &str| {
                 let mut p = params(ranks);
+                p.0.insert(
+                    "decomposition".into(),
+                    ParamValue::Text(decomposition.into()),
+                );
                 for (key, value) in variant.iter() {
                     p.0.insert((*key).into(), value.clone());
                 }
@@ -269,17 +273,18 @@ fn the_absorption_march_gives_the_serial_bits_on_ranks() {
                     .solve(&problem, &SolveOptions::default())
                     .unwrap_or_else(|e| panic!("{scene} {variant:?} on {ranks} ranks: {e}"))
             };
-            let serial = with(1);
+            let serial = with(1, "slabs");
             assert!(
                 serial.fluence[0].data().iter().any(|&v| v > 0.0),
                 "{scene}: some light arrives"
             );
-            for ranks in [2, 3] {
-                let split = with(ranks);
+            // Boxes: the grid of boxes that cuts least on each grid.
+            for (ranks, decomposition) in [(2, "slabs"), (3, "slabs"), (3, "boxes"), (4, "boxes")] {
+                let split = with(ranks, decomposition);
                 assert_eq!(
                     fluence_bits(&split),
                     fluence_bits(&serial),
-                    "{scene} {direction:?} {variant:?}, {ranks} ranks"
+                    "{scene} {direction:?} {variant:?}, {ranks} ranks over {decomposition}"
                 );
                 assert_eq!(split.report.stop_reason, serial.report.stop_reason);
             }

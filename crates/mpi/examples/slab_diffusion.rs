@@ -33,7 +33,7 @@ use lucent_diffusion::slab::{BlockFields, PointShares};
 use lucent_diffusion::{
     Boundaries, CellGeometry, Condition, DiffusionProblem, SlabSystem, Sources,
 };
-use lucent_explicit::ranks::{Boxes, block_ftcs_limit, iterate_block};
+use lucent_explicit::ranks::{block_ftcs_limit, iterate_block};
 use lucent_explicit::steady::{Iteration, SteadySettings, ftcs_limit, iterate};
 use lucent_grid::io::layers::{create_npy, write_npy_region};
 use lucent_grid::io::raw::RawLayout;
@@ -80,16 +80,7 @@ fn parse(args: &[String]) -> Result<Args, String> {
         Some("ftcs") => true,
         Some(other) => return Err(format!("--method {other}: jacobi or ftcs")),
     };
-    let boxes = match value("--boxes").as_deref() {
-        None => None,
-        Some("auto") => Some(None),
-        Some(text) => match slabs::numbers(text)?[..] {
-            [x, y, z] if [x, y, z].iter().all(|v| *v >= 1.0 && v.fract() == 0.0) => {
-                Some(Some([x as usize, y as usize, z as usize]))
-            }
-            _ => return Err(format!("--boxes {text}: auto or PX,PY,PZ")),
-        },
-    };
+    let boxes = slabs::boxes_arg(args)?;
     let albedo = number("--albedo", 0.9)?;
     if !(0.0..1.0).contains(&albedo) {
         return Err(format!("--albedo {albedo}: in [0, 1)"));
@@ -132,21 +123,7 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
     let [nx, ny, nz] = dims;
     // This rank's cells: a box of the grid of boxes, or a z-slab of whole layers.
     let owned: [std::ops::Range<usize>; 3] = match args.boxes {
-        Some(grid) => {
-            let boxes = match grid {
-                Some(grid) => Boxes::new(dims, grid),
-                None => Boxes::auto(dims, size),
-            }
-            .map_err(|e| e.to_string())?;
-            if boxes.ranks() != size {
-                return Err(format!(
-                    "--boxes {:?}: {} boxes for {size} ranks",
-                    boxes.grid(),
-                    boxes.ranks()
-                ));
-            }
-            boxes.bounds(rank)
-        }
+        Some(grid) => slabs::boxes(grid, dims, size)?.bounds(rank),
         None => {
             if size > nz {
                 return Err(format!(

@@ -16,8 +16,10 @@
 //! `--coarse-cells N` agglomerates coarse levels onto fewer ranks below N cells per rank,
 //! default `RankLayout::COARSE_CELLS_PER_RANK`, 0 splits every level as far as it goes);
 //! or Zhang & Ma's absorption march of a distant light through heterogeneous absorption on
-//! the same grid (`lucent_explicit::wavefront`, short characteristics): `march` with the
-//! light along z (the pipelined wavefront), `march-x` along x (planes in lock step); or
+//! the same grid (`lucent_explicit::wavefront`): `march` (short characteristics) with the
+//! light along z (over z-slabs the pipelined wavefront), `march-x` along x (over z-slabs
+//! planes in lock step), `march-paper` the paper's pass with the light as for `march`;
+//! each over z-slabs or `--boxes` (the KBA sweep, `wavefront::propagate_box`); or
 //! `p1`, Murray's P1 by FTCS from a point source on the same grid, 400 steps
 //! (`lucent_explicit::ranks::march_p1_on`, z-slabs or `--boxes`).
 //! Every rank also solves serially and compares: every method must give the serial bits
@@ -45,8 +47,9 @@ enum Method {
     Jacobi,
     /// Coarse levels go to fewer ranks below this many cells per rank.
     Multigrid(usize),
-    /// The absorption march, the light's dominant axis z (`true`) or x.
-    March(bool),
+    /// The absorption march: short characteristics with the light's dominant axis z
+    /// (`Some(true)`) or x, or the paper's pass (`None`).
+    March(Option<bool>),
     /// P1 by FTCS.
     P1,
 }
@@ -142,7 +145,7 @@ fn run(
     boxes: Option<&str>,
 ) -> Result<Run, String> {
     if let Method::March(along_z) = method {
-        return march(comm, along_z, layers_per_rank, side, repeat);
+        return march(comm, along_z, layers_per_rank, side, repeat, boxes);
     }
     if method == Method::P1 {
         return p1(comm, layers_per_rank, side, repeat, boxes);
@@ -229,23 +232,27 @@ fn run(
 }
 
 /// The absorption march on the grid of [`problem`], σ_a between 0 and 4/length varying
-/// cell to cell, against the serial march.
+/// cell to cell (the paper's per-step absorption between 0 and 0.8), against the serial
+/// march: short characteristics with the light's dominant axis z or x
+/// (`along_z`), or the paper's pass (`None`, the light as along z).
 fn march(
     comm: &(impl Communicator + ?Sized),
-    along_z: bool,
+    along_z: Option<bool>,
     layers_per_rank: usize,
     side: usize,
     repeat: usize,
+    boxes: Option<&str>,
 ) -> Result<Run, String> {
     use lucent_explicit::convection::{Light, Model, UpwindSettings, propagate};
     let dims = [side, side * 5 / 6, layers_per_rank * comm.size()];
     let lattice =
         lucent_explicit::Lattice::new(dims, 6.0 / side as f64).map_err(|e| e.to_string())?;
+    let top = if along_z.is_some() { 4.0 } else { 0.8 };
     let sigma: Vec<f64> = (0..lattice.len() as u64)
-        .map(|c| 4.0 * (c.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 54) as f64 / 1023.0)
+        .map(|c| top * (c.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 54) as f64 / 1023.0)
         .collect();
     let light = Light::Distant {
-        direction: if along_z {
+        direction: if along_z != Some(false) {
             DVec3::new(0.3, -0.2, 1.0)
         } else {
             DVec3::new(1.0, 0.3, -0.2)
@@ -253,11 +260,29 @@ fn march(
         density: 1.0,
     };
     let settings = UpwindSettings {
-        model: Model::Characteristic,
+        model: if along_z.is_some() {
+            Model::Characteristic
+        } else {
+            Model::Paper
+        },
         ..UpwindSettings::default()
     };
+    let decomposition = decomposition(boxes, dims, comm.size())?;
+    if comm.rank() == 0 {
+        match &decomposition {
+            Decomposition::Slabs => eprintln!("z-slabs"),
+            Decomposition::Boxes(b) => eprintln!("boxes: {:?} (x, y, z)", b.grid()),
+        }
+    }
     let (split, seconds) = best_of(repeat, || {
-        lucent_explicit::wavefront::propagate_on_ranks(&lattice, &sigma, &light, &settings, comm)
+        lucent_explicit::wavefront::propagate_on_ranks(
+            &lattice,
+            &sigma,
+            &light,
+            &settings,
+            &decomposition,
+            comm,
+        )
     })?;
     let reference = propagate(&lattice, &sigma, &light, &settings).map_err(|e| e.to_string())?;
     Ok(Run {
@@ -376,17 +401,20 @@ fn main() -> ExitCode {
         Some("mg") => Method::Multigrid(
             value(&args, "--coarse-cells").unwrap_or(RankLayout::COARSE_CELLS_PER_RANK),
         ),
-        Some("march") => Method::March(true),
-        Some("march-x") => Method::March(false),
+        Some("march") => Method::March(Some(true)),
+        Some("march-x") => Method::March(Some(false)),
+        Some("march-paper") => Method::March(None),
         Some("p1") => Method::P1,
         Some(other) => {
-            eprintln!("weak_scaling: --method {other}: ftcs, jacobi, mg, march, march-x or p1");
+            eprintln!(
+                "weak_scaling: --method {other}: ftcs, jacobi, mg, march, march-x, march-paper or p1"
+            );
             return ExitCode::from(2);
         }
     };
     let boxes = value::<String>(&args, "--boxes");
-    if boxes.is_some() && !matches!(method, Method::Ftcs | Method::Jacobi | Method::P1) {
-        eprintln!("weak_scaling: --boxes splits FTCS, Jacobi and P1 only");
+    if boxes.is_some() && matches!(method, Method::Multigrid(_)) {
+        eprintln!("weak_scaling: --boxes splits FTCS, Jacobi, P1 and the marches only");
         return ExitCode::from(2);
     }
     match run_on_ranks(&args, method, layers, side, repeat, boxes.as_deref()) {

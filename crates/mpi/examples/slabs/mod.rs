@@ -5,6 +5,7 @@
 use std::path::Path;
 use std::process::ExitCode;
 
+use lucent_explicit::ranks::Boxes;
 use lucent_grid::io::layers::{Layers, Region, read_npy_region, read_nrrd_region, read_raw_region};
 use lucent_grid::io::raw::RawLayout;
 use lucent_grid::io::{LoadOptions, ScalarType};
@@ -91,6 +92,42 @@ pub(crate) fn value(args: &[String], name: &str) -> Option<String> {
         .position(|a| a == name)
         .and_then(|i| args.get(i + 1))
         .cloned()
+}
+
+/// `--boxes`: `None` for z-slabs, `Some(None)` for `auto`, or the grid of boxes.
+pub(crate) fn boxes_arg(args: &[String]) -> Result<Option<Option<[usize; 3]>>, String> {
+    Ok(match value(args, "--boxes").as_deref() {
+        None => None,
+        Some("auto") => Some(None),
+        Some(text) => match numbers(text)?[..] {
+            [x, y, z] if [x, y, z].iter().all(|v| *v >= 1.0 && v.fract() == 0.0) => {
+                Some(Some([x as usize, y as usize, z as usize]))
+            }
+            _ => return Err(format!("--boxes {text}: auto or PX,PY,PZ")),
+        },
+    })
+}
+
+/// The grid of boxes `grid` (`None`: the one that cuts least) over `dims` cells for
+/// `ranks` ranks.
+pub(crate) fn boxes(
+    grid: Option<[usize; 3]>,
+    dims: [usize; 3],
+    ranks: usize,
+) -> Result<Boxes, String> {
+    let boxes = match grid {
+        Some(grid) => Boxes::new(dims, grid),
+        None => Boxes::auto(dims, ranks),
+    }
+    .map_err(|e| e.to_string())?;
+    if boxes.ranks() != ranks {
+        return Err(format!(
+            "--boxes {:?}: {} boxes for {ranks} ranks",
+            boxes.grid(),
+            boxes.ranks()
+        ));
+    }
+    Ok(boxes)
 }
 
 /// `text` as comma-separated numbers.
