@@ -31,10 +31,11 @@
 //! (`docs/ranks.md`);
 //! [`ranks::march_p1_on`] the P1 march (zero edges) over z-slabs or boxes, its change norm
 //! summed the same way; and [`wavefront::propagate_on_ranks`]
-//! Zhang & Ma's one-pass absorption march of a distant light (a pipelined wavefront where
-//! the light crosses the slabs, planes in lock step where it runs along them), over
-//! z-slabs (any `lucent_core::ranks::Communicator`: threads here, MPI through
-//! `lucent-mpi`) with the serial bits on any number of ranks.
+//! Zhang & Ma's one-pass absorption march of a distant light over z-slabs (a pipelined
+//! wavefront where the light crosses the slabs, planes in lock step where it runs along
+//! them) or a grid of boxes (the KBA sweep, [`wavefront::propagate_box`]), on any
+//! `lucent_core::ranks::Communicator` (threads here, MPI through `lucent-mpi`), with the
+//! serial bits on any number of ranks.
 //!
 //! Every march checks its step against [`stability`] before running and refuses a step
 //! beyond the correct bound with [`ExplicitError::Unstable`] unless the study option

@@ -31,7 +31,7 @@ const DECOMPOSITION: (&str, &str) = (
 
 const MARCH_DECOMPOSITION: (&str, &str) = (
     "decomposition",
-    "how ranks split the grid: slabs (z-layers r·n_z/P..(r+1)·n_z/P; planes in lock step where the light runs along them) or boxes (the grid of boxes that cuts least, x cut at multiples of 8; a KBA sweep, pipelined across the cuts of all but one lateral axis); the serial bits either way",
+    "how ranks split the grid: slabs (z-layers r·n_z/P..(r+1)·n_z/P; planes in lock step where the light runs along them) or boxes (per light, the grid of boxes that cuts least among those that leave an axis whole, the light's first, x cut at multiples of 8: a KBA sweep pipelined across every cut); the serial bits either way",
 );
 
 const P1_DECOMPOSITION: (&str, &str) = (

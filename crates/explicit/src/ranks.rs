@@ -213,13 +213,36 @@ impl Boxes {
     /// # Errors
     /// [`DecompositionError::BoxGrid`] (grid [1, 1, 1]) if no grid of `ranks` boxes fits.
     pub fn auto(dims: [usize; 3], ranks: usize) -> Result<Self, DecompositionError> {
+        Self::least_cut(dims, ranks, |_| true)
+    }
+
+    /// [`Boxes::auto`] among the grids that leave at least one of the axes `whole` uncut
+    /// (what a sweep pipelines best: Zhang & Ma's march over boxes,
+    /// `wavefront::march_boxes`).
+    ///
+    /// # Errors
+    /// [`DecompositionError::BoxGrid`] (grid [1, 1, 1]) if no such grid fits.
+    pub fn auto_leaving_whole(
+        dims: [usize; 3],
+        ranks: usize,
+        whole: &[usize],
+    ) -> Result<Self, DecompositionError> {
+        Self::least_cut(dims, ranks, |grid| whole.iter().any(|&a| grid[a] == 1))
+    }
+
+    /// The grid of `ranks` boxes with the least cut area among those `admit` takes.
+    fn least_cut(
+        dims: [usize; 3],
+        ranks: usize,
+        admit: impl Fn([usize; 3]) -> bool,
+    ) -> Result<Self, DecompositionError> {
         let units = Self::units(dims);
         let divisors = |n: usize| (1..=n).rev().filter(move |p| n.is_multiple_of(*p));
         let mut best: Option<([usize; 3], usize)> = None;
         for pz in divisors(ranks) {
             for py in divisors(ranks / pz) {
                 let grid = [ranks / pz / py, py, pz];
-                if (0..3).any(|a| grid[a] > units[a]) {
+                if (0..3).any(|a| grid[a] > units[a]) || !admit(grid) {
                     continue;
                 }
                 let [nx, ny, nz] = dims;

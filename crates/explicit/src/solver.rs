@@ -589,14 +589,23 @@ impl ExplicitSolver {
     ) -> Result<Outcome, SolveError> {
         let problem = context.problem;
         let l = lattice(problem)?;
-        let split = |ranks: usize| -> Result<Decomposition, SolveError> {
-            Ok(match decomposition {
-                DecompositionParam::Slabs => Decomposition::Slabs,
-                DecompositionParam::Boxes => Decomposition::Boxes(
-                    Boxes::auto(l.dims, ranks).map_err(|e| self.decomposition_error(e))?,
-                ),
-            })
-        };
+        // Boxes per light: the grid that leaves an axis whole, the light's axis first
+        // (`wavefront::march_boxes`: the sweep is then pipelined across every cut).
+        let split =
+            |ranks: usize, light: &crate::convection::Light| -> Result<Decomposition, SolveError> {
+                let boxes = match *light {
+                    crate::convection::Light::Distant { direction, .. } => {
+                        crate::wavefront::march_boxes(l.dims, ranks, direction, settings.model)
+                    }
+                    crate::convection::Light::Point { .. } => Boxes::auto(l.dims, ranks),
+                };
+                Ok(match decomposition {
+                    DecompositionParam::Slabs => Decomposition::Slabs,
+                    DecompositionParam::Boxes => {
+                        Decomposition::Boxes(boxes.map_err(|e| self.decomposition_error(e))?)
+                    }
+                })
+            };
         let geometry = *problem.geometry();
         let mut record = Record::exact((l.len() * 8 * 4) as u64);
         let mut fluence = Vec::new();
@@ -669,7 +678,7 @@ impl ExplicitSolver {
                         &absorption,
                         &light,
                         &settings,
-                        &split(comm.size())?,
+                        &split(comm.size(), &light)?,
                         comm,
                     )
                     .map_err(|e| self.decomposition_error(e))?,
@@ -678,7 +687,7 @@ impl ExplicitSolver {
                         &absorption,
                         &light,
                         &settings,
-                        &split(count)?,
+                        &split(count, &light)?,
                         count,
                     )
                     .map_err(|e| self.decomposition_error(e))?,

@@ -1,7 +1,13 @@
-//! Zhang & Ma's absorption march of a distant light split over ranks by z-slabs: the twin
-//! of the one-pass marches of [`crate::convection::propagate`] (ordered sweeps, inflow
-//! edges, the paper's Eq. 16 or short characteristics), the same bits on any number of
-//! ranks.
+//! Zhang & Ma's absorption march of a distant light split over ranks by z-slabs or a
+//! Cartesian grid of boxes: the twin of the one-pass marches of
+//! [`crate::convection::propagate`] (ordered sweeps, inflow edges, the paper's Eq. 16 or
+//! short characteristics), the same bits on any number of ranks and any decomposition
+//! ([`propagate_on_ranks`] takes either).
+//!
+//! Over boxes ([`propagate_box`], [`read_box`]) the march is the KBA sweep of discrete
+//! ordinates codes: tasks of a plane by a chunk of rows, one schedule of steps that every
+//! rank derives alike, pipelined across every cut but those of one axis (the module
+//! `boxes` has the construction). The rest of this page is the z-slab march.
 //!
 //! Rank r owns the z-layers [k0, k1) = [r n_z / P, (r + 1) n_z / P) ([`owned_layers`]) and
 //! holds σ_a and ρ of those and of two more layers each side ([`read_layers`]), so
@@ -60,7 +66,10 @@ use crate::ranks::{Decomposition, DecompositionError};
 use lucent_grid::box_cells;
 
 mod boxes;
-pub use boxes::{HALO, STEP_CELLS, TASK_CELLS, propagate_box, read_box};
+pub use boxes::{
+    BoxSchedule, HALO, MAX_TASKS, STEP_CELLS, TASK_CELLS, box_schedule, march_boxes, propagate_box,
+    read_box,
+};
 
 /// The z-layers rank `rank` of `size` owns: [rank·n_z/size, (rank + 1)·n_z/size).
 pub fn owned_layers(nz: usize, size: usize, rank: usize) -> Range<usize> {

@@ -501,3 +501,35 @@ fn a_rank_needs_only_its_box() {
         }
     }
 }
+
+/// The grid of boxes the march picks leaves an axis whole, the light's dominant one first
+/// for characteristics (every rank then works on every plane), and is the least cut
+/// grid where none can.
+#[test]
+fn the_march_picks_boxes_that_leave_an_axis_whole() {
+    use lucent_explicit::wavefront::march_boxes;
+    let cube = [512, 512, 512];
+    let along_z = DVec3::new(0.3, -0.2, 1.0);
+    let along_x = DVec3::new(-1.0, 0.3, -0.2);
+    let grid = |dims, ranks, u, model| march_boxes(dims, ranks, u, model).unwrap().grid();
+    // Boxes::auto cuts every axis of a cube in 4.
+    assert_eq!(Boxes::auto(cube, 64).unwrap().grid(), [4, 4, 4]);
+    assert_eq!(grid(cube, 64, along_z, Model::Characteristic), [8, 8, 1]);
+    assert_eq!(grid(cube, 64, along_x, Model::Characteristic), [1, 8, 8]);
+    let paper = grid(cube, 64, along_z, Model::Paper);
+    assert!(
+        paper.contains(&1) && paper.iter().product::<usize>() == 64,
+        "{paper:?}"
+    );
+    // x is cut at multiples of 8 only: a 12-wide grid stays whole in x.
+    assert_eq!(
+        grid([12, 40, 40], 16, along_x, Model::Characteristic),
+        [1, 4, 4]
+    );
+    // 8 ranks on 16 × 2 × 2 cells: only 2 × 2 × 2 fits.
+    assert_eq!(
+        grid([16, 2, 2], 8, along_z, Model::Characteristic),
+        [2, 2, 2]
+    );
+    assert!(march_boxes([16, 2, 2], 7, along_z, Model::Paper).is_err());
+}

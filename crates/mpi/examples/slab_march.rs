@@ -3,7 +3,7 @@
 //! positioned reads of `.raw`, `.npy` or raw-encoded NRRD), marches its slab
 //! (`lucent_explicit::wavefront::propagate_slab`, short characteristics) and writes its
 //! layers of ρ into one `.npy` by positioned writes. With `--boxes auto` (the grid of
-//! boxes that cuts least) or `--boxes PX,PY,PZ` each rank reads its box of cells and two
+//! boxes that suits the march: `wavefront::march_boxes`) or `--boxes PX,PY,PZ` each rank reads its box of cells and two
 //! more on every side (`wavefront::read_box`), marches it in the KBA sweep
 //! (`wavefront::propagate_box`) and writes its box, x-line by x-line.
 //!
@@ -29,7 +29,7 @@ use glam::DVec3;
 use lucent_explicit::Lattice;
 use lucent_explicit::convection::{Light, Model, UpwindSettings, propagate};
 use lucent_explicit::wavefront::{
-    owned_layers, propagate_box, propagate_slab, read_box, read_layers,
+    march_boxes, owned_layers, propagate_box, propagate_slab, read_box, read_layers,
 };
 use lucent_grid::io::layers::{Layers, create_npy, write_npy_region};
 use lucent_grid::io::raw::RawLayout;
@@ -98,10 +98,19 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
     let [nx, ny, nz] = dims;
     // This rank's cells and the cells it reads: a box of the grid of boxes and HALO cells
     // beyond, or a z-slab and two layers beyond.
-    let boxes = args
-        .boxes
-        .map(|grid| slabs::boxes(grid, dims, size))
-        .transpose()?;
+    let model = if args.paper {
+        Model::Paper
+    } else {
+        Model::Characteristic
+    };
+    // `--boxes auto`: the grid that suits the march (an axis whole, the light's first).
+    let boxes = match args.boxes {
+        None => None,
+        Some(None) => {
+            Some(march_boxes(dims, size, args.direction, model).map_err(|e| e.to_string())?)
+        }
+        Some(grid) => Some(slabs::boxes(grid, dims, size)?),
+    };
     let (owned, reads) = match &boxes {
         Some(boxes) => (boxes.bounds(rank), read_box(boxes, rank)),
         None => {
@@ -123,11 +132,7 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
         density: 1.0,
     };
     let settings = UpwindSettings {
-        model: if args.paper {
-            Model::Paper
-        } else {
-            Model::Characteristic
-        },
+        model,
         ..UpwindSettings::default()
     };
     let rho = match &boxes {

@@ -267,7 +267,19 @@ fn march(
         },
         ..UpwindSettings::default()
     };
-    let decomposition = decomposition(boxes, dims, comm.size())?;
+    // `--boxes auto`: the grid that suits the march (an axis whole, the light's first).
+    let decomposition = match boxes {
+        Some("auto") => Decomposition::Boxes(
+            lucent_explicit::wavefront::march_boxes(
+                dims,
+                comm.size(),
+                light_direction(&light),
+                settings.model,
+            )
+            .map_err(|e| e.to_string())?,
+        ),
+        _ => decomposition(boxes, dims, comm.size())?,
+    };
     if comm.rank() == 0 {
         match &decomposition {
             Decomposition::Slabs => eprintln!("z-slabs"),
@@ -291,6 +303,14 @@ fn march(
         seconds,
         agrees: bits(&split.density) == bits(&reference.density),
     })
+}
+
+/// A distant light's direction.
+fn light_direction(light: &lucent_explicit::convection::Light) -> DVec3 {
+    match *light {
+        lucent_explicit::convection::Light::Distant { direction, .. } => direction,
+        lucent_explicit::convection::Light::Point { .. } => DVec3::Z,
+    }
 }
 
 /// P1 by FTCS (staggered, consistent damping, 0.9 of the stable step) for 400 steps from

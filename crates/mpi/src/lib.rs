@@ -6,7 +6,8 @@
 //! Cartesian grid of boxes),
 //! `lucent_explicit::ranks::march_p1_on` (P1 by FTCS, z-slabs or boxes),
 //! `lucent_explicit::wavefront`
-//! (Zhang & Ma's absorption march: a pipelined wavefront or planes in lock step), and
+//! (Zhang & Ma's absorption march: over z-slabs a pipelined wavefront or planes in lock
+//! step, over boxes the KBA sweep), and
 //! through them the registry's `diffusion-mg`, `ftcs-diffusion`, `jacobi-diffusion`,
 //! `ftcs-p1` and `convection-diffusion` with `SolveOptions::ranks`. This crate adds the transport that runs them across processes:
 //! `Mpi` (feature `mpi`: rsmpi on the system's MPI, Debian's `openmpi-bin
@@ -26,8 +27,9 @@
 //!
 //! **Memory.** Through the registry every rank still builds the whole problem (only its
 //! slab is iterated), so memory does not yet scale with ranks there. Two solvers have a
-//! slab-local form: the absorption march (`lucent_explicit::wavefront::propagate_slab`: σ_a
-//! and ρ of the rank's layers and a two-layer halo; the `slab_march` example) and FTCS and
+//! slab-local form: the absorption march (`lucent_explicit::wavefront::propagate_slab`
+//! and `propagate_box`: σ_a and ρ of the rank's layers or box and a two-cell halo; the
+//! `slab_march` example, `--boxes` for a grid of boxes) and FTCS and
 //! Jacobi diffusion in a medium filling the box (`lucent_explicit::ranks::iterate_block`
 //! on the rows `lucent_diffusion::SlabSystem::block` builds from the rank's layers or box
 //! and D's cells beyond its faces; the `slab_diffusion` example, `--boxes` for a grid of

@@ -86,6 +86,11 @@ pub const TASK_CELLS: usize = 64;
 /// a core at 0.25 µs per cell, well above a message's latency).
 pub const STEP_CELLS: usize = 512;
 
+/// Every rank derives every rank's tasks (about 40 bytes each), so chunks are widened
+/// until the march has about this many tasks at most (40 MiB): on a 1024³ grid, chunks of
+/// eight rows or more at 64 ranks (8 × 8 × 1 boxes), of 32 at 1024 (32 × 32 × 1).
+pub const MAX_TASKS: usize = 1 << 20;
+
 /// The cells rank `rank` of `boxes` reads (σ_a) and holds (ρ): its box grown by [`HALO`]
 /// cells on every side, within the grid.
 pub fn read_box(boxes: &Boxes, rank: usize) -> Cells {
@@ -196,8 +201,18 @@ struct Plan {
 
 impl Plan {
     /// The schedule of the march of a light going along `direction` (normalised) with
-    /// `model` over `boxes`.
+    /// `model` over `boxes`, in about [`MAX_TASKS`] tasks at most.
     fn new(boxes: &Boxes, direction: DVec3, model: Model) -> Result<Self, DecompositionError> {
+        Self::with_limit(boxes, direction, model, MAX_TASKS)
+    }
+
+    /// [`Plan::new`] with chunks wide enough for about `max_tasks` tasks at most.
+    fn with_limit(
+        boxes: &Boxes,
+        direction: DVec3,
+        model: Model,
+        max_tasks: usize,
+    ) -> Result<Self, DecompositionError> {
         let dims = boxes.dims();
         let grid = boxes.grid();
         let size = boxes.ranks();
@@ -232,12 +247,24 @@ impl Plan {
         let lock_step = skew == 1 && grid[axes[2]] > 1;
         let cells = if lock_step { STEP_CELLS } else { TASK_CELLS };
         let width = (dims[axes[2]] / grid[axes[2]]).max(1);
+        // Every rank holds every rank's tasks: about n_A p_D (n_L/B + p_L) of them (each
+        // box's plane cut into chunks), kept to `max_tasks` by wider chunks.
+        let [n_a, n_l, _] = axes.map(|a| dims[a]);
+        let columns = n_a * grid[axes[2]];
+        let fewest = columns * grid[axes[1]];
+        let rows = if fewest >= max_tasks {
+            n_l
+        } else {
+            cells
+                .div_ceil(width)
+                .max((columns * n_l).div_ceil(max_tasks - fewest))
+        };
         let frame = Frame {
             axes,
             forward: std::array::from_fn(|a| direction[a] >= 0.0),
             dims,
             skew,
-            rows: cells.div_ceil(width).clamp(1, dims[axes[1]].max(1)),
+            rows: rows.clamp(1, n_l.max(1)),
             plane_major,
         };
         let march_dims = frame.axes.map(|a| dims[a]);
@@ -422,6 +449,107 @@ fn reads(
             across.start.saturating_sub(2)..(across.end + 1).min(dims[2]),
         ]],
     }
+}
+
+/// The grid of `ranks` boxes over `dims` cells that suits the march of a distant light
+/// along `direction` with `model`: the least cut area ([`Boxes::auto`]) among the grids
+/// that leave an axis whole, so that the sweep is pipelined across every cut (the
+/// module's docs). For characteristics the light's dominant axis first (then every rank
+/// works on every plane, in lock step), then either lateral one; for the paper any axis.
+/// [`Boxes::auto`]'s grid where none fits.
+///
+/// # Errors
+/// [`DecompositionError::BoxGrid`] if no grid of `ranks` boxes fits.
+pub fn march_boxes(
+    dims: [usize; 3],
+    ranks: usize,
+    direction: DVec3,
+    model: Model,
+) -> Result<Boxes, DecompositionError> {
+    let any = || Boxes::auto_leaving_whole(dims, ranks, &[0, 1, 2]);
+    match model {
+        Model::Paper => any(),
+        _ => {
+            let planes = direction.normalize_or_zero().abs().max_position();
+            Boxes::auto_leaving_whole(dims, ranks, &[planes]).or_else(|_| any())
+        }
+    }
+    .or_else(|_| Boxes::auto(dims, ranks))
+}
+
+/// The shape of the march over boxes, for a cost model ([`box_schedule`]): the frame and
+/// chunks it chose, how many steps it takes and what each rank does in them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BoxSchedule {
+    /// The global axes (0 = x) of the planes (A), the chunked rows (L) and the rest (D).
+    pub axes: [usize; 3],
+    /// Rows per chunk.
+    pub rows: usize,
+    /// Whether the ranks run their tasks plane by plane (else chunk by chunk).
+    pub plane_major: bool,
+    /// Steps of the whole march: each ends in one exchange among the ranks that send or
+    /// receive in it.
+    pub steps: usize,
+    /// Per rank, its tasks.
+    pub tasks: Vec<usize>,
+    /// Per rank, the steps it computes in.
+    pub busy: Vec<usize>,
+    /// Per rank, the messages it sends (one per step and rank that reads from it).
+    pub messages: Vec<usize>,
+    /// Per rank, the values (f64) it sends.
+    pub values: Vec<usize>,
+}
+
+/// The schedule [`propagate_box`] follows for a distant light along `direction` with
+/// `model` over `boxes` (no march is run). The same on every rank.
+///
+/// # Errors
+/// [`DecompositionError::Unsupported`] for a model that does not split (only the paper's
+/// and the characteristic one-pass marches do); [`DecompositionError::Protocol`] if the
+/// schedule cannot be built (not expected).
+pub fn box_schedule(
+    boxes: &Boxes,
+    direction: DVec3,
+    model: Model,
+) -> Result<BoxSchedule, DecompositionError> {
+    let direction = direction.normalize_or_zero();
+    if model == Model::Conservative || direction == DVec3::ZERO || !direction.is_finite() {
+        return Err(DecompositionError::Unsupported(format!(
+            "the {model:?} march along {direction} over boxes"
+        )));
+    }
+    let plan = Plan::new(boxes, direction, model)?;
+    let size = plan.tasks.len();
+    let mut messages = vec![0; size];
+    let mut values = vec![0; size];
+    let mut busy = vec![0; size];
+    for rank in 0..size {
+        let tasks = &plan.tasks[rank];
+        let mut first = 0;
+        while first < tasks.len() {
+            let step = tasks[first].step;
+            let end = first + tasks[first..].partition_point(|t| t.step == step);
+            busy[rank] += 1;
+            for &to in &plan.feeds[rank] {
+                let sent = plan.transfer(&tasks[first..end], rank, to).count();
+                if sent > 0 {
+                    messages[rank] += 1;
+                    values[rank] += sent;
+                }
+            }
+            first = end;
+        }
+    }
+    Ok(BoxSchedule {
+        axes: plan.frame.axes,
+        rows: plan.frame.rows,
+        plane_major: plan.frame.plane_major,
+        steps: plan.steps,
+        tasks: plan.tasks.iter().map(Vec::len).collect(),
+        busy,
+        messages,
+        values,
+    })
 }
 
 /// A rank's fields over its [`read_box`]: cell (x, y, z) at its offset from the box's
@@ -682,5 +810,32 @@ mod tests {
                 "{grid:?} {u} {model:?}: {total} steps, {busy} busy"
             );
         }
+    }
+
+    /// What crosses a cut is exactly what the stencil reads: the paper's and the
+    /// characteristic's upstream plane where the light crosses the cut, and where it runs
+    /// along it the characteristic's two rows upwind (from the downwind box) and one
+    /// downwind (from the upwind box) of every plane but the last.
+    #[test]
+    fn the_halo_is_the_stencils() {
+        let boxes = Boxes::new([16, 16, 16], [1, 1, 2]).unwrap();
+        let sent = |u: DVec3, model| box_schedule(&boxes, u, model).unwrap().values;
+        let along_z = DVec3::new(0.2, -0.3, 1.0);
+        assert_eq!(sent(along_z, Model::Paper), [256, 0]);
+        assert_eq!(sent(-along_z, Model::Paper), [0, 256]);
+        assert_eq!(sent(along_z, Model::Characteristic), [256, 0]);
+        // Along x, z falling: rank 1 (z 8..16) is upwind along z.
+        let along_x = DVec3::new(1.0, 0.3, -0.2);
+        assert_eq!(sent(along_x, Model::Characteristic), [16 * 15, 2 * 16 * 15]);
+        assert_eq!(
+            sent(DVec3::new(1.0, 0.3, 0.2), Model::Characteristic),
+            [2 * 16 * 15, 16 * 15]
+        );
+        let alone = box_schedule(
+            &Boxes::new([16, 16, 16], [1, 1, 1]).unwrap(),
+            along_z,
+            Model::Paper,
+        );
+        assert_eq!(alone.unwrap().messages, [0]);
     }
 }
