@@ -308,9 +308,24 @@ impl Setup<'_> {
         rho: &impl Fn(usize) -> f64,
         absorption: &impl Fn(usize) -> f64,
     ) -> f64 {
+        let s = self.lattice.strides();
+        let index = |p: [usize; 3]| p[0] * s[0] + p[1] * s[1] + p[2] * s[2];
+        self.characteristic_at(self.lattice.coords(c), &index, rho, absorption)
+    }
+
+    /// [`Setup::characteristic_with`] for the cell at `at` (its coordinates), each cell it
+    /// reads located by `index` (coordinates to the index `rho` and `absorption` take): the
+    /// march over boxes holds a box of cells, indexed from the box's corner.
+    pub(crate) fn characteristic_at(
+        &self,
+        at: [usize; 3],
+        index: &impl Fn([usize; 3]) -> usize,
+        rho: &impl Fn(usize) -> f64,
+        absorption: &impl Fn(usize) -> f64,
+    ) -> f64 {
         let l = self.lattice;
         let h = l.spacing;
-        let at = l.coords(c);
+        let c = index(at);
         let x = l.centre(at.map(|v| v as isize));
         let u = self.direction(x);
         let axis = u.abs().max_position();
@@ -357,10 +372,8 @@ impl Setup<'_> {
                 .iter()
                 .all(|&a| (0..l.dims[a] as isize).contains(&to[a]));
             let clamped = to.map(|v| v.max(0));
-            let clamped = [0, 1, 2].map(|a| clamped[a].min(l.dims[a] as isize - 1));
-            let i = (0..3)
-                .map(|a| clamped[a] as usize * l.strides()[a])
-                .sum::<usize>();
+            let clamped = [0, 1, 2].map(|a| clamped[a].min(l.dims[a] as isize - 1) as usize);
+            let i = index(clamped);
             let mut point = l.centre(to);
             if inside {
                 return (rho(i) * spread(point), absorption(i));

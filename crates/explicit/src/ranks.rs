@@ -103,6 +103,22 @@ use lucent_grid::box_cells;
 /// A box of cells: its ranges along x, y and z.
 type Cells = [std::ops::Range<usize>; 3];
 
+/// Copies the values of the cells `cells` from `src`, which holds the box `from` (x
+/// fastest), into `dst`, which holds the box `to`: one slice per x-line.
+pub(crate) fn copy_cells(src: &[f64], from: &Cells, dst: &mut [f64], to: &Cells, cells: &Cells) {
+    let offset = |b: &Cells, y: usize, z: usize| {
+        (cells[0].start - b[0].start)
+            + b[0].len() * ((y - b[1].start) + b[1].len() * (z - b[2].start))
+    };
+    let run = cells[0].len();
+    for z in cells[2].clone() {
+        for y in cells[1].clone() {
+            let (a, b) = (offset(from, y, z), offset(to, y, z));
+            dst[b..b + run].copy_from_slice(&src[a..a + run]);
+        }
+    }
+}
+
 /// Which layers (indices into [`Layers::ranges`]) each rank owns: contiguous runs in z,
 /// balanced by unknowns (each rank takes layers until it holds its share).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -327,11 +343,13 @@ impl Boxes {
             return Err(DecompositionError::Protocol { rank: comm.rank() });
         }
         let mut whole = vec![0.0; all.len()];
-        let mut values = all.into_iter();
+        let grid = [0..nx, 0..ny, 0..nz];
+        let mut first = 0;
         for r in 0..self.ranks() {
-            for p in box_cells(&self.bounds(r)) {
-                whole[p[0] + nx * (p[1] + ny * p[2])] = values.next().unwrap_or(0.0);
-            }
+            let cells = self.bounds(r);
+            let len = cells.iter().map(|c| c.len()).product::<usize>();
+            copy_cells(&all[first..first + len], &cells, &mut whole, &grid, &cells);
+            first += len;
         }
         Ok(whole)
     }

@@ -63,7 +63,6 @@ use crate::convection::{
     Edges, Light, Model, Propagation, Setup, Sweep, UpwindSettings, paper_row, propagate,
 };
 use crate::ranks::{Decomposition, DecompositionError};
-use lucent_grid::box_cells;
 
 mod boxes;
 pub use boxes::{
@@ -176,9 +175,10 @@ pub fn propagate_on_ranks(
         }
         Decomposition::Boxes(boxes) => {
             let boxes = boxes.fitting(lattice.dims, size)?;
-            let part: Vec<f64> = box_cells(&read_box(boxes, rank))
-                .map(|p| absorption[p[0] + nx * (p[1] + ny * p[2])])
-                .collect();
+            let region = read_box(boxes, rank);
+            let mut part = vec![0.0; region.iter().map(Range::len).product()];
+            let grid = [0..nx, 0..ny, 0..nz];
+            crate::ranks::copy_cells(absorption, &grid, &mut part, &region, &region);
             let mine = propagate_box(lattice, &part, light, settings, boxes, comm)?;
             boxes.gather(&mine, comm)?
         }

@@ -69,7 +69,7 @@ use rayon::prelude::*;
 
 use crate::Lattice;
 use crate::convection::{Light, Model, Setup, UpwindSettings, paper_cell};
-use crate::ranks::{Boxes, DecompositionError};
+use crate::ranks::{Boxes, DecompositionError, copy_cells};
 
 /// A box of cells: its ranges along three axes (global x, y, z, or the march's A, L, D).
 type Cells = [Range<usize>; 3];
@@ -179,6 +179,44 @@ struct Task {
     plane: usize,
     rows: Range<usize>,
     step: usize,
+}
+
+/// Where a rank's task of a given key is in its order: the tasks of one major key (a
+/// chunk, or a plane where ranks run plane by plane) are consecutive, their minor keys
+/// consecutive too.
+struct TaskIndex {
+    first_major: usize,
+    /// Per major key from `first_major`: its first minor key and its first task.
+    runs: Vec<(usize, usize)>,
+    tasks: usize,
+}
+
+impl TaskIndex {
+    fn new(frame: &Frame, tasks: &[Task]) -> Self {
+        let first_major = tasks.first().map_or(0, |t| frame.key(t.chunk, t.plane).0);
+        let mut runs: Vec<(usize, usize)> = Vec::new();
+        for (i, t) in tasks.iter().enumerate() {
+            let (major, minor) = frame.key(t.chunk, t.plane);
+            if runs.len() <= major - first_major {
+                runs.resize(major - first_major + 1, (usize::MAX, i));
+                runs[major - first_major] = (minor, i);
+            }
+        }
+        Self {
+            first_major,
+            runs,
+            tasks: tasks.len(),
+        }
+    }
+
+    /// The task of key `(major, minor)`, where its major key's run holds it.
+    fn find(&self, (major, minor): (usize, usize)) -> Option<usize> {
+        let slot = major.checked_sub(self.first_major)?;
+        let &(first_minor, start) = self.runs.get(slot)?;
+        let end = self.runs.get(slot + 1).map_or(self.tasks, |r| r.1);
+        let at = start + minor.checked_sub(first_minor)?;
+        (at < end).then_some(at)
+    }
 }
 
 /// Every rank's tasks and steps, and who reads from whom: the same on every rank.
@@ -292,21 +330,23 @@ impl Plan {
             }
         }
         // Steps: every task in the global order (its dependencies first).
-        let mut order: Vec<(usize, usize)> = (0..size)
-            .flat_map(|r| (0..tasks[r].len()).map(move |i| (r, i)))
+        // The sort key packed with the task (a sort of plain words: the tasks of a 1024³
+        // grid on 1024 ranks number a million).
+        let mut order: Vec<([usize; 4], usize)> = (0..size)
+            .flat_map(|r| {
+                let upwind = own[r][1].start + own[r][2].start;
+                tasks[r].iter().enumerate().map(move |(i, t)| {
+                    let (major, minor) = frame.key(t.chunk, t.plane);
+                    ([major, minor, upwind, r], i)
+                })
+            })
             .collect();
-        order.sort_by_key(|&(r, i)| {
-            let t = &tasks[r][i];
-            (
-                frame.key(t.chunk, t.plane),
-                own[r][1].start + own[r][2].start,
-                r,
-            )
-        });
+        order.sort_unstable_by_key(|&(key, _)| key);
+        let index: Vec<TaskIndex> = tasks.iter().map(|t| TaskIndex::new(&frame, t)).collect();
         let mut scheduled: Vec<usize> = vec![0; size];
         let mut current: Vec<(usize, usize)> = vec![(0, 0); size];
         let mut steps = 0;
-        for (r, i) in order {
+        for ([.., r], i) in order {
             let task = &tasks[r][i];
             let mine = [
                 task.plane..task.plane + 1,
@@ -314,9 +354,10 @@ impl Plan {
                 own[r][2].clone(),
             ];
             let mut ready = 0;
+            let read = reads(model, march_dims, &own[r], mine[0].clone(), mine[1].clone());
             for &q in &fed_by[r] {
-                for read in reads(model, march_dims, &own[r], mine[0].clone(), mine[1].clone()) {
-                    let cells = meet(&read, &own[q]);
+                for read in &read {
+                    let cells = meet(read, &own[q]);
                     if is_empty(&cells) {
                         continue;
                     }
@@ -324,8 +365,9 @@ impl Plan {
                     // its order, which is the order of the keys.
                     let (plane, row) = (cells[0].end - 1, cells[1].end - 1);
                     let key = frame.key(frame.chunk(plane, row), plane);
-                    let Ok(at) =
-                        tasks[q].binary_search_by_key(&key, |t| frame.key(t.chunk, t.plane))
+                    let Some(at) = index[q]
+                        .find(key)
+                        .filter(|&at| frame.key(tasks[q][at].chunk, tasks[q][at].plane) == key)
                     else {
                         return Err(DecompositionError::Protocol { rank: q });
                     };
@@ -373,11 +415,22 @@ impl Plan {
         from: usize,
         to: usize,
     ) -> impl Iterator<Item = [usize; 3]> + 'a {
+        self.transfer_boxes(tasks, from, to)
+            .flat_map(|cells| box_cells(&cells))
+    }
+
+    /// [`Plan::transfer`]'s cells as boxes of global cells, some empty.
+    fn transfer_boxes<'a>(
+        &'a self,
+        tasks: &'a [Task],
+        from: usize,
+        to: usize,
+    ) -> impl Iterator<Item = Cells> + 'a {
         tasks.iter().flat_map(move |t| {
             let cells = self.cells_of(t, from);
             self.needs[to]
                 .iter()
-                .flat_map(move |n| box_cells(&self.frame.global_cells(&meet(&cells, n))))
+                .map(move |n| self.frame.global_cells(&meet(&cells, n)))
         })
     }
 
@@ -531,7 +584,10 @@ pub fn box_schedule(
             let end = first + tasks[first..].partition_point(|t| t.step == step);
             busy[rank] += 1;
             for &to in &plan.feeds[rank] {
-                let sent = plan.transfer(&tasks[first..end], rank, to).count();
+                let sent: usize = plan
+                    .transfer_boxes(&tasks[first..end], rank, to)
+                    .map(|cells| count(&cells))
+                    .sum();
                 if sent > 0 {
                     messages[rank] += 1;
                     values[rank] += sent;
@@ -682,7 +738,9 @@ pub fn propagate_box(
         return Err(protocol);
     }
     let own = boxes.bounds(rank);
-    Ok(box_cells(&own).map(|p| local.rho[local.at(p)]).collect())
+    let mut out = vec![0.0; count(&own)];
+    copy_cells(&local.rho, &local.region, &mut out, &own, &own);
+    Ok(out)
 }
 
 /// Computes task `task` of rank `rank` into `local`.
@@ -695,57 +753,78 @@ fn run(
     local: &mut Local,
 ) {
     let frame = &plan.frame;
-    let cells = frame.global_cells(&plan.cells_of(task, rank));
-    let [nx, ny, _] = setup.lattice.dims;
-    let coords = |i: usize| [i % nx, (i / nx) % ny, i / (nx * ny)];
+    let march = plan.cells_of(task, rank);
+    let region = &local.region;
+    // Strides of the rank's fields along x, y and z.
+    let stride = [1, region[0].len(), region[0].len() * region[1].len()];
     match plan.model {
         Model::Paper => {
-            // In the light's order along L then D (one plane): every cell after its
-            // upwind neighbours along x, y and z.
+            // Row by row in the light's order along L, each row along D in the light's
+            // order (one plane): every cell after its upwind neighbours along x, y and z.
             let w = direction.abs();
             let total = w.element_sum();
-            let march = plan.cells_of(task, rank);
-            for row in march[1].clone() {
-                for across in march[2].clone() {
-                    let mut at = [0usize; 3];
-                    for (i, v) in [task.plane, row, across].into_iter().enumerate() {
-                        at[frame.axes[i]] = frame.flip(frame.axes[i], v..v + 1).start;
+            let [planes, along, across] = frame.axes;
+            // Per axis, the step from a cell to its upwind neighbour in the fields, and
+            // whether the cells at `at` lie on the face the light enters.
+            let upwind: [isize; 3] = std::array::from_fn(|a| {
+                let step = stride[a] as isize;
+                if frame.forward[a] { -step } else { step }
+            });
+            let entering = |a: usize, at: &[usize; 3]| {
+                at[a]
+                    == if frame.forward[a] {
+                        0
+                    } else {
+                        frame.dims[a] - 1
                     }
-                    let upwind: [f64; 3] = std::array::from_fn(|a| {
-                        let first = if frame.forward[a] {
-                            0
-                        } else {
-                            frame.dims[a] - 1
-                        };
-                        if at[a] == first {
-                            return density;
-                        }
-                        let mut up = at;
-                        up[a] = if frame.forward[a] {
-                            at[a] - 1
-                        } else {
-                            at[a] + 1
-                        };
-                        local.rho[local.at(up)]
-                    });
-                    let here = local.at(at);
-                    local.rho[here] = paper_cell(
+            };
+            let mut at = [0usize; 3];
+            for (i, range) in march.iter().enumerate() {
+                at[frame.axes[i]] = frame
+                    .flip(frame.axes[i], range.start..range.start + 1)
+                    .start;
+            }
+            for row in march[1].clone() {
+                at[along] = frame.flip(along, row..row + 1).start;
+                let mut here = local.at(at) as isize;
+                let rho = &mut local.rho;
+                // Along A and L the whole row reads its neighbours at one offset, or the
+                // light's density; along D each cell reads the one before it.
+                let from = |a: usize| (!entering(a, &at)).then_some(upwind[a]);
+                let (from_plane, from_row) = (from(planes), from(along));
+                let mut before = match from(across) {
+                    Some(offset) => rho[(here + offset) as usize],
+                    None => density,
+                };
+                for _ in march[2].clone() {
+                    let mut inflow = [0.0; 3];
+                    inflow[planes] = from_plane.map_or(density, |o| rho[(here + o) as usize]);
+                    inflow[along] = from_row.map_or(density, |o| rho[(here + o) as usize]);
+                    inflow[across] = before;
+                    let cell = here as usize;
+                    before = paper_cell(
                         setup.courant,
                         (w, total),
-                        upwind,
-                        setup.absorption[here],
-                        local.rho[here],
+                        inflow,
+                        setup.absorption[cell],
+                        rho[cell],
                     );
+                    rho[cell] = before;
+                    // The next cell along D, downwind.
+                    here -= upwind[across];
                 }
             }
         }
         _ => {
             // Reads only the upstream plane: compute the task's cells, then store them.
+            let cells = frame.global_cells(&march);
+            let origin = [region[0].start, region[1].start, region[2].start];
+            let index = |p: [usize; 3]| {
+                (p[0] - origin[0]) + stride[1] * (p[1] - origin[1]) + stride[2] * (p[2] - origin[2])
+            };
+            let rho = &local.rho;
             let compute = |p: [usize; 3]| {
-                let i = p[0] + nx * (p[1] + ny * p[2]);
-                setup.characteristic_with(i, &|j| local.rho[local.at(coords(j))], &|j| {
-                    setup.absorption[local.at(coords(j))]
-                })
+                setup.characteristic_at(p, &index, &|i| rho[i], &|i| setup.absorption[i])
             };
             let values: Vec<f64> = if count(&cells) >= 4 * STEP_CELLS {
                 let points: Vec<[usize; 3]> = box_cells(&cells).collect();
@@ -754,8 +833,7 @@ fn run(
                 box_cells(&cells).map(compute).collect()
             };
             for (p, v) in box_cells(&cells).zip(values) {
-                let at = local.at(p);
-                local.rho[at] = v;
+                local.rho[index(p)] = v;
             }
         }
     }
