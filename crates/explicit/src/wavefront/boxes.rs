@@ -88,7 +88,8 @@ pub const STEP_CELLS: usize = 512;
 
 /// Every rank derives every rank's tasks (about 40 bytes each), so chunks are widened
 /// until the march has about this many tasks at most (40 MiB): on a 1024³ grid, chunks of
-/// eight rows or more at 64 ranks (8 × 8 × 1 boxes), of 32 at 1024 (32 × 32 × 1).
+/// 9 rows at 64 ranks (8 × 8 × 1 boxes), and at 1024 (32 × 32 × 1) of 34 rows, or a whole
+/// plane of each box where that is already a million tasks (`docs/ranks.md`, section 4).
 pub const MAX_TASKS: usize = 1 << 20;
 
 /// The cells rank `rank` of `boxes` reads (σ_a) and holds (ρ): its box grown by [`HALO`]
@@ -289,13 +290,13 @@ impl Plan {
         // box's plane cut into chunks), kept to `max_tasks` by wider chunks.
         let [n_a, n_l, _] = axes.map(|a| dims[a]);
         let columns = n_a * grid[axes[2]];
-        let fewest = columns * grid[axes[1]];
-        let rows = if fewest >= max_tasks {
+        let one_chunk_each = columns * grid[axes[1]];
+        let rows = if one_chunk_each >= max_tasks {
             n_l
         } else {
             cells
                 .div_ceil(width)
-                .max((columns * n_l).div_ceil(max_tasks - fewest))
+                .max((columns * n_l).div_ceil(max_tasks - one_chunk_each))
         };
         let frame = Frame {
             axes,
@@ -663,7 +664,7 @@ pub fn propagate_box(
         (len != count(&region)).then(|| format!("{len} values for the cells {region:?}"))
     })?;
     let Light::Distant { direction, density } = setup.light else {
-        unreachable!("`checked_part` admits distant lights only");
+        return Err(super::unsupported(light));
     };
     let plan = Plan::new(boxes, direction, setup.model)?;
     let mut local = Local {
@@ -915,5 +916,35 @@ mod tests {
             Model::Paper,
         );
         assert_eq!(alone.unwrap().messages, [0]);
+    }
+
+    /// Chunks widen to keep the schedule under its bound, and the schedule stays whole
+    /// (every task gets a step) however wide they get.
+    #[test]
+    fn chunks_widen_to_bound_the_tasks() {
+        let boxes = Boxes::new([48, 40, 36], [2, 2, 3]).unwrap();
+        for (u, model) in [
+            (DVec3::new(0.3, -0.2, 1.0), Model::Characteristic),
+            (DVec3::new(-1.0, 0.4, 0.2), Model::Characteristic),
+            (DVec3::new(0.3, -0.2, 1.0), Model::Paper),
+        ] {
+            let u = u.normalize();
+            let free = Plan::new(&boxes, u, model).unwrap();
+            let total = |plan: &Plan| plan.tasks.iter().map(Vec::len).sum::<usize>();
+            for limit in [2000, 500, 10] {
+                let bounded = Plan::with_limit(&boxes, u, model, limit).unwrap();
+                assert!(bounded.frame.rows >= free.frame.rows);
+                // A plane of each box is the fewest tasks there can be.
+                let floor = boxes.dims()[bounded.frame.axes[0]]
+                    * boxes.grid()[bounded.frame.axes[1]]
+                    * boxes.grid()[bounded.frame.axes[2]];
+                assert!(
+                    total(&bounded) <= limit.max(floor) + floor,
+                    "{model:?} {u}, {limit}: {} tasks",
+                    total(&bounded)
+                );
+                assert!(bounded.steps > 0 && bounded.steps <= total(&bounded));
+            }
+        }
     }
 }
