@@ -40,7 +40,8 @@
 //! cells its step-k tasks computed that the other reads, one message per pair, and
 //! receives likewise. Every send of step k is received in step k, by ranks that reach
 //! step k after their own earlier steps, so the march cannot deadlock. Ranks with nothing
-//! to send or receive skip the step.
+//! to send or receive skip the step. While a step's messages travel, a rank runs the
+//! first tasks of its next step that read none of them (the schedule marks them).
 //!
 //! **What overlaps.** This is a pipeline:
 //! - a rank downstream along A starts its first chunk once the rank upstream has finished
@@ -180,6 +181,9 @@ struct Task {
     plane: usize,
     rows: Range<usize>,
     step: usize,
+    /// Whether it reads cells that arrive at the end of the step before its own (else it
+    /// can run while those messages travel).
+    waits: bool,
 }
 
 /// Where a rank's task of a given key is in its order: the tasks of one major key (a
@@ -390,6 +394,7 @@ impl Plan {
             };
             current[r] = next;
             tasks[r][i].step = next.0;
+            tasks[r][i].waits = ready > 0 && ready == next.0;
             if i != scheduled[r] {
                 return Err(DecompositionError::Protocol { rank: r });
             }
@@ -468,6 +473,7 @@ impl Frame {
                         plane,
                         rows: lo..hi,
                         step: 0,
+                        waits: false,
                     });
                 }
             }
@@ -675,22 +681,18 @@ pub fn propagate_box(
     let fed_by = &plan.fed_by[rank];
     // Per rank this one reads from: where its tasks of the current step start.
     let mut cursors = vec![0usize; fed_by.len()];
-    let mut next = 0;
+    // This rank's tasks of the current step start at `first`; those before `next` are done
+    // (some ran while the previous step's messages travelled).
+    let (mut first, mut next) = (0, 0);
     let protocol = DecompositionError::Protocol { rank };
+    let light = (direction, density);
     for step in 0..plan.steps {
-        let first = next;
         while next < mine.len() && mine[next].step == step {
-            run(
-                &setup,
-                &plan,
-                rank,
-                &mine[next],
-                (direction, density),
-                &mut local,
-            );
+            run(&setup, &plan, rank, &mine[next], light, &mut local);
             next += 1;
         }
         let done = &mine[first..next];
+        first = next;
         let sends: Vec<(usize, Vec<f64>)> = plan.feeds[rank]
             .iter()
             .map(|&to| {
@@ -720,7 +722,14 @@ pub fn propagate_box(
             continue;
         }
         let sends: Vec<(usize, &[f64])> = sends.iter().map(|(to, v)| (*to, &v[..])).collect();
-        let received = comm.exchange_with(&sends, &from, &mut || {});
+        // While the messages travel: the next step's first tasks that need none of them
+        // (they write only this rank's cells, the messages only its halo).
+        let received = comm.exchange_with(&sends, &from, &mut || {
+            while next < mine.len() && mine[next].step == step + 1 && !mine[next].waits {
+                run(&setup, &plan, rank, &mine[next], light, &mut local);
+                next += 1;
+            }
+        });
         if received.len() != from.len() {
             return Err(protocol);
         }
