@@ -593,18 +593,18 @@ impl ExplicitSolver {
         // (`wavefront::march_boxes`: the sweep is then pipelined across every cut).
         let split =
             |ranks: usize, light: &crate::convection::Light| -> Result<Decomposition, SolveError> {
+                if decomposition == DecompositionParam::Slabs {
+                    return Ok(Decomposition::Slabs);
+                }
                 let boxes = match *light {
                     crate::convection::Light::Distant { direction, .. } => {
                         crate::wavefront::march_boxes(l.dims, ranks, direction, settings.model)
                     }
                     crate::convection::Light::Point { .. } => Boxes::auto(l.dims, ranks),
                 };
-                Ok(match decomposition {
-                    DecompositionParam::Slabs => Decomposition::Slabs,
-                    DecompositionParam::Boxes => {
-                        Decomposition::Boxes(boxes.map_err(|e| self.decomposition_error(e))?)
-                    }
-                })
+                Ok(Decomposition::Boxes(
+                    boxes.map_err(|e| self.decomposition_error(e))?,
+                ))
             };
         let geometry = *problem.geometry();
         let mut record = Record::exact((l.len() * 8 * 4) as u64);

@@ -86,11 +86,11 @@ proptest! {
     }
 }
 
-/// A larger grid, every rank count to 5, each axis dominant both ways: the pipeline's
-/// chunks of several rows and the lock step's inner rows (slabs of five layers and more).
-#[test]
-fn larger_grids_on_every_rank_count() {
-    let lattice = Lattice::new([23, 19, 27], 0.1).unwrap();
+/// Every light of a fixed set (each axis dominant both ways, a diagonal, an axis) and
+/// both one-pass models through heterogeneous absorption on a `dims` grid: each of
+/// `splits` (a decomposition and its rank count) gives the serial march's bits.
+fn larger_grid_against_serial(dims: [usize; 3], splits: &[(Decomposition, usize)]) {
+    let lattice = Lattice::new(dims, 0.1).unwrap();
     let sigma = absorption(lattice.len(), 7, 3.0);
     let paper_sigma = absorption(lattice.len(), 11, 0.5);
     let directions = [
@@ -99,6 +99,7 @@ fn larger_grids_on_every_rank_count() {
         DVec3::new(1.0, 0.6, -0.3),
         DVec3::new(0.2, -1.0, 0.7),
         DVec3::new(-1.0, -1.0, 0.0),
+        DVec3::new(0.0, 0.0, -1.0),
     ];
     for direction in directions {
         let light = Light::Distant {
@@ -111,28 +112,30 @@ fn larger_grids_on_every_rank_count() {
         ] {
             let serial = propagate(&lattice, sigma, &light, &settings(model)).unwrap();
             assert!(serial.density.iter().all(|v| v.is_finite() && *v > 0.0));
-            for ranks in 1..=5 {
-                // One rank runs the split code too.
-                let split = propagate_on_threads(
-                    &lattice,
-                    sigma,
-                    &light,
-                    &settings(model),
-                    &Decomposition::Slabs,
-                    ranks,
-                )
-                .unwrap();
+            for (split, ranks) in splits {
+                let out =
+                    propagate_on_threads(&lattice, sigma, &light, &settings(model), split, *ranks)
+                        .unwrap();
                 assert!(
-                    split
-                        .density
+                    out.density
                         .iter()
                         .zip(&serial.density)
                         .all(|(a, b)| a.to_bits() == b.to_bits()),
-                    "{model:?} {direction} on {ranks} ranks"
+                    "{model:?} {direction} on {ranks} ranks over {split:?}"
                 );
             }
         }
     }
+}
+
+/// A larger grid, every rank count to 5 over z-slabs (one rank runs the split code too):
+/// the pipeline's chunks of several rows and the lock step's inner rows (slabs of five
+/// layers and more).
+#[test]
+fn larger_grids_on_every_rank_count() {
+    let splits: Vec<(Decomposition, usize)> =
+        (1..=5).map(|ranks| (Decomposition::Slabs, ranks)).collect();
+    larger_grid_against_serial([23, 19, 27], &splits);
 }
 
 #[test]
@@ -295,7 +298,9 @@ fn boxes(dims: [usize; 3], grid: [usize; 3], seed: Option<u64>) -> Option<Boxes>
         cuts.push(dims[a]);
         cuts
     });
-    (0..3).all(|a| cuts[a].len() == grid[a] + 1).then_some(())?;
+    if (0..3).any(|a| cuts[a].len() != grid[a] + 1) {
+        return None;
+    }
     Boxes::from_cuts(dims, cuts).ok()
 }
 
@@ -318,11 +323,10 @@ proptest! {
         let grid = [grid.0, grid.1, grid.2];
         let direction = DVec3::new(u.0, u.1, u.2);
         prop_assume!(direction.length() > 1e-3);
-        let Some(boxes) = boxes(dims, grid, uneven) else {
-            // Fewer places to cut than boxes asked for.
-            prop_assume!(false);
-            unreachable!()
-        };
+        // None: fewer places to cut than boxes asked for.
+        let boxes = boxes(dims, grid, uneven);
+        prop_assume!(boxes.is_some());
+        let boxes = boxes.unwrap();
         prop_assume!(boxes.ranks() <= 8);
         let lattice = Lattice::new(dims, spacing).unwrap();
         let n = lattice.len();
@@ -350,14 +354,10 @@ proptest! {
 }
 
 /// Larger grids over boxes cut along every axis, evenly and unevenly (boxes one and two
-/// cells thin, where the characteristic's stencil reaches past the next box), each axis
-/// dominant both ways, both models.
+/// cells thin, where the characteristic's stencil reaches past the next box).
 #[test]
 fn larger_grids_over_boxes() {
     let dims = [27, 19, 23];
-    let lattice = Lattice::new(dims, 0.1).unwrap();
-    let sigma = absorption(lattice.len(), 5, 3.0);
-    let paper_sigma = absorption(lattice.len(), 13, 0.5);
     let grids = [
         Boxes::new(dims, [2, 2, 1]).unwrap(),
         Boxes::new(dims, [1, 2, 3]).unwrap(),
@@ -365,47 +365,14 @@ fn larger_grids_over_boxes() {
         Boxes::from_cuts(dims, [vec![0, 8, 27], vec![0, 1, 3, 19], vec![0, 22, 23]]).unwrap(),
         Boxes::from_cuts(dims, [vec![0, 27], vec![0, 17, 18, 19], vec![0, 2, 3, 23]]).unwrap(),
     ];
-    let directions = [
-        DVec3::new(0.3, -0.2, 1.0),
-        DVec3::new(-0.4, 0.5, -1.0),
-        DVec3::new(1.0, 0.6, -0.3),
-        DVec3::new(0.2, -1.0, 0.7),
-        DVec3::new(-1.0, -1.0, 0.0),
-        DVec3::new(0.0, 0.0, -1.0),
-    ];
-    for direction in directions {
-        let light = Light::Distant {
-            direction,
-            density: 1.0,
-        };
-        for (model, sigma) in [
-            (Model::Characteristic, &sigma),
-            (Model::Paper, &paper_sigma),
-        ] {
-            let serial = propagate(&lattice, sigma, &light, &settings(model)).unwrap();
-            assert!(serial.density.iter().all(|v| v.is_finite() && *v > 0.0));
-            for boxes in &grids {
-                let split = propagate_on_threads(
-                    &lattice,
-                    sigma,
-                    &light,
-                    &settings(model),
-                    &Decomposition::Boxes(boxes.clone()),
-                    boxes.ranks(),
-                )
-                .unwrap();
-                assert!(
-                    split
-                        .density
-                        .iter()
-                        .zip(&serial.density)
-                        .all(|(a, b)| a.to_bits() == b.to_bits()),
-                    "{model:?} {direction} over {:?}",
-                    boxes.grid()
-                );
-            }
-        }
-    }
+    let splits: Vec<(Decomposition, usize)> = grids
+        .into_iter()
+        .map(|b| {
+            let ranks = b.ranks();
+            (Decomposition::Boxes(b), ranks)
+        })
+        .collect();
+    larger_grid_against_serial(dims, &splits);
 }
 
 /// Each rank handed only the cells `read_box` names (as it reads them from a file)

@@ -3,9 +3,9 @@
 //! positioned reads of `.raw`, `.npy` or raw-encoded NRRD), marches its slab
 //! (`lucent_explicit::wavefront::propagate_slab`, short characteristics) and writes its
 //! layers of ρ into one `.npy` by positioned writes. With `--boxes auto` (the grid of
-//! boxes that suits the march: `wavefront::march_boxes`) or `--boxes PX,PY,PZ` each rank reads its box of cells and two
-//! more on every side (`wavefront::read_box`), marches it in the KBA sweep
-//! (`wavefront::propagate_box`) and writes its box, x-line by x-line.
+//! boxes that suits the march: `wavefront::march_boxes`) or `--boxes PX,PY,PZ` each rank
+//! reads its box of cells and two more on every side (`wavefront::read_box`), marches it
+//! in the KBA sweep (`wavefront::propagate_box`) and writes its box, x-line by x-line.
 //!
 //! ```sh
 //! cargo build --profile examples -p lucent-mpi --features mpi --example slab_march

@@ -136,6 +136,16 @@ fn decomposition(
     grid.map(Decomposition::Boxes).map_err(|e| e.to_string())
 }
 
+/// Rank 0 says how the grid is split.
+fn announce(comm: &(impl Communicator + ?Sized), decomposition: &Decomposition) {
+    if comm.rank() == 0 {
+        match decomposition {
+            Decomposition::Slabs => eprintln!("z-slabs"),
+            Decomposition::Boxes(b) => eprintln!("boxes: {:?} (x, y, z)", b.grid()),
+        }
+    }
+}
+
 fn run(
     comm: &(impl Communicator + ?Sized),
     method: Method,
@@ -212,12 +222,7 @@ fn run(
         allow_unstable: false,
     };
     let decomposition = decomposition(boxes, dims, comm.size())?;
-    if comm.rank() == 0 {
-        match &decomposition {
-            Decomposition::Slabs => eprintln!("z-slabs"),
-            Decomposition::Boxes(b) => eprintln!("boxes: {:?} (x, y, z)", b.grid()),
-        }
-    }
+    announce(comm, &decomposition);
     let (split, seconds) = best_of(repeat, || {
         iterate_on(&system, dims, &decomposition, iteration, &settings, comm)
     })?;
@@ -251,12 +256,13 @@ fn march(
     let sigma: Vec<f64> = (0..lattice.len() as u64)
         .map(|c| top * (c.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 54) as f64 / 1023.0)
         .collect();
+    let direction = if along_z != Some(false) {
+        DVec3::new(0.3, -0.2, 1.0)
+    } else {
+        DVec3::new(1.0, 0.3, -0.2)
+    };
     let light = Light::Distant {
-        direction: if along_z != Some(false) {
-            DVec3::new(0.3, -0.2, 1.0)
-        } else {
-            DVec3::new(1.0, 0.3, -0.2)
-        },
+        direction,
         density: 1.0,
     };
     let settings = UpwindSettings {
@@ -270,22 +276,12 @@ fn march(
     // `--boxes auto`: the grid that suits the march (an axis whole, the light's first).
     let decomposition = match boxes {
         Some("auto") => Decomposition::Boxes(
-            lucent_explicit::wavefront::march_boxes(
-                dims,
-                comm.size(),
-                light_direction(&light),
-                settings.model,
-            )
-            .map_err(|e| e.to_string())?,
+            lucent_explicit::wavefront::march_boxes(dims, comm.size(), direction, settings.model)
+                .map_err(|e| e.to_string())?,
         ),
         _ => decomposition(boxes, dims, comm.size())?,
     };
-    if comm.rank() == 0 {
-        match &decomposition {
-            Decomposition::Slabs => eprintln!("z-slabs"),
-            Decomposition::Boxes(b) => eprintln!("boxes: {:?} (x, y, z)", b.grid()),
-        }
-    }
+    announce(comm, &decomposition);
     let (split, seconds) = best_of(repeat, || {
         lucent_explicit::wavefront::propagate_on_ranks(
             &lattice,
@@ -303,14 +299,6 @@ fn march(
         seconds,
         agrees: bits(&split.density) == bits(&reference.density),
     })
-}
-
-/// A distant light's direction.
-fn light_direction(light: &lucent_explicit::convection::Light) -> DVec3 {
-    match *light {
-        lucent_explicit::convection::Light::Distant { direction, .. } => direction,
-        lucent_explicit::convection::Light::Point { .. } => DVec3::Z,
-    }
 }
 
 /// P1 by FTCS (staggered, consistent damping, 0.9 of the stable step) for 400 steps from

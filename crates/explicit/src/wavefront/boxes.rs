@@ -18,13 +18,11 @@
 //! Ties keep L off x, so that a task's cells run along x.
 //!
 //! **Tasks.** A rank's box is cut into tasks, each one plane by a *chunk* of rows by the
-//! box's whole extent along D. A cell in plane m and row l belongs to chunk ⌊(l + s m)/B⌋.
-//! A rank runs its tasks chunk by chunk, each chunk plane by plane, with two exceptions:
-//!
-//! - the skew s is 1 for characteristics, so a cell reading a row downwind still reads an
-//!   earlier chunk; it is 0 for the paper;
-//! - where A is not cut, the characteristic's ranks run their tasks plane by plane
-//!   instead (no skew needed): all of them work on each plane together.
+//! box's whole extent along D. A cell in plane m and row l belongs to chunk ⌊(l + s m)/B⌋:
+//! the skew s is 1 for characteristics, so that a cell reading a row downwind still reads
+//! an earlier chunk, and 0 for the paper. A rank runs its tasks chunk by chunk, each chunk
+//! plane by plane; but where A is not cut, the characteristic's ranks run theirs plane by
+//! plane (with no skew), all of them working on each plane together.
 //!
 //! B rows make a task hold at least [`TASK_CELLS`] cells, or [`STEP_CELLS`] where the
 //! characteristic's boxes side by side along D advance a task per step in lock step.
@@ -624,9 +622,14 @@ struct Local {
 
 impl Local {
     fn at(&self, p: [usize; 3]) -> usize {
-        let r = &self.region;
-        (p[0] - r[0].start) + r[0].len() * ((p[1] - r[1].start) + r[1].len() * (p[2] - r[2].start))
+        local_index(&self.region, p)
     }
+}
+
+/// Where cell `p` lies in fields that hold the box `region`, x fastest.
+fn local_index(region: &Cells, p: [usize; 3]) -> usize {
+    (p[0] - region[0].start)
+        + region[0].len() * ((p[1] - region[1].start) + region[1].len() * (p[2] - region[2].start))
 }
 
 /// The march of [`super::propagate_on_ranks`] over the grid of boxes `boxes` (one per
@@ -828,10 +831,7 @@ fn run(
         _ => {
             // Reads only the upstream plane: compute the task's cells, then store them.
             let cells = frame.global_cells(&march);
-            let origin = [region[0].start, region[1].start, region[2].start];
-            let index = |p: [usize; 3]| {
-                (p[0] - origin[0]) + stride[1] * (p[1] - origin[1]) + stride[2] * (p[2] - origin[2])
-            };
+            let index = |p: [usize; 3]| local_index(region, p);
             let rho = &local.rho;
             let compute = |p: [usize; 3]| {
                 setup.characteristic_at(p, &index, &|i| rho[i], &|i| setup.absorption[i])
