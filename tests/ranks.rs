@@ -6,9 +6,9 @@
 //!
 //! - `ftcs-diffusion`, `jacobi-diffusion`, `ftcs-p1` and `convection-diffusion`: the serial
 //!   bits (over z-slabs and over grids of boxes).
-//! - `diffusion-mg`: the serial bits too (fluence, history and stop), on every rank count
-//!   and through both doors: its norms sum runs of eight cells exactly, as the serial
-//!   solve's do.
+//! - `diffusion-mg`: the serial bits too (fluence, history and stop), on every rank count,
+//!   over z-slabs and grids of boxes, and through both doors: its norms sum runs of eight
+//!   cells exactly, as the serial solve's do.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -60,6 +60,16 @@ fn solve(name: &str, problem: &Problem, ranks: i64) -> Solution {
 /// Every process's solve under a world of `ranks`, as `mpirun` runs them: rank 0's
 /// solution, after checking every rank got the same.
 fn solve_as_processes(name: &str, problem: &Problem, ranks: usize) -> Solution {
+    solve_as_processes_with(name, problem, ranks, &Params::default())
+}
+
+/// [`solve_as_processes`] with the solver built from `params`.
+fn solve_as_processes_with(
+    name: &str,
+    problem: &Problem,
+    ranks: usize,
+    params: &Params,
+) -> Solution {
     let solutions: Vec<Solution> = std::thread::scope(|scope| {
         let handles: Vec<_> = Threads::world(ranks)
             .into_iter()
@@ -70,7 +80,7 @@ fn solve_as_processes(name: &str, problem: &Problem, ranks: usize) -> Solution {
                         ..options(name)
                     };
                     lucent::registry()
-                        .build(name, &Params::default())
+                        .build(name, params)
                         .and_then(|s| s.solve(problem, &options))
                         .unwrap_or_else(|e| panic!("{name} as {ranks} processes: {e}"))
                 })
@@ -185,10 +195,19 @@ fn multigrid_on_ranks_gives_the_serial_bits() {
         let serial = solve("diffusion-mg", &problem, 1);
         assert!(serial.report.stop_reason.is_converged(), "{scene}");
         // The norms sum the same runs exactly on any number of ranks, so the history, the
-        // stop and the fluence are the serial ones to the bit, on every rank count and
-        // through both doors.
-        for ranks in [2, 3] {
-            let split = solve("diffusion-mg", &problem, ranks);
+        // stop and the fluence are the serial ones to the bit, on every rank count, over
+        // slabs and boxes, and through both doors.
+        for (ranks, decomposition) in [(2, "slabs"), (3, "slabs"), (4, "boxes"), (6, "boxes")] {
+            let mut p = params(ranks);
+            p.0.insert(
+                "decomposition".into(),
+                ParamValue::Text(decomposition.into()),
+            );
+            let split = lucent::registry()
+                .build("diffusion-mg", &p)
+                .and_then(|s| s.solve(&problem, &options("diffusion-mg")))
+                .unwrap_or_else(|e| panic!("diffusion-mg on {ranks} {decomposition}: {e}"));
+            let (scene, ranks) = (format!("{scene} over {decomposition}"), ranks);
             assert_eq!(
                 fluence_bits(&split),
                 fluence_bits(&serial),
@@ -205,6 +224,13 @@ fn multigrid_on_ranks_gives_the_serial_bits() {
             );
         }
         let processes = solve_as_processes("diffusion-mg", &problem, 2);
+        assert_eq!(fluence_bits(&processes), fluence_bits(&serial), "{scene}");
+        assert_eq!(history_bits(&processes), history_bits(&serial), "{scene}");
+        let mut boxes = Params::default();
+        boxes
+            .0
+            .insert("decomposition".into(), ParamValue::Text("boxes".into()));
+        let processes = solve_as_processes_with("diffusion-mg", &problem, 4, &boxes);
         assert_eq!(fluence_bits(&processes), fluence_bits(&serial), "{scene}");
         assert_eq!(history_bits(&processes), history_bits(&serial), "{scene}");
     }
@@ -354,6 +380,15 @@ fn what_cannot_split_says_so() {
         .unwrap_err();
     assert!(
         matches!(&e, SolveError::InvalidParameter { name, .. } if name == "ranks"),
+        "{e}"
+    );
+    let mut mgcg_boxes = Params::default();
+    mgcg_boxes
+        .0
+        .insert("decomposition".into(), ParamValue::Text("boxes".into()));
+    let e = registry.build("diffusion-mgcg", &mgcg_boxes).err().unwrap();
+    assert!(
+        matches!(&e, SolveError::InvalidParameter { name, .. } if name == "decomposition"),
         "{e}"
     );
     for (name, ranks) in [

@@ -29,6 +29,8 @@ use glam::DVec3;
 use lucent_core::exact::{ExactSum, add_run_squares};
 use rayon::prelude::*;
 
+use crate::region::Region;
+
 /// Two exact sums merged (the reductions' combining step: exact, so in any order).
 fn merged(mut a: ExactSum, b: ExactSum) -> ExactSum {
     a.merge(&b);
@@ -97,30 +99,47 @@ impl Level {
         self.spans.iter().map(|[lo, hi]| (hi - lo) as usize).sum()
     }
 
-    /// Σ v² over the slabs `layers` as the solves' norms sum it: every x-line cut into
-    /// runs of `NORM_RUN` cells (`lucent_core::exact`), each run left to right, the run
-    /// sums added exactly. The bits depend on the grid alone, never on the threads, nor
-    /// on how the slabs are split over ranks (each rank's sum merges exactly).
-    pub(crate) fn squares_layers(&self, v: &[f64], layers: Range<usize>) -> ExactSum {
+    /// Σ v² over `region` as the solves' norms sum it: every x-line cut into runs of
+    /// `NORM_RUN` cells (`lucent_core::exact`), each run left to right, the run sums added
+    /// exactly. The bits depend on the grid alone, never on the threads, nor on how the
+    /// level is split over ranks, as long as each region starts its x-lines at a multiple
+    /// of `NORM_RUN` (each rank's sum then holds whole runs, and merges exactly).
+    pub(crate) fn squares_in(&self, v: &[f64], region: &Region) -> ExactSum {
         let slab = self.slab();
-        v[layers.start * slab..layers.end * slab]
+        let z = region.z();
+        v[z.start * slab..z.end * slab]
             .par_chunks(slab.max(1))
             .with_min_len(self.slabs_per_task())
             .fold(ExactSum::new, |mut sum, v| {
-                add_run_squares(v, self.dims[0], &mut sum);
+                self.add_region_squares(v, region, &mut sum);
                 sum
             })
             .reduce(ExactSum::new, merged)
     }
 
-    /// ‖v‖₂ by [`Level::squares_layers`] over every slab.
-    pub(crate) fn norm(&self, v: &[f64]) -> f64 {
-        self.squares_layers(v, self.all_layers()).value().sqrt()
+    /// Adds the squares of one slab's values in `region`'s rows and columns to `sum`, in
+    /// runs of `NORM_RUN` from the region's first column.
+    fn add_region_squares(&self, slab: &[f64], region: &Region, sum: &mut ExactSum) {
+        let nx = self.dims[0];
+        let x = region.x();
+        if x == (0..nx) {
+            let y = region.y();
+            add_run_squares(&slab[y.start * nx..y.end * nx], nx, sum);
+            return;
+        }
+        for j in region.y() {
+            add_run_squares(&slab[x.start + nx * j..x.end + nx * j], x.len(), sum);
+        }
     }
 
-    /// Every slab: 0..n_z.
-    pub(crate) fn all_layers(&self) -> Range<usize> {
-        0..self.dims[2]
+    /// ‖v‖₂ by [`Level::squares_in`] over every cell.
+    pub(crate) fn norm(&self, v: &[f64]) -> f64 {
+        self.squares_in(v, &self.whole()).value().sqrt()
+    }
+
+    /// Every cell of the level.
+    pub(crate) fn whole(&self) -> Region {
+        Region::whole(self.dims)
     }
     pub(crate) fn len(&self) -> usize {
         self.dims[0] * self.dims[1] * self.dims[2]
@@ -233,7 +252,7 @@ impl Level {
 
     /// y = A x in f64 (x may be f32 or f64).
     pub(crate) fn apply<T: Copy + Into<f64> + Sync>(&self, x: &[T], y: &mut [f64]) {
-        self.apply_then(x, y, self.all_layers(), |_, _| ())
+        self.apply_then(x, y, &self.whole(), |_, _| ())
             .for_each(drop);
     }
 
@@ -244,57 +263,70 @@ impl Level {
         x: &[T],
         r: &mut [f64],
     ) -> f64 {
-        self.residual_layers(b, x, r, self.all_layers())
-            .value()
-            .sqrt()
+        self.residual_in(b, x, r, &self.whole()).value().sqrt()
     }
 
-    /// r = b − A x on the slabs `layers` (reading x on the slabs next to them too); returns
-    /// Σ r² over them (as [`Level::squares_layers`]).
-    pub(crate) fn residual_layers<T: Copy + Into<f64> + Sync>(
+    /// r = b − A x on `region` (reading x on the cells next to it too); returns Σ r² over
+    /// it (as [`Level::squares_in`]).
+    pub(crate) fn residual_in<T: Copy + Into<f64> + Sync>(
         &self,
         b: &[f64],
         x: &[T],
         r: &mut [f64],
-        layers: Range<usize>,
+        region: &Region,
     ) -> ExactSum {
         let slab = self.slab();
         let nx = self.dims[0];
-        self.apply_then(x, r, layers, |k, rs| {
-            for (r, b) in rs.iter_mut().zip(&b[k * slab..]) {
-                *r = b - *r;
+        let cols = region.x();
+        self.apply_then(x, r, region, move |k, rs| {
+            for j in region.y() {
+                let row = cols.start + nx * j..cols.end + nx * j;
+                for (r, b) in rs[row.clone()].iter_mut().zip(&b[k * slab + row.start..]) {
+                    *r = b - *r;
+                }
             }
             let mut sum = ExactSum::new();
-            add_run_squares(rs, nx, &mut sum);
+            self.add_region_squares(rs, region, &mut sum);
             sum
         })
         .reduce(ExactSum::new, merged)
     }
 
-    /// y = A x on the slabs `layers`, each slab then passed to `then(k, y_slab)` while it
-    /// is in cache; what `then` returns, per slab, as a parallel iterator.
+    /// y = A x on `region`, each of its slabs then passed to `then(k, y_slab)` while it is
+    /// in cache; what `then` returns, per slab, as a parallel iterator.
     fn apply_then<'a, T: Copy + Into<f64> + Sync, R: Send>(
         &'a self,
         x: &'a [T],
         y: &'a mut [f64],
-        layers: Range<usize>,
+        region: &'a Region,
         then: impl Fn(usize, &mut [f64]) -> R + Sync + Send + 'a,
     ) -> impl ParallelIterator<Item = R> + 'a {
         let slab = self.slab();
-        y[layers.start * slab..layers.end * slab]
+        let z = region.z();
+        y[z.start * slab..z.end * slab]
             .par_chunks_mut(slab)
             .with_min_len(self.slabs_per_task())
             .enumerate()
             .map(move |(i, y)| {
-                let k = layers.start + i;
-                self.apply_slab(k, x, y);
+                let k = region.axes[2].start + i;
+                self.apply_slab(k, x, y, region);
                 then(k, y)
             })
     }
 
-    /// Slab k of A x into `y` (one slab long): computed on the rows' spans, 0 outside
-    /// them (exactly what A gives there: those cells have no couplings).
-    fn apply_slab<T: Copy + Into<f64>>(&self, k: usize, x: &[T], y: &mut [f64]) {
+    /// Row j of slab k: the span of its cells in the medium, clipped to the columns `x`
+    /// (empty where they do not meet).
+    #[inline(always)]
+    fn span_within(&self, j: usize, k: usize, x: &Range<usize>) -> (usize, usize) {
+        let (lo, hi) = self.span(j, k);
+        let lo = lo.clamp(x.start, x.end);
+        (lo, hi.min(x.end).max(lo))
+    }
+
+    /// Slab k of A x into `y` (one slab long) on `region`'s rows and columns: computed on
+    /// the rows' spans, 0 outside them (exactly what A gives there: those cells have no
+    /// couplings); `y` outside the region is left as it is.
+    fn apply_slab<T: Copy + Into<f64>>(&self, k: usize, x: &[T], y: &mut [f64], region: &Region) {
         let slab = self.slab();
         let nz = self.dims[2];
         let xs = &x[k * slab..(k + 1) * slab];
@@ -306,10 +338,12 @@ impl Level {
             let g = k * slab + l;
             f64::from(self.extra[g]) * xs[l].into() + self.outflow(g, l, [i, j], xs, below, above)
         };
-        for (j, row) in y.chunks_mut(nx).enumerate() {
-            let (lo, hi) = self.span(j, k);
-            row[..lo].fill(0.0);
-            row[hi..].fill(0.0);
+        let cols = region.x();
+        for j in region.y() {
+            let row = &mut y[nx * j..nx * (j + 1)];
+            let (lo, hi) = self.span_within(j, k, &cols);
+            row[cols.start..lo].fill(0.0);
+            row[hi..cols.end].fill(0.0);
             let (from, to) = (lo.max(1), hi.min(nx - 1));
             let (Some(down), Some(up), true) = (below, above, j > 0 && j + 1 < ny && from < to)
             else {
@@ -331,24 +365,24 @@ impl Level {
     /// returns ‖r‖₂ (summed as [`Level::norm`]; outside the spans e = 0 and A e = 0, so r
     /// keeps its value there and counts as it is).
     pub(crate) fn correct(&self, e: &[f32], phi: &mut [f64], r: &mut [f64], b: &mut [f32]) -> f64 {
-        self.correct_layers(e, phi, r, b, self.all_layers())
-            .value()
-            .sqrt()
+        self.correct_in(e, phi, r, b, &self.whole()).value().sqrt()
     }
 
-    /// [`Level::correct`] on the slabs `layers` (reading e on the slabs next to them too);
-    /// returns Σ r² over those slabs (as [`Level::squares_layers`]).
-    pub(crate) fn correct_layers(
+    /// [`Level::correct`] on `region` (reading e on the cells next to it too); returns
+    /// Σ r² over it (as [`Level::squares_in`]).
+    pub(crate) fn correct_in(
         &self,
         e: &[f32],
         phi: &mut [f64],
         r: &mut [f64],
         b: &mut [f32],
-        layers: Range<usize>,
+        region: &Region,
     ) -> ExactSum {
         let slab = self.slab();
         let nx = self.dims[0];
-        let owned = layers.start * slab..layers.end * slab;
+        let z = region.z();
+        let cols = region.x();
+        let owned = z.start * slab..z.end * slab;
         phi[owned.clone()]
             .par_chunks_mut(slab)
             .zip(r[owned.clone()].par_chunks_mut(slab))
@@ -358,11 +392,11 @@ impl Level {
             .map_init(
                 || vec![0.0f64; slab],
                 |ae, (i, ((phi, r), b))| {
-                    let k = layers.start + i;
-                    self.apply_slab(k, e, ae);
+                    let k = z.start + i;
+                    self.apply_slab(k, e, ae, region);
                     let es = &e[k * slab..(k + 1) * slab];
-                    for j in 0..self.dims[1] {
-                        let (lo, hi) = self.span(j, k);
+                    for j in region.y() {
+                        let (lo, hi) = self.span_within(j, k, &cols);
                         for l in nx * j + lo..nx * j + hi {
                             phi[l] += f64::from(es[l]);
                             r[l] -= ae[l];
@@ -370,7 +404,7 @@ impl Level {
                         }
                     }
                     let mut sum = ExactSum::new();
-                    add_run_squares(r, nx, &mut sum);
+                    self.add_region_squares(r, region, &mut sum);
                     sum
                 },
             )
@@ -405,9 +439,10 @@ impl Level {
         let second = 1 - first;
         let slab = self.slab();
         let chunks = self.sweep_chunks();
+        let whole = self.whole();
         let colour =
             |k: usize, c: usize, xs: &mut [T], below: Option<&[T]>, above: Option<&[T]>| {
-                self.colour(b, k, c, omega, xs, below, above);
+                self.colour(b, k, c, omega, xs, below, above, &whole);
             };
         if chunks.len() < 2 {
             // One chunk: the whole wavefront in this thread.
@@ -452,22 +487,28 @@ impl Level {
         });
     }
 
-    /// One colour (0 = red) of a red–black SOR sweep on the slabs `layers` only, reading
-    /// the slabs next to them: the distributed sweep's half step, between halo exchanges.
-    pub(crate) fn colour_layers<T: Real>(
+    /// One colour (0 = red) of a red–black SOR sweep on `region` only, reading the cells
+    /// next to it: the distributed sweep's half step, between halo exchanges.
+    pub(crate) fn colour_in<T: Real>(
         &self,
         b: &[T],
         x: &mut [T],
         colour: usize,
         omega: T,
-        layers: Range<usize>,
+        region: &Region,
     ) {
+        if region.is_empty() {
+            return;
+        }
+        let z = region.z();
         // Slabs of one parity at a time, so no two written slabs are adjacent.
         for parity in 0..2 {
             self.on_slabs(
                 x,
-                |k| layers.contains(&k) && k % 2 == parity,
-                |k, xs, below, above| self.colour(b, k, colour, omega, xs, below, above),
+                |k| z.contains(&k) && k % 2 == parity,
+                |k, xs, below, above| {
+                    self.colour(b, k, colour, omega, xs, below, above, region);
+                },
             );
         }
     }
@@ -557,13 +598,15 @@ impl Level {
         x: &mut [T],
         below: Option<&[T]>,
         above: Option<&[T]>,
+        region: &Region,
     ) {
         let [nx, ny, _] = self.dims;
         let base = k * nx * ny;
         let one = T::from(1.0);
         let relaxed = omega != one;
-        for j in 0..ny {
-            let (lo, hi) = self.span(j, k);
+        let cols = region.x();
+        for j in region.y() {
+            let (lo, hi) = self.span_within(j, k, &cols);
             // Cells of the colour have i ≡ first (mod 2).
             let first = (colour + j + k) % 2;
             let (from, to) = (lo.max(1), hi.min(nx.saturating_sub(1)));
@@ -782,32 +825,33 @@ impl Level {
 
     /// One weighted Jacobi sweep x ← x + ω D⁻¹(b − A x), using `scratch` (len n).
     pub(crate) fn jacobi(&self, b: &[f32], x: &mut [f32], omega: f32, scratch: &mut [f32]) {
-        self.jacobi_layers(b, x, omega, scratch, self.all_layers());
+        self.jacobi_in(b, x, omega, scratch, &self.whole());
         x.copy_from_slice(scratch);
     }
 
-    /// The weighted Jacobi update of the slabs `layers` into `scratch` (x unchanged).
-    pub(crate) fn jacobi_layers(
+    /// The weighted Jacobi update of `region` into `scratch` (x unchanged).
+    pub(crate) fn jacobi_in(
         &self,
         b: &[f32],
         x: &[f32],
         omega: f32,
         scratch: &mut [f32],
-        layers: Range<usize>,
+        region: &Region,
     ) {
         let slab = self.slab();
         let nz = self.dims[2];
-        let [nx, ny, _] = self.dims;
-        scratch[layers.start * slab..layers.end * slab]
+        let nx = self.dims[0];
+        let z = region.z();
+        scratch[z.start * slab..z.end * slab]
             .par_chunks_mut(slab)
             .enumerate()
             .for_each(|(t, out)| {
-                let k = layers.start + t;
+                let k = z.start + t;
                 let xs = &x[k * slab..(k + 1) * slab];
                 let below = (k > 0).then(|| &x[(k - 1) * slab..k * slab]);
                 let above = (k + 1 < nz).then(|| &x[(k + 1) * slab..(k + 2) * slab]);
-                for j in 0..ny {
-                    for i in 0..nx {
+                for j in region.y() {
+                    for i in region.x() {
                         let l = i + nx * j;
                         let g = k * slab + l;
                         let r = b[g] + self.neighbour_sum(g, l, [i, j], xs, below, above)
@@ -827,26 +871,28 @@ impl Level {
         x: &[f32],
         coarse: &Level,
         out: &mut [f32],
-        coarse_layers: Range<usize>,
+        coarse_region: &Region,
     ) {
         let [nx, ny, nz] = self.dims;
         let [cx, cy, _] = coarse.dims;
         let slab = nx * ny;
-        out[coarse_layers.start * cx * cy..coarse_layers.end * cx * cy]
+        let (rows, cols) = self.children(coarse_region);
+        let z = coarse_region.z();
+        out[z.start * cx * cy..z.end * cx * cy]
             .par_chunks_mut(cx * cy)
             .with_min_len(coarse.slabs_per_task())
             .enumerate()
             .for_each(|(t, out)| {
-                let kc = coarse_layers.start + t;
-                out.fill(0.0);
+                let kc = z.start + t;
+                coarse.clear_rows(out, coarse_region);
                 for k in 2 * kc..(2 * kc + 2).min(nz) {
                     let xs = &x[k * slab..(k + 1) * slab];
                     let below = (k > 0).then(|| &x[(k - 1) * slab..k * slab]);
                     let above = (k + 1 < nz).then(|| &x[(k + 1) * slab..(k + 2) * slab]);
                     let mut buffer = [0.0f32; BLOCK];
-                    for j in 0..ny {
+                    for j in rows.clone() {
                         let row = (j / 2) * cx;
-                        let (lo, hi) = self.span(j, k);
+                        let (lo, hi) = self.span_within(j, k, &cols);
                         let general = |i: usize| {
                             let l = i + nx * j;
                             let g = k * slab + l;
@@ -895,22 +941,24 @@ impl Level {
         b: &[f32],
         coarse: &Level,
         out: &mut [f32],
-        coarse_layers: Range<usize>,
+        coarse_region: &Region,
     ) {
         let [nx, ny, nz] = self.dims;
         let [cx, cy, _] = coarse.dims;
         let slab = nx * ny;
-        out[coarse_layers.start * cx * cy..coarse_layers.end * cx * cy]
+        let (rows, cols) = self.children(coarse_region);
+        let z = coarse_region.z();
+        out[z.start * cx * cy..z.end * cx * cy]
             .par_chunks_mut(cx * cy)
             .with_min_len(coarse.slabs_per_task())
             .enumerate()
             .for_each(|(t, out)| {
-                let kc = coarse_layers.start + t;
-                out.fill(0.0);
+                let kc = z.start + t;
+                coarse.clear_rows(out, coarse_region);
                 for k in 2 * kc..(2 * kc + 2).min(nz) {
-                    for j in 0..ny {
+                    for j in rows.clone() {
                         let row = (j / 2) * cx;
-                        let (lo, hi) = self.span(j, k);
+                        let (lo, hi) = self.span_within(j, k, &cols);
                         let g = k * slab + nx * j;
                         for i in lo..hi {
                             if self.inv_diag[g + i] != 0.0 {
@@ -922,26 +970,41 @@ impl Level {
             });
     }
 
-    /// x_fine += x_coarse of the parent (piecewise-constant prolongation).
-    pub(crate) fn prolong_add(
-        &self,
-        coarse: &Level,
-        xc: &[f32],
-        x: &mut [f32],
-        layers: Range<usize>,
-    ) {
+    /// The fine rows (y) and columns (x) under the coarse `region` (whole children; the
+    /// last clipped to this level).
+    fn children(&self, coarse_region: &Region) -> (Range<usize>, Range<usize>) {
+        let under = |a: usize| {
+            let r = &coarse_region.axes[a];
+            (2 * r.start).min(self.dims[a])..(2 * r.end).min(self.dims[a])
+        };
+        (under(1), under(0))
+    }
+
+    /// Zeroes `region`'s rows and columns of one slab of this level.
+    fn clear_rows(&self, slab: &mut [f32], region: &Region) {
+        let nx = self.dims[0];
+        let cols = region.x();
+        for j in region.y() {
+            slab[cols.start + nx * j..cols.end + nx * j].fill(0.0);
+        }
+    }
+
+    /// x_fine += x_coarse of the parent (piecewise-constant prolongation), on `region`.
+    pub(crate) fn prolong_add(&self, coarse: &Level, xc: &[f32], x: &mut [f32], region: &Region) {
         let [nx, ny, _] = self.dims;
         let [cx, cy, _] = coarse.dims;
-        x[layers.start * nx * ny..layers.end * nx * ny]
+        let z = region.z();
+        let cols = region.x();
+        x[z.start * nx * ny..z.end * nx * ny]
             .par_chunks_mut(nx * ny)
             .with_min_len(self.slabs_per_task())
             .enumerate()
             .for_each(|(t, xs)| {
-                let k = layers.start + t;
+                let k = z.start + t;
                 let base = (k / 2) * cx * cy;
-                for j in 0..ny {
+                for j in region.y() {
                     let row = base + (j / 2) * cx;
-                    let (lo, hi) = self.span(j, k);
+                    let (lo, hi) = self.span_within(j, k, &cols);
                     for i in lo..hi {
                         if self.inv_diag[k * nx * ny + i + nx * j] != 0.0 {
                             xs[i + nx * j] += xc[row + i / 2];
@@ -960,30 +1023,32 @@ impl Level {
         coarse: &Level,
         xc: &[f32],
         x: &mut [f32],
-        layers: Range<usize>,
+        region: &Region,
     ) {
         let [nx, ny, _] = self.dims;
         let [cx, cy, cz] = coarse.dims;
-        x[layers.start * nx * ny..layers.end * nx * ny]
+        let z = region.z();
+        let cols = region.x();
+        x[z.start * nx * ny..z.end * nx * ny]
             .par_chunks_mut(nx * ny)
             .with_min_len(self.slabs_per_task())
             .enumerate()
             .for_each(|(t, xs)| {
-                let k = layers.start + t;
+                let k = z.start + t;
                 let kc = k / 2;
                 let kn = if k.is_multiple_of(2) {
                     kc.checked_sub(1)
                 } else {
                     Some(kc + 1).filter(|&v| v < cz)
                 };
-                for j in 0..ny {
+                for j in region.y() {
                     let jc = j / 2;
                     let jn = if j % 2 == 0 {
                         jc.checked_sub(1)
                     } else {
                         Some(jc + 1).filter(|&v| v < cy)
                     };
-                    let (lo, hi) = self.span(j, k);
+                    let (lo, hi) = self.span_within(j, k, &cols);
                     for i in lo..hi {
                         let l = i + nx * j;
                         if self.inv_diag[k * nx * ny + l] == 0.0 {
@@ -1320,7 +1385,7 @@ mod tests {
                 .map(|g| if medium(g) { (g % 5) as f32 * 0.1 } else { 0.0 })
                 .collect();
             let mut out = vec![0.0f32; coarse.len()];
-            lv.restrict_residual(&b, &x, &coarse, &mut out, coarse.all_layers());
+            lv.restrict_residual(&b, &x, &coarse, &mut out, &coarse.whole());
             let b64: Vec<f64> = b.iter().map(|&v| f64::from(v)).collect();
             let mut r = vec![0.0; n];
             let _ = lv.residual(&b64, &x, &mut r);
@@ -1341,14 +1406,8 @@ mod tests {
             // same order.
             let mut residual = vec![0.0f32; coarse.len()];
             let mut plain = vec![1.0f32; coarse.len()];
-            lv.restrict_residual(
-                &b,
-                &vec![0.0; n],
-                &coarse,
-                &mut residual,
-                coarse.all_layers(),
-            );
-            lv.restrict(&b, &coarse, &mut plain, coarse.all_layers());
+            lv.restrict_residual(&b, &vec![0.0; n], &coarse, &mut residual, &coarse.whole());
+            lv.restrict(&b, &coarse, &mut plain, &coarse.whole());
             assert_eq!(residual, plain);
         }
     }

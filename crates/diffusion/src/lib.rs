@@ -39,7 +39,8 @@
 //! jumps of 10³ (balls, tilted layers, random blocks a few coarse cells wide; tested).
 //!
 //! On several ranks (processes under MPI, or threads), `Multigrid::solve_on_ranks` runs
-//! the same cycles over z-slabs with one-layer halos, and agglomerates the coarse levels
+//! the same cycles over z-slabs or a Cartesian grid of boxes ([`Decomposition`]) with
+//! one-cell halos, and agglomerates the coarse levels
 //! onto fewer ranks as they shrink, down to rank 0 for the coarsest ([`RankLayout`]); φ
 //! and the history are [`Multigrid::solve`]'s bits on any rank count (both sum their
 //! norms over runs of eight cells along x, added exactly).
@@ -84,6 +85,7 @@ mod multigrid;
 mod params;
 mod problem;
 mod ranks;
+mod region;
 pub mod slab;
 mod solve;
 mod solver;
@@ -95,11 +97,12 @@ pub use multigrid::{
     Convergence, Cycle, LevelOperator, Multigrid, MultigridSettings, Prolongation, Smoother,
 };
 pub use params::{
-    CgParams, CycleParam, DiscretisationParam, JacobiParams, MAX_RANKS, MultigridParams, RANKS,
-    SmootherParam, SorParams, check_ranks,
+    CgParams, CycleParam, DecompositionParam, DiscretisationParam, JacobiParams, MAX_RANKS,
+    MultigridParams, RANKS, SmootherParam, SorParams, check_ranks,
 };
 pub use problem::{AssembledSystem, Balance, Boundaries, Condition, DiffusionProblem, Sources};
-pub use ranks::{RankLayout, Stage};
+pub use ranks::{Decomposition, RankLayout, Stage};
+pub use region::Region;
 pub use slab::SlabSystem;
 pub use solve::{DiffusionSolution, Method, RanksOf, solve, solve_on_ranks};
 pub use solver::{DiffusionSolver, LinearSolve, conditions};

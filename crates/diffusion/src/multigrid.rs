@@ -18,8 +18,8 @@
 //! cell of a block and stored on half of them (measured 2× faster than the strided loop).
 //! Cells on the box and the rows next to it take the general path.
 
+use crate::region::Region;
 use lucent_core::{StopReason, Stopping};
-use std::ops::Range;
 use std::sync::Mutex;
 
 use rayon::prelude::*;
@@ -413,13 +413,7 @@ impl Multigrid {
         {
             let (bf, bc) = b.split_at_mut(l + 1);
             let coarse = &self.levels[l + 1];
-            self.levels[l].restrict_residual(
-                &bf[l],
-                &x[l],
-                coarse,
-                &mut bc[0],
-                coarse.all_layers(),
-            );
+            self.levels[l].restrict_residual(&bf[l], &x[l], coarse, &mut bc[0], &coarse.whole());
         }
         x[l + 1].fill(0.0);
         match cycle {
@@ -436,7 +430,7 @@ impl Multigrid {
         }
         {
             let (xf, xc) = x.split_at_mut(l + 1);
-            self.prolong(l, &xc[0], &mut xf[l], self.levels[l].all_layers());
+            self.prolong(l, &xc[0], &mut xf[l], &self.levels[l].whole());
         }
         let (bl, xl, sl) = (&b[l], &mut x[l], &mut s[l]);
         self.smooth(l, bl, xl, sl, true);
@@ -520,14 +514,14 @@ impl Multigrid {
             .for_each(|(x, c)| *x = (w1 * f64::from(*c) + w2 * f64::from(*x)) as f32);
     }
 
-    /// Adds the prolonged correction to the slabs `layers` of level `l`.
-    pub(crate) fn prolong(&self, l: usize, coarse: &[f32], fine: &mut [f32], layers: Range<usize>) {
+    /// Adds the prolonged correction to `region` of level `l`.
+    pub(crate) fn prolong(&self, l: usize, coarse: &[f32], fine: &mut [f32], region: &Region) {
         match self.settings.prolongation {
             Prolongation::Constant => {
-                self.levels[l].prolong_add(&self.levels[l + 1], coarse, fine, layers)
+                self.levels[l].prolong_add(&self.levels[l + 1], coarse, fine, region)
             }
             Prolongation::Trilinear => {
-                self.levels[l].prolong_trilinear_add(&self.levels[l + 1], coarse, fine, layers)
+                self.levels[l].prolong_trilinear_add(&self.levels[l + 1], coarse, fine, region)
             }
         }
     }
@@ -565,7 +559,7 @@ impl Multigrid {
         for l in 0..self.levels.len() - 1 {
             let (bf, bc) = b.split_at_mut(l + 1);
             let coarse = &self.levels[l + 1];
-            self.levels[l].restrict(&bf[l], coarse, &mut bc[0], coarse.all_layers());
+            self.levels[l].restrict(&bf[l], coarse, &mut bc[0], &coarse.whole());
         }
         let last = self.levels.len() - 1;
         x[last].fill(0.0);
@@ -574,7 +568,7 @@ impl Multigrid {
             x[l].fill(0.0);
             {
                 let (xf, xc) = x.split_at_mut(l + 1);
-                self.prolong(l, &xc[0], &mut xf[l], self.levels[l].all_layers());
+                self.prolong(l, &xc[0], &mut xf[l], &self.levels[l].whole());
             }
             self.cycle(l, self.settings.cycle, b, x, s);
         }

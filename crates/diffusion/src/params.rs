@@ -78,9 +78,32 @@ pub struct MultigridParams {
     pub full_multigrid: bool,
     /// Cut cells.
     pub discretisation: DiscretisationParam,
-    /// In-process ranks to split the solve over (z-slabs; `diffusion-mg` only). Under
-    /// `mpirun` the processes are the ranks and this stays 1.
+    /// In-process ranks to split the solve over (`diffusion-mg` only). Under `mpirun` the
+    /// processes are the ranks and this stays 1.
     pub ranks: usize,
+    /// How the ranks cut the hierarchy (`diffusion-mg` only).
+    pub decomposition: DecompositionParam,
+}
+
+/// How `diffusion-mg`'s ranks cut the grid ([`crate::Decomposition`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DecompositionParam {
+    /// Runs of whole z-layers.
+    #[default]
+    Slabs,
+    /// The grid of boxes with the least cut area.
+    Boxes,
+}
+
+impl DecompositionParam {
+    /// The decomposition it names.
+    pub fn decomposition(self) -> crate::Decomposition {
+        match self {
+            Self::Slabs => crate::Decomposition::Slabs,
+            Self::Boxes => crate::Decomposition::Boxes,
+        }
+    }
 }
 
 impl Default for MultigridParams {
@@ -93,6 +116,7 @@ impl Default for MultigridParams {
             full_multigrid: true,
             discretisation: DiscretisationParam::Embedded,
             ranks: 1,
+            decomposition: DecompositionParam::Slabs,
         }
     }
 }
@@ -100,7 +124,7 @@ impl Default for MultigridParams {
 /// The meaning of every `ranks` parameter.
 pub const RANKS: (&str, &str) = (
     "ranks",
-    "split the solve over this many in-process ranks (z-slabs with one-layer halos, the bits of one rank; under mpirun the processes are the ranks: leave 1)",
+    "split the solve over this many in-process ranks (slabs or boxes with one-cell halos, the bits of one rank; under mpirun the processes are the ranks: leave 1)",
 );
 
 /// The most in-process ranks a solve may ask for.
@@ -143,6 +167,10 @@ impl SolverParams for MultigridParams {
         ),
         DISCRETISATION,
         RANKS,
+        (
+            "decomposition",
+            "how ranks cut the hierarchy (diffusion-mg only): slabs (whole z-layers, each rank two at least on the fine level) or boxes (the grid of boxes that cuts least, x cut at multiples of 8, so the fine level splits over more ranks and the halo shrinks); coarse levels agglomerated onto fewer ranks either way; the serial bits either way",
+        ),
     ];
 
     fn validate(&self) -> Result<(), SolveError> {

@@ -1,56 +1,75 @@
-//! Multigrid on ranks: the hierarchy split into z-slabs, the finer levels over every rank
-//! and the coarser ones agglomerated onto fewer ranks, down to one for the coarsest.
+//! Multigrid on ranks: the hierarchy split into z-slabs or a Cartesian grid of boxes, the
+//! finer levels over every rank and the coarser ones agglomerated onto fewer ranks, down
+//! to one for the coarsest.
 //!
 //! **Layout** ([`RankLayout`]): the levels fall into *stages*, runs of levels split over
-//! the same ranks 0..p. A stage of m levels cuts its first level's z-layers into runs of
-//! whole units of 2^m layers, balanced by units, so the slab bounds stay whole layers on
-//! each of its levels (level L + i owns layers [k₀/2^i, ⌈k₁/2^i⌉)) and on the next
+//! the same ranks 0..p. A stage of m levels cuts each axis of its first level into runs of
+//! whole units of 2^m cells, balanced by units, so the box bounds stay whole cells on each
+//! of its levels (level L + i owns cells [c₀/2^i, ⌈c₁/2^i⌉) per axis) and on the next
 //! stage's first level: a coarse cell's eight children are on one rank, and restriction
-//! and constant prolongation need no halo. m is the largest with p·2^m ≤ n_z (every rank
-//! keeps a unit) that leaves the coarsest level out and keeps every level of the stage but
-//! the fine one at `coarse_cells_per_rank` cells per rank or more. The next stage takes
-//! p' = min(p, ⌊n_z'/2⌋, cells'/`coarse_cells_per_rank`) ranks, about half as many, as
-//! HPGMG and AMReX agglomerate coarse levels; the stage on one rank (always the coarsest
-//! level's) is rank 0's, which cycles it serially. The K-cycle splits its fine level only
-//! (its coarse Krylov steps run on rank 0).
+//! and constant prolongation need no halo. On the fine level x is cut in runs of
+//! `NORM_RUN` too, so each rank's norm sums whole runs ([`Decomposition`]: slabs cut z
+//! only; boxes take the grid of least cut area, so the fine level of n³ splits over more
+//! ranks than n/2 and the halo per rank shrinks as P^(-2/3)). m is the largest with every
+//! box keeping a unit on every cut axis that leaves the coarsest level out and keeps every
+//! level of the stage but the fine one at `coarse_cells_per_rank` cells per rank or more.
+//! The next stage takes up to min(p, cells'/`coarse_cells_per_rank`) ranks, the most a
+//! grid of two-cell units allows, as HPGMG and AMReX agglomerate coarse levels; the stage
+//! on one rank (always the coarsest level's) is rank 0's, which cycles it serially. The
+//! K-cycle splits its fine level only (its coarse Krylov steps run on rank 0).
 //!
 //! **A cycle on a split level** (as [`Multigrid`]'s, the same arithmetic per cell):
-//! - red–black Gauss–Seidel: each colour starts by sending the slab's first and last
-//!   layers to the neighbours and sweeping the layers between them while the layers
-//!   travel, then sweeps the two boundary layers with the received halo; weighted Jacobi
-//!   likewise;
-//! - the residual's restriction after one halo exchange; trilinear prolongation after one
-//!   on the coarse level (constant prolongation needs none);
+//! - red–black Gauss–Seidel: each colour starts by sending the layers of the box next to
+//!   each face neighbour and sweeping the cells one in from those faces while they travel,
+//!   then sweeps the box's outer shell with the received halo; weighted Jacobi likewise;
+//! - the residual's restriction after one face exchange; trilinear prolongation after one
+//!   on the coarse level that crosses edges and corners too (up to 26 neighbours;
+//!   constant prolongation needs none);
 //! - where the next level starts a stage, the restricted right-hand side moves from the
-//!   layers each rank computed to the next stage's owners (point to point, each owner
-//!   receiving from the two or three ranks whose slabs cover its own), the ranks outside
-//!   the next stage wait, and the coarse correction comes back with the one-layer halo
-//!   trilinear prolongation reads. Ranks that own nothing on a level exchange nothing on
-//!   it.
+//!   boxes each rank computed to the next stage's owners (point to point, each owner
+//!   receiving from the ranks whose boxes overlap its own), the ranks outside the next
+//!   stage wait, and the coarse correction comes back with the one-cell halo trilinear
+//!   prolongation reads. Ranks that own nothing on a level exchange nothing on it.
 //!
 //! **Norms** are the serial solve's (`Level::norm`): every x-line of the fine level cut
 //! into runs of eight cells, each run summed left to right, the run sums added exactly
-//! (`lucent_core::exact::ExactSum`). Each rank sums the runs of its layers and the ranks
+//! (`lucent_core::exact::ExactSum`). Each rank sums the runs of its box and the ranks
 //! all-reduce the accumulators with their time-budget and cancel flags
 //! (`lucent_core::ranks::all_reduce_sums`: log₂P messages of 71 words per norm). An exact
 //! sum does not depend on the order of its terms, so the residual history, the stopping
-//! decisions and φ are [`Multigrid::solve`]'s bits on every rank count (tested on 1–5
-//! ranks, every cycle and smoother, with and without agglomeration). The time budget and
+//! decisions and φ are [`Multigrid::solve`]'s bits on every rank count and grid of boxes
+//! (tested on 1–12 ranks, every cycle and smoother, both prolongations, grids cut along
+//! each axis and all three, with and without agglomeration). The time budget and
 //! cancellation are each rank's own and travel with the reduction, so all ranks stop on
 //! the same cycle.
 //!
 //! **Not yet.** Every rank holds the whole hierarchy and full-length work vectors (it
-//! touches only its slabs and their halos), so memory does not scale with ranks.
+//! touches only its boxes and their halos), so memory does not scale with ranks.
 
-use std::ops::Range;
-
-use lucent_core::exact::ExactSum;
+use lucent_core::exact::{ExactSum, NORM_RUN};
 use lucent_core::ranks::{Communicator, all_reduce_sums};
 use lucent_core::{StopReason, Stopping};
 
 use crate::error::DiffusionError;
 use crate::level::Level;
 use crate::multigrid::{Convergence, Cycle, Multigrid, Prolongation, Smoother, Work};
+use crate::region::Region;
+
+/// How a stage cuts its levels over its ranks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Decomposition {
+    /// Runs of whole z-layers: two neighbours per rank, each message a whole layer.
+    #[default]
+    Slabs,
+    /// A Cartesian grid of boxes, the one with the least cut area: up to six face
+    /// neighbours (26 for trilinear prolongation's halo), and on P ranks a halo that
+    /// shrinks as P^(-2/3) of the level instead of staying a whole layer; the fine level
+    /// splits over more ranks than it has layer pairs.
+    Boxes,
+    /// The fine level over this grid of boxes [p_x, p_y, p_z] (one rank per box), the
+    /// coarse levels as [`Decomposition::Boxes`].
+    Grid([usize; 3]),
+}
 
 /// A run of levels split over the same ranks.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -59,29 +78,51 @@ pub struct Stage {
     pub first_level: usize,
     /// How many levels it spans: `first_level..first_level + levels`.
     pub levels: usize,
-    /// Per rank that works on it (ranks `0..layers.len()`), its z-layers [k₀, k₁) of the
-    /// first level: the bounds are multiples of 2^`levels` but the last, so a coarse
-    /// cell's children stay on one rank down to the next stage's first level.
-    pub layers: Vec<(usize, usize)>,
+    /// Per axis (x, y, z), the cut positions on the first level, from 0 to its cells on
+    /// that axis: p_a + 1 values for p_a boxes along it. Those inside are multiples of
+    /// 2^`levels` (on the fine level x's also of `NORM_RUN`, so each rank's norm sums
+    /// whole runs), so a coarse cell's children stay on one rank down to the next stage's
+    /// first level. Rank r sits at (r mod p_x, ⌊r / p_x⌋ mod p_y, ⌊r / (p_x p_y)⌋); z-slabs
+    /// are the grid 1 × 1 × p.
+    pub cuts: [Vec<usize>; 3],
 }
 
 impl Stage {
-    /// How many ranks work on it.
-    pub fn ranks(&self) -> usize {
-        self.layers.len()
+    /// Boxes per axis.
+    pub fn grid(&self) -> [usize; 3] {
+        std::array::from_fn(|a| self.cuts[a].len().saturating_sub(1))
     }
 
-    /// Rank `rank`'s layers of level `level`, which may be the next stage's first level
-    /// (the layers its slab restricts to); empty for a rank outside the stage or a level
-    /// above it.
-    pub fn owned(&self, rank: usize, level: usize) -> Range<usize> {
-        let (Some(&(k0, k1)), Some(shift)) =
-            (self.layers.get(rank), level.checked_sub(self.first_level))
+    /// How many ranks work on it.
+    pub fn ranks(&self) -> usize {
+        self.grid().iter().product()
+    }
+
+    /// Rank `rank`'s place in the grid (none outside the stage).
+    pub fn coords(&self, rank: usize) -> Option<[usize; 3]> {
+        let [px, py, _] = self.grid();
+        (rank < self.ranks()).then(|| [rank % px, (rank / px) % py, rank / (px * py)])
+    }
+
+    /// The rank at `coords` of the grid.
+    pub fn rank_at(&self, [i, j, k]: [usize; 3]) -> usize {
+        let [px, py, _] = self.grid();
+        i + px * (j + py * k)
+    }
+
+    /// Rank `rank`'s box of level `level`, which may be the next stage's first level (the
+    /// cells its box restricts to); empty for a rank outside the stage or a level above
+    /// it.
+    pub fn owned(&self, rank: usize, level: usize) -> Region {
+        let (Some(c), Some(shift)) = (self.coords(rank), level.checked_sub(self.first_level))
         else {
-            return 0..0;
+            return Region::default();
         };
         let shift = shift.min(usize::BITS as usize - 1);
-        (k0 >> shift)..k1.div_ceil(1 << shift)
+        Region::new(std::array::from_fn(|a| {
+            let (c0, c1) = (self.cuts[a][c[a]], self.cuts[a][c[a] + 1]);
+            (c0 >> shift)..c1.div_ceil(1 << shift)
+        }))
     }
 }
 
@@ -93,16 +134,57 @@ pub struct RankLayout {
     pub stages: Vec<Stage>,
 }
 
+/// The grid of `p` boxes over `dims` with the least cut area (Σ over cut planes of their
+/// cells) among those that keep a whole `unit[a]` of cells per box on every cut axis
+/// (p_a · unit_a ≤ n_a); ties go to grids cut along z, then y (whole x-lines in the
+/// messages). Slabs take 1 × 1 × p only. None if no grid of `p` boxes fits.
+fn box_grid(
+    dims: [usize; 3],
+    p: usize,
+    unit: [usize; 3],
+    decomposition: Decomposition,
+) -> Option<[usize; 3]> {
+    let fits = |g: [usize; 3]| fits(dims, g, unit);
+    if decomposition != Decomposition::Boxes {
+        return Some([1, 1, p]).filter(|&g| fits(g));
+    }
+    let area = |g: [usize; 3]| -> usize {
+        (0..3)
+            .map(|a| (g[a] - 1) * dims[(a + 1) % 3] * dims[(a + 2) % 3])
+            .sum()
+    };
+    let mut best: Option<([usize; 3], (usize, usize, usize))> = None;
+    for px in (1..=p).filter(|d| p.is_multiple_of(*d)) {
+        for py in (1..=p / px).filter(|d| (p / px).is_multiple_of(*d)) {
+            let g = [px, py, p / px / py];
+            if !fits(g) {
+                continue;
+            }
+            let key = (area(g), px, py);
+            if best.as_ref().is_none_or(|(_, k)| key < *k) {
+                best = Some((g, key));
+            }
+        }
+    }
+    best.map(|(g, _)| g)
+}
+
+/// Whether a grid `g` of boxes over `dims` keeps a whole `unit[a]` of cells per box on
+/// every cut axis.
+fn fits(dims: [usize; 3], g: [usize; 3], unit: [usize; 3]) -> bool {
+    (0..3).all(|a| g[a] == 1 || g[a] * unit[a] <= dims[a])
+}
+
 impl RankLayout {
     /// Below this many cells per rank a level goes to fewer ranks: 16³, where a sweep's
     /// work per rank (tens of microseconds) is no longer large against a message's
     /// latency.
     pub const COARSE_CELLS_PER_RANK: usize = 4096;
 
-    /// The layout of a hierarchy whose levels have `dims` (finest first) on `ranks` ranks:
-    /// the fine level over every rank while each keeps two layers, then a stage keeps at
-    /// least `coarse_cells_per_rank` cells per rank on each of its coarse levels (0 or 1:
-    /// split as far as the layers allow).
+    /// The layout of a hierarchy whose levels have `dims` (finest first) on `ranks` ranks,
+    /// over z-slabs: the fine level over every rank while each keeps two layers, then a
+    /// stage keeps at least `coarse_cells_per_rank` cells per rank on each of its coarse
+    /// levels (0 or 1: split as far as the layers allow).
     ///
     /// # Errors
     /// [`DiffusionError::Ranks`] for no ranks or more ranks than fine layers;
@@ -113,59 +195,117 @@ impl RankLayout {
         cycle: Cycle,
         coarse_cells_per_rank: usize,
     ) -> Result<Self, DiffusionError> {
+        Self::with(
+            dims,
+            ranks,
+            cycle,
+            coarse_cells_per_rank,
+            Decomposition::Slabs,
+        )
+    }
+
+    /// [`RankLayout::new`] over `decomposition`: for boxes, each stage takes the most of
+    /// its ranks that a grid of boxes keeping two cells per axis (eight along x on the
+    /// fine level) allows, cut with the least area.
+    ///
+    /// # Errors
+    /// [`DiffusionError::Ranks`] for no ranks, or more ranks than fine layers (slabs) or
+    /// fine cells (boxes); [`DiffusionError::Invalid`] for no levels.
+    pub fn with(
+        dims: &[[usize; 3]],
+        ranks: usize,
+        cycle: Cycle,
+        coarse_cells_per_rank: usize,
+        decomposition: Decomposition,
+    ) -> Result<Self, DiffusionError> {
         let Some(fine) = dims.first() else {
             return Err(DiffusionError::Invalid("a hierarchy of no levels".into()));
         };
-        let n_z = fine[2];
-        if ranks == 0 || ranks > n_z {
+        let (room, what) = match decomposition {
+            Decomposition::Slabs => (fine[2], "z-layers: every rank needs at least one layer"),
+            _ => (
+                fine.iter().product(),
+                "cells: every rank needs at least one cell",
+            ),
+        };
+        if ranks == 0 || ranks > room {
             return Err(DiffusionError::Ranks(format!(
-                "{ranks} ranks for {n_z} z-layers: every rank needs at least one layer"
+                "{ranks} ranks for {room} {what}"
             )));
         }
         let depth = dims.len();
         let per_rank = coarse_cells_per_rank.max(1);
+        // The cells per box and axis that m levels of a stage starting at `level` need: a
+        // coarse cell's 2^m children on one rank (and whole norm runs along x on the fine
+        // level).
+        let unit = |level: usize, m: usize| -> [usize; 3] {
+            let u = 1usize << m.min(usize::BITS as usize - 2);
+            [if level == 0 { u.max(NORM_RUN) } else { u }, u, u]
+        };
+        if let Decomposition::Grid(g) = decomposition
+            && (g.iter().product::<usize>() != ranks || !fits(*fine, g, unit(0, 1)))
+        {
+            return Err(DiffusionError::Ranks(format!(
+                "a grid of {g:?} boxes for {ranks} ranks on {fine:?} cells: the boxes must be \
+                 one per rank and keep two cells per axis (eight along x)"
+            )));
+        }
         let cells = |l: usize| dims[l].iter().product::<usize>();
         let mut stages = Vec::new();
         let (mut level, mut p) = (0, ranks);
         loop {
-            let n = dims[level][2];
+            let n = dims[level];
             // The fine level is split over every rank it can be (the caller chose the
             // ranks, and its data lives split); coarser ones keep the threshold.
-            p = p.min(n / 2).max(1);
             if level > 0 {
                 p = p.min(cells(level) / per_rank).max(1);
             }
             if level + 1 == depth || (cycle == Cycle::K && level > 0) {
                 p = 1;
             }
+            // The most ranks (up to p) whose grid keeps a unit of two levels per box, or
+            // on the fine level the grid asked for.
+            let (q, grid) = match decomposition {
+                Decomposition::Grid(g) if level == 0 && p > 1 => (ranks, g),
+                _ => {
+                    let cut = match decomposition {
+                        Decomposition::Slabs => Decomposition::Slabs,
+                        _ => Decomposition::Boxes,
+                    };
+                    (1..=p)
+                        .rev()
+                        .find_map(|q| box_grid(n, q, unit(level, 1), cut).map(|g| (q, g)))
+                        .unwrap_or((1, [1, 1, 1]))
+                }
+            };
+            p = q;
             if p == 1 {
                 stages.push(Stage {
                     first_level: level,
                     levels: depth - level,
-                    layers: vec![(0, n)],
+                    cuts: n.map(|n| vec![0, n]),
                 });
                 return Ok(Self { stages });
             }
             let mut m = 1;
             while level + m + 1 < depth
-                && p << (m + 1) <= n
+                && cycle != Cycle::K
                 && cells(level + m) >= p * per_rank
-                && !(cycle == Cycle::K)
+                && fits(n, grid, unit(level, m + 1))
             {
                 m += 1;
             }
-            let unit = 1usize << m;
-            let units = n.div_ceil(unit);
-            let layers = (0..p)
-                .map(|r| {
-                    let (u0, u1) = (r * units / p, (r + 1) * units / p);
-                    (u0 * unit, (u1 * unit).min(n))
-                })
-                .collect();
+            let u = unit(level, m);
+            let cuts = std::array::from_fn(|a| {
+                let units = n[a].div_ceil(u[a]);
+                (0..=grid[a])
+                    .map(|r| (r * units / grid[a] * u[a]).min(n[a]))
+                    .collect()
+            });
             stages.push(Stage {
                 first_level: level,
                 levels: m,
-                layers,
+                cuts,
             });
             level += m;
         }
@@ -180,8 +320,8 @@ impl RankLayout {
             .unwrap_or(&self.stages[0])
     }
 
-    /// Rank `rank`'s layers of level `level` (empty where it does not work on it).
-    pub fn owned(&self, rank: usize, level: usize) -> Range<usize> {
+    /// Rank `rank`'s box of level `level` (empty where it does not work on it).
+    pub fn owned(&self, rank: usize, level: usize) -> Region {
         self.stage_of(level).owned(rank, level)
     }
 }
@@ -201,15 +341,20 @@ fn protocol(rank: usize, what: &str) -> DiffusionError {
     ))
 }
 
-/// The common part of two layer ranges.
-fn overlap(a: &Range<usize>, b: &Range<usize>) -> Range<usize> {
-    let (start, end) = (a.start.max(b.start), a.end.min(b.end));
-    start..end.max(start)
+/// A halo message: the neighbour, the cells sent to it, the cells it sends.
+struct Neighbour {
+    rank: usize,
+    send: Region,
+    receive: Region,
 }
 
 impl<C: Communicator + ?Sized> OnRanks<'_, C> {
     fn level(&self, l: usize) -> &Level {
         &self.mg.levels[l]
+    }
+
+    fn dims(&self, l: usize) -> [usize; 3] {
+        self.level(l).dims
     }
 
     fn stage(&self, l: usize) -> &Stage {
@@ -226,49 +371,97 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         self.stage(l + 1).first_level == l + 1
     }
 
-    /// The layers of level `l` this rank computes (empty where it has no part in it).
-    fn owned(&self, l: usize) -> Range<usize> {
+    /// The box of level `l` this rank computes (empty where it has no part in it).
+    fn owned(&self, l: usize) -> Region {
         self.layout.owned(self.rank, l)
     }
 
-    /// The coarse layers (level `l + 1`) this rank's slab of level `l` restricts to.
-    fn restricts_to(&self, l: usize) -> Range<usize> {
+    /// The coarse cells (level `l + 1`) this rank's box of level `l` restricts to.
+    fn restricts_to(&self, l: usize) -> Region {
         self.stage(l).owned(self.rank, l + 1)
     }
 
-    /// Sends the first and last owned layers of `x` (level `l`) to the neighbours of its
-    /// stage, runs `interior` on `x` while they travel, and writes what the neighbours
-    /// sent into the halo layers. A rank outside the stage only runs `interior`.
+    /// This rank's neighbours in its stage's grid on level `l`: across its faces, and with
+    /// `corners` across its edges and corners too (what trilinear prolongation reads).
+    /// Each sends the layer of its box next to this one.
+    fn neighbours(&self, l: usize, corners: bool) -> Vec<Neighbour> {
+        let stage = self.stage(l);
+        let (Some(at), o) = (stage.coords(self.rank), self.owned(l)) else {
+            return Vec::new();
+        };
+        let grid = stage.grid();
+        let mut out = Vec::new();
+        for dz in -1isize..=1 {
+            for dy in -1isize..=1 {
+                for dx in -1isize..=1 {
+                    let d = [dx, dy, dz];
+                    let off = d.iter().filter(|&&v| v != 0).count();
+                    if off == 0 || (off > 1 && !corners) {
+                        continue;
+                    }
+                    let mut there = [0usize; 3];
+                    if (0..3).any(|a| {
+                        let c = at[a] as isize + d[a];
+                        there[a] = c as usize;
+                        c < 0 || c >= grid[a] as isize
+                    }) {
+                        continue;
+                    }
+                    let (mut send, mut receive) = (o.clone(), o.clone());
+                    for (a, &step) in d.iter().enumerate() {
+                        let r = o.axes[a].clone();
+                        match step {
+                            -1 => {
+                                send.axes[a] = r.start..r.start + 1;
+                                receive.axes[a] = r.start - 1..r.start;
+                            }
+                            1 => {
+                                send.axes[a] = r.end - 1..r.end;
+                                receive.axes[a] = r.end..r.end + 1;
+                            }
+                            _ => {}
+                        }
+                    }
+                    out.push(Neighbour {
+                        rank: stage.rank_at(there),
+                        send,
+                        receive,
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    /// Sends the layers of `x`'s box (level `l`) next to each neighbour of its stage
+    /// (faces, and with `corners` edges and corners), runs `interior` on `x` while they
+    /// travel, and writes what the neighbours sent into the halo. A rank outside the stage
+    /// only runs `interior`.
+    #[allow(clippy::too_many_arguments)]
     fn halo<T: Copy, R>(
         &self,
         l: usize,
         x: &mut [T],
         to_f64: fn(T) -> f64,
         from_f64: fn(f64) -> T,
+        corners: bool,
         interior: impl FnOnce(&mut [T]) -> R,
     ) -> Result<R, DiffusionError> {
-        let slab = self.level(l).slab();
-        let o = self.owned(l);
-        let ranks = self.stage(l).ranks();
-        if o.is_empty() || ranks == 1 {
+        if self.owned(l).is_empty() || self.stage(l).ranks() == 1 {
             return Ok(interior(x));
         }
-        let below = (self.rank > 0).then(|| self.rank - 1);
-        let above = Some(self.rank + 1).filter(|&r| r < ranks);
-        let layer = |k: usize, x: &[T]| -> Vec<f64> {
-            x[k * slab..(k + 1) * slab]
-                .iter()
-                .map(|&v| to_f64(v))
-                .collect()
-        };
-        let to_below = below.map(|_| layer(o.start, x)).unwrap_or_default();
-        let to_above = above.map(|_| layer(o.end - 1, x)).unwrap_or_default();
-        let sends: Vec<(usize, &[f64])> = below
-            .map(|b| (b, &to_below[..]))
-            .into_iter()
-            .chain(above.map(|a| (a, &to_above[..])))
+        let dims = self.dims(l);
+        let neighbours = self.neighbours(l, corners);
+        let parts: Vec<Vec<f64>> = neighbours
+            .iter()
+            .map(|n| n.send.read(dims, x, to_f64))
             .collect();
-        let from: Vec<usize> = below.into_iter().chain(above).collect();
+        let sends: Vec<(usize, &[f64])> = neighbours
+            .iter()
+            .zip(&parts)
+            .map(|(n, v)| (n.rank, &v[..]))
+            .collect();
+        let from: Vec<usize> = neighbours.iter().map(|n| n.rank).collect();
         let mut interior = Some(interior);
         let mut out = None;
         let received = {
@@ -284,81 +477,71 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
             (None, Some(f)) => f(&mut *x),
             (None, None) => unreachable!("the closure takes `interior` only to store its result"),
         };
-        let mut received = received.into_iter();
-        for (k, present) in [(o.start.wrapping_sub(1), below), (o.end, above)] {
-            if present.is_none() {
-                continue;
-            }
-            let values = received.next().unwrap_or_default();
-            if values.len() != slab {
+        if received.len() != neighbours.len() {
+            return Err(protocol(self.rank, "a halo"));
+        }
+        for (n, values) in neighbours.iter().zip(received) {
+            if !n.receive.write(dims, x, &values, from_f64) {
                 return Err(protocol(self.rank, "a halo"));
-            }
-            for (x, v) in x[k * slab..(k + 1) * slab].iter_mut().zip(values) {
-                *x = from_f64(v);
             }
         }
         Ok(out)
     }
 
+    /// The face halo of an f32 vector of level `l`.
     fn halo32(&self, l: usize, x: &mut [f32]) -> Result<(), DiffusionError> {
-        self.halo(l, x, f64::from, |v| v as f32, |_| ())
+        self.halo(l, x, f64::from, |v| v as f32, false, |_| ())
     }
 
-    /// Moves level `l`'s layers between ranks 0..`ranks`: rank q holds `have(q)` and
-    /// wants `want(q)`; every rank sends each other rank the part of its layers that rank
-    /// wants and receives its own wants from their holders (the ranges on one level are
-    /// disjoint for `have`, so each wanted layer has one holder).
-    fn move_layers(
+    /// Moves level `l`'s cells between ranks 0..`ranks`: rank q holds `have(q)` and wants
+    /// `want(q)`; every rank sends each other rank the part of its box that rank wants
+    /// and receives its own wants from their holders (the boxes on one level are disjoint
+    /// for `have`, so each wanted cell has one holder).
+    fn move_regions(
         &self,
         l: usize,
         v: &mut [f32],
         ranks: usize,
-        have: impl Fn(usize) -> Range<usize>,
-        want: impl Fn(usize) -> Range<usize>,
+        have: impl Fn(usize) -> Region,
+        want: impl Fn(usize) -> Region,
     ) -> Result<(), DiffusionError> {
         if self.rank >= ranks {
             return Ok(());
         }
-        let slab = self.level(l).slab();
+        let dims = self.dims(l);
         let mine = have(self.rank);
         let parts: Vec<(usize, Vec<f64>)> = (0..ranks)
             .filter(|&q| q != self.rank)
             .filter_map(|q| {
-                let part = overlap(&mine, &want(q));
-                (!part.is_empty()).then(|| {
-                    let values = v[part.start * slab..part.end * slab]
-                        .iter()
-                        .map(|&x| f64::from(x))
-                        .collect();
-                    (q, values)
-                })
+                let part = mine.overlap(&want(q));
+                (!part.is_empty()).then(|| (q, part.read(dims, v, f64::from)))
             })
             .collect();
         let sends: Vec<(usize, &[f64])> = parts.iter().map(|(q, v)| (*q, &v[..])).collect();
         let wanted = want(self.rank);
-        let from: Vec<(usize, Range<usize>)> = (0..ranks)
+        let from: Vec<(usize, Region)> = (0..ranks)
             .filter(|&q| q != self.rank)
-            .map(|q| (q, overlap(&have(q), &wanted)))
+            .map(|q| (q, have(q).overlap(&wanted)))
             .filter(|(_, part)| !part.is_empty())
             .collect();
         let sources: Vec<usize> = from.iter().map(|(q, _)| *q).collect();
         let received = self.comm.exchange_with(&sends, &sources, &mut || ());
+        if received.len() != from.len() {
+            return Err(protocol(self.rank, "a coarse level's hand-over"));
+        }
         for ((_, part), values) in from.iter().zip(received) {
-            if values.len() != part.len() * slab {
+            if !part.write(dims, v, &values, |v| v as f32) {
                 return Err(protocol(self.rank, "a coarse level's hand-over"));
-            }
-            for (x, v) in v[part.start * slab..part.end * slab].iter_mut().zip(values) {
-                *x = v as f32;
             }
         }
         Ok(())
     }
 
     /// Hands level `l + 1`'s restricted right-hand side from the ranks of `l`'s stage (the
-    /// layers each restricted to) to the owners in the next stage.
+    /// cells each restricted to) to the owners in the next stage.
     fn hand_down(&self, l: usize, b: &mut [f32]) -> Result<(), DiffusionError> {
         let (fine, coarse) = (self.stage(l), self.stage(l + 1));
-        self.move_layers(
+        self.move_regions(
             l + 1,
             b,
             fine.ranks(),
@@ -368,53 +551,61 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
     }
 
     /// Hands level `l + 1`'s correction back from the next stage's owners to the ranks of
-    /// `l`'s stage: the layers each restricted to and, for trilinear prolongation, one
-    /// more each side.
+    /// `l`'s stage: the cells each restricted to and, for trilinear prolongation, one
+    /// more on every side (edges and corners too).
     fn hand_up(&self, l: usize, x: &mut [f32]) -> Result<(), DiffusionError> {
         let (fine, coarse) = (self.stage(l), self.stage(l + 1));
-        let nz = self.level(l + 1).dims[2];
+        let dims = self.dims(l + 1);
         let halo = usize::from(self.mg.settings().prolongation == Prolongation::Trilinear);
-        self.move_layers(
+        self.move_regions(
             l + 1,
             x,
             fine.ranks(),
             |q| coarse.owned(q, l + 1),
-            |q| {
-                let r = fine.owned(q, l + 1);
-                if r.is_empty() {
-                    r
-                } else {
-                    r.start.saturating_sub(halo)..(r.end + halo).min(nz)
-                }
-            },
+            |q| fine.owned(q, l + 1).grown(halo, dims),
         )
     }
 
-    /// Zeroes level `l`'s vector where this rank reads it: its slab and halos.
+    /// Zeroes level `l`'s vector where this rank reads it: its box and halo.
     fn zero(&self, l: usize, x: &mut [f32]) {
-        let o = self.owned(l);
-        if o.is_empty() {
-            return;
-        }
-        let slab = self.level(l).slab();
-        let nz = self.level(l).dims[2];
-        x[o.start.saturating_sub(1) * slab..(o.end + 1).min(nz) * slab].fill(0.0);
+        let dims = self.dims(l);
+        self.owned(l).grown(1, dims).fill(dims, x, 0.0);
     }
 
-    /// The owned layers but the first and last, and those two (one when the slab is one
-    /// layer thick).
-    fn inner_and_edges(&self, l: usize) -> (Range<usize>, Vec<Range<usize>>) {
+    /// The box's cells that read no halo (one cell in from every face that has a
+    /// neighbour), and the rest of the box in pieces: the sweeps' work while the halo
+    /// travels, and after it.
+    fn inner_and_edges(&self, l: usize) -> (Region, Vec<Region>) {
         let o = self.owned(l);
-        if o.len() <= 2 {
-            return (
-                o.start..o.start,
-                (o.start..o.end).map(|k| k..k + 1).collect(),
-            );
+        let stage = self.stage(l);
+        let Some(at) = stage.coords(self.rank).filter(|_| !o.is_empty()) else {
+            return (Region::default(), Vec::new());
+        };
+        let grid = stage.grid();
+        let mut inner = o.clone();
+        for a in 0..3 {
+            let r = &o.axes[a];
+            let start = r.start + usize::from(at[a] > 0);
+            let end = r.end - usize::from(at[a] + 1 < grid[a]);
+            if start >= end {
+                return (Region::default(), vec![o]);
+            }
+            inner.axes[a] = start..end;
         }
-        (
-            o.start + 1..o.end - 1,
-            vec![o.start..o.start + 1, o.end - 1..o.end],
-        )
+        let mut edges = Vec::new();
+        let mut rest = o;
+        for a in [2, 1, 0] {
+            let (r, i) = (rest.axes[a].clone(), inner.axes[a].clone());
+            for part in [r.start..i.start, i.end..r.end] {
+                if !part.is_empty() {
+                    let mut piece = rest.clone();
+                    piece.axes[a] = part;
+                    edges.push(piece);
+                }
+            }
+            rest.axes[a] = i;
+        }
+        (inner, edges)
     }
 
     /// The pre- or post-smoothing sweeps on split level `l`.
@@ -444,12 +635,11 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
                             x,
                             f64::from,
                             |v| v as f32,
-                            |x| {
-                                level.colour_layers(b, x, colour, 1.0, inner.clone());
-                            },
+                            false,
+                            |x| level.colour_in(b, x, colour, 1.0, &inner),
                         )?;
                         for edge in &edges {
-                            level.colour_layers(b, x, colour, 1.0, edge.clone());
+                            level.colour_in(b, x, colour, 1.0, edge);
                         }
                     }
                 }
@@ -459,24 +649,24 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
                         x,
                         f64::from,
                         |v| v as f32,
+                        false,
                         |x| {
-                            level.jacobi_layers(b, x, omega, scratch, inner.clone());
+                            if !inner.is_empty() {
+                                level.jacobi_in(b, x, omega, scratch, &inner);
+                            }
                         },
                     )?;
                     for edge in &edges {
-                        level.jacobi_layers(b, x, omega, scratch, edge.clone());
+                        level.jacobi_in(b, x, omega, scratch, edge);
                     }
-                    let o = self.owned(l);
-                    let slab = level.slab();
-                    x[o.start * slab..o.end * slab]
-                        .copy_from_slice(&scratch[o.start * slab..o.end * slab]);
+                    self.owned(l).copy(level.dims, scratch, x);
                 }
             }
         }
         Ok(())
     }
 
-    /// One cycle on level `l` for A x = b (x holds the initial guess on the owned layers);
+    /// One cycle on level `l` for A x = b (x holds the initial guess on the owned box);
     /// a rank with no part in level `l` returns at once.
     fn cycle(
         &self,
@@ -503,7 +693,7 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
                 &x[l],
                 coarse,
                 &mut bc[0],
-                self.restricts_to(l),
+                &self.restricts_to(l),
             );
         }
         if self.hands_over(l) {
@@ -529,20 +719,21 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         self.smooth(l, &b[l], &mut x[l], &mut s[l], true)
     }
 
-    /// x[l] += the prolonged x[l + 1], on the owned layers of `l` (after fetching the
-    /// coarse layers it reads: the halo within a stage, the hand-up across one).
+    /// x[l] += the prolonged x[l + 1], on the owned box of `l` (after fetching the coarse
+    /// cells it reads: the halo within a stage, with edges and corners for trilinear
+    /// prolongation; the hand-up across one).
     fn prolong(&self, l: usize, x: &mut Work) -> Result<(), DiffusionError> {
         if self.hands_over(l) {
             self.hand_up(l, &mut x[l + 1])?;
         } else if self.mg.settings().prolongation == Prolongation::Trilinear {
-            self.halo32(l + 1, &mut x[l + 1])?;
+            self.halo(l + 1, &mut x[l + 1], f64::from, |v| v as f32, true, |_| ())?;
         }
         let (xf, xc) = x.split_at_mut(l + 1);
-        self.mg.prolong(l, &xc[0], &mut xf[l], self.owned(l));
+        self.mg.prolong(l, &xc[0], &mut xf[l], &self.owned(l));
         Ok(())
     }
 
-    /// Full multigrid from the owned layers of `rhs`.
+    /// Full multigrid from the owned box of `rhs`.
     fn full_multigrid(
         &self,
         rhs: &[f64],
@@ -550,13 +741,13 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         x: &mut Work,
         s: &mut Work,
     ) -> Result<(), DiffusionError> {
-        let slab = self.level(0).slab();
+        let dims = self.dims(0);
         let o = self.owned(0);
-        for (b, r) in b[0][o.start * slab..o.end * slab]
-            .iter_mut()
-            .zip(&rhs[o.start * slab..])
-        {
-            *b = *r as f32;
+        let n = o.axes[0].len();
+        for start in o.lines(dims) {
+            for (b, r) in b[0][start..start + n].iter_mut().zip(&rhs[start..]) {
+                *b = *r as f32;
+            }
         }
         let last = self.mg.levels.len() - 1;
         for l in 0..last {
@@ -565,7 +756,7 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
             }
             let (bf, bc) = b.split_at_mut(l + 1);
             self.level(l)
-                .restrict(&bf[l], self.level(l + 1), &mut bc[0], self.restricts_to(l));
+                .restrict(&bf[l], self.level(l + 1), &mut bc[0], &self.restricts_to(l));
             if self.hands_over(l) {
                 self.hand_down(l, &mut b[l + 1])?;
             }
@@ -596,9 +787,10 @@ struct Gathered {
 
 impl Multigrid {
     /// Whether `layout` splits this hierarchy over `ranks` ranks as a stage layout must:
-    /// stages cover the levels in order, the last on one rank; each stage's ranks (no more
-    /// than `ranks`, no more than its predecessor's) cover its first level's layers in
-    /// order, bounds multiples of 2^levels but the last.
+    /// stages cover the levels in order, the last on one rank; each stage's grid of boxes
+    /// (no more than `ranks` boxes, no more than its predecessor's) cuts each axis of its
+    /// first level in order, inner cuts multiples of 2^levels, and on the fine level x's
+    /// of `NORM_RUN` (so the norms are the serial bits).
     fn check_layout(&self, layout: &RankLayout, ranks: usize) -> Result<(), DiffusionError> {
         let invalid = |why: &str| {
             Err(DiffusionError::Invalid(format!(
@@ -617,17 +809,22 @@ impl Multigrid {
             if p == 0 || p > previous || (last != (p == 1)) {
                 return invalid("rank counts do not shrink to one on the last stage");
             }
-            let n = self.levels[level].dims[2];
-            let unit = 1usize << stage.levels.min(usize::BITS as usize - 1);
-            let mut at = 0;
-            for &(k0, k1) in &stage.layers {
-                if k0 != at || k1 <= k0 || (!last && k1 != n && k1 % unit != 0) {
-                    return invalid("slabs do not cover a level in whole units");
+            let dims = self.levels[level].dims;
+            let unit = 1usize << stage.levels.min(usize::BITS as usize - 2);
+            for (a, cuts) in stage.cuts.iter().enumerate() {
+                let unit = if level == 0 && a == 0 {
+                    unit.max(NORM_RUN)
+                } else {
+                    unit
+                };
+                let inner = cuts.get(1..cuts.len().saturating_sub(1)).unwrap_or(&[]);
+                if cuts.first() != Some(&0)
+                    || cuts.last() != Some(&dims[a])
+                    || cuts.windows(2).any(|w| w[1] <= w[0])
+                    || inner.iter().any(|c| c % unit != 0)
+                {
+                    return invalid("boxes do not cover a level in whole units");
                 }
-                at = k1;
-            }
-            if at != n {
-                return invalid("slabs do not cover a level");
             }
             previous = p;
             level += stage.levels;
@@ -671,8 +868,30 @@ impl Multigrid {
         ranks: usize,
         coarse_cells_per_rank: usize,
     ) -> Result<RankLayout, DiffusionError> {
+        self.layout(ranks, coarse_cells_per_rank, Decomposition::Slabs)
+    }
+
+    /// How this hierarchy splits over `ranks` ranks cut as `decomposition`, levels split
+    /// while they have at least `coarse_cells_per_rank` cells per rank (0: as far as the
+    /// cells allow; [`RankLayout::COARSE_CELLS_PER_RANK`] is the default).
+    ///
+    /// # Errors
+    /// [`DiffusionError::Ranks`] for no ranks, or more ranks than z-layers (slabs) or cells
+    /// (boxes).
+    pub fn layout(
+        &self,
+        ranks: usize,
+        coarse_cells_per_rank: usize,
+        decomposition: Decomposition,
+    ) -> Result<RankLayout, DiffusionError> {
         let dims: Vec<[usize; 3]> = self.levels.iter().map(|l| l.dims).collect();
-        RankLayout::new(&dims, ranks, self.settings().cycle, coarse_cells_per_rank)
+        RankLayout::with(
+            &dims,
+            ranks,
+            self.settings().cycle,
+            coarse_cells_per_rank,
+            decomposition,
+        )
     }
 
     /// [`Multigrid::solve`] on the ranks of `comm`, every rank calling it with the whole
@@ -725,9 +944,8 @@ impl Multigrid {
         };
         let started = std::time::Instant::now();
         let fine = self.fine();
-        let slab = fine.slab();
+        let dims = fine.dims;
         let o = on.owned(0);
-        let owned = o.start * slab..o.end * slab;
         // Σ of every rank's exact run sums, with every rank's flags: the serial norm's bits.
         let gather = |sum: ExactSum| -> Result<Gathered, DiffusionError> {
             let flags = stopping.local_flags(started);
@@ -751,25 +969,27 @@ impl Multigrid {
             },
             ..stopping.clone()
         };
-        let b_norm = gather(fine.squares_layers(rhs, o.clone()))?
+        let b_norm = gather(fine.squares_in(rhs, &o))?
             .norm
             .max(f64::MIN_POSITIVE);
         let (mut b, mut x, mut s) = self.work();
         if self.settings().full_multigrid {
             on.full_multigrid(rhs, &mut b, &mut x, &mut s)?;
-            for (p, x) in phi[owned.clone()].iter_mut().zip(&x[0][owned.clone()]) {
-                *p = f64::from(*x);
-            }
+            let values = o.read(dims, &x[0], f64::from);
+            o.write(dims, phi, &values, |v| v);
         }
         let mut r = vec![0.0f64; n];
         let true_residual = |phi: &mut [f64], r: &mut [f64]| -> Result<ExactSum, DiffusionError> {
-            on.halo(0, phi, |v| v, |v| v, |_| ())?;
-            Ok(fine.residual_layers(rhs, phi, r, o.clone()))
+            on.halo(0, phi, |v| v, |v| v, false, |_| ())?;
+            Ok(fine.residual_in(rhs, phi, r, &o))
         };
         let mut gathered = gather(true_residual(phi, &mut r)?)?;
         let to_b = |b: &mut [f32], r: &[f64]| {
-            for (b, r) in b[owned.clone()].iter_mut().zip(&r[owned.clone()]) {
-                *b = *r as f32;
+            let n = o.axes[0].len();
+            for start in o.lines(dims) {
+                for (b, r) in b[start..start + n].iter_mut().zip(&r[start..]) {
+                    *b = *r as f32;
+                }
             }
         };
         to_b(&mut b[0], &r);
@@ -803,14 +1023,23 @@ impl Multigrid {
             on.zero(0, &mut x[0]);
             on.cycle(0, self.settings().cycle, &mut b, &mut x, &mut s)?;
             on.halo32(0, &mut x[0])?;
-            gathered = gather(fine.correct_layers(&x[0], phi, &mut r, &mut b[0], o.clone()))?;
+            gathered = gather(fine.correct_in(&x[0], phi, &mut r, &mut b[0], &o))?;
             residuals.push(gathered.norm / b_norm);
         };
-        let whole = comm.all_gather(&phi[owned]);
-        if whole.len() != n {
+        // Every rank's box, in rank order (ranks past the fine stage hold none).
+        let whole = comm.all_gather(&o.read(dims, phi, |v| v));
+        let mut at = 0;
+        for q in 0..comm.size() {
+            let part = on.layout.owned(q, 0);
+            let end = at + part.cells();
+            if end > whole.len() || !part.write(dims, phi, &whole[at..end], |v| v) {
+                return Err(protocol(on.rank, "the solution's gather"));
+            }
+            at = end;
+        }
+        if at != n || whole.len() != n {
             return Err(protocol(on.rank, "the solution's gather"));
         }
-        phi.copy_from_slice(&whole);
         Ok(Convergence {
             residuals,
             stop_reason,

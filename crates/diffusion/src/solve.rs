@@ -8,6 +8,10 @@ use lucent_core::Stopping;
 use lucent_core::ranks::{Alone, Communicator, Threads};
 
 use crate::multigrid::{Convergence, Multigrid, MultigridSettings};
+use crate::ranks::{Decomposition, RankLayout};
+
+/// Coarse levels go to fewer ranks below this many cells per rank.
+const COARSE: usize = RankLayout::COARSE_CELLS_PER_RANK;
 use crate::problem::{Balance, DiffusionProblem, Sources};
 
 /// The iterative method.
@@ -155,16 +159,17 @@ pub enum RanksOf<'a> {
     Threads(usize),
 }
 
-/// [`solve`] by `Method::Multigrid(settings)` split over `ranks`
-/// ([`Multigrid::solve_on_ranks`]): every rank gets the whole solution, the same bits on any
-/// number of ranks. `memory_bytes` counts one rank's hierarchy and its work vectors (per
-/// in-process rank, the work vectors again).
+/// [`solve`] by `Method::Multigrid(settings)` split over `ranks` cut as `decomposition`
+/// ([`Multigrid::solve_on_layout`]): every rank gets the whole solution, the same bits on
+/// any number of ranks and either decomposition. `memory_bytes` counts one rank's hierarchy
+/// and its work vectors (per in-process rank, the work vectors again).
 pub fn solve_on_ranks(
     problem: &DiffusionProblem,
     sources: &Sources,
     settings: MultigridSettings,
     stopping: &Stopping,
     ranks: RanksOf<'_>,
+    decomposition: Decomposition,
 ) -> Result<DiffusionSolution, DiffusionError> {
     let started = Instant::now();
     let rhs = problem.rhs(sources)?;
@@ -179,16 +184,20 @@ pub fn solve_on_ranks(
         RanksOf::Alone | RanksOf::Communicator(_) => {
             let mut phi = vec![0.0f64; n];
             let c = match ranks {
-                RanksOf::Communicator(comm) => mg.solve_on_ranks(&rhs, &mut phi, stopping, comm),
+                RanksOf::Communicator(comm) => {
+                    let layout = mg.layout(comm.size(), COARSE, decomposition)?;
+                    mg.solve_on_layout(&rhs, &mut phi, stopping, comm, layout)
+                }
                 _ => mg.solve_on_ranks(&rhs, &mut phi, stopping, &Alone),
             }?;
             (phi, c, 1)
         }
         RanksOf::Threads(count) => {
             let (mg, rhs) = (&mg, &rhs);
+            let layout = mg.layout(count, COARSE, decomposition)?;
             let mut results = Threads::run(count, |comm| {
                 let mut phi = vec![0.0f64; rhs.len()];
-                mg.solve_on_ranks(rhs, &mut phi, stopping, comm)
+                mg.solve_on_layout(rhs, &mut phi, stopping, comm, layout.clone())
                     .map(|c| (phi, c))
             })
             .into_iter()

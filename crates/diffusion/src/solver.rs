@@ -32,7 +32,8 @@ use lucent_core::{
 };
 use lucent_core::{param_docs, resolved_params};
 
-use crate::params::{CgParams, JacobiParams, MultigridParams, SorParams};
+use crate::params::{CgParams, DecompositionParam, JacobiParams, MultigridParams, SorParams};
+use crate::ranks::Decomposition;
 use lucent_grid::Grid;
 
 use crate::geometry::{CellGeometry, Discretisation};
@@ -49,6 +50,8 @@ pub struct DiffusionSolver {
     discretisation: Discretisation,
     /// In-process ranks (`diffusion-mg`'s `ranks`).
     ranks: usize,
+    /// How the ranks cut the grid (`diffusion-mg`'s `decomposition`).
+    decomposition: Decomposition,
     /// Whether it splits over ranks (`diffusion-mg` only: its linear solve is
     /// `Multigrid::solve_on_ranks`; [`DiffusionSolver::custom`]'s are the caller's).
     splits: bool,
@@ -73,6 +76,7 @@ impl DiffusionSolver {
                 method: Method::Multigrid(p.settings()),
                 discretisation: p.discretisation.into(),
                 ranks: p.ranks,
+                decomposition: p.decomposition.decomposition(),
                 splits: true,
             }))
         },
@@ -92,6 +96,12 @@ impl DiffusionSolver {
                     "diffusion-mgcg runs in one process (diffusion-mg splits over ranks)",
                 ));
             }
+            if p.decomposition != DecompositionParam::Slabs {
+                return Err(invalid(
+                    "decomposition",
+                    "diffusion-mgcg runs in one process (diffusion-mg splits over ranks)",
+                ));
+            }
             let mut settings = p.settings();
             settings.full_multigrid = false;
             Ok(Box::new(DiffusionSolver {
@@ -99,6 +109,7 @@ impl DiffusionSolver {
                 method: Method::MultigridCg(settings),
                 discretisation: p.discretisation.into(),
                 ranks: 1,
+                decomposition: Decomposition::Slabs,
                 splits: false,
             }))
         },
@@ -117,6 +128,7 @@ impl DiffusionSolver {
                 method: Method::ConjugateGradient,
                 discretisation: p.discretisation.into(),
                 ranks: 1,
+                decomposition: Decomposition::Slabs,
                 splits: false,
             }))
         },
@@ -135,6 +147,7 @@ impl DiffusionSolver {
                 method: Method::Sor { omega: p.omega },
                 discretisation: p.discretisation.into(),
                 ranks: 1,
+                decomposition: Decomposition::Slabs,
                 splits: false,
             }))
         },
@@ -153,6 +166,7 @@ impl DiffusionSolver {
                 method: Method::Jacobi { omega: p.omega },
                 discretisation: p.discretisation.into(),
                 ranks: 1,
+                decomposition: Decomposition::Slabs,
                 splits: false,
             }))
         },
@@ -211,7 +225,7 @@ impl Solver for DiffusionSolver {
             // Lights outside enter as first-collision sources along curved rays
             // (`Uncollided::curved`); the scattered light diffuses as in a uniform index.
             graded_index: true,
-            // The multigrid splits over z-slabs (`Multigrid::solve_on_ranks`).
+            // The multigrid splits over z-slabs or boxes (`Multigrid::solve_on_layout`).
             ranks: self.splits,
             ..Capabilities::default()
         }
@@ -235,6 +249,7 @@ impl Solver for DiffusionSolver {
         // (`solve_on_ranks`: 29 bytes per cell).
         let memory = (cells * (4 * 14 + 8 * 4 + 24) + (self.ranks as u64 - 1) * cells * 29)
             * problem.channels() as u64;
+        let decomposition = self.decomposition;
         let ranks = match (world, self.ranks) {
             (Some(world), _) => RanksOf::Communicator(world.as_ref()),
             (None, 1) => RanksOf::Alone,
@@ -247,7 +262,7 @@ impl Solver for DiffusionSolver {
             &|diffusion, sources, stopping| match (method, ranks) {
                 (_, RanksOf::Alone) => solve(diffusion, sources, method, stopping),
                 (Method::Multigrid(settings), ranks) => {
-                    solve_on_ranks(diffusion, sources, settings, stopping, ranks)
+                    solve_on_ranks(diffusion, sources, settings, stopping, ranks, decomposition)
                 }
                 _ => solve(diffusion, sources, method, stopping),
             },
@@ -282,6 +297,7 @@ impl DiffusionSolver {
             }),
             discretisation: Discretisation::EmbeddedBoundary,
             ranks: 1,
+            decomposition: Decomposition::Slabs,
             splits: false,
         }
     }

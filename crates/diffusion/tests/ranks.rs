@@ -1,15 +1,16 @@
 //! Multigrid on ranks (`Multigrid::solve_on_ranks`) against the serial solve, on in-process
-//! ranks: the serial solve's bits (history, stop and φ) for every rank count, across
-//! grids whose sizes are not powers of two, media that fill the box or sit inside it,
-//! jumps of D, every cycle, both smoothers and both prolongations.
+//! ranks: the serial solve's bits (history, stop and φ) for every rank count, over z-slabs
+//! and over grids of boxes (cut along one, two and three axes), across grids whose sizes
+//! are not powers of two, media that fill the box or sit inside it, jumps of D, every
+//! cycle, both smoothers and both prolongations.
 
 use glam::DVec3;
 use lucent_core::Stopping;
 use lucent_core::ranks::{Communicator, Threads};
 use lucent_diffusion::{
-    Boundaries, CellGeometry, Condition, Convergence, Cycle, DiffusionError, DiffusionProblem,
-    Discretisation, Multigrid, MultigridSettings, Prolongation, RankLayout, Smoother, Sources,
-    Stage,
+    Boundaries, CellGeometry, Condition, Convergence, Cycle, Decomposition, DiffusionError,
+    DiffusionProblem, Discretisation, Multigrid, MultigridSettings, Prolongation, RankLayout,
+    Region, Smoother, Sources, Stage,
 };
 use lucent_grid::GridGeometry;
 use proptest::prelude::*;
@@ -79,13 +80,15 @@ fn stopping() -> Stopping {
 /// and agglomerated levels, the default agglomerates most of them here.
 const THRESHOLDS: [usize; 3] = [0, 64, RankLayout::COARSE_CELLS_PER_RANK];
 
-/// The solve on `ranks` in-process ranks, coarse levels agglomerated below `threshold`
-/// cells per rank: every rank's (φ, history), which must agree.
+/// The solve on `ranks` in-process ranks cut as `decomposition`, coarse levels
+/// agglomerated below `threshold` cells per rank: every rank's (φ, history), which must
+/// agree.
 fn on_ranks(
     mg: &Multigrid,
     rhs: &[f64],
     ranks: usize,
     threshold: usize,
+    decomposition: Decomposition,
 ) -> Result<(Vec<f64>, Convergence), DiffusionError> {
     let results: Vec<Result<(Vec<f64>, Convergence), DiffusionError>> = std::thread::scope(|s| {
         let handles: Vec<_> = Threads::world(ranks)
@@ -93,7 +96,7 @@ fn on_ranks(
             .map(|comm| {
                 s.spawn(move || {
                     let mut phi = vec![0.0; rhs.len()];
-                    let layout = mg.rank_layout_with(ranks, threshold)?;
+                    let layout = mg.layout(ranks, threshold, decomposition)?;
                     let c = mg.solve_on_layout(rhs, &mut phi, &stopping(), &comm, layout)?;
                     assert_eq!(comm.size(), ranks);
                     Ok((phi, c))
@@ -122,8 +125,16 @@ fn bits(v: &[f64]) -> Vec<u64> {
     v.iter().map(|x| x.to_bits()).collect()
 }
 
-/// Ranks 1..=max against each other and against the serial solve: the same bits.
+/// Ranks 1..=max, over slabs and over boxes, against each other and against the serial
+/// solve: the same bits.
 fn check(scene: Scene, settings: MultigridSettings, max_ranks: usize) {
+    let grids: Vec<Decomposition> = (2..=max_ranks).map(|_| Decomposition::Boxes).collect();
+    check_on(scene, settings, max_ranks, &grids);
+}
+
+/// [`check`] over slabs on 2..=`max_ranks` ranks, then over each of `boxes` (on the ranks
+/// a grid names, or 2..=`max_ranks` for [`Decomposition::Boxes`]).
+fn check_on(scene: Scene, settings: MultigridSettings, max_ranks: usize, boxes: &[Decomposition]) {
     let (problem, rhs) = system(scene);
     let mg = Multigrid::build(&problem, settings).unwrap();
     let mut serial = vec![0.0; rhs.len()];
@@ -132,16 +143,23 @@ fn check(scene: Scene, settings: MultigridSettings, max_ranks: usize) {
         expected.stop_reason.is_converged(),
         "{scene:?} {settings:?}: {expected:?}"
     );
-    let (one, history) = on_ranks(&mg, &rhs, 1, 0).unwrap();
+    let (one, history) = on_ranks(&mg, &rhs, 1, 0, Decomposition::Slabs).unwrap();
     // The same cells and arithmetic as the serial cycles, and the same norm (runs of eight
     // cells along x, their sums added exactly, whatever rank holds them): the serial
     // history, stop and φ to the bit.
     assert_eq!(history, expected, "{scene:?} {settings:?}");
     assert_eq!(bits(&one), bits(&serial), "{scene:?} {settings:?}");
-    for ranks in 2..=max_ranks {
+    let slabs = (2..=max_ranks).map(|r| (r, Decomposition::Slabs));
+    let boxes = boxes.iter().enumerate().map(|(i, &d)| match d {
+        Decomposition::Grid(g) => (g.iter().product(), d),
+        _ => (2 + i % (max_ranks - 1).max(1), d),
+    });
+    for (ranks, decomposition) in slabs.chain(boxes) {
         for threshold in THRESHOLDS {
-            let case = format!("{scene:?} {settings:?} on {ranks} ranks, {threshold} cells");
-            match on_ranks(&mg, &rhs, ranks, threshold) {
+            let case = format!(
+                "{scene:?} {settings:?} on {ranks} ranks as {decomposition:?}, {threshold} cells"
+            );
+            match on_ranks(&mg, &rhs, ranks, threshold, decomposition) {
                 Ok((phi, h)) => {
                     assert_eq!(h, history, "{case}");
                     assert_eq!(bits(&phi), bits(&one), "{case}");
@@ -193,6 +211,75 @@ fn every_cycle_smoother_and_prolongation_gives_the_one_rank_bits_on_four_ranks()
 }
 
 #[test]
+fn boxes_cut_along_every_axis_give_the_one_rank_bits() {
+    // Grids cut along x (in norm runs of 8), y and z, alone and together, up to 12 boxes,
+    // and the grid the layout picks: the halo crosses faces (smoothing, residuals), and
+    // for trilinear prolongation edges and corners; the hand-overs move boxes onto fewer
+    // ranks. Every cycle, both smoothers and both prolongations.
+    use Decomposition::{Boxes, Grid};
+    let grids = [
+        Grid([2, 1, 1]),
+        Grid([1, 3, 1]),
+        Grid([2, 2, 1]),
+        Grid([1, 2, 2]),
+        Grid([2, 2, 2]),
+        Grid([2, 3, 2]),
+        Boxes,
+    ];
+    let settings = [
+        MultigridSettings::default(),
+        MultigridSettings {
+            prolongation: Prolongation::Trilinear,
+            full_multigrid: false,
+            ..MultigridSettings::default()
+        },
+        MultigridSettings {
+            smoother: Smoother::Jacobi { omega: 6.0 / 7.0 },
+            prolongation: Prolongation::Trilinear,
+            ..MultigridSettings::default()
+        },
+        MultigridSettings {
+            cycle: Cycle::W,
+            ..MultigridSettings::default()
+        },
+        MultigridSettings {
+            cycle: Cycle::F,
+            prolongation: Prolongation::Trilinear,
+            ..MultigridSettings::default()
+        },
+        MultigridSettings {
+            cycle: Cycle::K,
+            ..MultigridSettings::default()
+        },
+    ];
+    let scene = Scene {
+        dims: [20, 18, 14],
+        sphere: true,
+        contrast: 30.0,
+        dirichlet_box: false,
+    };
+    for settings in settings {
+        check_on(scene, settings, 2, &grids);
+    }
+    // A medium that fills the box (every box face a cut through the medium), grids of odd
+    // sizes.
+    check_on(
+        Scene {
+            dims: [27, 13, 11],
+            sphere: false,
+            contrast: 5.0,
+            dirichlet_box: true,
+        },
+        MultigridSettings {
+            prolongation: Prolongation::Trilinear,
+            ..MultigridSettings::default()
+        },
+        2,
+        &[Grid([3, 1, 1]), Grid([1, 2, 3]), Grid([3, 2, 2]), Boxes],
+    );
+}
+
+#[test]
 fn a_medium_filling_the_box_with_dirichlet_faces() {
     check(
         Scene {
@@ -231,9 +318,16 @@ fn more_ranks_than_layers_is_a_typed_error() {
         dirichlet_box: false,
     });
     let mg = Multigrid::build(&problem, MultigridSettings::default()).unwrap();
-    let e = on_ranks(&mg, &rhs, 4, 0).unwrap_err();
+    let e = on_ranks(&mg, &rhs, 4, 0, Decomposition::Slabs).unwrap_err();
     assert!(matches!(e, DiffusionError::Ranks(_)), "{e}");
     assert!(e.to_string().contains("4 ranks for 3 z-layers"), "{e}");
+    // Boxes split the same grid over 4 ranks; a grid that is not one box per rank, or
+    // that cuts x into boxes narrower than a norm run, is an error.
+    assert!(on_ranks(&mg, &rhs, 4, 0, Decomposition::Boxes).is_ok());
+    for grid in [[1, 2, 1], [2, 2, 1]] {
+        let e = on_ranks(&mg, &rhs, 4, 0, Decomposition::Grid(grid)).unwrap_err();
+        assert!(matches!(e, DiffusionError::Ranks(_)), "{grid:?}: {e}");
+    }
 }
 
 /// The levels' dims of a hierarchy of `depth` levels over a fine grid `dims`.
@@ -245,13 +339,75 @@ fn level_dims(dims: [usize; 3], depth: usize) -> Vec<[usize; 3]> {
     .collect()
 }
 
+/// The checks every layout must pass: stages follow each other down to the coarsest level,
+/// which is rank 0's alone; rank counts never grow; each stage's cuts cover each axis of
+/// its first level in order with inner cuts in whole units of 2^levels (a coarse cell's
+/// children on one rank, down to the next stage), x's on the fine level in norm runs of
+/// 8; every rank keeps a unit on each level of its stage, and a coarse level the
+/// threshold's cells per rank; the boxes of a stage restrict to boxes that tile the next
+/// level.
+fn check_layout(layout: &RankLayout, levels: &[[usize; 3]], ranks: usize, threshold: usize) {
+    let case = format!("{:?} on {ranks} ranks, {threshold}: {layout:?}", levels[0]);
+    let depth = levels.len();
+    let last = layout.stages.last().unwrap();
+    assert_eq!(last.ranks(), 1, "{case}");
+    assert_eq!(last.first_level + last.levels, depth, "{case}");
+    let mut level = 0;
+    let mut previous = ranks;
+    for stage in &layout.stages {
+        assert_eq!(stage.first_level, level, "{case}");
+        assert!(stage.ranks() <= previous && stage.levels > 0, "{case}");
+        previous = stage.ranks();
+        let dims = levels[level];
+        for (a, cuts) in stage.cuts.iter().enumerate() {
+            assert_eq!(cuts.first(), Some(&0), "{case}");
+            assert_eq!(cuts.last(), Some(&dims[a]), "{case}");
+            let unit = (1 << stage.levels).max(if level == 0 && a == 0 { 8 } else { 1 });
+            if stage.ranks() > 1 {
+                for w in cuts.windows(2) {
+                    assert!(w[0] < w[1], "{case}");
+                }
+                for c in &cuts[1..cuts.len() - 1] {
+                    assert_eq!(c % unit, 0, "{case}");
+                }
+            }
+        }
+        if stage.ranks() > 1 {
+            for l in level..level + stage.levels {
+                let cells: usize = levels[l].iter().product();
+                assert!(l == 0 || cells >= stage.ranks() * threshold, "{case}");
+                for r in 0..stage.ranks() {
+                    assert!(!stage.owned(r, l).is_empty(), "{case}");
+                }
+            }
+            // Its boxes restrict to boxes that tile the next level: per axis, the boxes
+            // along it chain from 0 to the level's cells; their cells add up to the level's.
+            let next = level + stage.levels;
+            let grid = stage.grid();
+            for a in 0..3 {
+                let mut at = 0;
+                for c in 0..grid[a] {
+                    let mut coords = [0; 3];
+                    coords[a] = c;
+                    let o = stage.owned(stage.rank_at(coords), next);
+                    assert_eq!(o.axes[a].start, at, "{case}");
+                    at = o.axes[a].end;
+                }
+                assert_eq!(at, levels[next][a], "{case}");
+            }
+            let total: usize = (0..stage.ranks())
+                .map(|r| stage.owned(r, next).cells())
+                .sum();
+            assert_eq!(total, levels[next].iter().product::<usize>(), "{case}");
+        }
+        level += stage.levels;
+    }
+}
+
 #[test]
 fn the_layout_keeps_coarse_cells_on_one_rank_and_agglomerates_onto_fewer() {
-    // Stages follow each other down to the coarsest level, which is rank 0's alone; rank
-    // counts never grow; each stage's slabs cover its first level in order with bounds in
-    // whole units of 2^levels (a coarse cell's children on one rank, down to the next
-    // stage); every rank keeps a unit, and a coarse level the threshold's cells per rank;
-    // the fine level is split over every rank while each keeps two layers.
+    // Over slabs the fine level is split over every rank while each keeps two layers; over
+    // boxes over at least as many.
     let cases = [
         ([13, 11, 37], 4, 4),
         ([64, 64, 64], 5, 2),
@@ -260,53 +416,28 @@ fn the_layout_keeps_coarse_cells_on_one_rank_and_agglomerates_onto_fewer() {
         ([1024, 1024, 1024], 9, 1024),
         ([40, 40, 9], 2, 9),
         ([33, 17, 33], 5, 3),
+        ([50, 30, 6], 4, 5),
     ];
     for (dims, depth, ranks) in cases {
         let levels = level_dims(dims, depth);
         for threshold in [0, 64, RankLayout::COARSE_CELLS_PER_RANK] {
-            let layout = RankLayout::new(&levels, ranks, Cycle::V, threshold).unwrap();
-            let case = format!("{dims:?} {depth} {ranks} {threshold}: {layout:?}");
+            let slabs = RankLayout::new(&levels, ranks, Cycle::V, threshold).unwrap();
+            check_layout(&slabs, &levels, ranks, threshold);
             assert_eq!(
-                layout.stages[0].ranks(),
+                slabs.stages[0].ranks(),
                 ranks.min(dims[2] / 2).max(1),
-                "{case}"
+                "{dims:?} {ranks} {threshold}: {slabs:?}"
             );
-            let last = layout.stages.last().unwrap();
-            assert_eq!(last.ranks(), 1, "{case}");
-            assert_eq!(last.first_level + last.levels, depth, "{case}");
-            let mut level = 0;
-            let mut previous = ranks;
-            for stage in &layout.stages {
-                assert_eq!(stage.first_level, level, "{case}");
-                assert!(stage.ranks() <= previous && stage.levels > 0, "{case}");
-                previous = stage.ranks();
-                let n = levels[level][2];
-                assert_eq!(stage.layers.first().unwrap().0, 0, "{case}");
-                assert_eq!(stage.layers.last().unwrap().1, n, "{case}");
-                if stage.ranks() > 1 {
-                    for w in stage.layers.windows(2) {
-                        assert_eq!(w[0].1, w[1].0, "{case}");
-                        assert_eq!(w[0].1 % (1 << stage.levels), 0, "{case}");
-                    }
-                    for l in level..level + stage.levels {
-                        let cells: usize = levels[l].iter().product();
-                        assert!(l == 0 || cells >= stage.ranks() * threshold, "{case}");
-                        for r in 0..stage.ranks() {
-                            assert!(!stage.owned(r, l).is_empty(), "{case}");
-                        }
-                    }
-                    // Its slabs restrict to disjoint runs covering the next level.
-                    let next = level + stage.levels;
-                    let mut at = 0;
-                    for r in 0..stage.ranks() {
-                        let o = stage.owned(r, next);
-                        assert_eq!(o.start, at, "{case}");
-                        at = o.end;
-                    }
-                    assert_eq!(at, levels[next][2], "{case}");
-                }
-                level += stage.levels;
+            for stage in &slabs.stages {
+                assert_eq!(stage.grid()[..2], [1, 1], "{slabs:?}");
             }
+            let boxes = RankLayout::with(&levels, ranks, Cycle::V, threshold, Decomposition::Boxes)
+                .unwrap();
+            check_layout(&boxes, &levels, ranks, threshold);
+            assert!(
+                boxes.stages[0].ranks() >= slabs.stages[0].ranks(),
+                "{boxes:?} against {slabs:?}"
+            );
         }
     }
     // Splitting as far as the layers allow on 1024³ over 1024 ranks: the fine level on
@@ -331,9 +462,28 @@ fn the_layout_keeps_coarse_cells_on_one_rank_and_agglomerates_onto_fewer() {
     assert_eq!(stages, [(64, 3), (62, 1), (31, 1), (8, 1), (1, 2)]);
     // A level above a stage, or a rank outside it, owns nothing (no panic).
     let second = &layout.stages[1];
-    assert_eq!(second.owned(0, 0), 0..0);
-    assert_eq!(second.owned(63, 3), 0..0);
-    assert_eq!(second.owned(61, 3), 122..125);
+    assert!(second.owned(0, 0).is_empty());
+    assert!(second.owned(63, 3).is_empty());
+    assert_eq!(second.owned(61, 3), Region::layers([125; 3], 122..125));
+    // Boxes put the fine level of 1024³ on all 1024 ranks (slabs: 512, two layers each),
+    // as 8 × 8 × 16 boxes of 128 × 128 × 64 cells.
+    let layout = RankLayout::with(
+        &level_dims([1024; 3], 9),
+        1024,
+        Cycle::V,
+        RankLayout::COARSE_CELLS_PER_RANK,
+        Decomposition::Boxes,
+    )
+    .unwrap();
+    assert_eq!(layout.stages[0].ranks(), 1024);
+    let mut grid = layout.stages[0].grid();
+    grid.sort_unstable();
+    assert_eq!(grid, [8, 8, 16]);
+    // A chosen grid is the fine stage's; the coarse stages pick theirs.
+    let levels = level_dims([40, 24, 20], 3);
+    let layout = RankLayout::with(&levels, 6, Cycle::V, 0, Decomposition::Grid([3, 2, 1])).unwrap();
+    assert_eq!(layout.stages[0].grid(), [3, 2, 1]);
+    check_layout(&layout, &levels, 6, 0);
 }
 
 #[test]
@@ -355,12 +505,27 @@ fn a_layout_of_another_hierarchy_is_a_typed_error() {
                 Stage {
                     first_level: 0,
                     levels: 2,
-                    layers: vec![(0, 6), (6, 16)],
+                    cuts: [vec![0, 8], vec![0, 8], vec![0, 6, 16]],
                 },
                 Stage {
                     first_level: 2,
                     levels: mg.depth() - 2,
-                    layers: vec![(0, 4)],
+                    cuts: [vec![0, 2], vec![0, 2], vec![0, 4]],
+                },
+            ],
+        },
+        // Boxes that cut x inside a norm run (the norms would not be the serial bits).
+        RankLayout {
+            stages: vec![
+                Stage {
+                    first_level: 0,
+                    levels: 1,
+                    cuts: [vec![0, 4, 8], vec![0, 8], vec![0, 16]],
+                },
+                Stage {
+                    first_level: 1,
+                    levels: mg.depth() - 1,
+                    cuts: [vec![0, 4], vec![0, 4], vec![0, 8]],
                 },
             ],
         },

@@ -1,7 +1,8 @@
 //! # lucent-mpi: lucent's solvers on MPI ranks
 //!
 //! The solvers that split over ranks take any `lucent_core::ranks::Communicator`:
-//! `lucent_diffusion::Multigrid::solve_on_ranks` (the distributed multigrid, z-slabs),
+//! `lucent_diffusion::Multigrid::solve_on_layout` (the distributed multigrid, z-slabs or a
+//! Cartesian grid of boxes),
 //! `lucent_explicit::ranks::iterate_on` (FTCS and Jacobi to steady state, z-slabs or a
 //! Cartesian grid of boxes),
 //! `lucent_explicit::ranks::march_p1_on` (P1 by FTCS, z-slabs or boxes),
