@@ -501,6 +501,17 @@ impl Level {
             return;
         }
         let z = region.z();
+        if region.cells() < PARALLEL_MIN_CELLS {
+            // Too little work for rayon's hand-offs (a box's face, a coarse level): the
+            // slabs in turn, here.
+            let slab = self.slab();
+            for k in z {
+                on_slab_of_run(x, slab, k, None, None, |xs, below, above| {
+                    self.colour(b, k, colour, omega, xs, below, above, region);
+                });
+            }
+            return;
+        }
         // Slabs of one parity at a time, so no two written slabs are adjacent.
         for parity in 0..2 {
             self.on_slabs(
@@ -753,6 +764,34 @@ impl Level {
         }
     }
 
+    /// [`Level::interior_residuals`] of one cell: the same operations in the same order,
+    /// so the same bits (tested).
+    #[inline(always)]
+    fn interior_residual<T: Real>(
+        &self,
+        b: &[T],
+        g: usize,
+        l: usize,
+        x: &[T],
+        below: &[T],
+        above: &[T],
+    ) -> T {
+        let nx = self.dims[0];
+        let slab = self.slab();
+        let [cx, cy, cz] = &self.couplings;
+        let f = T::from;
+        let (cw, ce, cs, cn, cd, cu) = (cx[g], cx[g + 1], cy[g], cy[g + nx], cz[g], cz[g + slab]);
+        let s = b[g]
+            + f(cw) * x[l - 1]
+            + f(ce) * x[l + 1]
+            + f(cs) * x[l - nx]
+            + f(cn) * x[l + nx]
+            + f(cd) * below[l]
+            + f(cu) * above[l];
+        let d = f(self.extra[g]) + f(cw) + f(cs) + f(cd) + f(ce) + f(cn) + f(cu);
+        s - d * x[l]
+    }
+
     /// Cells from..to of an interior row (1 ≤ from, to ≤ nx − 1: all six neighbours
     /// present) for one colour. The update is computed for every cell of a block of the row
     /// into a buffer, from contiguous slices, so that it vectorises; then only the colour's
@@ -776,6 +815,19 @@ impl Level {
             omega,
         } = row;
         let relaxed = omega != T::from(1.0);
+        if to - from < SHORT_ROW {
+            // A few cells (a box's face column, a sliver of the medium): the colour's cells
+            // one by one, in the block's arithmetic.
+            let mut i = if from % 2 == parity { from } else { from + 1 };
+            while i < to {
+                let (g, l) = (g0 + i, l0 + i);
+                let step =
+                    self.interior_residual(b, g, l, x, below, above) * T::from(self.inv_diag[g]);
+                x[l] += if relaxed { omega * step } else { step };
+                i += 2;
+            }
+            return;
+        }
         let mut buffer = [T::default(); BLOCK];
         let mut start = from;
         while start < to {
@@ -1126,6 +1178,10 @@ pub(crate) const PARALLEL_MIN_CELLS: usize = 16 * 1024;
 /// Cells per block of the vectorised row kernels.
 const BLOCK: usize = 64;
 
+/// Below this many cells an interior row is swept cell by cell: the block's set-up costs
+/// more than the arithmetic (a box's face column is one cell per row).
+const SHORT_ROW: usize = 8;
+
 /// Where an interior row sweep writes: the row's first cell in the level and in its slab,
 /// the parity of the cells it updates, and the relaxation factor.
 struct RowSweep<T> {
@@ -1260,6 +1316,39 @@ mod tests {
             let mut x = vec![0.5f32; lv.len()];
             lv.sor(&b, &mut x, 0, 1.0);
             assert_red_then_black(&lv, &b, &x);
+        }
+    }
+
+    #[test]
+    fn a_cell_by_cell_residual_is_the_blocks_bits() {
+        // Short rows are swept cell by cell (`Level::interior_residual`), long ones in
+        // blocks (`Level::interior_residuals`): the two must agree to the bit, or a box's
+        // face column would differ from the same cells in one process's rows.
+        for lv in media() {
+            let [nx, ny, nz] = lv.dims;
+            let slab = nx * ny;
+            let x: Vec<f32> = (0..lv.len())
+                .map(|g| ((g * 7919) % 1013) as f32 / 97.0 - 5.0)
+                .collect();
+            let b: Vec<f32> = (0..lv.len())
+                .map(|g| ((g * 31) % 17) as f32 - 8.0)
+                .collect();
+            for k in 1..nz - 1 {
+                let (xs, below, above) = (
+                    &x[k * slab..(k + 1) * slab],
+                    &x[(k - 1) * slab..k * slab],
+                    &x[(k + 1) * slab..(k + 2) * slab],
+                );
+                for j in 1..ny - 1 {
+                    let (l, g) = (1 + nx * j, k * slab + 1 + nx * j);
+                    let mut block = vec![0.0f32; nx - 2];
+                    lv.interior_residuals(&b, g, l, xs, below, above, &mut block);
+                    for (t, r) in block.iter().enumerate() {
+                        let one = lv.interior_residual(&b, g + t, l + t, xs, below, above);
+                        assert_eq!(one.to_bits(), r.to_bits(), "cell {}", g + t);
+                    }
+                }
+            }
         }
     }
 

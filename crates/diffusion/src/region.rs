@@ -102,9 +102,14 @@ impl Region {
     /// Its values of `v` (a level's vector), x-line by x-line.
     pub fn read<T: Copy>(&self, dims: [usize; 3], v: &[T], to: impl Fn(T) -> f64) -> Vec<f64> {
         let n = self.axes[0].len();
-        let mut out = Vec::with_capacity(self.cells());
-        for start in self.lines(dims) {
-            out.extend(v[start..start + n].iter().map(|&x| to(x)));
+        let mut out = vec![0.0; self.cells()];
+        if n == 0 {
+            return out;
+        }
+        for (start, line) in self.lines(dims).zip(out.chunks_exact_mut(n)) {
+            for (o, &x) in line.iter_mut().zip(&v[start..start + n]) {
+                *o = to(x);
+            }
         }
         out
     }
