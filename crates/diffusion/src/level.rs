@@ -54,6 +54,10 @@ pub(crate) struct Level {
     /// the medium ([0, 0] for a row without any): the kernels that update or restrict run
     /// on these cells only.
     spans: Vec<[u32; 2]>,
+    /// The parity of the sum of this grid's first cell's coordinates in the whole level (0
+    /// for a whole level; a rank's box stored alone may start on a black cell): a cell's
+    /// colour is that of i + j + k + parity.
+    parity: usize,
 }
 
 impl Level {
@@ -84,7 +88,31 @@ impl Level {
             extra,
             inv_diag,
             spans,
+            parity: 0,
         }
+    }
+
+    /// The operator on the cells `origin + [0, dims)` of this level, as a level of its own
+    /// (a rank's box and the halo around it). Each cell keeps its couplings, so a cell whose
+    /// neighbours are all in the box, or in its halo, has the same row as here; a cell on
+    /// the box's edge of the grid is on the edge of this one too.
+    pub(crate) fn extract(&self, origin: [usize; 3], dims: [usize; 3]) -> Level {
+        let region = Region::new(std::array::from_fn(|a| origin[a]..origin[a] + dims[a]));
+        let cut = |v: &[f32]| region.cut(self.dims, v);
+        let parity = (self.parity + origin.iter().sum::<usize>()) % 2;
+        let level = Level::new(
+            dims,
+            self.spacing,
+            [
+                cut(&self.couplings[0]),
+                cut(&self.couplings[1]),
+                cut(&self.couplings[2]),
+            ],
+            cut(&self.diag),
+            cut(&self.extra),
+            cut(&self.inv_diag),
+        );
+        Level { parity, ..level }
     }
 
     /// Row j of slab k: the span lo..hi of its cells that are in the medium.
@@ -619,7 +647,7 @@ impl Level {
         for j in region.y() {
             let (lo, hi) = self.span_within(j, k, &cols);
             // Cells of the colour have i ≡ first (mod 2).
-            let first = (colour + j + k) % 2;
+            let first = (colour + j + k + self.parity) % 2;
             let (from, to) = (lo.max(1), hi.min(nx.saturating_sub(1)));
             if let (true, Some(below), Some(above)) =
                 (j > 0 && j + 1 < ny && from < to, below, above)
@@ -924,11 +952,12 @@ impl Level {
         coarse: &Level,
         out: &mut [f32],
         coarse_region: &Region,
+        o: Origins,
     ) {
         let [nx, ny, nz] = self.dims;
         let [cx, cy, _] = coarse.dims;
         let slab = nx * ny;
-        let (rows, cols) = self.children(coarse_region);
+        let (rows, cols) = self.children(coarse_region, o);
         let z = coarse_region.z();
         out[z.start * cx * cy..z.end * cx * cy]
             .par_chunks_mut(cx * cy)
@@ -937,13 +966,13 @@ impl Level {
             .for_each(|(t, out)| {
                 let kc = z.start + t;
                 coarse.clear_rows(out, coarse_region);
-                for k in 2 * kc..(2 * kc + 2).min(nz) {
+                for k in o.children(2, kc, nz) {
                     let xs = &x[k * slab..(k + 1) * slab];
                     let below = (k > 0).then(|| &x[(k - 1) * slab..k * slab]);
                     let above = (k + 1 < nz).then(|| &x[(k + 1) * slab..(k + 2) * slab]);
                     let mut buffer = [0.0f32; BLOCK];
                     for j in rows.clone() {
-                        let row = (j / 2) * cx;
+                        let row = o.parent(1, j) * cx;
                         let (lo, hi) = self.span_within(j, k, &cols);
                         let general = |i: usize| {
                             let l = i + nx * j;
@@ -959,12 +988,12 @@ impl Level {
                             (below, above, j > 0 && j + 1 < ny && from < to)
                         else {
                             for i in lo..hi {
-                                out[row + i / 2] += general(i);
+                                out[row + o.parent(0, i)] += general(i);
                             }
                             continue;
                         };
                         for i in (lo..from).chain(to..hi) {
-                            out[row + i / 2] += general(i);
+                            out[row + o.parent(0, i)] += general(i);
                         }
                         let mut start = from;
                         while start < to {
@@ -976,7 +1005,7 @@ impl Level {
                             let medium = &self.inv_diag[g..g + len];
                             for (t, (r, d)) in r.iter().zip(medium).enumerate() {
                                 if *d != 0.0 {
-                                    out[row + (start + t) / 2] += r;
+                                    out[row + o.parent(0, start + t)] += r;
                                 }
                             }
                             start += len;
@@ -994,11 +1023,12 @@ impl Level {
         coarse: &Level,
         out: &mut [f32],
         coarse_region: &Region,
+        o: Origins,
     ) {
         let [nx, ny, nz] = self.dims;
         let [cx, cy, _] = coarse.dims;
         let slab = nx * ny;
-        let (rows, cols) = self.children(coarse_region);
+        let (rows, cols) = self.children(coarse_region, o);
         let z = coarse_region.z();
         out[z.start * cx * cy..z.end * cx * cy]
             .par_chunks_mut(cx * cy)
@@ -1007,14 +1037,14 @@ impl Level {
             .for_each(|(t, out)| {
                 let kc = z.start + t;
                 coarse.clear_rows(out, coarse_region);
-                for k in 2 * kc..(2 * kc + 2).min(nz) {
+                for k in o.children(2, kc, nz) {
                     for j in rows.clone() {
-                        let row = (j / 2) * cx;
+                        let row = o.parent(1, j) * cx;
                         let (lo, hi) = self.span_within(j, k, &cols);
                         let g = k * slab + nx * j;
                         for i in lo..hi {
                             if self.inv_diag[g + i] != 0.0 {
-                                out[row + i / 2] += b[g + i];
+                                out[row + o.parent(0, i)] += b[g + i];
                             }
                         }
                     }
@@ -1024,10 +1054,11 @@ impl Level {
 
     /// The fine rows (y) and columns (x) under the coarse `region` (whole children; the
     /// last clipped to this level).
-    fn children(&self, coarse_region: &Region) -> (Range<usize>, Range<usize>) {
+    fn children(&self, coarse_region: &Region, o: Origins) -> (Range<usize>, Range<usize>) {
         let under = |a: usize| {
             let r = &coarse_region.axes[a];
-            (2 * r.start).min(self.dims[a])..(2 * r.end).min(self.dims[a])
+            let n = self.dims[a];
+            o.children(a, r.start, n).start..o.children(a, r.end, n).start
         };
         (under(1), under(0))
     }
@@ -1042,7 +1073,14 @@ impl Level {
     }
 
     /// x_fine += x_coarse of the parent (piecewise-constant prolongation), on `region`.
-    pub(crate) fn prolong_add(&self, coarse: &Level, xc: &[f32], x: &mut [f32], region: &Region) {
+    pub(crate) fn prolong_add(
+        &self,
+        coarse: &Level,
+        xc: &[f32],
+        x: &mut [f32],
+        region: &Region,
+        o: Origins,
+    ) {
         let [nx, ny, _] = self.dims;
         let [cx, cy, _] = coarse.dims;
         let z = region.z();
@@ -1053,13 +1091,13 @@ impl Level {
             .enumerate()
             .for_each(|(t, xs)| {
                 let k = z.start + t;
-                let base = (k / 2) * cx * cy;
+                let base = o.parent(2, k) * cx * cy;
                 for j in region.y() {
-                    let row = base + (j / 2) * cx;
+                    let row = base + o.parent(1, j) * cx;
                     let (lo, hi) = self.span_within(j, k, &cols);
                     for i in lo..hi {
                         if self.inv_diag[k * nx * ny + i + nx * j] != 0.0 {
-                            xs[i + nx * j] += xc[row + i / 2];
+                            xs[i + nx * j] += xc[row + o.parent(0, i)];
                         }
                     }
                 }
@@ -1076,6 +1114,7 @@ impl Level {
         xc: &[f32],
         x: &mut [f32],
         region: &Region,
+        o: Origins,
     ) {
         let [nx, ny, _] = self.dims;
         let [cx, cy, cz] = coarse.dims;
@@ -1087,15 +1126,15 @@ impl Level {
             .enumerate()
             .for_each(|(t, xs)| {
                 let k = z.start + t;
-                let kc = k / 2;
-                let kn = if k.is_multiple_of(2) {
+                let kc = o.parent(2, k);
+                let kn = if o.even(2, k) {
                     kc.checked_sub(1)
                 } else {
                     Some(kc + 1).filter(|&v| v < cz)
                 };
                 for j in region.y() {
-                    let jc = j / 2;
-                    let jn = if j % 2 == 0 {
+                    let jc = o.parent(1, j);
+                    let jn = if o.even(1, j) {
                         jc.checked_sub(1)
                     } else {
                         Some(jc + 1).filter(|&v| v < cy)
@@ -1106,8 +1145,8 @@ impl Level {
                         if self.inv_diag[k * nx * ny + l] == 0.0 {
                             continue;
                         }
-                        let ic = i / 2;
-                        let inb = if i % 2 == 0 {
+                        let ic = o.parent(0, i);
+                        let inb = if o.even(0, i) {
                             ic.checked_sub(1)
                         } else {
                             Some(ic + 1).filter(|&v| v < cx)
@@ -1143,6 +1182,37 @@ impl Level {
         let dims = self.dims.map(|n| if n == 1 { 1 } else { n.div_ceil(2) });
         let scale = DVec3::from_array(self.dims.map(|n| if n == 1 { 1.0 } else { 2.0 }));
         (dims, self.spacing * scale)
+    }
+}
+
+/// Where a fine level's vector and its coarse level's start in their whole grids, per axis
+/// (x, y, z): fine index i is cell `fine + i` of the fine grid, coarse index i cell
+/// `coarse + i` of the coarse grid. Zero for vectors of whole levels; a rank's box and halo
+/// otherwise.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Origins {
+    pub(crate) fine: [usize; 3],
+    pub(crate) coarse: [usize; 3],
+}
+
+impl Origins {
+    /// The coarse index of fine index `i`'s parent on axis `a`.
+    #[inline(always)]
+    fn parent(&self, a: usize, i: usize) -> usize {
+        (i + self.fine[a]) / 2 - self.coarse[a]
+    }
+
+    /// Whether fine index `i` is its parent's lower child on axis `a`.
+    #[inline(always)]
+    fn even(&self, a: usize, i: usize) -> bool {
+        (i + self.fine[a]).is_multiple_of(2)
+    }
+
+    /// The fine indices of coarse index `ic`'s children on axis `a`, within `n` fine cells.
+    #[inline(always)]
+    fn children(&self, a: usize, ic: usize, n: usize) -> Range<usize> {
+        let first = (2 * (ic + self.coarse[a])).saturating_sub(self.fine[a]);
+        first.min(n)..(first + 2).min(n)
     }
 }
 
@@ -1455,6 +1525,115 @@ mod tests {
     }
 
     #[test]
+    fn transfers_on_a_box_stored_alone_are_the_levels_bits() {
+        // A rank holds its box and the cells around it as a level of its own
+        // (`Level::extract`), the coarse level likewise: restriction and both
+        // prolongations there, shifted by `Origins`, a colour of the sweep (whose cells
+        // are those of the whole level's colour: a box at an odd origin starts on the
+        // other colour) and the residual must give the bits of the same kernels on the
+        // whole levels, for boxes at odd and even origins, touching the grid's faces or
+        // not.
+        for lv in media() {
+            let (cdims, spacing) = lv.coarse_shape();
+            let cn: usize = cdims.iter().product();
+            let c_inv: Vec<f32> = (0..cn)
+                .map(|c| if c % 7 == 3 { 0.0 } else { 0.5 })
+                .collect();
+            let zeros = vec![0.0f32; cn];
+            let coarse = Level::new(
+                cdims,
+                spacing,
+                [zeros.clone(), zeros.clone(), zeros.clone()],
+                zeros.clone(),
+                zeros,
+                c_inv,
+            );
+            let n = lv.len();
+            let b: Vec<f32> = (0..n).map(|g| ((g * 13) % 7) as f32 - 3.0).collect();
+            let x: Vec<f32> = (0..n).map(|g| ((g * 29) % 11) as f32 * 0.1).collect();
+            let xc: Vec<f32> = (0..cn).map(|c| ((c * 17) % 5) as f32 - 2.0).collect();
+            let dims = lv.dims;
+            let halves = |a: usize| {
+                let c = cdims[a];
+                [
+                    0..c,
+                    0..c.div_ceil(2),
+                    c / 2..c,
+                    (c / 3)..(c / 3 + 1).min(c),
+                ]
+            };
+            for rx in halves(0) {
+                for rz in halves(2) {
+                    let rc = Region::new([rx.clone(), 0..cdims[1], rz.clone()]);
+                    if rc.is_empty() {
+                        continue;
+                    }
+                    let rf = Region::new(std::array::from_fn(|a| {
+                        (2 * rc.axes[a].start).min(dims[a])..(2 * rc.axes[a].end).min(dims[a])
+                    }));
+                    let (gf, gc) = (rf.grown(1, dims), rc.grown(1, cdims));
+                    let origin = |g: &Region| std::array::from_fn(|a| g.axes[a].start);
+                    let size = |g: &Region| std::array::from_fn(|a| g.axes[a].len());
+                    let o = Origins {
+                        fine: origin(&gf),
+                        coarse: origin(&gc),
+                    };
+                    let local = |g: &Region, r: &Region| {
+                        Region::new(std::array::from_fn(|a| {
+                            r.axes[a].start - g.axes[a].start..r.axes[a].end - g.axes[a].start
+                        }))
+                    };
+                    let (lf, lc) = (
+                        lv.extract(o.fine, size(&gf)),
+                        coarse.extract(o.coarse, size(&gc)),
+                    );
+                    let (bl, xl, xcl) = (gf.cut(dims, &b), gf.cut(dims, &x), gc.cut(cdims, &xc));
+                    // Restriction.
+                    let mut whole = vec![0.0f32; cn];
+                    lv.restrict_residual(&b, &x, &coarse, &mut whole, &rc, Origins::default());
+                    let mut part = vec![0.0f32; lc.len()];
+                    lf.restrict_residual(&bl, &xl, &lc, &mut part, &local(&gc, &rc), o);
+                    assert_eq!(rc.cut(cdims, &whole), local(&gc, &rc).cut(lc.dims, &part));
+                    // Prolongations.
+                    for trilinear in [false, true] {
+                        let mut whole = x.clone();
+                        let mut part = xl.clone();
+                        if trilinear {
+                            lv.prolong_trilinear_add(
+                                &coarse,
+                                &xc,
+                                &mut whole,
+                                &rf,
+                                Origins::default(),
+                            );
+                            lf.prolong_trilinear_add(&lc, &xcl, &mut part, &local(&gf, &rf), o);
+                        } else {
+                            lv.prolong_add(&coarse, &xc, &mut whole, &rf, Origins::default());
+                            lf.prolong_add(&lc, &xcl, &mut part, &local(&gf, &rf), o);
+                        }
+                        assert_eq!(rf.cut(dims, &whole), local(&gf, &rf).cut(lf.dims, &part));
+                    }
+                    // A colour of the sweep and the residual on the box.
+                    let mut whole = x.clone();
+                    let mut part = xl.clone();
+                    lv.colour_in(&b, &mut whole, 1, 1.0, &rf);
+                    lf.colour_in(&bl, &mut part, 1, 1.0, &local(&gf, &rf));
+                    assert_eq!(rf.cut(dims, &whole), local(&gf, &rf).cut(lf.dims, &part));
+                    let (b64, bl64): (Vec<f64>, Vec<f64>) = (
+                        b.iter().map(|&v| f64::from(v)).collect(),
+                        bl.iter().map(|&v| f64::from(v)).collect(),
+                    );
+                    let (mut r, mut rl) = (vec![0.0; n], vec![0.0; lf.len()]);
+                    let sum = lv.residual_in(&b64, &x, &mut r, &rf);
+                    let suml = lf.residual_in(&bl64, &xl, &mut rl, &local(&gf, &rf));
+                    assert_eq!(rf.cut(dims, &r), local(&gf, &rf).cut(lf.dims, &rl));
+                    assert_eq!(sum.value().to_bits(), suml.value().to_bits());
+                }
+            }
+        }
+    }
+
+    #[test]
     fn restriction_sums_the_residual_of_the_medium() {
         for lv in media() {
             let (dims, spacing) = lv.coarse_shape();
@@ -1474,7 +1653,14 @@ mod tests {
                 .map(|g| if medium(g) { (g % 5) as f32 * 0.1 } else { 0.0 })
                 .collect();
             let mut out = vec![0.0f32; coarse.len()];
-            lv.restrict_residual(&b, &x, &coarse, &mut out, &coarse.whole());
+            lv.restrict_residual(
+                &b,
+                &x,
+                &coarse,
+                &mut out,
+                &coarse.whole(),
+                Origins::default(),
+            );
             let b64: Vec<f64> = b.iter().map(|&v| f64::from(v)).collect();
             let mut r = vec![0.0; n];
             let _ = lv.residual(&b64, &x, &mut r);
@@ -1495,8 +1681,15 @@ mod tests {
             // same order.
             let mut residual = vec![0.0f32; coarse.len()];
             let mut plain = vec![1.0f32; coarse.len()];
-            lv.restrict_residual(&b, &vec![0.0; n], &coarse, &mut residual, &coarse.whole());
-            lv.restrict(&b, &coarse, &mut plain, &coarse.whole());
+            lv.restrict_residual(
+                &b,
+                &vec![0.0; n],
+                &coarse,
+                &mut residual,
+                &coarse.whole(),
+                Origins::default(),
+            );
+            lv.restrict(&b, &coarse, &mut plain, &coarse.whole(), Origins::default());
             assert_eq!(residual, plain);
         }
     }

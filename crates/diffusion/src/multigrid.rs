@@ -25,7 +25,7 @@ use std::sync::Mutex;
 use rayon::prelude::*;
 
 use crate::error::DiffusionError;
-use crate::level::{Level, norm2};
+use crate::level::{Level, Origins, norm2};
 use crate::problem::{Boundaries, DiffusionProblem, LevelData, coarsen};
 
 /// The shape of a multigrid cycle.
@@ -413,7 +413,14 @@ impl Multigrid {
         {
             let (bf, bc) = b.split_at_mut(l + 1);
             let coarse = &self.levels[l + 1];
-            self.levels[l].restrict_residual(&bf[l], &x[l], coarse, &mut bc[0], &coarse.whole());
+            self.levels[l].restrict_residual(
+                &bf[l],
+                &x[l],
+                coarse,
+                &mut bc[0],
+                &coarse.whole(),
+                Origins::default(),
+            );
         }
         x[l + 1].fill(0.0);
         match cycle {
@@ -517,12 +524,20 @@ impl Multigrid {
     /// Adds the prolonged correction to `region` of level `l`.
     pub(crate) fn prolong(&self, l: usize, coarse: &[f32], fine: &mut [f32], region: &Region) {
         match self.settings.prolongation {
-            Prolongation::Constant => {
-                self.levels[l].prolong_add(&self.levels[l + 1], coarse, fine, region)
-            }
-            Prolongation::Trilinear => {
-                self.levels[l].prolong_trilinear_add(&self.levels[l + 1], coarse, fine, region)
-            }
+            Prolongation::Constant => self.levels[l].prolong_add(
+                &self.levels[l + 1],
+                coarse,
+                fine,
+                region,
+                Origins::default(),
+            ),
+            Prolongation::Trilinear => self.levels[l].prolong_trilinear_add(
+                &self.levels[l + 1],
+                coarse,
+                fine,
+                region,
+                Origins::default(),
+            ),
         }
     }
 
@@ -559,7 +574,13 @@ impl Multigrid {
         for l in 0..self.levels.len() - 1 {
             let (bf, bc) = b.split_at_mut(l + 1);
             let coarse = &self.levels[l + 1];
-            self.levels[l].restrict(&bf[l], coarse, &mut bc[0], &coarse.whole());
+            self.levels[l].restrict(
+                &bf[l],
+                coarse,
+                &mut bc[0],
+                &coarse.whole(),
+                Origins::default(),
+            );
         }
         let last = self.levels.len() - 1;
         x[last].fill(0.0);

@@ -43,15 +43,26 @@
 //! cancellation are each rank's own and travel with the reduction, so all ranks stop on
 //! the same cycle.
 //!
-//! **Not yet.** Every rank holds the whole hierarchy and full-length work vectors (it
-//! touches only its boxes and their halos), so memory does not scale with ranks.
+//! **Storage.** On a split level a rank works on its box and the cells around it held as a
+//! level of their own (`Level::extract`: the operator copied, the work vectors that size),
+//! so its sweeps stream its own x-lines: a box cut along x inside full-length vectors swept
+//! 3.5× slower per cell (BENCHMARKS.md). The transfers map indices through the two grids'
+//! origins (`level::Origins`) and a box's colours through its origin's parity; the
+//! hand-overs go through a second frame per stage boundary (the cells a rank restricts to
+//! and one around them). Rank 0 keeps its serial stage's levels whole.
+//!
+//! **Not yet.** Every rank still builds the whole hierarchy (`Multigrid::build`) before it
+//! extracts its boxes, and takes the whole right-hand side and returns the whole φ, so
+//! memory does not scale with ranks.
 
 use lucent_core::exact::{ExactSum, NORM_RUN};
 use lucent_core::ranks::{Communicator, all_reduce_sums};
 use lucent_core::{StopReason, Stopping};
 
 use crate::error::DiffusionError;
-use crate::level::Level;
+use std::borrow::Cow;
+
+use crate::level::{Level, Origins};
 use crate::multigrid::{Convergence, Cycle, Multigrid, Prolongation, Smoother, Work};
 use crate::region::Region;
 
@@ -326,12 +337,84 @@ impl RankLayout {
     }
 }
 
-/// One rank's view of the distributed solve: the communicator, the layout, the hierarchy.
+/// A rank's storage of one level: a box of the level's cells (a rank's box and the cells
+/// around it, or the whole level) held as a grid of its own, so that a box cut along x
+/// streams its own x-lines instead of parts of the level's (a sweep of the same cells ran
+/// 3.5× faster so stored, BENCHMARKS.md).
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Frame {
+    /// Its first cell in the level.
+    origin: [usize; 3],
+    /// Its cells per axis.
+    dims: [usize; 3],
+}
+
+impl Frame {
+    /// The whole level.
+    fn whole(dims: [usize; 3]) -> Self {
+        Self {
+            origin: [0; 3],
+            dims,
+        }
+    }
+
+    /// `region` and one cell around it, within a level of `dims`.
+    fn around(region: &Region, dims: [usize; 3]) -> Self {
+        let grown = region.grown(1, dims);
+        Self {
+            origin: std::array::from_fn(|a| grown.axes[a].start),
+            dims: std::array::from_fn(|a| grown.axes[a].len()),
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.dims.iter().product()
+    }
+
+    /// `region` (cells of the level) in this frame's indices; it must lie inside.
+    fn local(&self, region: &Region) -> Region {
+        if region.is_empty() {
+            return Region::default();
+        }
+        Region::new(std::array::from_fn(|a| {
+            region.axes[a].start - self.origin[a]..region.axes[a].end - self.origin[a]
+        }))
+    }
+}
+
+/// A frame and the operator on it.
+struct Held<'a> {
+    frame: Frame,
+    level: Cow<'a, Level>,
+}
+
+impl<'a> Held<'a> {
+    /// Level `level` of `mg` on `frame` (borrowed when the frame is the whole level).
+    fn new(mg: &'a Multigrid, level: usize, frame: Frame) -> Self {
+        let whole = &mg.levels[level];
+        let level = if frame == Frame::whole(whole.dims) {
+            Cow::Borrowed(whole)
+        } else {
+            Cow::Owned(whole.extract(frame.origin, frame.dims))
+        };
+        Self { frame, level }
+    }
+}
+
+/// One rank's view of the distributed solve: the communicator, the layout, the hierarchy
+/// and the part of it this rank holds.
 struct OnRanks<'a, C: ?Sized> {
     mg: &'a Multigrid,
     comm: &'a C,
     layout: RankLayout,
     rank: usize,
+    /// Per level, what this rank holds of it: its box and the cells around it on a split
+    /// level, the whole level on a stage of one rank (rank 0's), nothing elsewhere.
+    held: Vec<Option<Held<'a>>>,
+    /// Per level that starts a stage, for a rank of the stage before: the cells its box
+    /// restricts to and one around them, where the right-hand side goes down from and the
+    /// correction comes back to.
+    handover: Vec<Option<Held<'a>>>,
 }
 
 /// A message that did not fit the plan.
@@ -341,20 +424,81 @@ fn protocol(rank: usize, what: &str) -> DiffusionError {
     ))
 }
 
-/// A halo message: the neighbour, the cells sent to it, the cells it sends.
+/// A halo message: the neighbour, the cells sent to it, the cells it sends (level cells).
 struct Neighbour {
     rank: usize,
     send: Region,
     receive: Region,
 }
 
-impl<C: Communicator + ?Sized> OnRanks<'_, C> {
-    fn level(&self, l: usize) -> &Level {
-        &self.mg.levels[l]
+/// Where a hand-over's values are: a frame and its vector (none on a rank that holds none).
+type Side<'s, V> = Option<(&'s Frame, V)>;
+
+impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
+    fn new(mg: &'a Multigrid, comm: &'a C, layout: RankLayout) -> Self {
+        let rank = comm.rank();
+        let depth = mg.levels.len();
+        let dims = |l: usize| mg.levels[l].dims;
+        let held = (0..depth)
+            .map(|l| {
+                let stage = layout.stage_of(l);
+                let own = stage.owned(rank, l);
+                if own.is_empty() {
+                    None
+                } else if stage.ranks() == 1 {
+                    Some(Held::new(mg, l, Frame::whole(dims(l))))
+                } else {
+                    Some(Held::new(mg, l, Frame::around(&own, dims(l))))
+                }
+            })
+            .collect();
+        let handover = (0..depth)
+            .map(|l| {
+                let starts = l > 0 && layout.stage_of(l).first_level == l;
+                let restricted = if starts {
+                    layout.stage_of(l - 1).owned(rank, l)
+                } else {
+                    Region::default()
+                };
+                (!restricted.is_empty())
+                    .then(|| Held::new(mg, l, Frame::around(&restricted, dims(l))))
+            })
+            .collect();
+        Self {
+            mg,
+            comm,
+            layout,
+            rank,
+            held,
+            handover,
+        }
+    }
+
+    /// The work vectors (b, x and the smoothers' scratch) this rank needs: per level its
+    /// frame's length; and the hand-overs' (b and x).
+    fn work(&self) -> (Work, Work, Work, Work, Work) {
+        let sized = |held: &[Option<Held<'_>>]| -> Work {
+            held.iter()
+                .map(|h| vec![0.0f32; h.as_ref().map_or(0, |h| h.frame.len())])
+                .collect()
+        };
+        (
+            sized(&self.held),
+            sized(&self.held),
+            sized(&self.held),
+            sized(&self.handover),
+            sized(&self.handover),
+        )
+    }
+
+    fn held(&self, l: usize) -> Result<&Held<'a>, DiffusionError> {
+        self.held[l]
+            .as_ref()
+            .ok_or_else(|| protocol(self.rank, "a level this rank does not hold"))
     }
 
     fn dims(&self, l: usize) -> [usize; 3] {
-        self.level(l).dims
+        self.mg.levels[l].dims
     }
 
     fn stage(&self, l: usize) -> &Stage {
@@ -371,7 +515,8 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         self.stage(l + 1).first_level == l + 1
     }
 
-    /// The box of level `l` this rank computes (empty where it has no part in it).
+    /// The box of level `l` this rank computes, in the level's cells (empty where it has
+    /// no part in it).
     fn owned(&self, l: usize) -> Region {
         self.layout.owned(self.rank, l)
     }
@@ -433,10 +578,10 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         out
     }
 
-    /// Sends the layers of `x`'s box (level `l`) next to each neighbour of its stage
-    /// (faces, and with `corners` edges and corners), runs `interior` on `x` while they
-    /// travel, and writes what the neighbours sent into the halo. A rank outside the stage
-    /// only runs `interior`.
+    /// Sends the layers of `x`'s box (level `l`, this rank's frame) next to each neighbour
+    /// of its stage (faces, and with `corners` edges and corners), runs `interior` on `x`
+    /// while they travel, and writes what the neighbours sent into the halo. A rank alone
+    /// on its stage only runs `interior`.
     #[allow(clippy::too_many_arguments)]
     fn halo<T: Copy, R>(
         &self,
@@ -447,14 +592,17 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         corners: bool,
         interior: impl FnOnce(&mut [T]) -> R,
     ) -> Result<R, DiffusionError> {
-        if self.owned(l).is_empty() || self.stage(l).ranks() == 1 {
+        let Some(held) = self.held[l].as_ref() else {
+            return Ok(interior(x));
+        };
+        if self.stage(l).ranks() == 1 {
             return Ok(interior(x));
         }
-        let dims = self.dims(l);
+        let frame = &held.frame;
         let neighbours = self.neighbours(l, corners);
         let parts: Vec<Vec<f64>> = neighbours
             .iter()
-            .map(|n| n.send.read(dims, x, to_f64))
+            .map(|n| frame.local(&n.send).read(frame.dims, x, to_f64))
             .collect();
         let sends: Vec<(usize, &[f64])> = neighbours
             .iter()
@@ -481,7 +629,10 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
             return Err(protocol(self.rank, "a halo"));
         }
         for (n, values) in neighbours.iter().zip(received) {
-            if !n.receive.write(dims, x, &values, from_f64) {
+            if !frame
+                .local(&n.receive)
+                .write(frame.dims, x, &values, from_f64)
+            {
                 return Err(protocol(self.rank, "a halo"));
             }
         }
@@ -493,94 +644,111 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         self.halo(l, x, f64::from, |v| v as f32, false, |_| ())
     }
 
-    /// Moves level `l`'s cells between ranks 0..`ranks`: rank q holds `have(q)` and wants
-    /// `want(q)`; every rank sends each other rank the part of its box that rank wants
-    /// and receives its own wants from their holders (the boxes on one level are disjoint
-    /// for `have`, so each wanted cell has one holder).
+    /// Moves level `l`'s cells between ranks 0..`ranks`: rank q holds `have(q)` (in
+    /// `from`'s vector) and wants `want(q)` (in `to`'s); every rank sends each rank the
+    /// part of its cells that rank wants, its own part copied (the `have` boxes of one
+    /// level are disjoint, so each wanted cell has one holder).
     fn move_regions(
         &self,
-        l: usize,
-        v: &mut [f32],
         ranks: usize,
+        from: Side<'_, &[f32]>,
+        to: Side<'_, &mut [f32]>,
         have: impl Fn(usize) -> Region,
         want: impl Fn(usize) -> Region,
     ) -> Result<(), DiffusionError> {
         if self.rank >= ranks {
             return Ok(());
         }
-        let dims = self.dims(l);
         let mine = have(self.rank);
-        let parts: Vec<(usize, Vec<f64>)> = (0..ranks)
-            .filter(|&q| q != self.rank)
-            .filter_map(|q| {
-                let part = mine.overlap(&want(q));
-                (!part.is_empty()).then(|| (q, part.read(dims, v, f64::from)))
-            })
-            .collect();
-        let sends: Vec<(usize, &[f64])> = parts.iter().map(|(q, v)| (*q, &v[..])).collect();
         let wanted = want(self.rank);
-        let from: Vec<(usize, Region)> = (0..ranks)
+        let mut parts: Vec<(usize, Vec<f64>)> = Vec::new();
+        let mut own = None;
+        if let Some((frame, v)) = &from {
+            for q in 0..ranks {
+                let part = mine.overlap(&want(q));
+                if part.is_empty() {
+                    continue;
+                }
+                let values = frame.local(&part).read(frame.dims, v, f64::from);
+                if q == self.rank {
+                    own = Some((part, values));
+                } else {
+                    parts.push((q, values));
+                }
+            }
+        }
+        let sends: Vec<(usize, &[f64])> = parts.iter().map(|(q, v)| (*q, &v[..])).collect();
+        let sources: Vec<(usize, Region)> = (0..ranks)
             .filter(|&q| q != self.rank)
             .map(|q| (q, have(q).overlap(&wanted)))
             .filter(|(_, part)| !part.is_empty())
             .collect();
-        let sources: Vec<usize> = from.iter().map(|(q, _)| *q).collect();
-        let received = self.comm.exchange_with(&sends, &sources, &mut || ());
-        if received.len() != from.len() {
+        let ranks_from: Vec<usize> = sources.iter().map(|(q, _)| *q).collect();
+        let received = self.comm.exchange_with(&sends, &ranks_from, &mut || ());
+        if received.len() != sources.len() || (!sources.is_empty() && to.is_none()) {
             return Err(protocol(self.rank, "a coarse level's hand-over"));
         }
-        for ((_, part), values) in from.iter().zip(received) {
-            if !part.write(dims, v, &values, |v| v as f32) {
-                return Err(protocol(self.rank, "a coarse level's hand-over"));
+        if let Some((frame, v)) = to {
+            let incoming = sources.into_iter().map(|(_, part)| part).zip(received);
+            for (part, values) in own.into_iter().chain(incoming) {
+                if !frame
+                    .local(&part)
+                    .write(frame.dims, v, &values, |v| v as f32)
+                {
+                    return Err(protocol(self.rank, "a coarse level's hand-over"));
+                }
             }
         }
         Ok(())
     }
 
     /// Hands level `l + 1`'s restricted right-hand side from the ranks of `l`'s stage (the
-    /// cells each restricted to) to the owners in the next stage.
-    fn hand_down(&self, l: usize, b: &mut [f32]) -> Result<(), DiffusionError> {
+    /// cells each restricted to, in its hand-over vector `down`) to the owners in the next
+    /// stage (`b`).
+    fn hand_down(&self, l: usize, down: &[f32], b: &mut [f32]) -> Result<(), DiffusionError> {
         let (fine, coarse) = (self.stage(l), self.stage(l + 1));
+        let from = self.handover[l + 1].as_ref().map(|h| (&h.frame, down));
+        let to = self.held[l + 1].as_ref().map(|h| (&h.frame, b));
         self.move_regions(
-            l + 1,
-            b,
             fine.ranks(),
+            from,
+            to,
             |q| fine.owned(q, l + 1),
             |q| coarse.owned(q, l + 1),
         )
     }
 
-    /// Hands level `l + 1`'s correction back from the next stage's owners to the ranks of
-    /// `l`'s stage: the cells each restricted to and, for trilinear prolongation, one
-    /// more on every side (edges and corners too).
-    fn hand_up(&self, l: usize, x: &mut [f32]) -> Result<(), DiffusionError> {
+    /// Hands level `l + 1`'s correction back from the next stage's owners (`x`) to the
+    /// ranks of `l`'s stage (their hand-over vectors `up`): the cells each restricted to
+    /// and, for trilinear prolongation, one more on every side (edges and corners too).
+    fn hand_up(&self, l: usize, x: &[f32], up: &mut [f32]) -> Result<(), DiffusionError> {
         let (fine, coarse) = (self.stage(l), self.stage(l + 1));
         let dims = self.dims(l + 1);
         let halo = usize::from(self.mg.settings().prolongation == Prolongation::Trilinear);
+        let from = self.held[l + 1].as_ref().map(|h| (&h.frame, x));
+        let to = self.handover[l + 1].as_ref().map(|h| (&h.frame, up));
         self.move_regions(
-            l + 1,
-            x,
             fine.ranks(),
+            from,
+            to,
             |q| coarse.owned(q, l + 1),
             |q| fine.owned(q, l + 1).grown(halo, dims),
         )
     }
 
-    /// Zeroes level `l`'s vector where this rank reads it: its box and halo.
-    fn zero(&self, l: usize, x: &mut [f32]) {
-        let dims = self.dims(l);
-        self.owned(l).grown(1, dims).fill(dims, x, 0.0);
-    }
-
     /// The box's cells that read no halo (one cell in from every face that has a
-    /// neighbour), and the rest of the box in pieces: the sweeps' work while the halo
-    /// travels, and after it.
+    /// neighbour), and the rest of the box in pieces, in the frame's indices: the sweeps'
+    /// work while the halo travels, and after it.
     fn inner_and_edges(&self, l: usize) -> (Region, Vec<Region>) {
         let o = self.owned(l);
         let stage = self.stage(l);
-        let Some(at) = stage.coords(self.rank).filter(|_| !o.is_empty()) else {
+        let (Some(at), Some(held)) = (
+            stage.coords(self.rank).filter(|_| !o.is_empty()),
+            self.held[l].as_ref(),
+        ) else {
             return (Region::default(), Vec::new());
         };
+        let frame = &held.frame;
         let grid = stage.grid();
         let mut inner = o.clone();
         for a in 0..3 {
@@ -588,7 +756,7 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
             let start = r.start + usize::from(at[a] > 0);
             let end = r.end - usize::from(at[a] + 1 < grid[a]);
             if start >= end {
-                return (Region::default(), vec![o]);
+                return (Region::default(), vec![frame.local(&o)]);
             }
             inner.axes[a] = start..end;
         }
@@ -600,12 +768,12 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
                 if !part.is_empty() {
                     let mut piece = rest.clone();
                     piece.axes[a] = part;
-                    edges.push(piece);
+                    edges.push(frame.local(&piece));
                 }
             }
             rest.axes[a] = i;
         }
-        (inner, edges)
+        (frame.local(&inner), edges)
     }
 
     /// The pre- or post-smoothing sweeps on split level `l`.
@@ -623,7 +791,9 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
         } else {
             settings.pre_sweeps
         };
-        let level = self.level(l);
+        let held = self.held(l)?;
+        let level = &*held.level;
+        let owned = held.frame.local(&self.owned(l));
         let (inner, edges) = self.inner_and_edges(l);
         for _ in 0..sweeps {
             match settings.smoother {
@@ -659,93 +829,143 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
                     for edge in &edges {
                         level.jacobi_in(b, x, omega, scratch, edge);
                     }
-                    self.owned(l).copy(level.dims, scratch, x);
+                    owned.copy(level.dims, scratch, x);
                 }
             }
+        }
+        Ok(())
+    }
+
+    /// Where level `l`'s restriction writes and its prolongation reads level `l + 1`: the
+    /// hand-over's frame across a stage boundary, this rank's own within a stage.
+    fn coarse_side(&self, l: usize) -> Result<&Held<'a>, DiffusionError> {
+        let side = if self.hands_over(l) {
+            self.handover[l + 1].as_ref()
+        } else {
+            self.held[l + 1].as_ref()
+        };
+        side.ok_or_else(|| protocol(self.rank, "a coarse level this rank does not hold"))
+    }
+
+    /// Restricts level `l`'s residual (or, with `residual` false, its right-hand side) into
+    /// level `l + 1`'s, and hands it down where the next level starts a stage.
+    fn restrict(
+        &self,
+        l: usize,
+        residual: bool,
+        b: &mut Work,
+        x: &Work,
+        down: &mut Work,
+    ) -> Result<(), DiffusionError> {
+        let held = self.held(l)?;
+        let coarse = self.coarse_side(l)?;
+        let region = coarse.frame.local(&self.restricts_to(l));
+        let origins = Origins {
+            fine: held.frame.origin,
+            coarse: coarse.frame.origin,
+        };
+        let (bf, bc) = b.split_at_mut(l + 1);
+        let out = if self.hands_over(l) {
+            &mut down[l + 1]
+        } else {
+            &mut bc[0]
+        };
+        if residual {
+            held.level
+                .restrict_residual(&bf[l], &x[l], &coarse.level, out, &region, origins);
+        } else {
+            held.level
+                .restrict(&bf[l], &coarse.level, out, &region, origins);
+        }
+        if self.hands_over(l) {
+            self.hand_down(l, &down[l + 1], &mut b[l + 1])?;
         }
         Ok(())
     }
 
     /// One cycle on level `l` for A x = b (x holds the initial guess on the owned box);
     /// a rank with no part in level `l` returns at once.
-    fn cycle(
-        &self,
-        l: usize,
-        cycle: Cycle,
-        b: &mut Work,
-        x: &mut Work,
-        s: &mut Work,
-    ) -> Result<(), DiffusionError> {
+    fn cycle(&self, l: usize, cycle: Cycle, w: &mut Vectors) -> Result<(), DiffusionError> {
         if self.owned(l).is_empty() {
             return Ok(());
         }
         if self.serial(l) {
-            self.mg.cycle(l, cycle, b, x, s);
+            self.mg.cycle(l, cycle, &mut w.b, &mut w.x, &mut w.s);
             return Ok(());
         }
-        self.smooth(l, &b[l], &mut x[l], &mut s[l], false)?;
-        self.halo32(l, &mut x[l])?;
-        {
-            let (bf, bc) = b.split_at_mut(l + 1);
-            let coarse = self.level(l + 1);
-            self.level(l).restrict_residual(
-                &bf[l],
-                &x[l],
-                coarse,
-                &mut bc[0],
-                &self.restricts_to(l),
-            );
-        }
-        if self.hands_over(l) {
-            self.hand_down(l, &mut b[l + 1])?;
-        }
-        self.zero(l + 1, &mut x[l + 1]);
+        self.smooth(l, &w.b[l], &mut w.x[l], &mut w.s[l], false)?;
+        self.halo32(l, &mut w.x[l])?;
+        self.restrict(l, true, &mut w.b, &w.x, &mut w.down)?;
+        w.x[l + 1].fill(0.0);
         if !self.owned(l + 1).is_empty() {
             match cycle {
-                Cycle::V => self.cycle(l + 1, Cycle::V, b, x, s)?,
+                Cycle::V => self.cycle(l + 1, Cycle::V, w)?,
                 Cycle::W => {
-                    self.cycle(l + 1, Cycle::W, b, x, s)?;
-                    self.cycle(l + 1, Cycle::W, b, x, s)?;
+                    self.cycle(l + 1, Cycle::W, w)?;
+                    self.cycle(l + 1, Cycle::W, w)?;
                 }
                 Cycle::F => {
-                    self.cycle(l + 1, Cycle::F, b, x, s)?;
-                    self.cycle(l + 1, Cycle::V, b, x, s)?;
+                    self.cycle(l + 1, Cycle::F, w)?;
+                    self.cycle(l + 1, Cycle::V, w)?;
                 }
                 // The layout keeps the K-cycle's coarse levels on rank 0.
-                Cycle::K => self.mg.krylov_correction(l + 1, b, x, s),
+                Cycle::K => self
+                    .mg
+                    .krylov_correction(l + 1, &mut w.b, &mut w.x, &mut w.s),
             }
         }
-        self.prolong(l, x)?;
-        self.smooth(l, &b[l], &mut x[l], &mut s[l], true)
+        self.prolong(l, w)?;
+        self.smooth(l, &w.b[l], &mut w.x[l], &mut w.s[l], true)
     }
 
     /// x[l] += the prolonged x[l + 1], on the owned box of `l` (after fetching the coarse
     /// cells it reads: the halo within a stage, with edges and corners for trilinear
     /// prolongation; the hand-up across one).
-    fn prolong(&self, l: usize, x: &mut Work) -> Result<(), DiffusionError> {
+    fn prolong(&self, l: usize, w: &mut Vectors) -> Result<(), DiffusionError> {
+        let trilinear = self.mg.settings().prolongation == Prolongation::Trilinear;
         if self.hands_over(l) {
-            self.hand_up(l, &mut x[l + 1])?;
-        } else if self.mg.settings().prolongation == Prolongation::Trilinear {
-            self.halo(l + 1, &mut x[l + 1], f64::from, |v| v as f32, true, |_| ())?;
+            self.hand_up(l, &w.x[l + 1], &mut w.up[l + 1])?;
+        } else if trilinear {
+            self.halo(
+                l + 1,
+                &mut w.x[l + 1],
+                f64::from,
+                |v| v as f32,
+                true,
+                |_| (),
+            )?;
         }
-        let (xf, xc) = x.split_at_mut(l + 1);
-        self.mg.prolong(l, &xc[0], &mut xf[l], &self.owned(l));
+        let held = self.held(l)?;
+        let coarse = self.coarse_side(l)?;
+        let origins = Origins {
+            fine: held.frame.origin,
+            coarse: coarse.frame.origin,
+        };
+        let region = held.frame.local(&self.owned(l));
+        let (xf, xc) = w.x.split_at_mut(l + 1);
+        let xc = if self.hands_over(l) {
+            &w.up[l + 1]
+        } else {
+            &xc[0]
+        };
+        if trilinear {
+            held.level
+                .prolong_trilinear_add(&coarse.level, xc, &mut xf[l], &region, origins);
+        } else {
+            held.level
+                .prolong_add(&coarse.level, xc, &mut xf[l], &region, origins);
+        }
         Ok(())
     }
 
-    /// Full multigrid from the owned box of `rhs`.
-    fn full_multigrid(
-        &self,
-        rhs: &[f64],
-        b: &mut Work,
-        x: &mut Work,
-        s: &mut Work,
-    ) -> Result<(), DiffusionError> {
-        let dims = self.dims(0);
-        let o = self.owned(0);
-        let n = o.axes[0].len();
-        for start in o.lines(dims) {
-            for (b, r) in b[0][start..start + n].iter_mut().zip(&rhs[start..]) {
+    /// Full multigrid from the owned box of the fine right-hand side (`rhs`, this rank's
+    /// frame of level 0).
+    fn full_multigrid(&self, rhs: &[f64], w: &mut Vectors) -> Result<(), DiffusionError> {
+        let held = self.held(0)?;
+        let owned = held.frame.local(&self.owned(0));
+        let n = owned.axes[0].len();
+        for start in owned.lines(held.frame.dims) {
+            for (b, r) in w.b[0][start..start + n].iter_mut().zip(&rhs[start..]) {
                 *b = *r as f32;
             }
         }
@@ -754,27 +974,45 @@ impl<C: Communicator + ?Sized> OnRanks<'_, C> {
             if self.owned(l).is_empty() {
                 break;
             }
-            let (bf, bc) = b.split_at_mut(l + 1);
-            self.level(l)
-                .restrict(&bf[l], self.level(l + 1), &mut bc[0], &self.restricts_to(l));
-            if self.hands_over(l) {
-                self.hand_down(l, &mut b[l + 1])?;
+            if self.serial(l) {
+                // Rank 0's serial levels: the serial restriction.
+                let (bf, bc) = w.b.split_at_mut(l + 1);
+                let coarse = &self.mg.levels[l + 1];
+                self.mg.levels[l].restrict(
+                    &bf[l],
+                    coarse,
+                    &mut bc[0],
+                    &coarse.whole(),
+                    Origins::default(),
+                );
+                continue;
             }
+            self.restrict(l, false, &mut w.b, &w.x, &mut w.down)?;
         }
         if !self.owned(last).is_empty() {
-            x[last].fill(0.0);
-            self.mg.coarsest(&b[last], &mut x[last]);
+            w.x[last].fill(0.0);
+            self.mg.coarsest(&w.b[last], &mut w.x[last]);
         }
         for l in (0..last).rev() {
             if self.owned(l).is_empty() {
                 continue;
             }
-            self.zero(l, &mut x[l]);
-            self.prolong(l, x)?;
-            self.cycle(l, self.mg.settings().cycle, b, x, s)?;
+            w.x[l].fill(0.0);
+            self.prolong(l, w)?;
+            self.cycle(l, self.mg.settings().cycle, w)?;
         }
         Ok(())
     }
+}
+
+/// One rank's work vectors: per level b, x and the smoothers' scratch on its frame; per
+/// level that starts a stage the hand-over's right-hand side and correction.
+struct Vectors {
+    b: Work,
+    x: Work,
+    s: Work,
+    down: Work,
+    up: Work,
 }
 
 /// A norm's reduction: the norm, whether any rank's clock ran out, whether any rank was
@@ -936,16 +1174,27 @@ impl Multigrid {
                 phi.len()
             )));
         }
-        let on = OnRanks {
-            mg: self,
-            comm,
-            layout,
-            rank: comm.rank(),
-        };
+        let on = OnRanks::new(self, comm, layout);
         let started = std::time::Instant::now();
-        let fine = self.fine();
-        let dims = fine.dims;
-        let o = on.owned(0);
+        let dims = self.fine().dims;
+        // This rank's fine level: its box and the cells around it (nothing on a rank the
+        // fine level leaves out), rhs, φ and r held there, o the box in the frame's indices.
+        let (frame, fine) = match on.held[0].as_ref() {
+            Some(h) => (h.frame.clone(), Some(&*h.level)),
+            None => (
+                Frame {
+                    origin: [0; 3],
+                    dims: [0; 3],
+                },
+                None,
+            ),
+        };
+        let around = Region::new(std::array::from_fn(|a| {
+            frame.origin[a]..frame.origin[a] + frame.dims[a]
+        }));
+        let o = frame.local(&on.owned(0));
+        let rhs = around.cut(dims, rhs);
+        let mut phi_held = around.cut(dims, phi);
         // Σ of every rank's exact run sums, with every rank's flags: the serial norm's bits.
         let gather = |sum: ExactSum| -> Result<Gathered, DiffusionError> {
             let flags = stopping.local_flags(started);
@@ -969,30 +1218,31 @@ impl Multigrid {
             },
             ..stopping.clone()
         };
-        let b_norm = gather(fine.squares_in(rhs, &o))?
+        let b_norm = gather(fine.map_or_else(ExactSum::new, |f| f.squares_in(&rhs, &o)))?
             .norm
             .max(f64::MIN_POSITIVE);
-        let (mut b, mut x, mut s) = self.work();
-        if self.settings().full_multigrid {
-            on.full_multigrid(rhs, &mut b, &mut x, &mut s)?;
-            let values = o.read(dims, &x[0], f64::from);
-            o.write(dims, phi, &values, |v| v);
+        let (b, x, s, down, up) = on.work();
+        let mut w = Vectors { b, x, s, down, up };
+        if self.settings().full_multigrid && fine.is_some() {
+            on.full_multigrid(&rhs, &mut w)?;
+            let values = o.read(frame.dims, &w.x[0], f64::from);
+            o.write(frame.dims, &mut phi_held, &values, |v| v);
         }
-        let mut r = vec![0.0f64; n];
+        let mut r = vec![0.0f64; frame.len()];
         let true_residual = |phi: &mut [f64], r: &mut [f64]| -> Result<ExactSum, DiffusionError> {
             on.halo(0, phi, |v| v, |v| v, false, |_| ())?;
-            Ok(fine.residual_in(rhs, phi, r, &o))
+            Ok(fine.map_or_else(ExactSum::new, |f| f.residual_in(&rhs, phi, r, &o)))
         };
-        let mut gathered = gather(true_residual(phi, &mut r)?)?;
+        let mut gathered = gather(true_residual(&mut phi_held, &mut r)?)?;
         let to_b = |b: &mut [f32], r: &[f64]| {
             let n = o.axes[0].len();
-            for start in o.lines(dims) {
+            for start in o.lines(frame.dims) {
                 for (b, r) in b[start..start + n].iter_mut().zip(&r[start..]) {
                     *b = *r as f32;
                 }
             }
         };
-        to_b(&mut b[0], &r);
+        to_b(&mut w.b[0], &r);
         let mut residuals = vec![gathered.norm / b_norm];
         let initial = residuals[0];
         let stop_reason = loop {
@@ -1002,7 +1252,7 @@ impl Multigrid {
                 if !reason.is_converged() {
                     break reason;
                 }
-                gathered = gather(true_residual(phi, &mut r)?)?;
+                gathered = gather(true_residual(&mut phi_held, &mut r)?)?;
                 let norm = gathered.norm;
                 *residuals.last_mut().unwrap_or(&mut 0.0) = norm / b_norm;
                 if let Some(reason) = shared
@@ -1011,7 +1261,7 @@ impl Multigrid {
                 {
                     break reason;
                 }
-                to_b(&mut b[0], &r);
+                to_b(&mut w.b[0], &r);
             }
             let relative = norm / b_norm;
             if gathered.time_up {
@@ -1020,14 +1270,20 @@ impl Multigrid {
             if gathered.cancelled {
                 break StopReason::Interrupted { residual: relative };
             }
-            on.zero(0, &mut x[0]);
-            on.cycle(0, self.settings().cycle, &mut b, &mut x, &mut s)?;
-            on.halo32(0, &mut x[0])?;
-            gathered = gather(fine.correct_in(&x[0], phi, &mut r, &mut b[0], &o))?;
+            let sum = match fine {
+                Some(fine) => {
+                    w.x[0].fill(0.0);
+                    on.cycle(0, self.settings().cycle, &mut w)?;
+                    on.halo32(0, &mut w.x[0])?;
+                    fine.correct_in(&w.x[0], &mut phi_held, &mut r, &mut w.b[0], &o)
+                }
+                None => ExactSum::new(),
+            };
+            gathered = gather(sum)?;
             residuals.push(gathered.norm / b_norm);
         };
         // Every rank's box, in rank order (ranks past the fine stage hold none).
-        let whole = comm.all_gather(&o.read(dims, phi, |v| v));
+        let whole = comm.all_gather(&o.read(frame.dims, &phi_held, |v| v));
         let mut at = 0;
         for q in 0..comm.size() {
             let part = on.layout.owned(q, 0);

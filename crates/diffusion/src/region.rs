@@ -99,6 +99,19 @@ impl Region {
         }
     }
 
+    /// Its cells of `v` (a level's vector), x-line by x-line, as they are.
+    pub fn cut<T: Copy + Default>(&self, dims: [usize; 3], v: &[T]) -> Vec<T> {
+        let n = self.axes[0].len();
+        let mut out = vec![T::default(); self.cells()];
+        if n == 0 {
+            return out;
+        }
+        for (start, line) in self.lines(dims).zip(out.chunks_exact_mut(n)) {
+            line.copy_from_slice(&v[start..start + n]);
+        }
+        out
+    }
+
     /// Its values of `v` (a level's vector), x-line by x-line.
     pub fn read<T: Copy>(&self, dims: [usize; 3], v: &[T], to: impl Fn(T) -> f64) -> Vec<f64> {
         let n = self.axes[0].len();

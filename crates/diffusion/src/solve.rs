@@ -177,9 +177,12 @@ pub fn solve_on_ranks(
     let mg = Multigrid::new(problem.fine_level(), problem.boundaries(), settings);
     let setup = started.elapsed().as_secs_f64();
     let n = rhs.len();
-    // Per rank: b, x (and Jacobi's scratch) f32 on every level (8/7 of the fine one), and
-    // φ and r in f64.
-    let per_rank = n as u64 * (12 * 8 / 7 + 16);
+    // The ranks together hold each cell once in their boxes (and a halo around them): the
+    // operator copied (5 f32 fields) with b, x and the smoothers' scratch (3 f32) on
+    // every level (8/7 of the fine one), and the right-hand side, φ and r in f64; each
+    // rank also keeps the whole φ it returns.
+    let boxes = n as u64 * (32 * 8 / 7 + 24);
+    let per_rank = n as u64 * 8;
     let (phi, convergence, count) = match ranks {
         RanksOf::Alone | RanksOf::Communicator(_) => {
             let mut phi = vec![0.0f64; n];
@@ -219,7 +222,7 @@ pub fn solve_on_ranks(
         setup_seconds: setup,
         solve_seconds,
         levels: mg.depth(),
-        memory_bytes: mg.memory_bytes() + count * per_rank,
+        memory_bytes: mg.memory_bytes() + boxes + count * per_rank,
     })
 }
 

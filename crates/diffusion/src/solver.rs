@@ -245,10 +245,15 @@ impl Solver for DiffusionSolver {
         // fractions, 24 bytes). Measured (`tests/memory_estimates.rs`): 162 bytes per cell
         // in all with the driver's share.
         let cells = problem.geometry().voxel_count() as u64;
-        // In-process ranks share the hierarchy; each has its own work vectors
-        // (`solve_on_ranks`: 29 bytes per cell).
-        let memory = (cells * (4 * 14 + 8 * 4 + 24) + (self.ranks as u64 - 1) * cells * 29)
-            * problem.channels() as u64;
+        // In-process ranks share the hierarchy; between them they hold each cell once in
+        // their boxes (the operator and work vectors, 61 bytes per cell) and each keeps the
+        // whole φ it returns (`solve_on_ranks`).
+        let split = if self.ranks > 1 {
+            cells * 61 + (self.ranks as u64 - 1) * cells * 8
+        } else {
+            0
+        };
+        let memory = (cells * (4 * 14 + 8 * 4 + 24) + split) * problem.channels() as u64;
         let decomposition = self.decomposition;
         let ranks = match (world, self.ranks) {
             (Some(world), _) => RanksOf::Communicator(world.as_ref()),
