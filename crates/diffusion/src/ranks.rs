@@ -1193,8 +1193,19 @@ impl Multigrid {
             frame.origin[a]..frame.origin[a] + frame.dims[a]
         }));
         let o = frame.local(&on.owned(0));
-        let rhs = around.cut(dims, rhs);
-        let mut phi_held = around.cut(dims, phi);
+        // A rank that holds the whole fine level (one rank, or the fine level on rank 0
+        // alone) works on the caller's vectors; the others on copies of their frame.
+        let whole_level = frame == Frame::whole(dims);
+        let rhs: Cow<'_, [f64]> = if whole_level {
+            Cow::Borrowed(rhs)
+        } else {
+            Cow::Owned(around.cut(dims, rhs))
+        };
+        let mut copied = (!whole_level).then(|| around.cut(dims, phi));
+        let phi_held: &mut [f64] = match copied.as_mut() {
+            Some(v) => v,
+            None => &mut *phi,
+        };
         // Σ of every rank's exact run sums, with every rank's flags: the serial norm's bits.
         let gather = |sum: ExactSum| -> Result<Gathered, DiffusionError> {
             let flags = stopping.local_flags(started);
@@ -1226,14 +1237,14 @@ impl Multigrid {
         if self.settings().full_multigrid && fine.is_some() {
             on.full_multigrid(&rhs, &mut w)?;
             let values = o.read(frame.dims, &w.x[0], f64::from);
-            o.write(frame.dims, &mut phi_held, &values, |v| v);
+            o.write(frame.dims, phi_held, &values, |v| v);
         }
         let mut r = vec![0.0f64; frame.len()];
         let true_residual = |phi: &mut [f64], r: &mut [f64]| -> Result<ExactSum, DiffusionError> {
             on.halo(0, phi, |v| v, |v| v, false, |_| ())?;
             Ok(fine.map_or_else(ExactSum::new, |f| f.residual_in(&rhs, phi, r, &o)))
         };
-        let mut gathered = gather(true_residual(&mut phi_held, &mut r)?)?;
+        let mut gathered = gather(true_residual(phi_held, &mut r)?)?;
         let to_b = |b: &mut [f32], r: &[f64]| {
             let n = o.axes[0].len();
             for start in o.lines(frame.dims) {
@@ -1252,7 +1263,7 @@ impl Multigrid {
                 if !reason.is_converged() {
                     break reason;
                 }
-                gathered = gather(true_residual(&mut phi_held, &mut r)?)?;
+                gathered = gather(true_residual(phi_held, &mut r)?)?;
                 let norm = gathered.norm;
                 *residuals.last_mut().unwrap_or(&mut 0.0) = norm / b_norm;
                 if let Some(reason) = shared
@@ -1275,15 +1286,23 @@ impl Multigrid {
                     w.x[0].fill(0.0);
                     on.cycle(0, self.settings().cycle, &mut w)?;
                     on.halo32(0, &mut w.x[0])?;
-                    fine.correct_in(&w.x[0], &mut phi_held, &mut r, &mut w.b[0], &o)
+                    fine.correct_in(&w.x[0], phi_held, &mut r, &mut w.b[0], &o)
                 }
                 None => ExactSum::new(),
             };
             gathered = gather(sum)?;
             residuals.push(gathered.norm / b_norm);
         };
+        if comm.size() == 1 {
+            // φ is the caller's already.
+            return Ok(Convergence {
+                residuals,
+                stop_reason,
+            });
+        }
         // Every rank's box, in rank order (ranks past the fine stage hold none).
-        let whole = comm.all_gather(&o.read(frame.dims, &phi_held, |v| v));
+        let mine = o.read(frame.dims, phi_held, |v| v);
+        let whole = comm.all_gather(&mine);
         let mut at = 0;
         for q in 0..comm.size() {
             let part = on.layout.owned(q, 0);
