@@ -1132,8 +1132,9 @@ impl Multigrid {
         )
     }
 
-    /// [`Multigrid::solve`] on the ranks of `comm`, every rank calling it with the whole
-    /// `rhs` (this rank reads its slab of it). `phi` is the initial guess (ignored under
+    /// [`Multigrid::solve`] on the ranks of `comm` over z-slabs ([`Multigrid::layout`] and
+    /// [`Multigrid::solve_on_layout`] for boxes), every rank calling it with the whole
+    /// `rhs` (this rank reads its box of it). `phi` is the initial guess (ignored under
     /// full multigrid) and holds the whole solution on every rank on return; the history
     /// and the stop reason are the same on every rank and for any number of ranks.
     ///
