@@ -83,14 +83,6 @@ impl Region {
         })
     }
 
-    /// Sets its cells of `v` to `value`.
-    pub fn fill<T: Copy>(&self, dims: [usize; 3], v: &mut [T], value: T) {
-        let n = self.axes[0].len();
-        for start in self.lines(dims) {
-            v[start..start + n].fill(value);
-        }
-    }
-
     /// Copies its cells of `from` into `to` (two vectors of one level).
     pub fn copy<T: Copy>(&self, dims: [usize; 3], from: &[T], to: &mut [T]) {
         let n = self.axes[0].len();
