@@ -85,7 +85,8 @@ pub struct MultigridParams {
     pub decomposition: DecompositionParam,
 }
 
-/// How `diffusion-mg`'s ranks cut the grid ([`crate::Decomposition`]).
+/// How a solver's ranks cut the grid: z-slabs or the grid of boxes with the least cut area
+/// (`diffusion-mg`: [`crate::Decomposition`]; `lucent-explicit`'s solvers map it to theirs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum DecompositionParam {

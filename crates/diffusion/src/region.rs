@@ -75,7 +75,7 @@ impl Region {
 
     /// The level index of each of its x-lines' first cell in a level of `dims` (each line
     /// x₁ − x₀ cells long): y then z, the order the grid stores them.
-    pub fn lines(&self, dims: [usize; 3]) -> impl Iterator<Item = usize> + '_ {
+    pub(crate) fn lines(&self, dims: [usize; 3]) -> impl Iterator<Item = usize> + '_ {
         let [nx, ny, _] = dims;
         self.z().flat_map(move |k| {
             self.y()
@@ -84,7 +84,7 @@ impl Region {
     }
 
     /// Copies its cells of `from` into `to` (two vectors of one level).
-    pub fn copy<T: Copy>(&self, dims: [usize; 3], from: &[T], to: &mut [T]) {
+    pub(crate) fn copy<T: Copy>(&self, dims: [usize; 3], from: &[T], to: &mut [T]) {
         let n = self.axes[0].len();
         for start in self.lines(dims) {
             to[start..start + n].copy_from_slice(&from[start..start + n]);
@@ -92,7 +92,7 @@ impl Region {
     }
 
     /// Its cells of `v` (a level's vector), x-line by x-line, as they are.
-    pub fn cut<T: Copy + Default>(&self, dims: [usize; 3], v: &[T]) -> Vec<T> {
+    pub(crate) fn cut<T: Copy + Default>(&self, dims: [usize; 3], v: &[T]) -> Vec<T> {
         let n = self.axes[0].len();
         let mut out = vec![T::default(); self.cells()];
         if n == 0 {
@@ -105,7 +105,12 @@ impl Region {
     }
 
     /// Its values of `v` (a level's vector), x-line by x-line.
-    pub fn read<T: Copy>(&self, dims: [usize; 3], v: &[T], to: impl Fn(T) -> f64) -> Vec<f64> {
+    pub(crate) fn read<T: Copy>(
+        &self,
+        dims: [usize; 3],
+        v: &[T],
+        to: impl Fn(T) -> f64,
+    ) -> Vec<f64> {
         let n = self.axes[0].len();
         let mut out = vec![0.0; self.cells()];
         if n == 0 {
@@ -121,7 +126,7 @@ impl Region {
 
     /// Writes `values` ([`Region::read`]'s order) into its cells of `v`; false (and `v`
     /// unchanged) when there are not exactly as many values as cells.
-    pub fn write<T>(
+    pub(crate) fn write<T>(
         &self,
         dims: [usize; 3],
         v: &mut [T],

@@ -39,18 +39,10 @@ const P1_DECOMPOSITION: (&str, &str) = (
     "how ranks split the grid: slabs (z-layers r·n_z/P..(r+1)·n_z/P, one layer per rank at least) or boxes (the grid of boxes that cuts least, x cut at multiples of 8); the serial bits either way",
 );
 
-/// How the steady iterations and P1 split the grid over ranks
-/// ([`crate::ranks::Decomposition`], the grid of boxes chosen by
-/// [`crate::ranks::Boxes::auto`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum DecompositionParam {
-    /// z-slabs balanced by unknowns.
-    #[default]
-    Slabs,
-    /// The grid of boxes with the least cut area.
-    Boxes,
-}
+/// How the steady iterations and P1 split the grid over ranks: slabs, or the grid of boxes
+/// [`crate::ranks::Boxes::auto`] chooses (`lucent_diffusion`'s parameter, shared with
+/// `diffusion-mg` as `ranks` is).
+pub use lucent_diffusion::DecompositionParam;
 
 fn check_fraction(fraction: f64) -> Result<(), SolveError> {
     if fraction > 0.0 && fraction.is_finite() {
