@@ -115,6 +115,14 @@ impl Level {
         Level { parity, ..level }
     }
 
+    /// This level as the frame of a level from cell `origin` on (a rank's box and the halo
+    /// around it, built where it is held): the colours follow the whole level's, as
+    /// [`Level::extract`]'s do.
+    pub(crate) fn framed(self, origin: [usize; 3]) -> Level {
+        let parity = (self.parity + origin.iter().sum::<usize>()) % 2;
+        Level { parity, ..self }
+    }
+
     /// Row j of slab k: the span lo..hi of its cells that are in the medium.
     #[inline(always)]
     fn span(&self, j: usize, k: usize) -> (usize, usize) {
@@ -1149,14 +1157,6 @@ impl Level {
                 }
             });
     }
-
-    /// Dims and spacing of the next coarser level.
-    /// Axes with a single cell stay single (a 2D problem is one cell thick).
-    pub(crate) fn coarse_shape(&self) -> ([usize; 3], DVec3) {
-        let dims = self.dims.map(|n| if n == 1 { 1 } else { n.div_ceil(2) });
-        let scale = DVec3::from_array(self.dims.map(|n| if n == 1 { 1.0 } else { 2.0 }));
-        (dims, self.spacing * scale)
-    }
 }
 
 /// Where a fine level's vector and its coarse level's start in their whole grids, per axis
@@ -1475,7 +1475,7 @@ mod tests {
         // whole levels, for boxes at odd and even origins, touching the grid's faces or
         // not.
         for lv in media() {
-            let (cdims, spacing) = lv.coarse_shape();
+            let (cdims, spacing) = crate::problem::coarse_shape(lv.dims, lv.spacing);
             let cn: usize = cdims.iter().product();
             let c_inv: Vec<f32> = (0..cn)
                 .map(|c| if c % 7 == 3 { 0.0 } else { 0.5 })
@@ -1577,7 +1577,7 @@ mod tests {
     #[test]
     fn restriction_sums_the_residual_of_the_medium() {
         for lv in media() {
-            let (dims, spacing) = lv.coarse_shape();
+            let (dims, spacing) = crate::problem::coarse_shape(lv.dims, lv.spacing);
             let n = lv.len();
             let coarse = Level::new(
                 dims,

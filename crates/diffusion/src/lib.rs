@@ -101,7 +101,7 @@ pub use params::{
     MultigridParams, RANKS, SmootherParam, SorParams, check_ranks,
 };
 pub use problem::{AssembledSystem, Balance, Boundaries, Condition, DiffusionProblem, Sources};
-pub use ranks::{Decomposition, RankLayout, Stage};
+pub use ranks::{BoxSolution, Decomposition, RankLayout, Stage};
 pub use region::Region;
 pub use slab::SlabSystem;
 pub use solve::{DiffusionSolution, Method, RanksOf, solve, solve_on_ranks};

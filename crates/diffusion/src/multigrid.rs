@@ -19,6 +19,7 @@
 //! Cells on the box and the rows next to it take the general path.
 
 use crate::region::Region;
+use glam::DVec3;
 use lucent_core::{StopReason, Stopping};
 use std::sync::Mutex;
 
@@ -199,6 +200,26 @@ impl Clone for Multigrid {
     }
 }
 
+/// The most levels a hierarchy has.
+const MAX_LEVELS: usize = 24;
+
+/// Whether a level of `dims` cells has a coarser level: while every axis that has more than
+/// one cell has at least four.
+fn coarsens(dims: [usize; 3]) -> bool {
+    !(dims.iter().any(|&n| n > 1 && n < 4) || dims.iter().all(|&n| n == 1))
+}
+
+/// The levels' dimensions and cell sizes of the hierarchy on a fine grid of `dims` cells of
+/// size `spacing`, finest first: what [`Multigrid::new`] builds, known without the medium.
+pub(crate) fn level_shapes(dims: [usize; 3], spacing: DVec3) -> Vec<([usize; 3], DVec3)> {
+    let mut shapes = vec![(dims, spacing)];
+    while shapes.len() < MAX_LEVELS && coarsens(shapes[shapes.len() - 1].0) {
+        let (d, h) = shapes[shapes.len() - 1];
+        shapes.push(crate::problem::coarse_shape(d, h));
+    }
+    shapes
+}
+
 impl Multigrid {
     /// The hierarchy for a fine level.
     pub(crate) fn new(
@@ -206,15 +227,20 @@ impl Multigrid {
         boundaries: &Boundaries,
         settings: MultigridSettings,
     ) -> Self {
+        Self::with_depth(fine, boundaries, settings, MAX_LEVELS)
+    }
+
+    /// [`Multigrid::new`] with at most `max_levels` levels (the part of a deeper hierarchy
+    /// from a coarse level down: the levels a rank cycles alone).
+    pub(crate) fn with_depth(
+        fine: LevelData,
+        boundaries: &Boundaries,
+        settings: MultigridSettings,
+        max_levels: usize,
+    ) -> Self {
         let mut data = vec![fine];
-        while data.len() < 24 {
-            let last = &data[data.len() - 1];
-            // Coarsen while every axis that has more than one cell has at least four.
-            let dims = last.level.dims;
-            if dims.iter().any(|&n| n > 1 && n < 4) || dims.iter().all(|&n| n == 1) {
-                break;
-            }
-            let next = coarsen(last, boundaries);
+        while data.len() < max_levels && coarsens(data[data.len() - 1].level.dims) {
+            let next = coarsen(&data[data.len() - 1], boundaries);
             data.push(next);
         }
         let levels: Vec<Level> = data.into_iter().map(|d| d.level).collect();

@@ -22,6 +22,7 @@ use glam::DVec3;
 use crate::error::DiffusionError;
 use crate::geometry::{CellGeometry, Side, face_indices};
 use crate::level::Level;
+use crate::region::Region;
 
 /// A boundary condition.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -662,31 +663,113 @@ pub(crate) fn finish_level(
     }
 }
 
+/// A level's operator before its diagonal is formed: what [`finish_level`] takes, on a
+/// whole level or on a frame (a box of the level's cells held as a grid of its own).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct LevelParts {
+    /// The cells' dimensions.
+    pub(crate) dims: [usize; 3],
+    /// The cells' size (length).
+    pub(crate) spacing: DVec3,
+    /// Coupling through each cell's low x, y and z face.
+    pub(crate) couplings: [Vec<f32>; 3],
+    /// σ_a κ V per cell.
+    pub(crate) absorption: Vec<f32>,
+    /// Boundary patches, sorted by cell and side; `cell` in the grid's own indices.
+    pub(crate) patches: Vec<LevelPatch>,
+}
+
+impl LevelParts {
+    /// Zero couplings and absorption and no patches on `dims` cells.
+    pub(crate) fn zeros(dims: [usize; 3], spacing: DVec3) -> Self {
+        let n = dims.iter().product();
+        Self {
+            dims,
+            spacing,
+            couplings: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+            absorption: vec![0.0; n],
+            patches: Vec::new(),
+        }
+    }
+
+    /// The diagonal formed: the level's operator.
+    pub(crate) fn finish(self, boundaries: &Boundaries) -> LevelData {
+        finish_level(
+            self.dims,
+            self.spacing,
+            self.couplings,
+            self.absorption,
+            self.patches,
+            boundaries,
+        )
+    }
+}
+
+/// The dimensions and cell size of the level above a level of `dims` cells of size
+/// `spacing`: every axis with more than one cell halved, rounding up.
+pub(crate) fn coarse_shape(dims: [usize; 3], spacing: DVec3) -> ([usize; 3], DVec3) {
+    let coarse = dims.map(|n| if n == 1 { 1 } else { n.div_ceil(2) });
+    let scale = DVec3::from_array(dims.map(|n| if n == 1 { 1.0 } else { 2.0 }));
+    (coarse, spacing * scale)
+}
+
 /// The next coarser level by rediscretisation on the coarsened geometry: couplings through a
 /// coarse face are half the sum of the fine couplings on it (the fine faces' conductances in
 /// parallel, over twice the distance), absorption sums, and boundary patches merge per cell
 /// and side, each fine patch's plane measured from the coarse cell's centre.
 pub(crate) fn coarsen(fine: &LevelData, boundaries: &Boundaries) -> LevelData {
-    let lv = &fine.level;
-    let [nx, ny, nz] = lv.dims;
-    let (dims, spacing) = lv.coarse_shape();
-    let [cx, cy, cz] = dims;
-    let n = cx * cy * cz;
-    let fine_index = |i: usize, j: usize, k: usize| i + nx * (j + ny * k);
-    let mut couplings = [vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]];
-    let mut absorption = vec![0.0f32; n];
-    for kc in 0..cz {
-        for jc in 0..cy {
-            for ic in 0..cx {
-                let c = ic + cx * (jc + cy * kc);
+    let (dims, _) = coarse_shape(fine.level.dims, fine.level.spacing);
+    let whole = Region::new(dims.map(|n| 0..n));
+    coarsen_in(
+        (&fine.level, &fine.absorption, &fine.patches),
+        fine.level.dims,
+        [0; 3],
+        [0; 3],
+        dims,
+        &whole,
+    )
+    .finish(boundaries)
+}
+
+/// [`coarsen`] for the coarse cells `region` (cells of the coarse grid) alone, from a frame
+/// of the fine level: `fine` (its operator, absorption and patches) holds the fine level's
+/// cells from `fine_origin` on (a level of
+/// `level_dims` cells), the result the coarse cells from `coarse_origin` on, `coarse_dims`
+/// of them. Each cell of `region` is the same sums in the same order as the whole level's
+/// coarsening makes it, and its patches merge in the order the whole level's do (the
+/// frame's cells keep the level's order), so a rank that holds a box and its children
+/// coarsens it to the whole level's bits. Every child of a cell of `region` must lie in the
+/// fine frame; cells of the coarse frame outside `region` stay zero, without patches.
+pub(crate) fn coarsen_in(
+    (lv, fine_absorption, fine_patches): (&Level, &[f32], &[LevelPatch]),
+    level_dims: [usize; 3],
+    fine_origin: [usize; 3],
+    coarse_origin: [usize; 3],
+    coarse_dims: [usize; 3],
+    region: &Region,
+) -> LevelParts {
+    let [nx, ny, _] = lv.dims;
+    let (_, spacing) = coarse_shape(level_dims, lv.spacing);
+    let [cx, cy, _] = coarse_dims;
+    let mut parts = LevelParts::zeros(coarse_dims, spacing);
+    let fine_index = |at: [usize; 3]| {
+        let [i, j, k] = std::array::from_fn(|a| at[a] - fine_origin[a]);
+        i + nx * (j + ny * k)
+    };
+    for kc in region.axes[2].clone() {
+        for jc in region.axes[1].clone() {
+            for ic in region.axes[0].clone() {
                 let at = [ic, jc, kc];
+                let [li, lj, lk] = std::array::from_fn(|a| at[a] - coarse_origin[a]);
+                let c = li + cx * (lj + cy * lk);
                 let mut sums = [0.0f64; 3];
                 let mut absorbed = 0.0f64;
-                for k in 2 * kc..(2 * kc + 2).min(nz) {
-                    for j in 2 * jc..(2 * jc + 2).min(ny) {
-                        for i in 2 * ic..(2 * ic + 2).min(nx) {
-                            let f = fine_index(i, j, k);
-                            absorbed += f64::from(fine.absorption[f]);
+                let children = |a: usize| 2 * at[a]..(2 * at[a] + 2).min(level_dims[a]);
+                for k in children(2) {
+                    for j in children(1) {
+                        for i in children(0) {
+                            let f = fine_index([i, j, k]);
+                            absorbed += f64::from(fine_absorption[f]);
                             let fa = [i, j, k];
                             for axis in 0..3 {
                                 if fa[axis] == 2 * at[axis] && at[axis] > 0 {
@@ -696,30 +779,35 @@ pub(crate) fn coarsen(fine: &LevelData, boundaries: &Boundaries) -> LevelData {
                         }
                     }
                 }
-                absorption[c] = absorbed as f32;
+                parts.absorption[c] = absorbed as f32;
                 for axis in 0..3 {
-                    couplings[axis][c] = (0.5 * sums[axis]) as f32;
+                    parts.couplings[axis][c] = (0.5 * sums[axis]) as f32;
                 }
             }
         }
     }
     // Merge patches per coarse cell and side.
-    let parent = |cell: usize| {
-        let (i, j, k) = (cell % nx, (cell / nx) % ny, cell / (nx * ny));
-        (i / 2) + cx * ((j / 2) + cy * (k / 2))
-    };
     let mut merged: std::collections::HashMap<(usize, Side), [f64; 6]> =
         std::collections::HashMap::new();
-    for p in &fine.patches {
+    for p in fine_patches {
+        // The patch's cell in the level, and its parent.
+        let local = [p.cell % nx, (p.cell / nx) % ny, p.cell / (nx * ny)];
+        let at: [usize; 3] = std::array::from_fn(|a| local[a] + fine_origin[a]);
+        let parent: [usize; 3] = at.map(|v| v / 2);
+        if !(0..3).all(|a| region.axes[a].contains(&parent[a])) {
+            continue;
+        }
+        let [pi, pj, pk] = std::array::from_fn(|a| parent[a] - coarse_origin[a]);
         // The patch's plane seen from the coarse centre: d_c = d + n·(x_fine − x_coarse).
-        let at = [p.cell % nx, (p.cell / nx) % ny, p.cell / (nx * ny)];
-        let offset = DVec3::from_array(std::array::from_fn(|a| match (lv.dims[a], at[a] % 2) {
+        let offset = DVec3::from_array(std::array::from_fn(|a| match (level_dims[a], at[a] % 2) {
             (1, _) => 0.0,
             (_, 0) => -0.5,
             _ => 0.5,
         })) * lv.spacing;
         let extra = p.normal.dot(offset);
-        let e = merged.entry((parent(p.cell), p.side)).or_insert([0.0; 6]);
+        let e = merged
+            .entry((pi + cx * (pj + cy * pk), p.side))
+            .or_insert([0.0; 6]);
         e[0] += p.area;
         e[1] += p.area * (p.distance + extra);
         e[2] += p.area * p.diffusion;
@@ -727,7 +815,7 @@ pub(crate) fn coarsen(fine: &LevelData, boundaries: &Boundaries) -> LevelData {
         e[4] += p.area * p.normal.y;
         e[5] += p.area * p.normal.z;
     }
-    let mut patches: Vec<LevelPatch> = merged
+    parts.patches = merged
         .into_iter()
         .filter(|(_, e)| e[0] > 0.0)
         .map(|((cell, side), e)| {
@@ -744,6 +832,6 @@ pub(crate) fn coarsen(fine: &LevelData, boundaries: &Boundaries) -> LevelData {
             }
         })
         .collect();
-    patches.sort_by_key(|p| (p.cell, p.side));
-    finish_level(dims, spacing, couplings, absorption, patches, boundaries)
+    parts.patches.sort_by_key(|p| (p.cell, p.side));
+    parts
 }

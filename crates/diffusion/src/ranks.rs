@@ -51,9 +51,16 @@
 //! hand-overs go through a second frame per stage boundary (the cells a rank restricts to
 //! and one around them). Rank 0 keeps its serial stage's levels whole.
 //!
-//! **Not yet.** Every rank still builds the whole hierarchy (`Multigrid::build`) before it
-//! extracts its boxes, and takes the whole right-hand side and returns the whole φ, so
-//! memory does not scale with ranks.
+//! **Two ways in.** [`Multigrid::solve_on_layout`] splits a hierarchy every rank built
+//! whole (`Multigrid::build`: any medium, embedded boundaries included): each rank takes
+//! the whole right-hand side and gets the whole φ back, so memory does not shrink with
+//! ranks. For a medium that fills the grid's box,
+//! [`SlabSystem::solve_multigrid_on_layout`](crate::SlabSystem::solve_multigrid_on_layout)
+//! builds each rank's frames from its own box of the medium (the `local` module: positioned
+//! reads of the box and the cell beyond its faces, coarsening of its own cells, the
+//! operator's halo and hand-overs exchanged like the vectors'), and each rank gets back φ
+//! on its box: no rank holds the whole volume, hierarchy or solution. Both give
+//! [`Multigrid::solve`]'s bits.
 
 use lucent_core::exact::{ExactSum, NORM_RUN};
 use lucent_core::ranks::{Communicator, all_reduce_sums};
@@ -63,8 +70,13 @@ use crate::error::DiffusionError;
 use std::borrow::Cow;
 
 use crate::level::{Level, Origins};
-use crate::multigrid::{Convergence, Cycle, Multigrid, Prolongation, Smoother, Work};
+use crate::multigrid::{
+    Convergence, Cycle, Multigrid, MultigridSettings, Prolongation, Smoother, Work,
+};
 use crate::region::Region;
+
+mod local;
+pub use local::BoxSolution;
 
 /// How a stage cuts its levels over its ranks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -401,10 +413,59 @@ impl<'a> Held<'a> {
     }
 }
 
-/// One rank's view of the distributed solve: the communicator, the layout, the hierarchy
-/// and the part of it this rank holds.
+/// The levels rank 0 cycles alone (the last stage's), as a hierarchy of their own whose
+/// level 0 is level `first` of the whole one.
+struct Serial<'a> {
+    first: usize,
+    mg: Cow<'a, Multigrid>,
+}
+
+/// The frames rank `rank` holds of each level of a hierarchy of `dims` split as `layout`:
+/// per level its box and the cells around it on a split level, the whole level on the
+/// stage of one rank (rank 0's), none elsewhere; and per level that starts a stage, for a
+/// rank of the stage before, the cells its box restricts to and one around them (the
+/// hand-over's).
+#[allow(clippy::type_complexity)]
+fn frames(
+    layout: &RankLayout,
+    dims: &[[usize; 3]],
+    rank: usize,
+) -> (Vec<Option<Frame>>, Vec<Option<Frame>>) {
+    let held = (0..dims.len())
+        .map(|l| {
+            let stage = layout.stage_of(l);
+            let own = stage.owned(rank, l);
+            if own.is_empty() {
+                None
+            } else if stage.ranks() == 1 {
+                Some(Frame::whole(dims[l]))
+            } else {
+                Some(Frame::around(&own, dims[l]))
+            }
+        })
+        .collect();
+    let handover = (0..dims.len())
+        .map(|l| {
+            let starts = l > 0 && layout.stage_of(l).first_level == l;
+            let restricted = if starts {
+                layout.stage_of(l - 1).owned(rank, l)
+            } else {
+                Region::default()
+            };
+            (!restricted.is_empty()).then(|| Frame::around(&restricted, dims[l]))
+        })
+        .collect();
+    (held, handover)
+}
+
+/// One rank's view of the distributed solve: the communicator, the layout, the settings,
+/// each level's dimensions and the part of the hierarchy this rank holds.
 struct OnRanks<'a, C: ?Sized> {
-    mg: &'a Multigrid,
+    settings: MultigridSettings,
+    /// Every level's cells per axis.
+    dims: Vec<[usize; 3]>,
+    /// Rank 0's serial levels (`None` on the other ranks).
+    serial: Option<Serial<'a>>,
     comm: &'a C,
     layout: RankLayout,
     rank: usize,
@@ -437,35 +498,24 @@ type Side<'s, V> = Option<(&'s Frame, V)>;
 impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
     fn new(mg: &'a Multigrid, comm: &'a C, layout: RankLayout) -> Self {
         let rank = comm.rank();
-        let depth = mg.levels.len();
-        let dims = |l: usize| mg.levels[l].dims;
-        let held = (0..depth)
-            .map(|l| {
-                let stage = layout.stage_of(l);
-                let own = stage.owned(rank, l);
-                if own.is_empty() {
-                    None
-                } else if stage.ranks() == 1 {
-                    Some(Held::new(mg, l, Frame::whole(dims(l))))
-                } else {
-                    Some(Held::new(mg, l, Frame::around(&own, dims(l))))
-                }
-            })
-            .collect();
-        let handover = (0..depth)
-            .map(|l| {
-                let starts = l > 0 && layout.stage_of(l).first_level == l;
-                let restricted = if starts {
-                    layout.stage_of(l - 1).owned(rank, l)
-                } else {
-                    Region::default()
-                };
-                (!restricted.is_empty())
-                    .then(|| Held::new(mg, l, Frame::around(&restricted, dims(l))))
-            })
-            .collect();
+        let dims: Vec<[usize; 3]> = mg.levels.iter().map(|l| l.dims).collect();
+        let (held, handover) = frames(&layout, &dims, rank);
+        let take = |frames: Vec<Option<Frame>>| -> Vec<Option<Held<'a>>> {
+            frames
+                .into_iter()
+                .enumerate()
+                .map(|(l, f)| f.map(|f| Held::new(mg, l, f)))
+                .collect()
+        };
+        let (held, handover) = (take(held), take(handover));
+        let serial = (rank == 0).then_some(Serial {
+            first: 0,
+            mg: Cow::Borrowed(mg),
+        });
         Self {
-            mg,
+            settings: *mg.settings(),
+            dims,
+            serial,
             comm,
             layout,
             rank,
@@ -498,7 +548,14 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
     }
 
     fn dims(&self, l: usize) -> [usize; 3] {
-        self.mg.levels[l].dims
+        self.dims[l]
+    }
+
+    /// Rank 0's serial levels.
+    fn serial_levels(&self) -> Result<&Serial<'a>, DiffusionError> {
+        self.serial
+            .as_ref()
+            .ok_or_else(|| protocol(self.rank, "a serial level on a rank other than 0"))
     }
 
     fn stage(&self, l: usize) -> &Stage {
@@ -724,7 +781,7 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
     fn hand_up(&self, l: usize, x: &[f32], up: &mut [f32]) -> Result<(), DiffusionError> {
         let (fine, coarse) = (self.stage(l), self.stage(l + 1));
         let dims = self.dims(l + 1);
-        let halo = usize::from(self.mg.settings().prolongation == Prolongation::Trilinear);
+        let halo = usize::from(self.settings.prolongation == Prolongation::Trilinear);
         let from = self.held[l + 1].as_ref().map(|h| (&h.frame, x));
         let to = self.handover[l + 1].as_ref().map(|h| (&h.frame, up));
         self.move_regions(
@@ -785,7 +842,7 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
         scratch: &mut [f32],
         post: bool,
     ) -> Result<(), DiffusionError> {
-        let settings = self.mg.settings();
+        let settings = &self.settings;
         let sweeps = if post {
             settings.post_sweeps
         } else {
@@ -890,7 +947,8 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
             return Ok(());
         }
         if self.serial(l) {
-            self.mg.cycle(l, cycle, &mut w.b, &mut w.x, &mut w.s);
+            let Serial { first: f, mg } = self.serial_levels()?;
+            mg.cycle(l - f, cycle, &mut w.b[*f..], &mut w.x[*f..], &mut w.s[*f..]);
             return Ok(());
         }
         self.smooth(l, &w.b[l], &mut w.x[l], &mut w.s[l], false)?;
@@ -909,9 +967,10 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
                     self.cycle(l + 1, Cycle::V, w)?;
                 }
                 // The layout keeps the K-cycle's coarse levels on rank 0.
-                Cycle::K => self
-                    .mg
-                    .krylov_correction(l + 1, &mut w.b, &mut w.x, &mut w.s),
+                Cycle::K => {
+                    let Serial { first: f, mg } = self.serial_levels()?;
+                    mg.krylov_correction(l + 1 - f, &mut w.b[*f..], &mut w.x[*f..], &mut w.s[*f..]);
+                }
             }
         }
         self.prolong(l, w)?;
@@ -922,7 +981,14 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
     /// cells it reads: the halo within a stage, with edges and corners for trilinear
     /// prolongation; the hand-up across one).
     fn prolong(&self, l: usize, w: &mut Vectors) -> Result<(), DiffusionError> {
-        let trilinear = self.mg.settings().prolongation == Prolongation::Trilinear;
+        if self.serial(l) {
+            // Rank 0's serial levels: the serial prolongation.
+            let Serial { first: f, mg } = self.serial_levels()?;
+            let (xf, xc) = w.x.split_at_mut(l + 1);
+            mg.prolong(l - f, &xc[0], &mut xf[l], &mg.levels[l - f].whole());
+            return Ok(());
+        }
+        let trilinear = self.settings.prolongation == Prolongation::Trilinear;
         if self.hands_over(l) {
             self.hand_up(l, &w.x[l + 1], &mut w.up[l + 1])?;
         } else if trilinear {
@@ -969,16 +1035,17 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
                 *b = *r as f32;
             }
         }
-        let last = self.mg.levels.len() - 1;
+        let last = self.dims.len() - 1;
         for l in 0..last {
             if self.owned(l).is_empty() {
                 break;
             }
             if self.serial(l) {
                 // Rank 0's serial levels: the serial restriction.
+                let Serial { first: f, mg } = self.serial_levels()?;
                 let (bf, bc) = w.b.split_at_mut(l + 1);
-                let coarse = &self.mg.levels[l + 1];
-                self.mg.levels[l].restrict(
+                let coarse = &mg.levels[l + 1 - f];
+                mg.levels[l - f].restrict(
                     &bf[l],
                     coarse,
                     &mut bc[0],
@@ -991,7 +1058,9 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
         }
         if !self.owned(last).is_empty() {
             w.x[last].fill(0.0);
-            self.mg.coarsest(&w.b[last], &mut w.x[last]);
+            self.serial_levels()?
+                .mg
+                .coarsest(&w.b[last], &mut w.x[last]);
         }
         for l in (0..last).rev() {
             if self.owned(l).is_empty() {
@@ -999,9 +1068,126 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
             }
             w.x[l].fill(0.0);
             self.prolong(l, w)?;
-            self.cycle(l, self.mg.settings().cycle, w)?;
+            self.cycle(l, self.settings.cycle, w)?;
         }
         Ok(())
+    }
+
+    /// The solve on this rank's frame of the fine level: `rhs` and `phi` (the initial
+    /// guess, ignored under full multigrid) on it, φ left on the owned box. The history and
+    /// stop reason are every rank's.
+    fn iterate(
+        &self,
+        rhs: &[f64],
+        phi_held: &mut [f64],
+        stopping: &Stopping,
+    ) -> Result<Convergence, DiffusionError> {
+        let started = std::time::Instant::now();
+        let (frame, fine) = match self.held[0].as_ref() {
+            Some(h) if self.serial(0) => {
+                (h.frame.clone(), Some(&self.serial_levels()?.mg.levels[0]))
+            }
+            Some(h) => (h.frame.clone(), Some(&*h.level)),
+            None => (
+                Frame {
+                    origin: [0; 3],
+                    dims: [0; 3],
+                },
+                None,
+            ),
+        };
+        let o = frame.local(&self.owned(0));
+        // Σ of every rank's exact run sums, with every rank's flags: the serial norm's bits.
+        let gather = |sum: ExactSum| -> Result<Gathered, DiffusionError> {
+            let flags = stopping.local_flags(started);
+            let (flags, sums) = all_reduce_sums(self.comm, &flags, &[sum])
+                .ok_or_else(|| protocol(self.rank, "a norm's reduction"))?;
+            Ok(Gathered {
+                norm: sums[0].value().sqrt(),
+                time_up: flags[0],
+                cancelled: flags[1],
+            })
+        };
+        // The deterministic stops from the shared residual; the clock and the cancel flag
+        // come with the gathers.
+        let shared = Stopping {
+            time_budget: None,
+            cancel: None,
+            progress: if self.rank == 0 {
+                stopping.progress.clone()
+            } else {
+                None
+            },
+            ..stopping.clone()
+        };
+        let b_norm = gather(fine.map_or_else(ExactSum::new, |f| f.squares_in(rhs, &o)))?
+            .norm
+            .max(f64::MIN_POSITIVE);
+        let (b, x, s, down, up) = self.work();
+        let mut w = Vectors { b, x, s, down, up };
+        if self.settings.full_multigrid && fine.is_some() {
+            self.full_multigrid(rhs, &mut w)?;
+            let values = o.read(frame.dims, &w.x[0], f64::from);
+            o.write(frame.dims, phi_held, &values, |v| v);
+        }
+        let mut r = vec![0.0f64; frame.len()];
+        let true_residual = |phi: &mut [f64], r: &mut [f64]| -> Result<ExactSum, DiffusionError> {
+            self.halo(0, phi, |v| v, |v| v, false, |_| ())?;
+            Ok(fine.map_or_else(ExactSum::new, |f| f.residual_in(rhs, phi, r, &o)))
+        };
+        let mut gathered = gather(true_residual(phi_held, &mut r)?)?;
+        let to_b = |b: &mut [f32], r: &[f64]| {
+            let n = o.axes[0].len();
+            for start in o.lines(frame.dims) {
+                for (b, r) in b[start..start + n].iter_mut().zip(&r[start..]) {
+                    *b = *r as f32;
+                }
+            }
+        };
+        to_b(&mut w.b[0], &r);
+        let mut residuals = vec![gathered.norm / b_norm];
+        let initial = residuals[0];
+        let stop_reason = loop {
+            let iteration = residuals.len() - 1;
+            let norm = gathered.norm;
+            if let Some(reason) = shared.verdict(iteration, norm / b_norm, norm, initial, started) {
+                if !reason.is_converged() {
+                    break reason;
+                }
+                gathered = gather(true_residual(phi_held, &mut r)?)?;
+                let norm = gathered.norm;
+                *residuals.last_mut().unwrap_or(&mut 0.0) = norm / b_norm;
+                if let Some(reason) = shared
+                    .verdict(iteration, norm / b_norm, norm, initial, started)
+                    .filter(|r| r.is_converged())
+                {
+                    break reason;
+                }
+                to_b(&mut w.b[0], &r);
+            }
+            let relative = norm / b_norm;
+            if gathered.time_up {
+                break StopReason::TimeLimit { residual: relative };
+            }
+            if gathered.cancelled {
+                break StopReason::Interrupted { residual: relative };
+            }
+            let sum = match fine {
+                Some(fine) => {
+                    w.x[0].fill(0.0);
+                    self.cycle(0, self.settings.cycle, &mut w)?;
+                    self.halo32(0, &mut w.x[0])?;
+                    fine.correct_in(&w.x[0], phi_held, &mut r, &mut w.b[0], &o)
+                }
+                None => ExactSum::new(),
+            };
+            gathered = gather(sum)?;
+            residuals.push(gathered.norm / b_norm);
+        };
+        Ok(Convergence {
+            residuals,
+            stop_reason,
+        })
     }
 }
 
@@ -1023,6 +1209,75 @@ struct Gathered {
     cancelled: bool,
 }
 
+/// Whether `layout` splits a hierarchy of levels of `dims` cells over `ranks` ranks as a stage layout must:
+/// stages cover the levels in order, the last on one rank; each stage's grid of boxes
+/// (no more than `ranks` boxes, no more than its predecessor's) cuts each axis of its
+/// first level in order, inner cuts multiples of 2^levels, and on the fine level x's
+/// of `NORM_RUN` (so the norms are the serial bits).
+fn check_layout(
+    layout: &RankLayout,
+    dims: &[[usize; 3]],
+    cycle: Cycle,
+    ranks: usize,
+) -> Result<(), DiffusionError> {
+    let invalid = |why: &str| {
+        Err(DiffusionError::Invalid(format!(
+            "a rank layout whose {why} ({layout:?} for {} levels on {ranks} ranks)",
+            dims.len()
+        )))
+    };
+    let mut level = 0;
+    let mut previous = ranks;
+    for (i, stage) in layout.stages.iter().enumerate() {
+        let last = i + 1 == layout.stages.len();
+        if stage.first_level != level || stage.levels == 0 {
+            return invalid("stages do not follow each other");
+        }
+        let p = stage.ranks();
+        if p == 0 || p > previous || (last != (p == 1)) {
+            return invalid("rank counts do not shrink to one on the last stage");
+        }
+        let Some(level_dims) = dims.get(level) else {
+            return invalid("stages run past the coarsest level");
+        };
+        let unit = 1usize << stage.levels.min(usize::BITS as usize - 2);
+        for (a, cuts) in stage.cuts.iter().enumerate() {
+            let unit = if level == 0 && a == 0 {
+                unit.max(NORM_RUN)
+            } else {
+                unit
+            };
+            let inner = cuts.get(1..cuts.len().saturating_sub(1)).unwrap_or(&[]);
+            if cuts.first() != Some(&0)
+                || cuts.last() != Some(&level_dims[a])
+                || cuts.windows(2).any(|w| w[1] <= w[0])
+                || inner.iter().any(|c| c % unit != 0)
+            {
+                return invalid("boxes do not cover a level in whole units");
+            }
+        }
+        previous = p;
+        level += stage.levels;
+        if level > dims.len() {
+            return invalid("stages run past the coarsest level");
+        }
+    }
+    if level != dims.len() {
+        return invalid("stages do not reach the coarsest level");
+    }
+    if cycle == Cycle::K
+        && layout
+            .stages
+            .first()
+            .is_some_and(|s| s.ranks() > 1 && s.levels > 1)
+    {
+        return invalid(
+            "K-cycle splits more than its fine level (its Krylov steps run on one rank)",
+        );
+    }
+    Ok(())
+}
+
 impl Multigrid {
     /// Whether `layout` splits this hierarchy over `ranks` ranks as a stage layout must:
     /// stages cover the levels in order, the last on one rank; each stage's grid of boxes
@@ -1030,60 +1285,8 @@ impl Multigrid {
     /// first level in order, inner cuts multiples of 2^levels, and on the fine level x's
     /// of `NORM_RUN` (so the norms are the serial bits).
     fn check_layout(&self, layout: &RankLayout, ranks: usize) -> Result<(), DiffusionError> {
-        let invalid = |why: &str| {
-            Err(DiffusionError::Invalid(format!(
-                "a rank layout whose {why} ({layout:?} for {} levels on {ranks} ranks)",
-                self.levels.len()
-            )))
-        };
-        let mut level = 0;
-        let mut previous = ranks;
-        for (i, stage) in layout.stages.iter().enumerate() {
-            let last = i + 1 == layout.stages.len();
-            if stage.first_level != level || stage.levels == 0 {
-                return invalid("stages do not follow each other");
-            }
-            let p = stage.ranks();
-            if p == 0 || p > previous || (last != (p == 1)) {
-                return invalid("rank counts do not shrink to one on the last stage");
-            }
-            let dims = self.levels[level].dims;
-            let unit = 1usize << stage.levels.min(usize::BITS as usize - 2);
-            for (a, cuts) in stage.cuts.iter().enumerate() {
-                let unit = if level == 0 && a == 0 {
-                    unit.max(NORM_RUN)
-                } else {
-                    unit
-                };
-                let inner = cuts.get(1..cuts.len().saturating_sub(1)).unwrap_or(&[]);
-                if cuts.first() != Some(&0)
-                    || cuts.last() != Some(&dims[a])
-                    || cuts.windows(2).any(|w| w[1] <= w[0])
-                    || inner.iter().any(|c| c % unit != 0)
-                {
-                    return invalid("boxes do not cover a level in whole units");
-                }
-            }
-            previous = p;
-            level += stage.levels;
-            if level > self.levels.len() {
-                return invalid("stages run past the coarsest level");
-            }
-        }
-        if level != self.levels.len() {
-            return invalid("stages do not reach the coarsest level");
-        }
-        if self.settings().cycle == Cycle::K
-            && layout
-                .stages
-                .first()
-                .is_some_and(|s| s.ranks() > 1 && s.levels > 1)
-        {
-            return invalid(
-                "K-cycle splits more than its fine level (its Krylov steps run on one rank)",
-            );
-        }
-        Ok(())
+        let dims: Vec<[usize; 3]> = self.levels.iter().map(|l| l.dims).collect();
+        check_layout(layout, &dims, self.settings().cycle, ranks)
     }
 
     /// How [`Multigrid::solve_on_ranks`] splits this hierarchy over `ranks` ranks: coarse
@@ -1176,20 +1379,16 @@ impl Multigrid {
             )));
         }
         let on = OnRanks::new(self, comm, layout);
-        let started = std::time::Instant::now();
         let dims = self.fine().dims;
         // This rank's fine level: its box and the cells around it (nothing on a rank the
-        // fine level leaves out), rhs, φ and r held there, o the box in the frame's indices.
-        let (frame, fine) = match on.held[0].as_ref() {
-            Some(h) => (h.frame.clone(), Some(&*h.level)),
-            None => (
-                Frame {
-                    origin: [0; 3],
-                    dims: [0; 3],
-                },
-                None,
-            ),
-        };
+        // fine level leaves out), rhs and φ held there, o the box in the frame's indices.
+        let frame = on.held[0].as_ref().map_or(
+            Frame {
+                origin: [0; 3],
+                dims: [0; 3],
+            },
+            |h| h.frame.clone(),
+        );
         let around = Region::new(std::array::from_fn(|a| {
             frame.origin[a]..frame.origin[a] + frame.dims[a]
         }));
@@ -1207,99 +1406,10 @@ impl Multigrid {
             Some(v) => v,
             None => &mut *phi,
         };
-        // Σ of every rank's exact run sums, with every rank's flags: the serial norm's bits.
-        let gather = |sum: ExactSum| -> Result<Gathered, DiffusionError> {
-            let flags = stopping.local_flags(started);
-            let (flags, sums) = all_reduce_sums(comm, &flags, &[sum])
-                .ok_or_else(|| protocol(on.rank, "a norm's reduction"))?;
-            Ok(Gathered {
-                norm: sums[0].value().sqrt(),
-                time_up: flags[0],
-                cancelled: flags[1],
-            })
-        };
-        // The deterministic stops from the shared residual; the clock and the cancel flag
-        // come with the gathers.
-        let shared = Stopping {
-            time_budget: None,
-            cancel: None,
-            progress: if on.rank == 0 {
-                stopping.progress.clone()
-            } else {
-                None
-            },
-            ..stopping.clone()
-        };
-        let b_norm = gather(fine.map_or_else(ExactSum::new, |f| f.squares_in(&rhs, &o)))?
-            .norm
-            .max(f64::MIN_POSITIVE);
-        let (b, x, s, down, up) = on.work();
-        let mut w = Vectors { b, x, s, down, up };
-        if self.settings().full_multigrid && fine.is_some() {
-            on.full_multigrid(&rhs, &mut w)?;
-            let values = o.read(frame.dims, &w.x[0], f64::from);
-            o.write(frame.dims, phi_held, &values, |v| v);
-        }
-        let mut r = vec![0.0f64; frame.len()];
-        let true_residual = |phi: &mut [f64], r: &mut [f64]| -> Result<ExactSum, DiffusionError> {
-            on.halo(0, phi, |v| v, |v| v, false, |_| ())?;
-            Ok(fine.map_or_else(ExactSum::new, |f| f.residual_in(&rhs, phi, r, &o)))
-        };
-        let mut gathered = gather(true_residual(phi_held, &mut r)?)?;
-        let to_b = |b: &mut [f32], r: &[f64]| {
-            let n = o.axes[0].len();
-            for start in o.lines(frame.dims) {
-                for (b, r) in b[start..start + n].iter_mut().zip(&r[start..]) {
-                    *b = *r as f32;
-                }
-            }
-        };
-        to_b(&mut w.b[0], &r);
-        let mut residuals = vec![gathered.norm / b_norm];
-        let initial = residuals[0];
-        let stop_reason = loop {
-            let iteration = residuals.len() - 1;
-            let norm = gathered.norm;
-            if let Some(reason) = shared.verdict(iteration, norm / b_norm, norm, initial, started) {
-                if !reason.is_converged() {
-                    break reason;
-                }
-                gathered = gather(true_residual(phi_held, &mut r)?)?;
-                let norm = gathered.norm;
-                *residuals.last_mut().unwrap_or(&mut 0.0) = norm / b_norm;
-                if let Some(reason) = shared
-                    .verdict(iteration, norm / b_norm, norm, initial, started)
-                    .filter(|r| r.is_converged())
-                {
-                    break reason;
-                }
-                to_b(&mut w.b[0], &r);
-            }
-            let relative = norm / b_norm;
-            if gathered.time_up {
-                break StopReason::TimeLimit { residual: relative };
-            }
-            if gathered.cancelled {
-                break StopReason::Interrupted { residual: relative };
-            }
-            let sum = match fine {
-                Some(fine) => {
-                    w.x[0].fill(0.0);
-                    on.cycle(0, self.settings().cycle, &mut w)?;
-                    on.halo32(0, &mut w.x[0])?;
-                    fine.correct_in(&w.x[0], phi_held, &mut r, &mut w.b[0], &o)
-                }
-                None => ExactSum::new(),
-            };
-            gathered = gather(sum)?;
-            residuals.push(gathered.norm / b_norm);
-        };
+        let convergence = on.iterate(&rhs, phi_held, stopping)?;
         if comm.size() == 1 {
             // φ is the caller's already.
-            return Ok(Convergence {
-                residuals,
-                stop_reason,
-            });
+            return Ok(convergence);
         }
         // Every rank's box, in rank order (ranks past the fine stage hold none).
         let mine = o.read(frame.dims, phi_held, |v| v);
@@ -1316,9 +1426,6 @@ impl Multigrid {
         if at != n || whole.len() != n {
             return Err(protocol(on.rank, "the solution's gather"));
         }
-        Ok(Convergence {
-            residuals,
-            stop_reason,
-        })
+        Ok(convergence)
     }
 }

@@ -23,7 +23,9 @@ use sprs::CsMat;
 
 use crate::error::DiffusionError;
 use crate::geometry::{box_patch, box_sides};
-use crate::problem::{Boundaries, Condition, LevelPatch, face_diffusion, point_weights_in};
+use crate::problem::{
+    Boundaries, Condition, LevelParts, LevelPatch, face_diffusion, point_weights_in,
+};
 
 /// Slabs z − 1, z and z + 1 of a field (`None` beyond the box).
 #[derive(Debug, Clone, Copy)]
@@ -105,6 +107,11 @@ impl SlabSystem {
     /// The grid.
     pub fn geometry(&self) -> &GridGeometry {
         &self.geometry
+    }
+
+    /// The boundary conditions.
+    pub fn boundaries(&self) -> &Boundaries {
+        &self.boundaries
     }
 
     /// Whether some face of the box holds the fluence (a Robin or Dirichlet condition):
@@ -368,24 +375,23 @@ pub struct BlockFields<'a> {
     pub source: &'a [f32],
 }
 
+impl BlockFields<'_> {
+    /// Cell `p` of the grid in the fields (it must lie in their box).
+    #[inline]
+    fn index(&self, [i, j, k]: [usize; 3]) -> usize {
+        let [ox, oy, oz] = self.origin;
+        (i - ox) + self.dims[0] * ((j - oy) + self.dims[1] * (k - oz))
+    }
+}
+
 impl SlabSystem {
-    /// The rows and right-hand side of the box of cells `cells` (without a first moment),
-    /// from the fields of that box and, for D, the cell beyond each face that the grid has:
-    /// what one rank of a decomposition into boxes (or z-slabs) builds without the rest of
-    /// the volume. The coefficients are checked as
-    /// [`DiffusionProblem::new`](crate::DiffusionProblem::new) checks them (D finite and
-    /// positive over the box grown by a cell, σ_a finite and ≥ 0, q0 finite over the box).
-    ///
-    /// # Errors
-    /// [`DiffusionError::Invalid`] for an empty box or one beyond the grid, fields that do
-    /// not cover the cells the block reads or whose lengths are not their box's, or a
-    /// value the problem refuses (named by its cell).
-    pub fn block(
+    /// Checks that `fields` cover the cells a block of `cells` reads and hold values the
+    /// problem accepts ([`SlabSystem::block`]'s errors).
+    fn check_fields(
         &self,
-        cells: [Range<usize>; 3],
-        fields: BlockFields<'_>,
-        points: &[PointShares],
-    ) -> Result<Block, DiffusionError> {
+        cells: &[Range<usize>; 3],
+        fields: &BlockFields<'_>,
+    ) -> Result<(), DiffusionError> {
         let dims = self.geometry.dims();
         let [nx, ny, _] = dims;
         let BlockFields {
@@ -394,7 +400,7 @@ impl SlabSystem {
             diffusion: d,
             absorption: sigma_a,
             source: q0,
-        } = fields;
+        } = *fields;
         let reads: [Range<usize>; 3] = std::array::from_fn(|a| {
             cells[a].start.saturating_sub(1)..(cells[a].end + 1).min(dims[a])
         });
@@ -414,7 +420,6 @@ impl SlabSystem {
                 q0.len()
             )));
         }
-        // A cell's place in the fields, and in the whole grid.
         let at = |[i, j, k]: [usize; 3]| {
             (i - origin[0]) + held[0] * ((j - origin[1]) + held[1] * (k - origin[2]))
         };
@@ -428,7 +433,7 @@ impl SlabSystem {
                 )));
             }
         }
-        for p in box_cells(&cells) {
+        for p in box_cells(cells) {
             let (s, q) = (sigma_a[at(p)], q0[at(p)]);
             if !(s.is_finite() && s >= 0.0) {
                 return Err(DiffusionError::Invalid(format!(
@@ -443,6 +448,113 @@ impl SlabSystem {
                 )));
             }
         }
+        Ok(())
+    }
+
+    /// The right-hand side of the box of cells `cells` (without a first moment), in the
+    /// box's order, from `fields` (checked as [`SlabSystem::block`] checks them).
+    ///
+    /// # Errors
+    /// As [`SlabSystem::block`].
+    pub fn block_rhs(
+        &self,
+        cells: &[Range<usize>; 3],
+        fields: &BlockFields<'_>,
+        points: &[PointShares],
+    ) -> Result<Vec<f64>, DiffusionError> {
+        self.check_fields(cells, fields)?;
+        let volume = self.geometry.cell_volume();
+        Ok(box_cells(cells)
+            .map(|p| {
+                let at = fields.index(p);
+                let source = f64::from(fields.source[at]) * f64::from(1.0f32) * volume;
+                self.boundary_and_points(p, fields.diffusion[at], None, points, 0.0 + source)
+            })
+            .collect())
+    }
+
+    /// The finest level's couplings, absorption and boundary patches on a frame of the grid
+    /// (`frame_dims` cells from `frame_origin`), as
+    /// [`DiffusionProblem::fine_level`](crate::DiffusionProblem) makes them for the whole
+    /// grid: the couplings of every face both of whose cells `fields` hold, the absorption
+    /// and patches of the cells `cells` (which `fields` must hold, checked beforehand).
+    pub(crate) fn frame_parts(
+        &self,
+        cells: &[Range<usize>; 3],
+        fields: &BlockFields<'_>,
+        frame_origin: [usize; 3],
+        frame_dims: [usize; 3],
+    ) -> LevelParts {
+        let h = self.geometry.spacing();
+        let mut parts = LevelParts::zeros(frame_dims, h);
+        let [fx, fy, _] = frame_dims;
+        let local = |p: [usize; 3]| {
+            (p[0] - frame_origin[0])
+                + fx * ((p[1] - frame_origin[1]) + fy * (p[2] - frame_origin[2]))
+        };
+        let frame: [Range<usize>; 3] =
+            std::array::from_fn(|a| frame_origin[a]..frame_origin[a] + frame_dims[a]);
+        let held: [Range<usize>; 3] =
+            std::array::from_fn(|a| fields.origin[a]..fields.origin[a] + fields.dims[a]);
+        for p in box_cells(&frame) {
+            if !(0..3).all(|a| held[a].contains(&p[a])) {
+                continue;
+            }
+            let d = fields.diffusion[fields.index(p)];
+            for axis in 0..3 {
+                let mut below = p;
+                below[axis] = below[axis].wrapping_sub(1);
+                if p[axis] > 0 && held[axis].contains(&below[axis]) {
+                    parts.couplings[axis][local(p)] =
+                        self.coupling(axis, d, fields.diffusion[fields.index(below)]);
+                }
+            }
+        }
+        let volume = self.geometry.cell_volume();
+        for p in box_cells(cells) {
+            let at = fields.index(p);
+            parts.absorption[local(p)] =
+                (f64::from(fields.absorption[at]) * f64::from(1.0f32) * volume) as f32;
+            for mut patch in self.patches(p, fields.diffusion[at]) {
+                patch.cell = local(p);
+                parts.patches.push(patch);
+            }
+        }
+        parts
+    }
+
+    /// The rows and right-hand side of the box of cells `cells` (without a first moment),
+    /// from the fields of that box and, for D, the cell beyond each face that the grid has:
+    /// what one rank of a decomposition into boxes (or z-slabs) builds without the rest of
+    /// the volume. The coefficients are checked as
+    /// [`DiffusionProblem::new`](crate::DiffusionProblem::new) checks them (D finite and
+    /// positive over the box grown by a cell, σ_a finite and ≥ 0, q0 finite over the box).
+    ///
+    /// # Errors
+    /// [`DiffusionError::Invalid`] for an empty box or one beyond the grid, fields that do
+    /// not cover the cells the block reads or whose lengths are not their box's, or a
+    /// value the problem refuses (named by its cell).
+    pub fn block(
+        &self,
+        cells: [Range<usize>; 3],
+        fields: BlockFields<'_>,
+        points: &[PointShares],
+    ) -> Result<Block, DiffusionError> {
+        self.check_fields(&cells, &fields)?;
+        let dims = self.geometry.dims();
+        let [nx, ny, _] = dims;
+        let BlockFields {
+            origin,
+            dims: held,
+            diffusion: d,
+            absorption: sigma_a,
+            source: q0,
+        } = fields;
+        // A cell's place in the fields, and in the whole grid.
+        let at = |[i, j, k]: [usize; 3]| {
+            (i - origin[0]) + held[0] * ((j - origin[1]) + held[1] * (k - origin[2]))
+        };
+        let cell = |[i, j, k]: [usize; 3]| i + nx * (j + ny * k);
         let rows: usize = cells.iter().map(ExactSizeIterator::len).product();
         let mut indptr = Vec::with_capacity(rows + 1);
         indptr.push(0);
