@@ -343,7 +343,13 @@ fn a_refused_part_of_the_medium_stops_every_rank() {
                 (1, DiffusionError::Invalid(why)) if !short => {
                     assert!(why.contains("diffusion coefficient -1"), "{why}");
                 }
-                (1, DiffusionError::Invalid(_)) | (_, DiffusionError::Ranks(_)) => {}
+                (1, DiffusionError::Invalid(_)) => {}
+                (_, DiffusionError::Ranks(why)) => {
+                    assert!(
+                        why.contains("rank 1 refused its part of the medium"),
+                        "{why}"
+                    );
+                }
                 _ => panic!("rank {rank}: {e}"),
             }
         }

@@ -34,7 +34,9 @@
 //! Jacobi diffusion in a medium filling the box (`lucent_explicit::ranks::iterate_block`
 //! on the rows `lucent_diffusion::SlabSystem::block` builds from the rank's layers or box
 //! and D's cells beyond its faces; the `slab_diffusion` example, `--boxes` for a grid of
-//! boxes). The examples read the rank's layers or box of a volume file by positioned reads
+//! boxes), and the multigrid in such a medium
+//! (`lucent_diffusion::SlabSystem::solve_multigrid_on_layout`: each rank builds its part of
+//! every level from its box; `slab_diffusion --method mg`). The examples read the rank's layers or box of a volume file by positioned reads
 //! and write its cells of the result into one `.npy` (`lucent_grid::io::layers`), so no
 //! rank holds the whole volume.
 //!

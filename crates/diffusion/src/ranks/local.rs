@@ -158,7 +158,8 @@ impl SlabSystem {
         } else {
             self.block_rhs(&cells, &fields, points)
         };
-        let failed = f64::from(u8::from(rhs.is_err()));
+        // 1 + the rank that failed (the highest, when several did), or 0.
+        let failed = if rhs.is_err() { rank as f64 + 1.0 } else { 0.0 };
         let any_failed = all_reduce(comm, &[failed], |acc, part| {
             acc[0] = acc[0].max(part[0]);
             part.len() == 1
@@ -167,7 +168,8 @@ impl SlabSystem {
         let rhs = rhs?;
         if any_failed[0] != 0.0 {
             return Err(DiffusionError::Ranks(format!(
-                "rank {rank}: another rank refused its part of the medium"
+                "rank {rank}: rank {} refused its part of the medium (it says why)",
+                any_failed[0] - 1.0
             )));
         }
         let on = OnRanks::build(self, &fields, &shapes, settings, comm, layout)?;
