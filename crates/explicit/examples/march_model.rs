@@ -16,13 +16,15 @@
 //! with t_c = 0.25 µs per cell (the measured march on one core of dev-2c), α = 2 µs and
 //! β = 10 GB/s (a cluster's network): the compute stretched by the pipeline's fill, one
 //! latency per step, and the halo's bytes. `speed-up` is n³ t_c / T_P. `schedule` is the
-//! wall time this machine took to derive the schedule and count its messages (every rank
-//! derives it once per march; the count is this example's).
+//! wall time this machine took to derive every rank's schedule and count its messages
+//! (this example's model); `a rank's plan` the tasks one rank (the middle one) derives
+//! before it marches, and the time it took (`wavefront::rank_plan_tasks`): in lock step
+//! (planes) its own and its neighbours' tasks, otherwise every rank's.
 
 use glam::DVec3;
 use lucent_explicit::convection::Model;
 use lucent_explicit::ranks::Boxes;
-use lucent_explicit::wavefront::box_schedule;
+use lucent_explicit::wavefront::{box_schedule, rank_plan_tasks};
 
 const SECONDS_PER_CELL: f64 = 0.25e-6;
 const LATENCY: f64 = 2e-6;
@@ -54,9 +56,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         BANDWIDTH / 1e9
     );
     println!(
-        "| boxes | march | A, L, D | rows | order | steps | busy | messages | MB sent | T_P | speed-up | schedule |"
+        "| boxes | march | A, L, D | rows | order | steps | busy | messages | MB sent | T_P | speed-up | schedule | a rank's plan |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for grid in grids {
         let boxes = Boxes::new([n; 3], grid)?;
         let ranks = boxes.ranks();
@@ -76,6 +78,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let started = std::time::Instant::now();
             let s = box_schedule(&boxes, direction, model)?;
             let scheduled = started.elapsed().as_secs_f64();
+            let started = std::time::Instant::now();
+            let planned = rank_plan_tasks(&boxes, direction, model, ranks / 2)?;
+            let plan_seconds = started.elapsed().as_secs_f64();
             let busiest = (0..ranks).max_by_key(|&r| s.busy[r]).unwrap_or(0);
             let cells = (n * n * n) as f64 / ranks as f64;
             let bytes = 8.0 * s.values.iter().copied().max().unwrap_or(0) as f64;
@@ -84,7 +89,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 + s.steps as f64 * LATENCY
                 + bytes / BANDWIDTH;
             println!(
-                "| {grid:?} | {name} | {}, {}, {} | {} | {} | {} | {} | {messages} | {:.1} | {:.3} s | {:.0} | {scheduled:.2} s |",
+                "| {grid:?} | {name} | {}, {}, {} | {} | {} | {} | {} | {messages} | {:.1} | {:.3} s | {:.0} | {scheduled:.2} s | {planned} tasks, {plan_seconds:.3} s |",
                 axis[s.axes[0]],
                 axis[s.axes[1]],
                 axis[s.axes[2]],

@@ -67,7 +67,7 @@ use crate::ranks::{Decomposition, DecompositionError};
 mod boxes;
 pub use boxes::{
     BoxSchedule, HALO, MAX_TASKS, STEP_CELLS, TASK_CELLS, box_schedule, march_boxes, propagate_box,
-    read_box,
+    rank_plan_tasks, read_box,
 };
 
 /// The z-layers rank `rank` of `size` owns: [rank·n_z/size, (rank + 1)·n_z/size).

@@ -41,6 +41,11 @@
 //! to send or receive skip the step. While a step's messages travel, a rank runs the
 //! first tasks of its next step that read none of them (the schedule marks them).
 //!
+//! In lock step (the characteristic with the light's axis whole, ranks plane by plane) the
+//! walk has a closed form: the tasks of plane m run in step m, after the exchange of every
+//! rank's plane m − 1. There a rank derives only its own tasks, its partners (one pass
+//! over the boxes) and the tasks of the ranks it reads from, not every rank's.
+//!
 //! **What overlaps.** This is a pipeline:
 //! - a rank downstream along A starts its first chunk once the rank upstream has finished
 //!   that chunk's last plane;
@@ -57,7 +62,8 @@
 //! Every cell is computed by the serial pass's function (`Setup::characteristic_with`,
 //! `convection::paper_cell`) from the same values, so ρ is the serial ρ bit for bit.
 //! Memory per rank: ρ and σ_a over its box grown by [`HALO`] cells on every side
-//! ([`read_box`]), plus the schedule (a few words per task of every rank).
+//! ([`read_box`]), plus the schedule (a few words per task: of every rank, or in lock step
+//! of itself and the ranks it reads from).
 
 use std::ops::Range;
 
@@ -242,17 +248,32 @@ struct Plan {
 
 impl Plan {
     /// The schedule of the march of a light going along `direction` (normalised) with
-    /// `model` over `boxes`, in about [`MAX_TASKS`] tasks at most.
+    /// `model` over `boxes`, in about [`MAX_TASKS`] tasks at most: every rank's.
     fn new(boxes: &Boxes, direction: DVec3, model: Model) -> Result<Self, DecompositionError> {
-        Self::with_limit(boxes, direction, model, MAX_TASKS)
+        Self::with_limit(boxes, direction, model, MAX_TASKS, None)
     }
 
-    /// [`Plan::new`] with chunks wide enough for about `max_tasks` tasks at most.
+    /// The part of [`Plan::new`]'s schedule that rank `rank` marches by: in lock step (the
+    /// characteristic with the light's axis whole) its own tasks and those of the ranks it
+    /// reads from, and who reads from it (every task's step is its plane: nothing to
+    /// walk); otherwise every rank's (the pipeline's steps come from a walk of all tasks).
+    fn for_rank(
+        boxes: &Boxes,
+        direction: DVec3,
+        model: Model,
+        rank: usize,
+    ) -> Result<Self, DecompositionError> {
+        Self::with_limit(boxes, direction, model, MAX_TASKS, Some(rank))
+    }
+
+    /// [`Plan::new`] with chunks wide enough for about `max_tasks` tasks at most; with
+    /// `only`, [`Plan::for_rank`]'s part of it.
     fn with_limit(
         boxes: &Boxes,
         direction: DVec3,
         model: Model,
         max_tasks: usize,
+        only: Option<usize>,
     ) -> Result<Self, DecompositionError> {
         let dims = boxes.dims();
         let grid = boxes.grid();
@@ -312,7 +333,6 @@ impl Plan {
         let own: Vec<Cells> = (0..size)
             .map(|r| frame.march_cells(&boxes.bounds(r)))
             .collect();
-        let mut tasks: Vec<Vec<Task>> = own.iter().map(|b| frame.tasks_of(b)).collect();
         let needs: Vec<Vec<Cells>> = own
             .iter()
             .map(|b| {
@@ -324,13 +344,92 @@ impl Plan {
             .collect();
         let mut fed_by = vec![Vec::new(); size];
         let mut feeds = vec![Vec::new(); size];
-        for x in 0..size {
-            for q in (0..size).filter(|&q| q != x) {
-                if needs[x].iter().any(|n| !is_empty(&meet(n, &own[q]))) {
-                    fed_by[x].push(q);
-                    feeds[q].push(x);
+        let reads_from =
+            |x: usize, q: usize| q != x && needs[x].iter().any(|n| !is_empty(&meet(n, &own[q])));
+        // In lock step a rank needs only its own pairs (each rank's steps are its planes);
+        // the pipeline's walk needs every rank's.
+        let lock_step_planes = plane_major && size > 1;
+        match only.filter(|_| lock_step_planes) {
+            Some(me) => {
+                fed_by[me] = (0..size).filter(|&q| reads_from(me, q)).collect();
+                feeds[me] = (0..size).filter(|&x| reads_from(x, me)).collect();
+            }
+            None => {
+                for x in 0..size {
+                    for q in 0..size {
+                        if reads_from(x, q) {
+                            fed_by[x].push(q);
+                            feeds[q].push(x);
+                        }
+                    }
                 }
             }
+        }
+        let mut tasks: Vec<Vec<Task>> = (0..size)
+            .map(|r| {
+                let needed = match only.filter(|_| lock_step_planes) {
+                    Some(me) => r == me || fed_by[me].contains(&r),
+                    None => true,
+                };
+                if needed {
+                    frame.tasks_of(&own[r])
+                } else {
+                    Vec::new()
+                }
+            })
+            .collect();
+        if lock_step_planes {
+            // The light's axis is whole, so every rank holds every plane, and a
+            // characteristic's plane reads only the plane before it. The steps have a
+            // closed form: each box's rows of a plane fall into groups of whole chunks,
+            // about `STEP_CELLS` cells each, at most `groups` per box, and a box's group g
+            // of plane m runs in step m · groups + g. A task reads plane m − 1 only, all
+            // of whose steps come before its own; it waits for the exchange that ends the
+            // step before its own if it reads a cell another rank computed in that step
+            // (known for the ranks whose partners were found: all, or `only`, the one
+            // whose tasks run).
+            let per_group = STEP_CELLS.div_ceil(width).div_ceil(frame.rows).max(1);
+            let first_chunk = |r: usize| own[r][1].start / frame.rows;
+            let groups = (0..size)
+                .map(|r| {
+                    let chunks = own[r][1].end.div_ceil(frame.rows) - first_chunk(r);
+                    chunks.div_ceil(per_group)
+                })
+                .max()
+                .unwrap_or(1)
+                .max(1);
+            let step_of = |r: usize, plane: usize, row: usize| {
+                plane * groups + (row / frame.rows - first_chunk(r)) / per_group
+            };
+            for (r, tasks) in tasks.iter_mut().enumerate() {
+                for task in tasks.iter_mut() {
+                    task.step = step_of(r, task.plane, task.rows.start);
+                    let read = reads(
+                        model,
+                        march_dims,
+                        &own[r],
+                        task.plane..task.plane + 1,
+                        task.rows.clone(),
+                    );
+                    let latest = read
+                        .iter()
+                        .flat_map(|read| fed_by[r].iter().map(|&q| (q, meet(read, &own[q]))))
+                        .filter(|(_, cells)| !is_empty(cells))
+                        .map(|(q, cells)| step_of(q, cells[0].end - 1, cells[1].end - 1))
+                        .max();
+                    task.waits = latest.is_some_and(|s| s + 1 == task.step);
+                }
+            }
+            return Ok(Self {
+                frame,
+                model,
+                boxes: own,
+                tasks,
+                needs,
+                fed_by,
+                feeds,
+                steps: march_dims[0] * groups,
+            });
         }
         // Steps: every task in the global order (its dependencies first).
         // The sort key packed with the task (a sort of plain words: the tasks of a 1024³
@@ -613,6 +712,30 @@ pub fn box_schedule(
     })
 }
 
+/// How many tasks rank `rank` derives before it marches a distant light along
+/// `direction` with `model` over `boxes` (its part of the schedule, [`propagate_box`]'s
+/// first step): in lock step (the characteristic with the light's axis whole) its own and
+/// those of the ranks it reads from; otherwise every rank's, since the pipeline's steps
+/// come from a walk of them all.
+///
+/// # Errors
+/// As [`box_schedule`].
+pub fn rank_plan_tasks(
+    boxes: &Boxes,
+    direction: DVec3,
+    model: Model,
+    rank: usize,
+) -> Result<usize, DecompositionError> {
+    let direction = direction.normalize_or_zero();
+    if model == Model::Conservative || direction == DVec3::ZERO || !direction.is_finite() {
+        return Err(DecompositionError::Unsupported(format!(
+            "the {model:?} march along {direction} over boxes"
+        )));
+    }
+    let plan = Plan::for_rank(boxes, direction, model, rank)?;
+    Ok(plan.tasks.iter().map(Vec::len).sum())
+}
+
 /// A rank's fields over its [`read_box`]: cell (x, y, z) at its offset from the box's
 /// corner, x fastest.
 struct Local {
@@ -675,7 +798,7 @@ pub fn propagate_box(
     let Light::Distant { direction, density } = setup.light else {
         return Err(super::unsupported(light));
     };
-    let plan = Plan::new(boxes, direction, setup.model)?;
+    let plan = Plan::for_rank(boxes, direction, setup.model, rank)?;
     let mut local = Local {
         rho: vec![0.0; count(&region)],
         region,
@@ -927,6 +1050,68 @@ mod tests {
         assert_eq!(alone.unwrap().messages, [0]);
     }
 
+    /// In lock step a rank derives its own part of the schedule: its tasks (steps and
+    /// waits), the ranks it reads from and that read from it, and their tasks, all as in
+    /// the whole schedule, and nobody else's tasks. Boxes one and two cells thin, where
+    /// the stencil reaches past the next box, included.
+    #[test]
+    fn a_rank_in_lock_step_derives_only_its_part() {
+        let z = DVec3::new(0.3, -0.2, 1.0).normalize();
+        for boxes in [
+            Boxes::new([40, 36, 30], [3, 4, 1]).unwrap(),
+            Boxes::from_cuts(
+                [27, 19, 23],
+                [vec![0, 27], vec![0, 17, 18, 19], vec![0, 23]],
+            )
+            .unwrap(),
+            Boxes::from_cuts(
+                [24, 12, 9],
+                [vec![0, 8, 16, 24], vec![0, 2, 12], vec![0, 9]],
+            )
+            .unwrap(),
+        ] {
+            let whole = Plan::new(&boxes, z, Model::Characteristic).unwrap();
+            assert!(whole.frame.plane_major);
+            let total: usize = whole.tasks.iter().map(Vec::len).sum();
+            for rank in 0..boxes.ranks() {
+                let part = Plan::for_rank(&boxes, z, Model::Characteristic, rank).unwrap();
+                assert_eq!(part.steps, whole.steps);
+                assert_eq!(part.tasks[rank], whole.tasks[rank], "{boxes:?} rank {rank}");
+                assert_eq!(part.fed_by[rank], whole.fed_by[rank]);
+                assert_eq!(part.feeds[rank], whole.feeds[rank]);
+                for q in 0..boxes.ranks() {
+                    if part.fed_by[rank].contains(&q) {
+                        assert_eq!(
+                            part.tasks[q]
+                                .iter()
+                                .map(|t| (t.plane, t.rows.clone(), t.step))
+                                .collect::<Vec<_>>(),
+                            whole.tasks[q]
+                                .iter()
+                                .map(|t| (t.plane, t.rows.clone(), t.step))
+                                .collect::<Vec<_>>()
+                        );
+                    } else if q != rank {
+                        assert!(part.tasks[q].is_empty());
+                    }
+                }
+                let derived: usize = part.tasks.iter().map(Vec::len).sum();
+                let needed: usize = std::iter::once(rank)
+                    .chain(part.fed_by[rank].iter().copied())
+                    .map(|q| whole.tasks[q].len())
+                    .sum();
+                assert_eq!(derived, needed, "{boxes:?} rank {rank}");
+                // On the 3 × 4 grid a rank reads from its eight neighbours at most.
+                if boxes.ranks() == 12 {
+                    assert!(
+                        derived < total,
+                        "{boxes:?} rank {rank}: {derived} of {total}"
+                    );
+                }
+            }
+        }
+    }
+
     /// Chunks widen to keep the schedule under its bound, and the schedule stays whole
     /// (every task gets a step) however wide they get.
     #[test]
@@ -941,7 +1126,7 @@ mod tests {
             let free = Plan::new(&boxes, u, model).unwrap();
             let total = |plan: &Plan| plan.tasks.iter().map(Vec::len).sum::<usize>();
             for limit in [2000, 500, 10] {
-                let bounded = Plan::with_limit(&boxes, u, model, limit).unwrap();
+                let bounded = Plan::with_limit(&boxes, u, model, limit, None).unwrap();
                 assert!(bounded.frame.rows >= free.frame.rows);
                 // A plane of each box is the fewest tasks there can be.
                 let floor = boxes.dims()[bounded.frame.axes[0]]
