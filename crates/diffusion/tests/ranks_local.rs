@@ -294,6 +294,27 @@ fn grids_cut_along_every_axis_give_the_serial_bits() {
     }
 }
 
+/// Ranks the fine level leaves out (5 layers on 5 ranks: the fine level on 2) read
+/// nothing, take part in the norms and the hand-overs, and get an empty box back; the
+/// others their boxes of the serial φ.
+#[test]
+fn ranks_beyond_half_the_layers_read_nothing() {
+    let medium = Medium::new([12, 10, 5], [0, 0, 1, 0, 2, 0], 5);
+    let system = SlabSystem::new(medium.geometry, medium.boundaries).unwrap();
+    let s = settings(0, false, true, false);
+    let layout = system
+        .multigrid_layout(&s, 5, 0, Decomposition::Slabs)
+        .unwrap();
+    assert_eq!(layout.stages[0].ranks(), 2);
+    check(&medium, s, 5, 0, Decomposition::Slabs).unwrap();
+    let solutions = medium.on_ranks(s, &stopping(), &layout, 5);
+    for (rank, solution) in solutions.into_iter().enumerate().skip(2) {
+        let solution = solution.unwrap();
+        assert!(solution.fluence.is_empty(), "rank {rank}");
+        assert!(solution.cells.iter().all(|r| r.is_empty()), "rank {rank}");
+    }
+}
+
 /// A rank whose part of the medium holds a negative D, or fields that miss the cells its
 /// rows read, returns the typed error naming the cell; the other ranks return an error
 /// too (none waits for it).
