@@ -43,7 +43,11 @@
 //! one-cell halos, and agglomerates the coarse levels
 //! onto fewer ranks as they shrink, down to rank 0 for the coarsest ([`RankLayout`]); φ
 //! and the history are [`Multigrid::solve`]'s bits on any rank count (both sum their
-//! norms over runs of eight cells along x, added exactly).
+//! norms over runs of eight cells along x, added exactly). Every rank builds the whole
+//! hierarchy there; for a medium that fills the box,
+//! [`SlabSystem::solve_multigrid_on_layout`] builds each rank's part of every level from
+//! its own box of the medium and returns φ on that box, with the same bits: no rank holds
+//! the whole volume, hierarchy or solution.
 //!
 //! For solvers that stream their fields slab by slab (out of core), [`slab`] gives the
 //! same system row by row for a medium that fills the box: the assembled matrix's rows and
