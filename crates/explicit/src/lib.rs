@@ -30,7 +30,8 @@
 //! sums exactly (`lucent_core::exact`), so the bits do not depend on the split
 //! (`docs/ranks.md`);
 //! [`ranks::march_p1_on`] the P1 march (zero edges) over z-slabs or boxes, its change norm
-//! summed the same way; and [`wavefront::propagate_on_ranks`]
+//! summed the same way ([`ranks::march_p1_box`] with each rank holding only its box of the
+//! source and of the state); and [`wavefront::propagate_on_ranks`]
 //! Zhang & Ma's one-pass absorption march of a distant light over z-slabs (a pipelined
 //! wavefront where the light crosses the slabs, planes in lock step where it runs along
 //! them) or a grid of boxes (the KBA sweep, [`wavefront::propagate_box`]), on any

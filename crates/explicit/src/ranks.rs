@@ -1045,19 +1045,12 @@ pub fn march_p1(
 }
 
 /// [`crate::p1::march`] from zero, split over the ranks of `comm` by `decomposition`
-/// (z-slabs of layers r·n_z/P..(r+1)·n_z/P, or a grid of boxes): per step each rank sends
-/// the cells of (φ, E) on each face it shares with another box to that box, steps the
-/// cells that read no halo while they travel, then the rest; the growth monitor's largest
-/// values and finiteness, the exact change and size sums of its norm's runs, and the time
-/// and cancel flags are all-gathered, and every rank takes the serial decision. A rank
-/// holds the state of its cells and one halo cell beyond each face only (eight f64 fields
-/// of its box grown by a cell); the whole state is gathered on every rank at the end, the
-/// serial bits on any number of ranks and any decomposition.
+/// (z-slabs of layers r·n_z/P..(r+1)·n_z/P, or a grid of boxes): [`march_p1_box`] on each
+/// rank's box of `source`, then the whole state gathered on every rank: the serial bits on
+/// any number of ranks and any decomposition.
 ///
 /// # Errors
-/// The serial march's refusals ([`DecompositionError::Scheme`]); periodic edges on more
-/// than one rank (the decomposition has no wrap-around neighbours); more slabs than
-/// layers; boxes of another grid or rank count; a rank that left the protocol.
+/// As [`march_p1_box`]; more slabs than layers.
 pub fn march_p1_on(
     lattice: &crate::Lattice,
     source: &[f64],
@@ -1065,15 +1058,8 @@ pub fn march_p1_on(
     settings: &crate::p1::P1Settings,
     comm: &(impl Communicator + ?Sized),
 ) -> Result<crate::p1::P1State, DecompositionError> {
-    use crate::p1::{
-        P1Edges, P1State, Region, StepCoefficients, box_runs, change_norms, change_sums,
-        growth_monitor, step_box,
-    };
-    use std::ops::Range;
     lattice.check_field("source", source)?;
-    let step_of = StepCoefficients::checked(settings, lattice.spacing)?;
-    let (size, rank) = (comm.size(), comm.rank());
-    let dims = lattice.dims;
+    let (size, dims) = (comm.size(), lattice.dims);
     let boxes = match decomposition {
         Decomposition::Slabs => {
             if size == 0 || size > dims[2] {
@@ -1086,23 +1072,112 @@ pub fn march_p1_on(
         }
         Decomposition::Boxes(boxes) => boxes.fitting(dims, size)?.clone(),
     };
+    let [nx, ny, _] = dims;
+    let mine: Vec<f64> = box_cells(&boxes.bounds(comm.rank()))
+        .map(|p| source[p[0] + nx * (p[1] + ny * p[2])])
+        .collect();
+    let part = march_p1_box(lattice, &mine, &boxes, settings, comm)?;
+    let gathered = |f: &[f64]| boxes.gather(f, comm);
+    Ok(crate::p1::P1State {
+        fluence: gathered(&part.fluence)?,
+        flux: [
+            gathered(&part.flux[0])?,
+            gathered(&part.flux[1])?,
+            gathered(&part.flux[2])?,
+        ],
+        steps: part.steps,
+        changes: part.changes,
+        stop_reason: part.stop_reason,
+    })
+}
+
+/// [`crate::p1::march`] from zero over the grid of boxes `boxes` (one per rank of `comm`),
+/// each rank holding only its box: `source` is q over `boxes.bounds(rank)` (x fastest, as
+/// a rank reads it from a volume), and the state returned is φ and E over that box. Per
+/// step each rank sends the cells of (φ, E) on each face it shares with another box to
+/// that box, steps the cells that read no halo while they travel, then the rest; the
+/// growth monitor's largest values and finiteness, the exact change and size sums of its
+/// norm's runs, and the time and cancel flags are all-reduced, and every rank takes the
+/// serial decision (the source's largest magnitude, which the monitor starts from, is
+/// all-reduced too). A rank holds eight f64 fields of its box grown by a cell; its box of
+/// the result is the serial march's bits, and the steps, changes and stop reason are the
+/// serial march's on every rank.
+///
+/// # Errors
+/// The serial march's refusals ([`DecompositionError::Scheme`], on every rank: a rank
+/// whose part of the source is refused names the cell, the others name that rank);
+/// periodic edges on more than one rank (the decomposition has no wrap-around
+/// neighbours); boxes of another grid or rank count; a rank that left the protocol.
+pub fn march_p1_box(
+    lattice: &crate::Lattice,
+    source: &[f64],
+    boxes: &Boxes,
+    settings: &crate::p1::P1Settings,
+    comm: &(impl Communicator + ?Sized),
+) -> Result<crate::p1::P1State, DecompositionError> {
+    use crate::p1::{
+        P1Edges, P1State, Region, StepCoefficients, box_runs, change_norms, change_sums,
+        growth_monitor, step_box,
+    };
+    use std::ops::Range;
+    let (size, rank) = (comm.size(), comm.rank());
+    let dims = lattice.dims;
+    let boxes = boxes.fitting(dims, size)?.clone();
+    let own = boxes.bounds(rank);
+    // This rank's part of the source: its length and values, then everyone's verdict and
+    // the largest magnitude (1 + the rank that refused, the highest when several did).
+    let checked = if source.len() != own.iter().map(Range::len).product::<usize>() {
+        Err(format!("{} values for the cells {own:?}", source.len()))
+    } else {
+        match source
+            .iter()
+            .zip(box_cells(&own))
+            .find(|(v, _)| !v.is_finite())
+        {
+            Some((v, [i, j, k])) => Err(format!("{v} in cell {}", i + dims[0] * (j + dims[1] * k))),
+            None => Ok(()),
+        }
+    };
+    let largest = source.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+    let failed = if checked.is_err() {
+        rank as f64 + 1.0
+    } else {
+        0.0
+    };
+    let agreed = all_reduce(comm, &[failed, largest], |acc, part| {
+        acc[0] = acc[0].max(part[0]);
+        acc[1] = acc[1].max(part[1]);
+        part.len() == 2
+    })
+    .ok_or(DecompositionError::Protocol { rank })?;
+    checked.map_err(|why| {
+        DecompositionError::Scheme(crate::ExplicitError::Invalid(format!("source: {why}")))
+    })?;
+    if agreed[0] != 0.0 {
+        return Err(DecompositionError::Scheme(crate::ExplicitError::Invalid(
+            format!(
+                "rank {} refused its part of the source (it says why)",
+                agreed[0] - 1.0
+            ),
+        )));
+    }
+    let largest = agreed[1];
+    let step_of = StepCoefficients::checked(settings, lattice.spacing)?;
     if size > 1 && settings.edges == P1Edges::Periodic {
         return Err(DecompositionError::Scheme(crate::ExplicitError::Invalid(
             "periodic edges do not split over ranks (no wrap-around neighbours): use zero edges"
                 .into(),
         )));
     }
-    // This rank's box, and the box it holds: grown by a cell where the grid goes on.
-    let own = boxes.bounds(rank);
+    // The box this rank holds: its own grown by a cell where the grid goes on.
     let origin: [usize; 3] = std::array::from_fn(|a| own[a].start.saturating_sub(1));
     let held: [usize; 3] = std::array::from_fn(|a| (own[a].end + 1).min(dims[a]) - origin[a]);
     let len: usize = held.iter().product();
     let region = Region { dims, origin, held };
     let place = |p: [usize; 3]| region.place(p);
-    let [nx, ny, _] = dims;
     let mut local_source = vec![0.0; len];
-    for p in box_cells(&own) {
-        local_source[place(p)] = source[p[0] + nx * (p[1] + ny * p[2])];
+    for (p, &q) in box_cells(&own).zip(source) {
+        local_source[place(p)] = q;
     }
     // The boxes sharing a face with this one: (rank, the cells sent, the halo received).
     let at = boxes.position(rank);
@@ -1153,7 +1228,6 @@ pub fn march_p1_on(
         );
     };
     let runs = box_runs(origin, held, &own);
-    let largest = source.iter().fold(0.0f64, |a, b| a.max(b.abs()));
     let monitor = growth_monitor(0.0, largest, settings);
     let shared = Stopping {
         time_budget: None,
@@ -1285,17 +1359,10 @@ pub fn march_p1_on(
             };
         }
     };
-    let gathered = |f: &[f64]| -> Result<Vec<f64>, DecompositionError> {
-        let mine: Vec<f64> = box_cells(&own).map(|p| f[place(p)]).collect();
-        boxes.gather(&mine, comm)
-    };
+    let mine = |f: &[f64]| -> Vec<f64> { box_cells(&own).map(|p| f[place(p)]).collect() };
     Ok(P1State {
-        fluence: gathered(&phi)?,
-        flux: [
-            gathered(&flux[0])?,
-            gathered(&flux[1])?,
-            gathered(&flux[2])?,
-        ],
+        fluence: mine(&phi),
+        flux: [mine(&flux[0]), mine(&flux[1]), mine(&flux[2])],
         steps: step,
         changes: history.into_residuals(),
         stop_reason,

@@ -494,6 +494,91 @@ mod p1 {
         }
     }
 
+    /// `march_p1_box`: each rank handed only its box of the source (as it reads it from a
+    /// volume) returns its box of the serial φ and E, and the serial steps, changes and
+    /// stop; a bad value in one rank's box stops every rank, the one holding it naming the
+    /// cell and the others that rank.
+    #[test]
+    fn a_rank_holding_only_its_box_of_the_source_gets_its_box_of_the_serial_state() {
+        use lucent_explicit::ranks::march_p1_box;
+        let lattice = Lattice::new([19, 7, 9], 1.0).unwrap();
+        let dims = lattice.dims;
+        let [nx, ny, _] = dims;
+        // A source over the whole grid, largest away from rank 0's box (the growth
+        // monitor starts from the all-reduced largest magnitude).
+        let source: Vec<f64> = (0..lattice.len())
+            .map(|c| {
+                ((c * 37) % 11) as f64 * 0.01 + if c == 5 + 19 * (5 + 7 * 7) { 2.0 } else { 0.0 }
+            })
+            .collect();
+        let cut = |boxes: &Boxes, rank: usize, field: &[f64]| -> Vec<f64> {
+            let own = boxes.bounds(rank);
+            let mut out = Vec::new();
+            for k in own[2].clone() {
+                for j in own[1].clone() {
+                    for i in own[0].clone() {
+                        out.push(field[i + nx * (j + ny * k)]);
+                    }
+                }
+            }
+            out
+        };
+        for (layout, fraction, tolerance, steps) in [
+            (Layout::Staggered, 0.9, 1e-6, 4000),
+            (Layout::Collocated, 0.5, 0.0, 23),
+            (Layout::Staggered, 1.3, 0.0, 400),
+        ] {
+            let settings = settings(
+                layout,
+                fraction,
+                Stopping {
+                    relative_tolerance: tolerance,
+                    max_iterations: steps,
+                    ..Stopping::default()
+                },
+            );
+            let reference = march(&lattice, &source, &settings, None).unwrap();
+            for grid in [[1, 1, 3], [2, 1, 1], [1, 2, 2], [2, 3, 2]] {
+                let boxes = Boxes::new(dims, grid).unwrap();
+                let outs = Threads::run(boxes.ranks(), |comm| {
+                    use lucent_core::ranks::Communicator;
+                    let mine = cut(&boxes, comm.rank(), &source);
+                    march_p1_box(&lattice, &mine, &boxes, &settings, comm)
+                });
+                for (rank, out) in outs.into_iter().enumerate() {
+                    let out = out.unwrap().unwrap();
+                    let case = format!("{layout:?} at {fraction}, {grid:?} rank {rank}");
+                    let expected = P1State {
+                        fluence: cut(&boxes, rank, &reference.fluence),
+                        flux: std::array::from_fn(|a| cut(&boxes, rank, &reference.flux[a])),
+                        ..reference.clone()
+                    };
+                    assert_serial_bits(&out, &expected, &case);
+                }
+            }
+        }
+        // A non-finite value in rank 1's box.
+        let boxes = Boxes::new(dims, [1, 1, 3]).unwrap();
+        let settings = settings(Layout::Staggered, 0.9, Stopping::default());
+        let outs = Threads::run(3, |comm| {
+            use lucent_core::ranks::Communicator;
+            let mut mine = cut(&boxes, comm.rank(), &source);
+            if comm.rank() == 1 {
+                mine[4] = f64::NAN;
+            }
+            march_p1_box(&lattice, &mine, &boxes, &settings, comm)
+        });
+        for (rank, out) in outs.into_iter().enumerate() {
+            let why = out.unwrap().unwrap_err().to_string();
+            let expected = if rank == 1 {
+                "NaN in cell"
+            } else {
+                "rank 1 refused its part of the source"
+            };
+            assert!(why.contains(expected), "rank {rank}: {why}");
+        }
+    }
+
     #[test]
     fn periodic_edges_and_too_many_ranks_are_refused() {
         let lattice = Lattice::new([6, 6, 4], 1.0).unwrap();

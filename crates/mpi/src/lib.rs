@@ -36,7 +36,8 @@
 //! and D's cells beyond its faces; the `slab_diffusion` example, `--boxes` for a grid of
 //! boxes), and the multigrid in such a medium
 //! (`lucent_diffusion::SlabSystem::solve_multigrid_on_layout`: each rank builds its part of
-//! every level from its box; `slab_diffusion --method mg`). The examples read the rank's layers or box of a volume file by positioned reads
+//! every level from its box; `slab_diffusion --method mg`), and P1 from an emitting
+//! volume (`lucent_explicit::ranks::march_p1_box`; the `slab_p1` example). The examples read the rank's layers or box of a volume file by positioned reads
 //! and write its cells of the result into one `.npy` (`lucent_grid::io::layers`), so no
 //! rank holds the whole volume.
 //!
