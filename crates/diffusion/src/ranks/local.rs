@@ -487,7 +487,7 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
                     if !contains(&part, at) {
                         continue;
                     }
-                    words.extend_from_slice(&[
+                    let record: [f64; PATCH_WORDS] = [
                         at[0] as f64,
                         at[1] as f64,
                         at[2] as f64,
@@ -497,9 +497,10 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
                         p.normal.y,
                         p.normal.z,
                         p.diffusion,
-                    ]);
-                    words.push(side_code(p.side));
-                    words.push(p.width);
+                        side_code(p.side),
+                        p.width,
+                    ];
+                    words.extend_from_slice(&record);
                 }
                 if q == self.rank {
                     own = words;
@@ -519,17 +520,17 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
         let Some(frame) = to else {
             return Ok(Vec::new());
         };
+        let held = Region::new(std::array::from_fn(|a| {
+            frame.origin[a]..frame.origin[a] + frame.dims[a]
+        }));
         let mut patches = Vec::new();
         for words in std::iter::once(&own).chain(&received) {
-            if words.len() % (PATCH_WORDS) != 0 {
+            if words.len() % PATCH_WORDS != 0 {
                 return Err(protocol(self.rank, "a coarse level's patches"));
             }
             for w in words.chunks_exact(PATCH_WORDS) {
                 let at = [w[0] as usize, w[1] as usize, w[2] as usize];
-                let region = Region::new(std::array::from_fn(|a| {
-                    frame.origin[a]..frame.origin[a] + frame.dims[a]
-                }));
-                let (Some(side), true) = (side_of(w[9]), contains(&region, at)) else {
+                let (Some(side), true) = (side_of(w[9]), contains(&held, at)) else {
                     return Err(protocol(self.rank, "a coarse level's patches"));
                 };
                 patches.push(LevelPatch {
