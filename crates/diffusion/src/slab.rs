@@ -420,9 +420,7 @@ impl SlabSystem {
                 q0.len()
             )));
         }
-        let at = |[i, j, k]: [usize; 3]| {
-            (i - origin[0]) + held[0] * ((j - origin[1]) + held[1] * (k - origin[2]))
-        };
+        let at = |p: [usize; 3]| fields.index(p);
         let cell = |[i, j, k]: [usize; 3]| i + nx * (j + ny * k);
         for p in box_cells(&reads) {
             let v = d[at(p)];
@@ -463,14 +461,18 @@ impl SlabSystem {
         points: &[PointShares],
     ) -> Result<Vec<f64>, DiffusionError> {
         self.check_fields(cells, fields)?;
-        let volume = self.geometry.cell_volume();
         Ok(box_cells(cells)
-            .map(|p| {
-                let at = fields.index(p);
-                let source = f64::from(fields.source[at]) * f64::from(1.0f32) * volume;
-                self.boundary_and_points(p, fields.diffusion[at], None, points, 0.0 + source)
-            })
+            .map(|p| self.cell_rhs(p, fields, points))
             .collect())
+    }
+
+    /// The right-hand side of cell `p` (without a first moment) from `fields`, which hold
+    /// it: the volumetric source, the boundary patches' data and the points' shares, in
+    /// the order the assembled vector adds them.
+    fn cell_rhs(&self, p: [usize; 3], fields: &BlockFields<'_>, points: &[PointShares]) -> f64 {
+        let at = fields.index(p);
+        let source = f64::from(fields.source[at]) * f64::from(1.0f32) * self.geometry.cell_volume();
+        self.boundary_and_points(p, fields.diffusion[at], None, points, 0.0 + source)
     }
 
     /// The finest level's couplings, absorption and boundary patches on a frame of the grid
@@ -543,17 +545,9 @@ impl SlabSystem {
         self.check_fields(&cells, &fields)?;
         let dims = self.geometry.dims();
         let [nx, ny, _] = dims;
-        let BlockFields {
-            origin,
-            dims: held,
-            diffusion: d,
-            absorption: sigma_a,
-            source: q0,
-        } = fields;
+        let (d, sigma_a) = (fields.diffusion, fields.absorption);
         // A cell's place in the fields, and in the whole grid.
-        let at = |[i, j, k]: [usize; 3]| {
-            (i - origin[0]) + held[0] * ((j - origin[1]) + held[1] * (k - origin[2]))
-        };
+        let at = |p: [usize; 3]| fields.index(p);
         let cell = |[i, j, k]: [usize; 3]| i + nx * (j + ny * k);
         let rows: usize = cells.iter().map(ExactSizeIterator::len).product();
         let mut indptr = Vec::with_capacity(rows + 1);
@@ -561,7 +555,6 @@ impl SlabSystem {
         let mut indices = Vec::with_capacity(7 * rows);
         let mut data = Vec::with_capacity(7 * rows);
         let mut rhs = Vec::with_capacity(rows);
-        let volume = self.geometry.cell_volume();
         for p in box_cells(&cells) {
             let (c, dc) = (cell(p), d[at(p)]);
             let d_near = |axis: usize, offset: isize| {
@@ -575,8 +568,7 @@ impl SlabSystem {
                 data.push(value);
             }
             indptr.push(indices.len());
-            let source = f64::from(q0[at(p)]) * f64::from(1.0f32) * volume;
-            rhs.push(self.boundary_and_points(p, dc, None, points, 0.0 + source));
+            rhs.push(self.cell_rhs(p, &fields, points));
         }
         let matrix = CsMat::try_new((rows, nx * ny * dims[2]), indptr, indices, data)
             .map_err(|e| DiffusionError::Invalid(format!("a block's rows: {}", e.3)))?;

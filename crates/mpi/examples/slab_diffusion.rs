@@ -197,6 +197,10 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
     let steady =
         iterate_block(&block, dims, iteration, &settings, comm).map_err(|e| e.to_string())?;
     let seconds = started.elapsed().as_secs_f64();
+    // Every rank has the same stop reason: all of them refuse to write a blown-up field.
+    if steady.stop_reason.is_diverged() {
+        return Err(format!("the iteration {}", steady.stop_reason));
+    }
     let created = if rank == 0 {
         create_npy(&args.out, dims).map_err(|e| e.to_string())
     } else {
@@ -318,6 +322,9 @@ fn run_multigrid(
         .solve_multigrid_on_layout(fields, &shares, settings, &stopping, comm, layout.clone())
         .map_err(|e| e.to_string())?;
     let seconds = started.elapsed().as_secs_f64();
+    if solved.convergence.stop_reason.is_diverged() {
+        return Err(format!("the multigrid {}", solved.convergence.stop_reason));
+    }
     let created = if rank == 0 {
         create_npy(&args.out, dims).map_err(|e| e.to_string())
     } else {

@@ -121,6 +121,10 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
     let state =
         march_p1_box(&lattice, &source, &boxes, &settings, comm).map_err(|e| e.to_string())?;
     let seconds = started.elapsed().as_secs_f64();
+    // Every rank has the same stop reason: all of them refuse to write a blown-up field.
+    if state.stop_reason.is_diverged() {
+        return Err(format!("the march {}", state.stop_reason));
+    }
     let created = if rank == 0 {
         create_npy(&args.out, dims).map_err(|e| e.to_string())
     } else {

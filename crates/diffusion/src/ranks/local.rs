@@ -15,7 +15,7 @@
 //! 3. within a stage, the next level of its box by coarsening its own cells; where the
 //!    next level starts a stage, the coarse cells its box restricts to, handed to their
 //!    owners in the next stage as the right-hand side is (couplings, absorption, and the
-//!    boundary patches as nine numbers each), and the owners' operator handed back onto
+//!    boundary patches as eleven numbers each), and the owners' operator handed back onto
 //!    the hand-over frames as the correction is;
 //! 4. rank 0 builds its serial levels as a hierarchy of their own from the first of them.
 //!

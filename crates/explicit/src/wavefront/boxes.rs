@@ -255,8 +255,8 @@ impl Plan {
 
     /// The part of [`Plan::new`]'s schedule that rank `rank` marches by: in lock step (the
     /// characteristic with the light's axis whole) its own tasks and those of the ranks it
-    /// reads from, and who reads from it (every task's step is its plane: nothing to
-    /// walk); otherwise every rank's (the pipeline's steps come from a walk of all tasks).
+    /// reads from, and who reads from it (the steps have a closed form: nothing to walk);
+    /// otherwise every rank's (the pipeline's steps come from a walk of all tasks).
     fn for_rank(
         boxes: &Boxes,
         direction: DVec3,
@@ -719,7 +719,7 @@ pub fn box_schedule(
 /// come from a walk of them all.
 ///
 /// # Errors
-/// As [`box_schedule`].
+/// As [`box_schedule`]; [`DecompositionError::BoxGrid`] for a rank the boxes do not have.
 pub fn rank_plan_tasks(
     boxes: &Boxes,
     direction: DVec3,
@@ -731,6 +731,13 @@ pub fn rank_plan_tasks(
         return Err(DecompositionError::Unsupported(format!(
             "the {model:?} march along {direction} over boxes"
         )));
+    }
+    if rank >= boxes.ranks() {
+        return Err(DecompositionError::BoxGrid {
+            grid: boxes.grid(),
+            dims: boxes.dims(),
+            ranks: rank + 1,
+        });
     }
     let plan = Plan::for_rank(boxes, direction, model, rank)?;
     Ok(plan.tasks.iter().map(Vec::len).sum())
@@ -1072,6 +1079,11 @@ mod tests {
         ] {
             let whole = Plan::new(&boxes, z, Model::Characteristic).unwrap();
             assert!(whole.frame.plane_major);
+            // A rank the boxes do not have is a typed error, not a panic.
+            assert!(matches!(
+                rank_plan_tasks(&boxes, z, Model::Characteristic, boxes.ranks()),
+                Err(DecompositionError::BoxGrid { .. })
+            ));
             let total: usize = whole.tasks.iter().map(Vec::len).sum();
             for rank in 0..boxes.ranks() {
                 let part = Plan::for_rank(&boxes, z, Model::Characteristic, rank).unwrap();
@@ -1101,6 +1113,10 @@ mod tests {
                     .map(|q| whole.tasks[q].len())
                     .sum();
                 assert_eq!(derived, needed, "{boxes:?} rank {rank}");
+                assert_eq!(
+                    rank_plan_tasks(&boxes, z, Model::Characteristic, rank).unwrap(),
+                    derived
+                );
                 // On the 3 × 4 grid a rank reads from its eight neighbours at most.
                 if boxes.ranks() == 12 {
                     assert!(
