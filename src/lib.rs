@@ -77,6 +77,24 @@ pub fn registry() -> lucent_core::Registry {
     registry
 }
 
+/// Builds rayon's global pool within [`lucent_core::SolveOptions::MAX_THREADS`] when
+/// `RAYON_NUM_THREADS` asks for more (rayon would try to start them all: 100 000 threads
+/// never finished starting), and says so; `None` when nothing was capped. Call it before
+/// any parallel work (the `lucent` command and the Python module do).
+pub fn cap_global_threads() -> Option<String> {
+    let asked = std::env::var("RAYON_NUM_THREADS").ok()?;
+    let n: usize = asked.trim().parse().ok()?;
+    let most = lucent_core::SolveOptions::MAX_THREADS;
+    if n <= most {
+        return None;
+    }
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(most)
+        .build_global()
+        .ok()
+        .map(|()| format!("RAYON_NUM_THREADS={n} capped at {most} threads"))
+}
+
 /// Whether `e` says a GPU backend found no adapter and the environment lets harnesses
 /// skip it (with the reason) instead of failing: anywhere but CI (`CI=true`), where a
 /// missing adapter must fail the run.

@@ -30,6 +30,14 @@ use lucent::progress::Meter;
 use lucent::resolution::AngularFamily;
 use lucent::scene::{BuiltScene, Scene};
 
+/// A line on stdout that never panics: a full or closed stdout (`> /dev/full`, a pipe
+/// whose reader left) loses the line, not the job (`println!` panics on a failed write).
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        let _ = writeln!(io::stdout(), $($arg)*);
+    }};
+}
+
 /// The solve ran to its end but did not converge (iteration or time limit).
 const EXIT_UNCONVERGED: u8 = 3;
 /// The solve diverged (a residual that grew without bound, or NaN).
@@ -46,8 +54,7 @@ Ctrl-C. With 3 and 4 nothing but `solve`'s JSON report is written, unless --allo
     name = "lucent",
     version,
     about = "Light transport in participating media: solve a scene, render a picture.",
-    after_help = EXIT_STATUS_HELP,
-    args_conflicts_with_subcommands = true
+    after_help = EXIT_STATUS_HELP
 )]
 struct Cli {
     #[command(subcommand)]
@@ -111,10 +118,17 @@ impl SolverArgs {
             Some(t) if t > 0.0 && t.is_finite() && t < 1e9 => Some(Duration::from_secs_f64(t)),
             Some(t) => {
                 return Err(Error::Usage(format!(
-                    "--time-limit {t}: a positive number of seconds"
+                    "--time-limit {t:?}: a positive number of seconds (below 10⁹)"
                 )));
             }
         };
+        if let Some(t) = self.tolerance
+            && !(0.0..1.0).contains(&t)
+        {
+            return Err(Error::Usage(format!(
+                "--tolerance {t:?}: a relative residual, at least 0 and below 1"
+            )));
+        }
         Ok(SolveOptions {
             relative_tolerance: chosen.tolerance,
             max_iterations: self.max_iterations,
@@ -201,7 +215,13 @@ enum Ended {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match parse_command_line(std::env::args_os()) {
+        Ok(cli) => cli,
+        Err(e) => e.exit(),
+    };
+    if let Some(note) = lucent::cap_global_threads() {
+        let _ = writeln!(io::stderr(), "lucent: {note}");
+    }
     // Under `mpirun` (built with the `mpi` feature) this process is one rank; MPI is
     // finalised when `_mpi` drops, after everything else.
     #[cfg(feature = "mpi")]
@@ -288,6 +308,43 @@ fn main() -> ExitCode {
         );
     }
     status
+}
+
+/// The command line, with global flags (`-q`) allowed before the subcommand as in cargo
+/// and git (`lucent -q solve ...`). Without a subcommand the arguments are `render`'s; with
+/// one, `render`'s arguments before it are a usage error.
+fn parse_command_line<I, T>(args: I) -> Result<Cli, clap::Error>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    use clap::parser::ValueSource;
+    use clap::{CommandFactory, FromArgMatches};
+    let mut command = Cli::command();
+    let matches = command.try_get_matches_from_mut(args)?;
+    if let Some((name, _)) = matches.subcommand() {
+        let given: Vec<String> = matches
+            .ids()
+            .filter(|id| id.as_str() != "quiet")
+            .filter(|id| matches.value_source(id.as_str()) == Some(ValueSource::CommandLine))
+            // Arguments only (a flattened struct is also a group of its arguments' ids).
+            .filter_map(|id| command.get_arguments().find(|a| a.get_id() == id))
+            .map(|a| match a.get_long() {
+                Some(long) => format!("--{long}"),
+                None => a.get_id().to_string(),
+            })
+            .collect();
+        if !given.is_empty() {
+            return Err(command.error(
+                clap::error::ErrorKind::ArgumentConflict,
+                format!(
+                    "`{}` given before the subcommand `{name}`: put the subcommand first (`lucent {name} ...`)",
+                    given.join("`, `")
+                ),
+            ));
+        }
+    }
+    Cli::from_arg_matches(&matches).map_err(|e| e.format(&mut command))
 }
 
 /// The MPI ranks this process is one of (set once, under `mpirun`, by the `mpi` feature).
@@ -677,7 +734,7 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
         }
         .write_exr(&error_path)?;
         if !quiet {
-            println!(
+            say!(
                 "lucent: per-pixel standard error in {}",
                 error_path.display()
             );
@@ -727,7 +784,7 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
     };
     image.write(output, built.exposure, built.tone)?;
     if !quiet {
-        println!(
+        say!(
             "lucent: rendered {name} with `{}` to {} ({}×{}{}) in {:.2} s (solve {solve_seconds:.2} s)",
             chosen.solver.name(),
             output.display(),
@@ -851,7 +908,7 @@ fn solve_paged_to_file(
     }
     if !quiet {
         let p = &solution.paging;
-        println!(
+        say!(
             "lucent: solved {name} with `{}` out of core ({} MiB budget, a pool of {} bricks of {}³ cells): {}, {:.2} s, {} pins at a hit rate of {:.3}, {} MiB read and {} MiB written; fluence {} and report {}",
             chosen.solver.name(),
             args.budget() >> 20,
@@ -930,7 +987,7 @@ fn solve_to_file(
         return Ok(ended);
     }
     if !quiet {
-        println!(
+        say!(
             "lucent: solved {name} with `{}`: {stop}, {:.2} s; fluence {} and report {}",
             chosen.solver.name(),
             solution.report.wall_time_s,
@@ -1108,7 +1165,7 @@ fn order_source(observed: bool) -> &'static str {
 fn resolution(scene: &Path, args: &SolverArgs, target: f64, directions: bool) -> Result<(), Error> {
     if !(target > 0.0 && target < 1.0) {
         return Err(Error::Usage(format!(
-            "--error {target}: a relative error between 0 and 1"
+            "--error {target:?}: a relative error between 0 and 1"
         )));
     }
     let (parsed, built, name) = load(Some(scene), args.budget())?;

@@ -114,6 +114,12 @@ pub fn coarsest_meeting(
         if coarsening > 1 && dims.iter().zip(fine).any(|(&d, n)| d < MIN_CELLS && d < n) {
             break;
         }
+        // A level no coarser than the last (a 1³ grid "coarsened") would make the
+        // difference, and so the estimate, zero.
+        let previous = fine.map(|n| n.div_ceil((coarsening / 2).max(1)));
+        if coarsening > 1 && dims == previous {
+            break;
+        }
         let level = if coarsening == 1 {
             problem.clone()
         } else {

@@ -30,7 +30,7 @@ pub const SCENE_MEMORY_BUDGET: u64 = 8 << 30;
 /// The most bytes one scene grid may take under a budget: a scene holds up to eight
 /// fields on its grid (the volume, σ_t and albedo per channel, an embedded SDF), an eighth
 /// of the budget each (1 GiB, 645³ cells, under the default).
-fn max_grid_bytes(budget: u64) -> u64 {
+pub fn max_grid_bytes(budget: u64) -> u64 {
     budget / 8
 }
 
@@ -38,7 +38,7 @@ fn max_grid_bytes(budget: u64) -> u64 {
 /// fields' worth (an f64 payload and its f32 grid of the largest field), so that a file
 /// claiming more (a decompression bomb, a VDB whose tree spans a huge box) is refused
 /// before anything is inflated or allocated.
-fn max_read_bytes(budget: u64) -> u64 {
+pub fn max_read_bytes(budget: u64) -> u64 {
     3 * max_grid_bytes(budget)
 }
 

@@ -168,6 +168,16 @@ proptest! {
             ParamValue::Float(value)
         };
         params.0.insert(doc.name.clone(), v);
+        // A number that is not finite means nothing: refused, never read as "unset" (JSON,
+        // which the parameters pass through, turns NaN and infinity into null).
+        if !value.is_finite() {
+            let refused = registry.build(entry.name, &params).err().map(|e| e.to_string());
+            prop_assert!(
+                refused.as_deref().is_some_and(|m| m.contains("is not a finite number")),
+                "{} {} = {value}: {refused:?}", entry.name, doc.name
+            );
+            return Ok(());
+        }
         if let Ok(solver) = registry.build(entry.name, &params) {
             let geometry = GridGeometry::new([6, 6, 6], DVec3::splat(0.2), DVec3::ZERO).unwrap();
             let medium = Medium {

@@ -32,7 +32,7 @@ pub enum SolveError {
     /// step, a Courant number); nothing was run. Ask for it anyway with the scheme's
     /// `allow_unstable` where studying the blow-up is the point.
     #[error(
-        "solver `{solver}`: {parameter} = {requested} is beyond its stability limit {limit} (`allow_unstable = true` runs it anyway)"
+        "solver `{solver}`: {parameter} = {requested:?} is beyond its stability limit {limit:?} (`allow_unstable = true` runs it anyway)"
     )]
     Unstable {
         /// The solver's name.

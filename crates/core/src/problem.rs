@@ -610,4 +610,50 @@ impl Problem {
             .map(|l| l.spectrum().channels())
             .fold(medium, usize::max)
     }
+
+    /// A 64-bit digest of everything that defines the problem (geometry, every field's
+    /// bits, phase function, lights, boundary, embedded body, refractive index): equal
+    /// problems have equal fingerprints, and a solution kept with its problem's can be
+    /// checked against the problem it is later used with.
+    pub fn fingerprint(&self) -> u64 {
+        use std::hash::{DefaultHasher, Hasher};
+        let mut h = DefaultHasher::new();
+        let mut bytes = Vec::with_capacity(4096);
+        let mut grid = |h: &mut DefaultHasher, g: &Grid| {
+            h.write_usize(g.data().len());
+            for chunk in g.data().chunks(1024) {
+                bytes.clear();
+                bytes.extend(chunk.iter().flat_map(|v| v.to_bits().to_le_bytes()));
+                h.write(&bytes);
+            }
+        };
+        h.write(format!("{:?}", self.geometry).as_bytes());
+        for g in &self.medium.sigma_t {
+            grid(&mut h, g);
+        }
+        for a in &self.medium.albedo {
+            match a {
+                Field::Constant(v) => h.write_u32(v.to_bits()),
+                Field::Grid(g) => grid(&mut h, g),
+            }
+        }
+        if let Some(g) = &self.embedded {
+            grid(&mut h, g);
+        }
+        for light in &self.lights {
+            match light {
+                Light::Emission { grid: g, scale } => {
+                    grid(&mut h, g);
+                    h.write(format!("emission {scale:?}").as_bytes());
+                }
+                other => h.write(format!("{other:?}").as_bytes()),
+            }
+        }
+        let described = format!(
+            "{:?}|{:?}|{:?}",
+            self.medium.phase, self.boundary, self.refractive_index
+        );
+        h.write(described.as_bytes());
+        h.finish()
+    }
 }

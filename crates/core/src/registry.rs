@@ -113,6 +113,18 @@ impl Params {
     /// range are an [`SolveError::InvalidParameter`] naming the solver, the key and what
     /// is allowed (serde's "expected one of ...").
     pub fn parse<T: SolverParams>(&self, solver: &str) -> Result<T, SolveError> {
+        // JSON has no NaN or infinity: serde_json turns them into null, which an optional
+        // parameter reads as "unset". A number that is not finite means nothing here.
+        let not_finite = self.0.iter().find_map(|(key, value)| match value {
+            ParamValue::Float(f) if !f.is_finite() => Some((key, *f)),
+            _ => None,
+        });
+        if let Some((key, f)) = not_finite {
+            return Err(SolveError::InvalidParameter {
+                name: key.clone(),
+                reason: format!("{f:?} is not a finite number (solver `{solver}`)"),
+            });
+        }
         let as_object = |keys: &mut dyn Iterator<Item = (&String, &ParamValue)>| {
             serde_json::Value::Object(keys.map(|(k, v)| (k.clone(), v.to_json())).collect())
         };

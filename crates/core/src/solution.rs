@@ -190,6 +190,45 @@ pub struct Solution {
 }
 
 impl Solution {
+    /// Whether this can be a solution of `problem`: a fluence per channel of the problem,
+    /// every grid (fluence, standard errors, angular parts) on the problem's geometry.
+    /// `Err` says what differs. (A renderer handed the solution of another problem would
+    /// otherwise sample it as if it were this one's.)
+    pub fn check_fits(&self, problem: &crate::Problem) -> Result<(), String> {
+        let geometry = problem.geometry();
+        if self.fluence.len() != problem.channels() {
+            return Err(format!(
+                "the solution has {} fluence channels, the problem {}",
+                self.fluence.len(),
+                problem.channels()
+            ));
+        }
+        let mut grids: Vec<&Grid> = self.fluence.iter().collect();
+        grids.extend(self.standard_error.iter().flatten());
+        let lights = match &self.angular {
+            Some(Angular::Lights(l)) => Some(l),
+            Some(Angular::Ordinates(o)) => {
+                if o.geometry != *geometry {
+                    return Err("its ordinates lie on another grid".into());
+                }
+                o.lights.as_ref()
+            }
+            None => None,
+        };
+        if let Some(l) = lights {
+            grids.extend(l.transmittance.iter().flatten());
+            grids.extend(&l.isotropic_fluence);
+        }
+        match grids.iter().find(|g| g.geometry() != geometry) {
+            Some(g) => Err(format!(
+                "its grids are {:?} cells, the problem's {:?}",
+                g.dims(),
+                geometry.dims()
+            )),
+            None => Ok(()),
+        }
+    }
+
     /// The fluence grid of `channel`.
     pub fn fluence(&self, channel: usize) -> &Grid {
         &self.fluence[channel.min(self.fluence.len() - 1)]

@@ -401,8 +401,8 @@ impl SolveOptions {
     /// start than any solve here gains.
     pub const MAX_THREADS: usize = 1024;
 
-    /// Checks the numbers (tolerances ≥ 0 and finite, at least one iteration, 1 to
-    /// [`Self::MAX_THREADS`] threads).
+    /// Checks the numbers (a relative tolerance in [0, 1), an absolute one finite and
+    /// ≥ 0, at least one iteration, 1 to [`Self::MAX_THREADS`] threads).
     pub fn validate(&self) -> Result<(), SolveError> {
         let bad = |name: &str, reason: &str| {
             Err(SolveError::InvalidParameter {
@@ -410,8 +410,13 @@ impl SolveOptions {
                 reason: reason.into(),
             })
         };
-        if !(self.relative_tolerance >= 0.0 && self.relative_tolerance.is_finite()) {
-            return bad("relative_tolerance", "must be finite and ≥ 0");
+        // A relative residual of 1 is where every iteration starts: a tolerance of 1 or
+        // more would call the initial guess converged.
+        if !(0.0..1.0).contains(&self.relative_tolerance) {
+            return bad(
+                "relative_tolerance",
+                "must be at least 0 and below 1 (a fraction of the initial residual)",
+            );
         }
         if !(self.absolute_tolerance >= 0.0 && self.absolute_tolerance.is_finite()) {
             return bad("absolute_tolerance", "must be finite and ≥ 0");

@@ -5,7 +5,7 @@
 pub enum ExplicitError {
     /// The requested step is beyond the scheme's correct stability bound (and the study
     /// option `allow_unstable` is off). Nothing was run.
-    #[error("{scheme}: {parameter} = {requested} is beyond the stability limit {limit}")]
+    #[error("{scheme}: {parameter} = {requested:?} is beyond the stability limit {limit:?}")]
     Unstable {
         /// The scheme.
         scheme: &'static str,

@@ -39,7 +39,7 @@ pub enum GpuError {
         available: u64,
     },
     /// Input the device must not see: NaN, infinity, or a negative coefficient.
-    #[error("{what}: value {value} at index {index} is {problem}")]
+    #[error("{what}: value {value:?} at index {index} is {problem}")]
     BadInput {
         /// The field.
         what: String,

@@ -6,6 +6,16 @@ use glam::DVec3;
 
 use crate::error::GridError;
 
+/// The largest coordinate a grid's box may reach, in scene units: squared distances across
+/// it (ray marching, point-light fall-off) stay far from f64's overflow at 1.8·10³⁰⁸.
+pub const MAX_COORDINATE: f64 = 1e150;
+
+/// A point or vector for a message: `(0.5, 0.5, 1e308)`, each number as Rust's `{:?}`
+/// writes it (shortest round trip, exponent for large and small values).
+pub(crate) fn v3(v: DVec3) -> String {
+    format!("({:?}, {:?}, {:?})", v.x, v.y, v.z)
+}
+
 /// The geometry of a cell-centred grid: `dims` cells of size `spacing` (anisotropic allowed)
 /// starting at the corner `origin`, stored x-fastest.
 ///
@@ -26,7 +36,7 @@ pub struct GridGeometry {
 
 impl GridGeometry {
     /// A geometry with at least one cell per axis, finite positive spacing and a finite
-    /// origin. The cell count must fit in `usize` and in 2⁴⁰ (a terabyte of f32): anything
+    /// origin, its box within ±[`MAX_COORDINATE`]. The cell count must fit in `usize` and in 2⁴⁰ (a terabyte of f32): anything
     /// larger is a corrupt header, not a volume.
     pub fn new(dims: [usize; 3], spacing: DVec3, origin: DVec3) -> Result<Self, GridError> {
         if dims.contains(&0) {
@@ -41,12 +51,27 @@ impl GridGeometry {
         }
         if !spacing.is_finite() || spacing.min_element() <= 0.0 {
             return Err(GridError::InvalidGeometry(format!(
-                "spacing {spacing} must be finite and positive"
+                "spacing {} must be finite and positive",
+                v3(spacing)
             )));
         }
         if !origin.is_finite() {
             return Err(GridError::InvalidGeometry(format!(
-                "origin {origin} must be finite"
+                "origin {} must be finite",
+                v3(origin)
+            )));
+        }
+        // Distances and their squares must stay finite everywhere in the box (a spacing
+        // of 1e308 puts its far corner at infinity; one of 1e-320 has no finite inverse).
+        let n = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
+        let far = origin + spacing * n;
+        let reach = origin.abs().max(far.abs()).max_element();
+        if !(reach <= MAX_COORDINATE && spacing.recip().is_finite()) {
+            return Err(GridError::InvalidGeometry(format!(
+                "the box from {} to {} (spacing {}) reaches beyond ±{MAX_COORDINATE:e}, or its spacing has no finite inverse",
+                v3(origin),
+                v3(far),
+                v3(spacing)
             )));
         }
         Ok(Self {
@@ -284,4 +309,28 @@ pub fn ray_box(origin: DVec3, dir: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, 
         }
     }
     (t0 < t1).then_some((t0, t1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_box_that_reaches_infinity_or_has_no_finite_inverse_spacing_is_refused() {
+        let one = DVec3::ONE;
+        for (spacing, origin) in [
+            (DVec3::new(1.0, 1.0, 1e308), DVec3::ZERO),
+            (one * 1e150, DVec3::ZERO),
+            (one, DVec3::splat(-2e150)),
+            (DVec3::new(1.0, 1e-320, 1.0), DVec3::ZERO),
+        ] {
+            let refused = GridGeometry::new([4, 4, 4], spacing, origin);
+            assert!(
+                matches!(refused, Err(GridError::InvalidGeometry(ref m)) if !m.contains("0000000000")),
+                "{spacing:?} {origin:?}: {refused:?}"
+            );
+        }
+        // Large but finite boxes stay valid.
+        assert!(GridGeometry::new([4, 4, 4], one * 1e140, DVec3::splat(-1e145)).is_ok());
+    }
 }

@@ -68,5 +68,5 @@ pub use bricked::BrickedGrid;
 pub use bricks::BrickLayout;
 pub use dense::{Grid, GridStats, trilinear_blend, trilinear_cell};
 pub use error::GridError;
-pub use geometry::{GridGeometry, MAX_VOXELS, box_cells, ray_box};
+pub use geometry::{GridGeometry, MAX_COORDINATE, MAX_VOXELS, box_cells, ray_box};
 pub use line::{DualCorners, EmptyBricks, line_integral_with};

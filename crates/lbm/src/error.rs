@@ -7,7 +7,7 @@ pub enum LbmError {
     #[error("{0}")]
     Invalid(String),
     /// A coefficient beyond the scheme's stability limit.
-    #[error("{parameter} = {value} is beyond the lattice's stability limit {limit}")]
+    #[error("{parameter} = {value:?} is beyond the lattice's stability limit {limit:?}")]
     Unstable {
         /// Which.
         parameter: &'static str,

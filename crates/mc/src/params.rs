@@ -50,7 +50,10 @@ impl SolverParams for McParams {
             "independent batches, at least 2 (their spread gives the standard error)",
         ),
         ("seed", "seed of the counter-based random streams"),
-        ("max_depth", "scattering events after which a path ends"),
+        (
+            "max_depth",
+            "scattering events after which a path ends, at least 1",
+        ),
         (
             "majorant_cells",
             "cells per edge of a majorant block (delta tracking's bound on σ_t; out of core the bricks are the blocks)",
@@ -72,6 +75,13 @@ impl SolverParams for McParams {
         }
         if !(2..=1 << 20).contains(&self.spp) {
             return Err(bad("spp", "2 to 2^20 paths per pixel"));
+        }
+        if self.max_depth == 0 {
+            // A path that may not scatter once carries no scattered light: that is `direct`.
+            return Err(bad(
+                "max_depth",
+                "at least 1 (scattering events; the uncollided light alone is `direct`)",
+            ));
         }
         if self.particles == 0 || self.majorant_cells == 0 {
             return Err(bad("particles", "particles and majorant_cells at least 1"));

@@ -9,7 +9,7 @@ use thiserror::Error;
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum OpticsError {
     /// A value that must be finite was NaN or infinite.
-    #[error("{name} must be finite, got {value}")]
+    #[error("{name} must be finite, got {value:?}")]
     NotFinite {
         /// The parameter's name, as in the API (`sigma_a`, `g`, ...).
         name: &'static str,
@@ -17,7 +17,7 @@ pub enum OpticsError {
         value: f64,
     },
     /// A coefficient that must be non-negative was negative.
-    #[error("{name} must be non-negative, got {value}")]
+    #[error("{name} must be non-negative, got {value:?}")]
     Negative {
         /// The parameter's name.
         name: &'static str,
@@ -25,7 +25,7 @@ pub enum OpticsError {
         value: f64,
     },
     /// A value lies outside the interval the physics allows.
-    #[error("{name} must lie in {range}, got {value}")]
+    #[error("{name} must lie in {range}, got {value:?}")]
     OutOfRange {
         /// The parameter's name.
         name: &'static str,

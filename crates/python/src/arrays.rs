@@ -12,7 +12,7 @@ use numpy::{
 };
 use pyo3::prelude::*;
 
-use crate::errors::invalid;
+use crate::errors::{Kind, invalid, raise};
 
 /// An input array as f32 values in C order, with its shape.
 pub(crate) struct Floats {
@@ -22,9 +22,13 @@ pub(crate) struct Floats {
     pub(crate) values: Vec<f32>,
 }
 
-/// `obj` (an ndarray, or anything `numpy.asarray` takes) as finite f32 values; `name`
-/// is the argument, for the error.
-pub(crate) fn floats(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Floats> {
+/// `obj` (an ndarray, or anything `numpy.asarray` takes) as finite f32 values in C order
+/// (the logical order `a[z, y, x]`, whatever the memory layout: C, Fortran, transposed,
+/// strided or broadcast views are all read by index, never by memory position); `name`
+/// is the argument, for the error. An array whose f32 copy would take more than
+/// `max_bytes` is refused before anything is copied (a broadcast view of 2000³ costs
+/// numpy nothing and would cost 32 GB here).
+pub(crate) fn floats(obj: &Bound<'_, PyAny>, name: &str, max_bytes: u64) -> PyResult<Floats> {
     let py = obj.py();
     let array = match obj.cast::<PyUntypedArray>() {
         Ok(a) => a.clone(),
@@ -52,32 +56,61 @@ pub(crate) fn floats(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Floats> {
             ),
         ));
     }
+    let bytes = shape
+        .iter()
+        .try_fold(4u64, |acc, &n| acc.checked_mul(n as u64));
+    if bytes.is_none_or(|b| b > max_bytes) {
+        return Err(raise(
+            Kind::OverBudget,
+            format!(
+                "`{name}`: shape {} as float32 needs {} bytes, over the {max_bytes} bytes it may take (a field may take an eighth of `memory_budget`, 3 for RGB)",
+                tuple(&shape),
+                bytes.map_or_else(|| "more than 2^64".to_owned(), |b| b.to_string()),
+            ),
+        ));
+    }
     let values: Vec<f32> = if let Ok(a) = array.cast::<PyArrayDyn<f32>>() {
         let a = a.readonly();
+        // `as_slice` also accepts a Fortran-contiguous array (its memory order is not
+        // a[z, y, x]'s): only a C-contiguous one is copied as it lies.
         match a.as_slice() {
-            Ok(contiguous) => contiguous.to_vec(),
-            Err(_) => a.as_array().iter().copied().collect(),
+            Ok(contiguous) if a.is_c_contiguous() => contiguous.to_vec(),
+            _ => a.as_array().iter().copied().collect(),
         }
     } else {
         // float64 (and half or extended floats, through float64).
         let a64 = match array.cast::<PyArrayDyn<f64>>() {
             Ok(a) => a.clone(),
-            Err(_) => array
-                .call_method1("astype", ("float64",))?
-                .cast_into::<PyArrayDyn<f64>>()
-                .map_err(|_| invalid(name, "cannot be read as float64"))?,
+            Err(_) => {
+                if bytes.is_none_or(|b| b.saturating_mul(2) > max_bytes) {
+                    return Err(raise(
+                        Kind::OverBudget,
+                        format!(
+                            "`{name}`: shape {} as float64 (to read {} values) is over the {max_bytes} bytes it may take",
+                            tuple(&shape),
+                            dtype
+                                .str()
+                                .map_or_else(|_| "?".to_owned(), |s| s.to_string())
+                        ),
+                    ));
+                }
+                array
+                    .call_method1("astype", ("float64",))?
+                    .cast_into::<PyArrayDyn<f64>>()
+                    .map_err(|_| invalid(name, "cannot be read as float64"))?
+            }
         };
         let a = a64.readonly();
         match a.as_slice() {
-            Ok(contiguous) => contiguous.iter().map(|&v| v as f32).collect(),
-            Err(_) => a.as_array().iter().map(|&v| v as f32).collect(),
+            Ok(contiguous) if a.is_c_contiguous() => contiguous.iter().map(|&v| v as f32).collect(),
+            _ => a.as_array().iter().map(|&v| v as f32).collect(),
         }
     };
     if let Some(at) = values.iter().position(|v| !v.is_finite()) {
         return Err(invalid(
             name,
             format!(
-                "{} at index {} (values must be finite, and within f32's range)",
+                "{:?} at index {} (values must be finite, and within f32's range)",
                 values[at],
                 tuple(&unravel(at, &shape))
             ),
@@ -117,14 +150,22 @@ pub(crate) fn dims_of(shape: &[usize]) -> [usize; 3] {
     [shape[2], shape[1], shape[0]]
 }
 
+/// The most bytes one field may take under a job's memory `budget`: the scene's rule
+/// (up to eight fields on a grid, an eighth of the budget each; 1 GiB under the default).
+pub(crate) fn field_bytes(budget: u64) -> u64 {
+    lucent::scene::max_grid_bytes(budget)
+}
+
 /// A scalar field on a grid: a 3D array, or `channels` of them stacked as a 4D array with
 /// 1 or 3 in front; `dims` (if known) is checked.
 pub(crate) fn channels(
     obj: &Bound<'_, PyAny>,
     name: &str,
     dims: Option<[usize; 3]>,
+    budget: u64,
 ) -> PyResult<([usize; 3], Vec<Vec<f32>>)> {
-    let Floats { shape, values } = floats(obj, name)?;
+    // Up to three channels of one field each.
+    let Floats { shape, values } = floats(obj, name, 3 * field_bytes(budget))?;
     let (count, grid_shape) = match shape.len() {
         3 => (1, &shape[..]),
         4 if shape[0] == 1 || shape[0] == 3 => (shape[0], &shape[1..]),

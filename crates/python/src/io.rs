@@ -92,16 +92,23 @@ impl PyVolume {
     }
 }
 
+/// What a read may take: the command line's rule, so that a file `lucent` refuses is
+/// refused here too. A read (its payload and decoded grid together) gets three fields'
+/// worth of the job's budget (`memory_budget`, default 8 GiB: 3 GiB), which stops a
+/// decompression bomb or a VDB whose tree spans a huge box before it is inflated.
 fn load_options(memory_budget: Option<u64>) -> LoadOptions {
     LoadOptions {
-        memory_budget: memory_budget.unwrap_or(LoadOptions::default().memory_budget),
+        memory_budget: lucent::scene::max_read_bytes(
+            memory_budget.unwrap_or(lucent::scene::SCENE_MEMORY_BUDGET),
+        ),
     }
 }
 
 /// Reads a volume file by its extension: `.nrrd`/`.nhdr`, `.mhd`/`.mha`, `.vtk`,
 /// `.vti` (file or vtk.js folder), `.vol` (Mitsuba, every channel), `.npy`, `.vdb` (the
-/// first float grid). Headerless raw files need `read_raw`. Nothing beyond
-/// `memory_budget` bytes (default 8 GiB) is allocated: a file claiming more is refused.
+/// first float grid). Headerless raw files need `read_raw`. A read takes at most three
+/// eighths of `memory_budget` (default 8 GiB, so 3 GiB), as `lucent` allows a scene's
+/// volume: a file claiming more is refused before anything is inflated or allocated.
 #[pyfunction]
 #[pyo3(signature = (path, *, memory_budget=None))]
 pub(crate) fn read_volume(
@@ -210,17 +217,21 @@ pub(crate) fn read_raw(
 /// as float32 cells of `spacing` from the corner `origin`, in the format of the
 /// extension: `.vol` (Mitsuba: the box the cells fill), `.npy` (no geometry), `.nrrd`
 /// (raw), `.mhd`, `.vtk`, `.vti` (the sample-at-cell-centre convention of `read_volume`,
-/// so a file written here reads back to the same values and box).
+/// so a file written here reads back to the same values and box). The file appears whole
+/// or not at all (written beside it, then renamed). `data` may take up to three eighths of
+/// `memory_budget` (default 8 GiB).
 #[pyfunction]
-#[pyo3(signature = (path, data, *, spacing=None, origin=None))]
+#[pyo3(signature = (path, data, *, spacing=None, origin=None, memory_budget=None))]
 pub(crate) fn write_volume(
     py: Python<'_>,
     path: PathBuf,
     data: &Bound<'_, PyAny>,
     spacing: Option<&Bound<'_, PyAny>>,
     origin: Option<&Bound<'_, PyAny>>,
+    memory_budget: Option<u64>,
 ) -> PyResult<()> {
-    let (dims, channels) = crate::arrays::channels(data, "data", None)?;
+    let budget = memory_budget.unwrap_or(lucent::scene::SCENE_MEMORY_BUDGET);
+    let (dims, channels) = crate::arrays::channels(data, "data", None, budget)?;
     let spacing = match spacing {
         Some(s) => crate::scene::triple(s, "spacing")?,
         None => DVec3::ONE,

@@ -13,9 +13,12 @@
 //! - the renderer (`render`), and the diffusion system as CSR arrays
 //!   (`DiffusionSystem`) for other solvers of the same matrix.
 //!
-//! **Layout.** A grid is the C-order array `a[z, y, x]`, shape (n_z, n_y, n_x), the
-//! layout of lucent's grids (x fastest) and `.npy` files, so no copy reorders it;
-//! channels stack in front. Units are the scene's length unit and W.
+//! **Layout.** A grid is the array `a[z, y, x]`, shape (n_z, n_y, n_x), the layout of
+//! lucent's grids (x fastest) and `.npy` files; channels stack in front. Inputs are read
+//! by index, whatever their memory layout (C, Fortran, transposed, strided, broadcast):
+//! a C-contiguous array is copied as it lies, any other in its logical order. Each input
+//! array may take an eighth of the call's `memory_budget` (default 8 GiB), checked
+//! before it is copied. Units are the scene's length unit and W.
 //!
 //! **Errors** are Python exceptions carrying lucent's messages (`lucent._errors`): bad
 //! arrays, parameters and values are `ValueError`s naming the argument.
@@ -44,6 +47,12 @@ use pyo3::prelude::*;
 /// The compiled part of the `lucent` package.
 #[pymodule]
 fn _lucent(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // `RAYON_NUM_THREADS` beyond what a solve may ask for is capped (a pool of 100 000
+    // threads never finished starting), as by the `lucent` command.
+    if let Some(note) = lucent::cap_global_threads() {
+        let warnings = PyModule::import(m.py(), "warnings")?;
+        warnings.call_method1("warn", (format!("lucent: {note}"),))?;
+    }
     m.add_class::<scene::PyScene>()?;
     m.add_class::<scene::PyProblem>()?;
     m.add_class::<solve::PySolver>()?;

@@ -225,7 +225,16 @@ pub(crate) fn render(
         });
     }
     let solution = match solution {
-        Some(s) => s,
+        Some(s) => {
+            let held = s.get();
+            if held.problem != built.problem.fingerprint() {
+                return Err(invalid(
+                    "solution",
+                    "it solves another problem than this scene's (solve the scene, or pass the scene it was solved from)",
+                ));
+            }
+            s
+        }
         None => {
             chosen.solver.admits(&built.problem).map_err(from_solve)?;
             Py::new(py, chosen.run(py, &built.problem, &options, default_rtol)?)?

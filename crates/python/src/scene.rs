@@ -211,9 +211,11 @@ impl PyProblem {
     /// file (`{"kind": "directional", "direction": [0, 0, -1], "irradiance": 1.0}`);
     /// `boundary` a name or a dict (`{"kind": "robin", "eta": 1.3}`); `embedded` the
     /// signed distance of an embedded body (negative inside); `emission` the grid that
-    /// emission lights scale.
+    /// emission lights scale. Arrays are read by index in any memory layout (C, Fortran,
+    /// transposed, strided, broadcast); each may take an eighth of `memory_budget`
+    /// (default 8 GiB; three eighths for RGB), checked before anything is copied.
     #[new]
-    #[pyo3(signature = (sigma_t, albedo=None, *, spacing=None, origin=None, phase=None, lights=None, boundary=None, embedded=None, emission=None))]
+    #[pyo3(signature = (sigma_t, albedo=None, *, spacing=None, origin=None, phase=None, lights=None, boundary=None, embedded=None, emission=None, memory_budget=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         sigma_t: &Bound<'_, PyAny>,
@@ -225,8 +227,10 @@ impl PyProblem {
         boundary: Option<&Bound<'_, PyAny>>,
         embedded: Option<&Bound<'_, PyAny>>,
         emission: Option<&Bound<'_, PyAny>>,
+        memory_budget: Option<u64>,
     ) -> PyResult<Self> {
-        let (dims, sigma) = channels(sigma_t, "sigma_t", None)?;
+        let budget = memory_budget.unwrap_or(lucent::scene::SCENE_MEMORY_BUDGET);
+        let (dims, sigma) = channels(sigma_t, "sigma_t", None, budget)?;
         if let Some((c, v)) = sigma
             .iter()
             .enumerate()
@@ -261,7 +265,7 @@ impl PyProblem {
             }
             Some(a) => match a.extract::<Vec<f64>>() {
                 Ok(v) if v.len() == 3 => v.iter().map(|&x| Field::Constant(x as f32)).collect(),
-                _ => channels(a, "albedo", Some(dims))?
+                _ => channels(a, "albedo", Some(dims), budget)?
                     .1
                     .into_iter()
                     .map(|v| grid(v, "albedo").map(Field::Grid))
@@ -279,7 +283,7 @@ impl PyProblem {
         }
         let emission = match emission.filter(|e| !e.is_none()) {
             Some(e) => {
-                let (_, mut values) = channels(e, "emission", Some(dims))?;
+                let (_, mut values) = channels(e, "emission", Some(dims), budget)?;
                 if values.len() != 1 {
                     return Err(invalid("emission", "one grid (n_z, n_y, n_x)"));
                 }
@@ -310,7 +314,7 @@ impl PyProblem {
         };
         let embedded = match embedded.filter(|e| !e.is_none()) {
             Some(e) => {
-                let (_, mut values) = channels(e, "embedded", Some(dims))?;
+                let (_, mut values) = channels(e, "embedded", Some(dims), budget)?;
                 if values.len() != 1 {
                     return Err(invalid(
                         "embedded",

@@ -226,6 +226,7 @@ impl PySolver {
             spacing: problem.geometry().spacing().into(),
             origin: problem.geometry().origin().into(),
             params: self.resolved.clone(),
+            problem: problem.fingerprint(),
         })
     }
 }
@@ -357,6 +358,9 @@ pub(crate) struct PySolution {
     spacing: (f64, f64, f64),
     origin: (f64, f64, f64),
     params: serde_json::Value,
+    /// [`lucent::core::Problem::fingerprint`] of the problem it solves, so that
+    /// `render(scene, solution=...)` can refuse the solution of another problem.
+    pub(crate) problem: u64,
 }
 
 #[pymethods]

@@ -10,6 +10,24 @@ use crate::errors::invalid;
 /// scalars and arrays through their `tolist()`. `None` in a dict means "not given" and
 /// is dropped; anywhere else it is an error naming `path`.
 pub(crate) fn to_toml(obj: &Bound<'_, PyAny>, path: &str) -> PyResult<toml::Value> {
+    to_toml_at(obj, path, 0)
+}
+
+/// How deep a scene value may nest: a scene file's deepest value (a transfer function's
+/// control points inside `[medium]`) is 4 deep; 64 leaves room for any real use and keeps
+/// the recursion (here and in serde) far from the thread's stack (a dict nested 20 000
+/// deep, or a list that holds itself, once overflowed it).
+pub(crate) const MAX_DEPTH: usize = 64;
+
+fn to_toml_at(obj: &Bound<'_, PyAny>, path: &str, depth: usize) -> PyResult<toml::Value> {
+    if depth > MAX_DEPTH {
+        return Err(invalid(
+            path,
+            format!(
+                "nested more than {MAX_DEPTH} deep (a scene value is a few levels deep; does a list or dict hold itself?)"
+            ),
+        ));
+    }
     if obj.is_instance_of::<PyBool>() {
         return Ok(toml::Value::Boolean(obj.extract()?));
     }
@@ -39,7 +57,7 @@ pub(crate) fn to_toml(obj: &Bound<'_, PyAny>, path: &str) -> PyResult<toml::Valu
             } else {
                 format!("{path}.{key}")
             };
-            table.insert(key, to_toml(&v, &inner)?);
+            table.insert(key, to_toml_at(&v, &inner, depth + 1)?);
         }
         return Ok(toml::Value::Table(table));
     }
@@ -47,7 +65,7 @@ pub(crate) fn to_toml(obj: &Bound<'_, PyAny>, path: &str) -> PyResult<toml::Valu
         let items = obj
             .try_iter()?
             .enumerate()
-            .map(|(i, item)| to_toml(&item?, &format!("{path}[{i}]")))
+            .map(|(i, item)| to_toml_at(&item?, &format!("{path}[{i}]"), depth + 1))
             .collect::<PyResult<Vec<_>>>()?;
         return Ok(toml::Value::Array(items));
     }
@@ -55,7 +73,7 @@ pub(crate) fn to_toml(obj: &Bound<'_, PyAny>, path: &str) -> PyResult<toml::Valu
     if obj.hasattr("tolist")? {
         let plain = obj.call_method0("tolist")?;
         if !plain.is(obj) {
-            return to_toml(&plain, path);
+            return to_toml_at(&plain, path, depth + 1);
         }
     }
     Err(invalid(

@@ -123,6 +123,11 @@ impl MarchSetup {
     ) -> Result<Self, RenderError> {
         camera.validate()?;
         let pixels = settings.validate()?;
+        solution.check_fits(problem).map_err(|why| {
+            RenderError::Invalid(format!(
+                "the solution does not belong to the problem: {why}"
+            ))
+        })?;
         let geometry = problem.geometry();
         let (lo, hi) = geometry.bounds();
         let sky: [f64; 3] = std::array::from_fn(|c| {

@@ -65,6 +65,7 @@ class Problem:
         boundary: Union[str, Mapping[str, Any], None] = None,
         embedded: Optional[_Floats] = None,
         emission: Optional[_Floats] = None,
+        memory_budget: Optional[int] = None,
     ) -> None:
         """``sigma_t`` (1/length): (n_z, n_y, n_x) or (3, n_z, n_y, n_x), float32 or
         float64, finite, ≥ 0. ``albedo``: a number (default 0.9), three numbers, or an
@@ -74,7 +75,10 @@ class Problem:
         ``lights``: dicts as in a scene file. ``boundary``: ``"vacuum"`` or a dict
         (``{"kind": "robin", "eta": 1.3}``). ``embedded``: the signed distance of an
         embedded body (negative inside). ``emission``: the grid emission lights scale.
-        Bad arrays raise ``ValueError`` naming the argument."""
+        Arrays are read by index whatever their memory layout (C, Fortran, transposed,
+        strided, broadcast). Bad arrays raise ``ValueError`` naming the argument; an array
+        over an eighth of ``memory_budget`` (default 8 GiB; three eighths for RGB) raises
+        ``MemoryError`` before anything is copied."""
     @property
     def dims(self) -> Tuple[int, int, int]:
         """Cells per axis, (n_x, n_y, n_z)."""
@@ -234,7 +238,10 @@ class Volume:
 
 def read_volume(path: _Path, *, memory_budget: Optional[int] = None) -> Volume:
     """``.nrrd``/``.nhdr``, ``.mhd``/``.mha``, ``.vtk``, ``.vti`` (or a vtk.js folder),
-    ``.vol``, ``.npy``, ``.vdb``, by extension."""
+    ``.vol``, ``.npy``, ``.vdb``, by extension. A read may take three eighths of
+    ``memory_budget`` (default 8 GiB: 3 GiB), the ``lucent`` command's rule; a file
+    claiming more (a decompression bomb, a VDB spanning a huge box) raises
+    ``MemoryError`` before anything is inflated."""
 
 def read_raw(
     path: _Path,
@@ -257,10 +264,12 @@ def write_volume(
     *,
     spacing: Union[float, Sequence[float], None] = None,
     origin: Union[float, Sequence[float], None] = None,
+    memory_budget: Optional[int] = None,
 ) -> None:
     """Writes float32 cells as ``.vol`` (several channels allowed), ``.npy``, ``.nrrd``,
     ``.mhd``, ``.vtk`` or ``.vti``; ``read_volume`` reads them back to the same values
-    and box (``.npy`` has no geometry)."""
+    and box (``.npy`` has no geometry). The file appears whole or not at all: it is
+    written beside the target and renamed over it when complete."""
 
 class Rendering:
     """A rendered image; ``numpy.asarray(rendering)`` is its linear radiance."""
