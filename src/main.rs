@@ -214,7 +214,26 @@ enum Ended {
     Diverged,
 }
 
+/// Mesa's implicit Vulkan layer `VK_LAYER_MESA_device_select` asks Wayland for the
+/// default display while the adapters are listed; without a runtime folder
+/// (`XDG_RUNTIME_DIR`, which a headless machine lacks) libwayland prints
+/// `error: XDG_RUNTIME_DIR is invalid or not set` twice on every GPU run. The layer only
+/// orders devices by the display they drive, and wgpu picks its adapter itself, so on a
+/// headless machine the layer is told to stand aside (`NODEVICE_SELECT=1`, Mesa's switch)
+/// instead of alarming users with errors that are not errors.
+#[allow(unsafe_code)]
+fn quiet_headless_vulkan() {
+    let headless = std::env::var_os("XDG_RUNTIME_DIR").is_none_or(|d| !Path::new(&d).is_dir());
+    if headless && std::env::var_os("NODEVICE_SELECT").is_none() {
+        // SAFETY: called first thing in `main`, before any thread exists (the Ctrl-C
+        // handler, rayon's pool and MPI start later), so nothing reads or writes the
+        // environment concurrently.
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
+    }
+}
+
 fn main() -> ExitCode {
+    quiet_headless_vulkan();
     let cli = match parse_command_line(std::env::args_os()) {
         Ok(cli) => cli,
         Err(e) => e.exit(),
