@@ -391,6 +391,7 @@ fn cancel_flag() -> Arc<AtomicBool> {
         // Without a handler (another one installed), Ctrl-C keeps its default: exit.
         let _ = ctrlc::set_handler(move || {
             if seen.swap(true, Ordering::SeqCst) {
+                lucent::grid::io::atomic::remove_partial_files();
                 std::process::exit(i32::from(EXIT_INTERRUPTED));
             }
             let _ = writeln!(
@@ -853,14 +854,15 @@ fn solve_report(
     })
 }
 
-/// Writes `report` as pretty JSON to `path`.
+/// Writes `report` as pretty JSON to `path`, whole or not at all.
 fn write_report(path: &Path, report: &serde_json::Value) -> Result<(), Error> {
     let io = |e: &dyn std::fmt::Display| Error::Io {
         path: path.to_owned(),
         reason: e.to_string(),
     };
     let text = serde_json::to_string_pretty(report).map_err(|e| io(&e))?;
-    std::fs::write(path, text + "\n").map_err(|e| io(&e))
+    lucent::grid::io::atomic::write_with(path, |f| f.write_all((text + "\n").as_bytes()))
+        .map_err(|e| io(&e))
 }
 
 /// `solve` on a paged medium ([`Scene::build_paged`]): the fluence streamed slab by slab

@@ -1743,3 +1743,111 @@ fn a_headless_gpu_run_prints_no_window_system_errors() {
     assert!(!err.contains("XDG_RUNTIME_DIR"), "{err}");
     assert!(err.is_empty(), "a quiet run says nothing: {err}");
 }
+
+/// `lucent ARGS` in `dir` under a file-size limit of `blocks` × 512 bytes: a full disk as
+/// a writer sees it (`EFBIG` partway through a file, `SIGXFSZ` ignored).
+#[cfg(unix)]
+fn lucent_on_a_full_disk(args: &[&str], dir: &Path, blocks: u32) -> Output {
+    Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -f {blocks}; trap '' XFSZ; exec \"$0\" \"$@\""
+        ))
+        .arg(env!("CARGO_BIN_EXE_lucent"))
+        .args(args)
+        .current_dir(dir)
+        .env("LUCENT_DATA", data_dir())
+        .output()
+        .expect("sh runs")
+}
+
+/// Every output of the command onto a full disk: exit 1 with the file named, the older
+/// file at the target intact, and no partial file beside it. (A small PNG once sat in a
+/// buffer whose failed flush was dropped: "rendered", exit 0, a 0-byte file.)
+#[cfg(unix)]
+#[test]
+fn outputs_onto_a_full_disk_fail_and_keep_the_older_file() {
+    let slab = scene("suite/slab.toml");
+    // A 2 × 2 × 2 medium: its fluence (.npy 160 bytes, .vol 80) fits under the limit, its
+    // JSON report does not, so the report's own failure is seen.
+    let tiny = std::fs::read_to_string(&slab)
+        .unwrap()
+        .replace("resolution = [8, 8, 32]", "resolution = [2, 2, 2]");
+    let cases: Vec<(Vec<&str>, Vec<&str>, &str)> = vec![
+        // (arguments, outputs that exist before, the output that must fail)
+        (
+            vec!["render", &slab, "-o", "x.png", "--size", "128x96"],
+            vec!["x.png"],
+            "x.png",
+        ),
+        (
+            vec!["render", &slab, "-o", "x.exr", "--size", "64x48"],
+            vec!["x.exr"],
+            "x.exr",
+        ),
+        (
+            vec![
+                "render", &slab, "-o", "mc.png", "--size", "64x48", "--solver", "mc", "--param",
+                "spp=2",
+            ],
+            vec!["mc.png", "mc.stderr.exr"],
+            "mc.stderr.exr",
+        ),
+        (
+            vec!["solve", &slab, "-o", "phi.npy"],
+            vec!["phi.npy", "phi.json"],
+            "phi.npy",
+        ),
+        (
+            vec!["solve", &slab, "-o", "phi.vol"],
+            vec!["phi.vol", "phi.json"],
+            "phi.vol",
+        ),
+        (
+            vec!["solve", "tiny.toml", "-o", "tiny.npy"],
+            vec!["tiny.json"],
+            "tiny.json",
+        ),
+        // Out of core: the fluence streamed slab by slab into the .npy.
+        (
+            vec![
+                "solve",
+                &slab,
+                "-o",
+                "paged.npy",
+                "--memory-budget",
+                "16KiB",
+                "--solver",
+                "direct",
+            ],
+            vec!["paged.npy", "paged.json"],
+            // The pager's backing file (the medium's and the fluence's bricks) is larger
+            // than the fluence, so the disk fills there first.
+            "its out-of-core storage failed",
+        ),
+    ];
+    for (args, older, failing) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("tiny.toml"), &tiny).unwrap();
+        for name in &older {
+            std::fs::write(dir.path().join(name), b"an older file").unwrap();
+        }
+        let mut all = args.clone();
+        all.push("-q");
+        let out = lucent_on_a_full_disk(&all, dir.path(), 1);
+        assert_clean_failure(&out, failing);
+        for name in &older {
+            assert_eq!(
+                std::fs::read(dir.path().join(name)).unwrap(),
+                b"an older file",
+                "{args:?} touched {name}"
+            );
+        }
+        let left: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains("partial") || n.starts_with(".lucent"))
+            .collect();
+        assert!(left.is_empty(), "{args:?} left {left:?}");
+    }
+}

@@ -108,6 +108,15 @@ pub enum SolveError {
         /// outside CI instead of failing.
         unavailable: bool,
     },
+    /// The out-of-core storage (the pager's backing file) could not be read or written: a
+    /// full disk, a quota, a lost file system. Nothing the solve computed was written.
+    #[error("solver `{solver}`: its out-of-core storage failed: {reason}")]
+    Storage {
+        /// The solver's name.
+        solver: String,
+        /// What failed, with the operating system's words.
+        reason: String,
+    },
     /// The problem is invalid.
     #[error(transparent)]
     Problem(#[from] ProblemError),

@@ -86,6 +86,10 @@ pub fn paging_error(solver: &str, e: PagingError) -> SolveError {
             needed,
             budget,
         },
+        PagingError::Io { .. } | PagingError::Create { .. } => SolveError::Storage {
+            solver: solver.into(),
+            reason: e.to_string(),
+        },
         other => SolveError::InvalidParameter {
             name: "paged storage".into(),
             reason: format!("{solver}: {other}"),

@@ -288,7 +288,8 @@ fn nrrd_layers_attached_and_detached_are_the_whole_reads_layers() {
 /// makes, byte for byte; a bad range is refused.
 #[test]
 fn positioned_npy_writes_make_the_whole_file() {
-    use lucent_grid::io::layers::{create_npy, write_npy_layers};
+    use lucent_grid::io::atomic::partial_path;
+    use lucent_grid::io::layers::{create_npy, finish_npy, write_npy_layers};
     let dir = std::env::temp_dir().join(format!("lucent-npy-layers-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     for dims in [[5, 3, 7], [1, 1, 1], [9, 4, 2]] {
@@ -296,15 +297,20 @@ fn positioned_npy_writes_make_the_whole_file() {
         let whole = dir.join("whole.npy");
         let parts = dir.join("parts.npy");
         npy::write(&whole, &g, ScalarType::F32).unwrap();
-        // A longer file left behind is emptied first.
-        std::fs::write(&parts, vec![7u8; 10_000]).unwrap();
+        // A longer partial file left behind is emptied first.
+        std::fs::write(partial_path(&parts), vec![7u8; 10_000]).unwrap();
+        // An older file at the target stays until the new one is whole.
+        std::fs::write(&parts, b"older").unwrap();
         create_npy(&parts, dims).unwrap();
         let nz = dims[2];
         let cuts = [0, nz / 3, nz / 3 + nz / 2, nz];
         // Last slab first: the order of the ranks' writes does not matter.
         for w in cuts.windows(2).rev().filter(|w| w[0] < w[1]) {
             write_npy_layers(&parts, dims, w[0]..w[1], &slice(&g, w[0]..w[1])).unwrap();
+            assert_eq!(std::fs::read(&parts).unwrap(), b"older");
         }
+        finish_npy(&parts).unwrap();
+        assert!(!partial_path(&parts).exists());
         assert_eq!(
             std::fs::read(&parts).unwrap(),
             std::fs::read(&whole).unwrap()
@@ -372,7 +378,7 @@ fn nrrd_boxes_and_bad_boxes() {
 /// byte for byte; a bad box is refused.
 #[test]
 fn positioned_npy_box_writes_make_the_whole_file() {
-    use lucent_grid::io::layers::{create_npy, write_npy_region};
+    use lucent_grid::io::layers::{create_npy, finish_npy, write_npy_region};
     let dir = tempfile::tempdir().unwrap();
     for dims in [[19, 6, 5], [1, 1, 1], [8, 3, 2]] {
         let g = grid(dims, 13);
@@ -394,6 +400,7 @@ fn positioned_npy_box_writes_make_the_whole_file() {
         for cells in boxes.into_iter().rev() {
             write_npy_region(&parts, dims, cells.clone(), &boxed(&g, &cells)).unwrap();
         }
+        finish_npy(&parts).unwrap();
         assert_eq!(
             std::fs::read(&parts).unwrap(),
             std::fs::read(&whole).unwrap(),

@@ -209,7 +209,7 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
     slabs::agree(comm, created)?;
     let values: Vec<f32> = steady.fluence.iter().map(|&v| v as f32).collect();
     let written = write_npy_region(&args.out, dims, owned.clone(), &values);
-    slabs::agree(comm, written.map_err(|e| e.to_string()))?;
+    slabs::publish(comm, &args.out, written.map_err(|e| e.to_string()))?;
     // The block (CSR: 7 entries of 16 bytes per row, an index per row, the right-hand
     // side), the samples and coefficients read (f32 × 4), and the iteration's vectors (φ
     // with its halo, r, b and the scale: f64 × 4; the halo at most the cells read less
@@ -337,7 +337,7 @@ fn run_multigrid(
         let values: Vec<f32> = solved.fluence.iter().map(|&v| v as f32).collect();
         write_npy_region(&args.out, dims, solved.cells.clone(), &values).map_err(|e| e.to_string())
     };
-    slabs::agree(comm, written)?;
+    slabs::publish(comm, &args.out, written)?;
     let history = &solved.convergence;
     if rank == 0 {
         let grids: Vec<[usize; 3]> = layout.stages.iter().map(|s| s.grid()).collect();

@@ -150,7 +150,7 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
     slabs::agree(comm, created)?;
     let values: Vec<f32> = rho.iter().map(|&v| v as f32).collect();
     let written = write_npy_region(&args.out, dims, owned.clone(), &values);
-    slabs::agree(comm, written.map_err(|e| e.to_string()))?;
+    slabs::publish(comm, &args.out, written.map_err(|e| e.to_string()))?;
     // σ_a and ρ of the cells read (f64), the cells as read (f32), ρ of the owned cells
     // returned and written (f64 and f32).
     let count =

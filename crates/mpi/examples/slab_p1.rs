@@ -133,7 +133,7 @@ fn run(comm: &(impl Communicator + ?Sized), args: &Args) -> Result<bool, String>
     slabs::agree(comm, created)?;
     let values: Vec<f32> = state.fluence.iter().map(|&v| v as f32).collect();
     let written = write_npy_region(&args.out, dims, own.clone(), &values);
-    slabs::agree(comm, written.map_err(|e| e.to_string()))?;
+    slabs::publish(comm, &args.out, written.map_err(|e| e.to_string()))?;
     if rank == 0 {
         eprintln!(
             "{} steps, {}, {seconds:.3} s; boxes {:?}",

@@ -90,6 +90,7 @@ fn solve_kind(e: &SolveError) -> Kind {
         SolveError::Device { .. } => Kind::Device,
         SolveError::Grid(g) => grid_kind(g),
         SolveError::NonFiniteOutput { .. } | SolveError::TooMuchWork { .. } => Kind::Solve,
+        SolveError::Storage { .. } => Kind::Io,
     }
 }
 

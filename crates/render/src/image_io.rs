@@ -77,7 +77,8 @@ impl Image {
         sum / self.pixels.len().max(1) as f64
     }
 
-    /// Writes an 8-bit sRGB PNG.
+    /// Writes an 8-bit sRGB PNG, whole or not at all (encoded in memory, then written
+    /// beside the target and renamed over it: `lucent_grid::io::atomic`).
     pub fn write_png(
         &self,
         path: impl AsRef<Path>,
@@ -93,28 +94,37 @@ impl Image {
             u32::try_from(self.width).map_err(|e| fail(e.to_string()))?,
             u32::try_from(self.height).map_err(|e| fail(e.to_string()))?,
         );
-        image::save_buffer_with_format(
-            path,
+        let mut encoded = std::io::Cursor::new(Vec::new());
+        image::write_buffer_with_format(
+            &mut encoded,
             &self.to_srgb8(exposure, tone),
             w,
             h,
             image::ColorType::Rgb8,
             image::ImageFormat::Png,
         )
-        .map_err(|e| fail(e.to_string()))
+        .map_err(|e| fail(e.to_string()))?;
+        write_whole(path, encoded.get_ref())
     }
 
-    /// Writes a linear f32 RGB OpenEXR file (no tone mapping: the radiance itself).
+    /// Writes a linear f32 RGB OpenEXR file (no tone mapping: the radiance itself), whole
+    /// or not at all.
     pub fn write_exr(&self, path: impl AsRef<Path>) -> Result<(), RenderError> {
+        use exr::prelude::{Image as ExrImage, SpecificChannels, Vec2, WritableImage};
         let path = path.as_ref();
-        exr::prelude::write_rgb_file(path, self.width, self.height, |x, y| {
+        let channels = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
             let p = self.pixels[y * self.width + x];
             (p[0], p[1], p[2])
-        })
-        .map_err(|e| RenderError::Write {
-            path: path.to_owned(),
-            reason: e.to_string(),
-        })
+        });
+        let mut encoded = std::io::Cursor::new(Vec::new());
+        ExrImage::from_channels((self.width, self.height), channels)
+            .write()
+            .to_buffered(&mut encoded)
+            .map_err(|e| RenderError::Write {
+                path: path.to_owned(),
+                reason: e.to_string(),
+            })?;
+        write_whole(path, encoded.get_ref())
     }
 
     /// Writes PNG or EXR by the extension (`.png`, `.exr`).
@@ -139,4 +149,15 @@ impl Image {
             }),
         }
     }
+}
+
+/// `bytes` as the file `path`, whole or not at all.
+fn write_whole(path: &Path, bytes: &[u8]) -> Result<(), RenderError> {
+    use std::io::Write;
+    lucent_grid::io::atomic::write_with(path, |f| f.write_all(bytes)).map_err(|e| {
+        RenderError::Write {
+            path: path.to_owned(),
+            reason: e.to_string(),
+        }
+    })
 }

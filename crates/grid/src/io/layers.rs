@@ -140,10 +140,13 @@ pub fn write_npy_layers(
 
 /// Writes `values` (f32, x fastest) as the box `cells` of the C-order (n_z, n_y, n_x) f32
 /// `.npy` array of `dims`, by positioned writes: every rank of a decomposition writes its
-/// own cells into one file, and the header, identical from every rank. The file is
-/// created if it is missing and never truncated, so one rank creates (or empties) it
-/// before the others write: [`create_npy`], then a barrier. Once every cell has been
-/// written the file is the array [`super::npy::write`] would have written.
+/// own cells into one file, and the header, identical from every rank. The cells go into
+/// the partial file beside `path` ([`super::atomic::partial_path`]), which is created if
+/// it is missing and never truncated, and are `fsync`ed before this returns: one rank
+/// creates (or empties) it before the others write ([`create_npy`], then a barrier), and
+/// once every rank has written (a barrier) one rank renames it over `path`
+/// ([`finish_npy`]). `path` is then the array [`super::npy::write`] would have written,
+/// and never a part of it.
 ///
 /// # Errors
 /// An empty box or one past the grid, `values` of another length
@@ -163,11 +166,12 @@ pub fn write_npy_region(
         });
     }
     let header = super::npy::header_bytes(dims, 1, ScalarType::F32);
+    let partial = super::atomic::partial_path(path);
     let file = std::fs::OpenOptions::new()
         .write(true)
         .create(true)
         .truncate(false)
-        .open(path)
+        .open(&partial)
         .map_err(io_error(path))?;
     write_at(&file, path, &header, 0)?;
     let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
@@ -181,16 +185,34 @@ pub fn write_npy_region(
         )?;
         at += len;
     }
-    Ok(())
+    file.sync_data().map_err(io_error(path))
 }
 
-/// Creates (or empties) the `.npy` file that [`write_npy_layers`] fills, with its header.
+/// Creates (or empties) the partial file that [`write_npy_region`] fills for `path`, with
+/// its header.
 ///
 /// # Errors
 /// I/O.
 pub fn create_npy(path: impl AsRef<Path>, dims: [usize; 3]) -> Result<(), GridError> {
     let path = path.as_ref();
-    std::fs::write(path, super::npy::header_bytes(dims, 1, ScalarType::F32)).map_err(io_error(path))
+    let partial = super::atomic::partial_path(path);
+    std::fs::write(&partial, super::npy::header_bytes(dims, 1, ScalarType::F32))
+        .map_err(io_error(path))
+}
+
+/// Renames the partial file that every rank has filled ([`write_npy_region`]) over
+/// `path`: call on one rank, after all have written. `path` appears whole or not at all.
+///
+/// # Errors
+/// I/O (the partial file is then removed).
+pub fn finish_npy(path: impl AsRef<Path>) -> Result<(), GridError> {
+    let path = path.as_ref();
+    super::atomic::publish(&super::atomic::partial_path(path), path).map_err(io_error(path))
+}
+
+/// Removes the partial file of `path` (a decomposed write that failed on some rank).
+pub fn abandon_npy(path: impl AsRef<Path>) {
+    let _ = std::fs::remove_file(super::atomic::partial_path(path.as_ref()));
 }
 
 /// Layers `layers` of a raw file of `layout`.

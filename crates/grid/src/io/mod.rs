@@ -19,6 +19,7 @@
 //! Every reader checks sizes against the file and against [`LoadOptions::memory_budget`]
 //! *before* allocating, and reports problems as [`GridError`]s that name the file.
 
+pub mod atomic;
 pub mod layers;
 pub mod mhd;
 pub mod mitsuba;
@@ -349,9 +350,10 @@ pub(crate) fn check_finite(
     }
 }
 
-/// Writes a whole file, naming it in the error.
+/// Writes a whole file, naming it in the error: whole or not at all ([`atomic`]).
 pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), GridError> {
-    fs::write(path, bytes).map_err(|source| GridError::Io {
+    use std::io::Write;
+    atomic::write_with(path, |f| f.write_all(bytes)).map_err(|source| GridError::Io {
         path: path.to_owned(),
         source,
     })

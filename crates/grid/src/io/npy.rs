@@ -219,7 +219,8 @@ pub(crate) fn header_bytes(dims: [usize; 3], channels: usize, scalar: ScalarType
 /// Writes `channels` f32 grids of `dims` (as [`write_channels`] lays them out) without
 /// holding more than one slab: `slab(channel, z, out)` fills slab `z` of a channel, x
 /// fastest. For fields that live out of core (a paged fluence). An error of `slab` ends
-/// the write and is returned as an I/O error naming the file.
+/// the write and is returned as an I/O error naming the file. The file appears whole or
+/// not at all ([`super::atomic`]).
 pub fn write_f32_slabs<E: std::fmt::Display>(
     path: impl AsRef<Path>,
     dims: [usize; 3],
@@ -232,8 +233,7 @@ pub fn write_f32_slabs<E: std::fmt::Display>(
         path: path.to_owned(),
         source,
     };
-    let file = std::fs::File::create(path).map_err(io)?;
-    let mut out = std::io::BufWriter::new(file);
+    let mut out = super::atomic::AtomicFile::create(path).map_err(io)?;
     out.write_all(&header_bytes(dims, channels.max(1), ScalarType::F32))
         .map_err(io)?;
     let [nx, ny, nz] = dims;
@@ -249,7 +249,7 @@ pub fn write_f32_slabs<E: std::fmt::Display>(
             out.write_all(&bytes).map_err(io)?;
         }
     }
-    out.flush().map_err(io)
+    out.commit().map_err(io)
 }
 
 /// Writes one grid as a 3D array, or several grids on one geometry (RGB fluence) as a

@@ -86,6 +86,27 @@ pub(crate) fn agree<T>(
     }
 }
 
+/// After every rank has written its cells of `out` into the shared partial file
+/// (`written`): rank 0 renames it over `out` when all succeeded, or removes it when any
+/// failed, so that `out` is the whole array or untouched, never a part of it.
+pub(crate) fn publish(
+    comm: &(impl Communicator + ?Sized),
+    out: &std::path::Path,
+    written: Result<(), String>,
+) -> Result<(), String> {
+    let agreed = agree(comm, written);
+    let finished = if comm.rank() != 0 {
+        Ok(())
+    } else if agreed.is_ok() {
+        lucent_grid::io::layers::finish_npy(out).map_err(|e| e.to_string())
+    } else {
+        lucent_grid::io::layers::abandon_npy(out);
+        Ok(())
+    };
+    agreed?;
+    agree(comm, finished)
+}
+
 /// The value after `name` in `args`.
 pub(crate) fn value(args: &[String], name: &str) -> Option<String> {
     args.iter()
