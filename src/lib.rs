@@ -158,6 +158,24 @@ pub enum Error {
     /// From the optics.
     #[error(transparent)]
     Optics(#[from] lucent_optics::OpticsError),
+    /// A budget under which a solver cannot solve the scene out of core, found before
+    /// anything was built.
+    #[error(
+        "`{solver}` cannot solve this scene out of core within the memory budget of {budget} bytes{}",
+        match smallest {
+            Some(b) => format!(": the smallest budget that would do is {} MiB (--memory-budget {}MiB)", b.div_ceil(1 << 20), b.div_ceil(1 << 20)),
+            None => ": the medium's bookkeeping alone needs more (coarser bricks or a smaller grid)".into(),
+        }
+    )]
+    PagedBudget {
+        /// The solver.
+        solver: String,
+        /// The budget asked for.
+        budget: u64,
+        /// The smallest budget that would do, where the search found one (it stops where
+        /// the medium's bookkeeping alone would pass the caller's budget or 1 GiB).
+        smallest: Option<u64>,
+    },
     /// A solve a job needed stopped without converging, so its result cannot be used.
     #[error("{what}: the solve {reason}")]
     Unconverged {

@@ -887,8 +887,9 @@ fn solve_paged_to_file(
     }
     let options = args.options(chosen, meter_free())?;
     options.validate()?;
-    // The medium gets its share of the budget; the solver pages its own data in the rest.
-    let problem = parsed.build_paged(chosen.solver.paged_medium_budget(args.budget()))?;
+    // The medium gets its share of the budget, the solver pages its own data in the rest;
+    // a budget that cannot do is refused before the medium is built.
+    let problem = parsed.build_paged_for(chosen.solver.as_ref(), &options)?;
     chosen.say_note();
     let (progress, meter) = bar(quiet, "solve");
     let options = args.options(chosen, meter.solver_callback())?;

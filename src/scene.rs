@@ -42,6 +42,48 @@ pub fn max_read_bytes(budget: u64) -> u64 {
     3 * max_grid_bytes(budget)
 }
 
+/// The brick edge of a paged scene under `budget`: 16³ cells, or 8³ (4³) where the brick
+/// layers a paged solver keeps in memory would take more than a quarter of the budget.
+fn default_brick(geometry: &GridGeometry, budget: u64) -> usize {
+    let [nx, ny, _] = geometry.dims();
+    let layer = |b: usize| (nx * ny * b) as u64 * 4;
+    [16, 8, 4]
+        .into_iter()
+        .find(|&b| 4 * layer(b) <= budget / 4)
+        .unwrap_or(4)
+}
+
+/// The pager of a paged scene with bricks of `brick`³ cells under `budget`: the pool is
+/// the budget less the brick layers the solvers keep in memory and the bookkeeping.
+fn paged_pager(
+    geometry: &GridGeometry,
+    brick: usize,
+    budget: u64,
+    store: impl FnOnce() -> Result<Box<dyn lucent_paging::BrickStore>, String>,
+) -> Result<std::sync::Arc<lucent_paging::Pager>, Error> {
+    let invalid = |reason: String| Error::Invalid(reason);
+    let [nx, ny, _] = geometry.dims();
+    let layer = |b: usize| (nx * ny * b) as u64 * 4;
+    let layout = lucent_grid::BrickLayout::new(geometry.dims(), brick)?;
+    let bookkeeping = 8 * layout.count() as u64 * 21 + (nx * ny).max(1) as u64 * 40;
+    let pool = budget.saturating_sub(4 * layer(brick) + bookkeeping + budget / 16);
+    let brick_bytes = layout.stored_len() as u64 * 4;
+    let store = store().map_err(invalid)?;
+    let pager = lucent_paging::Pager::new(
+        store,
+        0,
+        layout.stored_len(),
+        4,
+        lucent_paging::PagerOptions {
+            budget_bytes: pool.max(4 * brick_bytes),
+            eviction: lucent_paging::Eviction::Nru,
+            fill: 0.0,
+        },
+    )
+    .map_err(|e| invalid(e.to_string()))?;
+    Ok(std::sync::Arc::new(pager))
+}
+
 /// The built-in default scene: a procedural cloud lit by a sun-like directional light and a
 /// blue sky (`examples/scenes/default.toml`).
 pub const DEFAULT_SCENE: &str = include_str!("../examples/scenes/default.toml");
@@ -756,6 +798,145 @@ impl Scene {
     /// the budget less those layers and the bookkeeping. Procedural volumes only (cloud,
     /// shape, blob) with a density (no transfer function), no emission, no embedded shape.
     pub fn build_paged(&self, budget: u64) -> Result<PagedProblem, Error> {
+        self.build_paged_with(budget, None)
+    }
+
+    /// [`Scene::build_paged`] for `solver` under `options`, refused before any work when
+    /// the budget cannot do: the solver's memory for the scene's shape
+    /// ([`lucent_core::Solver::paged_memory`] on a [`PagedProblem::shell`], whose medium
+    /// is never evaluated) is checked for bricks of 16³, 8³ and 4³ cells (the default
+    /// first), the first that fits is built, and when none fits the error names the
+    /// smallest budget that would do. (Building the medium of a 384³ cloud takes tens of
+    /// seconds; it was once built and then refused.)
+    pub fn build_paged_for(
+        &self,
+        solver: &dyn lucent_core::Solver,
+        options: &lucent_core::SolveOptions,
+    ) -> Result<PagedProblem, Error> {
+        let budget = options.memory_budget;
+        let geometry = self.paged_geometry()?;
+        let medium_budget = solver.paged_medium_budget(budget);
+        let first = default_brick(&geometry, medium_budget);
+        let bricks = std::iter::once(first).chain([16, 8, 4].into_iter().filter(|&b| b != first));
+        // A shell holds the medium's per-brick bookkeeping (never its values); one whose
+        // bookkeeping alone is over the budget tried, or over what a refusal may spend
+        // (the caller's budget, at least 1 GiB), is not built: it cannot fit, or the
+        // search for the smallest budget stops there.
+        let shell_cap = options.memory_budget.max(1 << 30);
+        let medium_fields =
+            self.medium.extinction_color.map_or(1, |c| c.len()) + self.medium.albedo.channels();
+        let fits =
+            |brick: usize, budget: u64| -> Result<Result<u64, lucent_core::SolveError>, Error> {
+                let count = lucent_grid::BrickLayout::new(geometry.dims(), brick)?.count() as u64;
+                let bookkeeping =
+                    count * medium_fields as u64 * lucent_paging::PagedGrid::BYTES_PER_BRICK;
+                if bookkeeping > budget.min(shell_cap) {
+                    return Ok(Err(lucent_core::SolveError::OverBudget {
+                        solver: solver.name().into(),
+                        needed: bookkeeping,
+                        budget,
+                    }));
+                }
+                let shell = self.paged_shell(solver.paged_medium_budget(budget), brick)?;
+                let options = lucent_core::SolveOptions {
+                    memory_budget: budget,
+                    ..options.clone()
+                };
+                Ok(solver.paged_memory(&shell, &options))
+            };
+        let mut refusal = None;
+        for brick in bricks.clone() {
+            match fits(brick, budget)? {
+                Ok(_) => return self.build_paged_with(medium_budget, Some(brick)),
+                Err(lucent_core::SolveError::OverBudget { .. }) => {}
+                Err(other) => {
+                    refusal.get_or_insert(other);
+                }
+            }
+        }
+        if let Some(other) = refusal {
+            return Err(other.into());
+        }
+        // No brick fits: the smallest budget that would, by bisection on each brick (the
+        // need grows more slowly than the budget: the pool takes a share of it).
+        let mut smallest = u64::MAX;
+        let ceiling = shell_cap.saturating_mul(64);
+        for brick in bricks {
+            let (mut lo, mut hi) = (budget, budget.saturating_mul(2).max(1 << 20));
+            while hi < ceiling && fits(brick, hi)?.is_err() {
+                lo = hi;
+                hi = hi.saturating_mul(2);
+            }
+            if hi >= ceiling {
+                continue;
+            }
+            // Within 1 %: the answer is advice, not a bound to the byte.
+            while hi - lo > hi / 100 {
+                let mid = lo + (hi - lo) / 2;
+                if fits(brick, mid)?.is_ok() {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            smallest = smallest.min(hi);
+        }
+        Err(Error::PagedBudget {
+            solver: solver.name().into(),
+            budget,
+            smallest: (smallest < u64::MAX).then_some(smallest),
+        })
+    }
+
+    /// The geometry of a paged build, and the checks that need nothing built.
+    fn paged_geometry(&self) -> Result<GridGeometry, Error> {
+        let (resolution, bounds) = match &self.volume {
+            VolumeSpec::Cloud {
+                resolution, bounds, ..
+            }
+            | VolumeSpec::Shape {
+                resolution, bounds, ..
+            }
+            | VolumeSpec::Blob {
+                resolution, bounds, ..
+            } => (*resolution, *bounds),
+            VolumeSpec::File { .. } => {
+                return Err(Error::Invalid(
+                    "a paged scene needs a procedural volume (cloud, shape, blob): volume files are read whole"
+                        .into(),
+                ));
+            }
+        };
+        Ok(GridGeometry::from_bounds(
+            resolution,
+            DVec3::from_array(bounds[0]),
+            DVec3::from_array(bounds[1]),
+        )?)
+    }
+
+    /// The paged problem's shape with a zero medium ([`PagedProblem::shell`]): its pager
+    /// in memory, nothing evaluated.
+    fn paged_shell(&self, budget: u64, brick: usize) -> Result<PagedProblem, Error> {
+        let geometry = self.paged_geometry()?;
+        let pager = paged_pager(&geometry, brick, budget, || {
+            Ok(Box::new(lucent_paging::MemoryStore::default())
+                as Box<dyn lucent_paging::BrickStore>)
+        })?;
+        let m = &self.medium;
+        Ok(PagedProblem::shell(
+            pager,
+            geometry,
+            brick,
+            m.extinction_color.map_or(1, |c| c.len()),
+            m.albedo.channels(),
+            self.phase()?,
+            self.lights(None)?,
+            self.boundary,
+        )?)
+    }
+
+    /// [`Scene::build_paged`] with bricks of `brick`³ cells (`None`: the default choice).
+    fn build_paged_with(&self, budget: u64, brick: Option<usize>) -> Result<PagedProblem, Error> {
         let invalid = |reason: String| Error::Invalid(reason);
         if self.medium.transfer.is_some() {
             return Err(invalid(
@@ -878,32 +1059,14 @@ impl Scene {
             .map(|&a| Box::new(move |_: DVec3| a) as Box<dyn Fn(DVec3) -> f32 + Sync>)
             .collect();
 
-        // Bricks and pool: the solvers keep a few brick layers of slabs in memory.
-        let [nx, ny, _] = geometry.dims();
-        let layer = |b: usize| (nx * ny * b) as u64 * 4;
-        let brick = [16, 8, 4]
-            .into_iter()
-            .find(|&b| 4 * layer(b) <= budget / 4)
-            .unwrap_or(4);
-        let layout = lucent_grid::BrickLayout::new(geometry.dims(), brick)?;
-        let bookkeeping = 8 * layout.count() as u64 * 21 + (nx * ny).max(1) as u64 * 40;
-        let pool = budget.saturating_sub(4 * layer(brick) + bookkeeping + budget / 16);
-        let brick_bytes = layout.stored_len() as u64 * 4;
-        let store = lucent_paging::FileStore::create().map_err(|e| invalid(e.to_string()))?;
-        let pager = lucent_paging::Pager::new(
-            Box::new(store),
-            0,
-            layout.stored_len(),
-            4,
-            lucent_paging::PagerOptions {
-                budget_bytes: pool.max(4 * brick_bytes),
-                eviction: lucent_paging::Eviction::Nru,
-                fill: 0.0,
-            },
-        )
-        .map_err(|e| invalid(e.to_string()))?;
+        let brick = brick.unwrap_or_else(|| default_brick(&geometry, budget));
+        let pager = paged_pager(&geometry, brick, budget, || {
+            lucent_paging::FileStore::create()
+                .map(|s| Box::new(s) as Box<dyn lucent_paging::BrickStore>)
+                .map_err(|e| e.to_string())
+        })?;
         Ok(PagedProblem::from_fn(
-            std::sync::Arc::new(pager),
+            pager,
             geometry,
             brick,
             CellMedium {

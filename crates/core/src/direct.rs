@@ -190,6 +190,14 @@ impl Solver for DirectSolver {
         true
     }
 
+    fn paged_memory(
+        &self,
+        problem: &PagedProblem,
+        options: &SolveOptions,
+    ) -> Result<u64, SolveError> {
+        Self::paged_needs(problem, problem.lights(), options)
+    }
+
     fn solve_paged(
         &self,
         problem: &PagedProblem,
@@ -225,6 +233,44 @@ impl Solver for DirectSolver {
 }
 
 impl DirectSolver {
+    /// The bytes `direct` needs on the paged `problem` for `lights`: the pool, the
+    /// bookkeeping of every field (the medium's and the results: transmittance per light
+    /// and extinction channel, isotropic fluence and fluence per channel), and one layer
+    /// of slabs per field read or written at once. Depends on the problem's shape only (a
+    /// [`PagedProblem::shell`] gives the same answer), so a budget is refused before the
+    /// medium is built.
+    ///
+    /// # Errors
+    /// [`SolveError::OverBudget`] when it exceeds `options.memory_budget`.
+    pub(crate) fn paged_needs(
+        problem: &PagedProblem,
+        lights: &[Light],
+        options: &SolveOptions,
+    ) -> Result<u64, SolveError> {
+        let [nx, ny, _] = problem.geometry().dims();
+        let layout = *problem.layout();
+        let medium = problem.medium();
+        let channels = problem.channels_with(lights);
+        let (point_lights, sky) = split_lights(lights);
+        let extinction = medium.sigma_t.len();
+        let outputs = point_lights.len() * extinction
+            + usize::from(!sky.is_empty()) * extinction
+            + 2 * channels;
+        let fields = medium.sigma_t.len() + medium.albedo.len() + outputs;
+        let layer_bytes = (nx * ny * layout.brick()) as u64 * 4;
+        let pool = problem.pager().capacity() as u64 * layout.stored_len() as u64 * 4;
+        let needed =
+            pool + problem.overhead_bytes(fields) + layer_bytes * (point_lights.len() + 2) as u64;
+        if needed > options.memory_budget {
+            return Err(SolveError::OverBudget {
+                solver: Self::NAME.into(),
+                needed,
+                budget: options.memory_budget,
+            });
+        }
+        Ok(needed)
+    }
+
     /// `direct` on a paged medium: per light and extinction channel a paged transmittance
     /// field, computed brick layer by brick layer (each cell's τ read through the paged σ_t
     /// with the same walk and arithmetic as in memory), then the isotropic fluence and the
@@ -253,25 +299,11 @@ impl DirectSolver {
         let cutoff = self.max_optical_depth;
         let directions = sky_directions(self.sky_level)?;
 
-        // Memory: the pool, the bookkeeping of every field (the medium's and the results:
-        // transmittance per light and extinction channel, isotropic fluence and fluence per
-        // channel), and one layer of slabs per field read or written at once.
         let extinction = medium.sigma_t.len();
         let outputs = point_lights.len() * extinction
             + usize::from(!sky.is_empty()) * extinction
             + 2 * channels;
-        let fields = medium.sigma_t.len() + medium.albedo.len() + outputs;
-        let layer_bytes = (nx * ny * b) as u64 * 4;
-        let pool = problem.pager().capacity() as u64 * layout.stored_len() as u64 * 4;
-        let needed =
-            pool + problem.overhead_bytes(fields) + layer_bytes * (point_lights.len() + 2) as u64;
-        if needed > options.memory_budget {
-            return Err(SolveError::OverBudget {
-                solver: Self::NAME.into(),
-                needed,
-                budget: options.memory_budget,
-            });
-        }
+        let needed = Self::paged_needs(problem, lights, options)?;
 
         let layers = layout.bricks()[2];
         let total_layers = (layers * (outputs.max(1))) as f64;

@@ -167,6 +167,52 @@ impl PagedProblem {
         })
     }
 
+    /// A problem of the same shape as [`PagedProblem::from_fn`] would build (geometry,
+    /// bricks, pager, `sigma_channels` and `albedo_channels` fields, lights, boundary),
+    /// its medium zero everywhere (constant bricks: nothing evaluated, nothing stored).
+    /// For [`crate::Solver::paged_memory`]: what a solve would need, known before the
+    /// medium is built.
+    ///
+    /// # Errors
+    /// No channel, or a brick size the layout refuses.
+    #[allow(clippy::too_many_arguments)]
+    pub fn shell(
+        pager: Arc<Pager>,
+        geometry: GridGeometry,
+        brick: usize,
+        sigma_channels: usize,
+        albedo_channels: usize,
+        phase: Phase,
+        lights: Vec<Light>,
+        boundary: Boundary,
+    ) -> Result<Self, ProblemError> {
+        if sigma_channels == 0 || albedo_channels == 0 {
+            return Err(ProblemError(
+                "a paged medium needs σ_t and albedo for at least one channel".into(),
+            ));
+        }
+        let zero = || {
+            PagedGrid::filled(pager.clone(), geometry, brick, 0.0)
+                .map_err(|e| ProblemError(e.to_string()))
+        };
+        let medium = PagedMedium {
+            sigma_t: (0..sigma_channels)
+                .map(|_| zero())
+                .collect::<Result<_, _>>()?,
+            albedo: (0..albedo_channels)
+                .map(|_| zero())
+                .collect::<Result<_, _>>()?,
+            phase,
+        };
+        Ok(Self {
+            geometry,
+            medium,
+            lights,
+            boundary,
+            pager,
+        })
+    }
+
     /// The grid.
     pub fn geometry(&self) -> &GridGeometry {
         &self.geometry

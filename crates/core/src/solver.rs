@@ -674,6 +674,22 @@ pub trait Solver: Send + Sync {
         budget
     }
 
+    /// The bytes [`Solver::solve_paged`] needs on `problem` under `options.memory_budget`,
+    /// or [`SolveError::OverBudget`]: the check `solve_paged` makes first, from the
+    /// problem's shape alone (geometry, bricks, pool, channels, lights), so that a caller
+    /// can refuse a budget on a [`crate::PagedProblem::shell`] before building the medium.
+    fn paged_memory(
+        &self,
+        problem: &crate::PagedProblem,
+        options: &SolveOptions,
+    ) -> Result<u64, SolveError> {
+        let _ = (problem, options);
+        Err(SolveError::Unsupported {
+            solver: self.name().into(),
+            feature: "a paged (out-of-core) medium: it needs its fields in memory".into(),
+        })
+    }
+
     /// Solves a problem whose medium is paged ([`crate::PagedProblem`]), giving the bits
     /// [`Solver::solve`] gives on the same medium in memory. Solvers that need their
     /// fields in memory refuse with [`SolveError::Unsupported`] (the default).

@@ -16,16 +16,16 @@ use rayon::prelude::*;
 
 use crate::lattice::Lattice;
 
-/// The march of every channel's lights and their composition.
-pub(crate) fn convection(
+/// What [`convection`] checks before any work: the problem's kind (a vacuum box, distant
+/// lights, cubic cells) and the bytes it needs: the pool, the bookkeeping of every field
+/// (the medium, each light's field, the fluence per channel), a march's four planes (f64 ρ
+/// and σ_a, this one and upstream, and one in f32), and one brick layer per light and the
+/// output while composing. Returns the lights' directions, the lattice and the bytes.
+pub(crate) fn convection_needs(
     name: &str,
     problem: &PagedProblem,
     options: &SolveOptions,
-) -> Result<PagedSolution, SolveError> {
-    let started = std::time::Instant::now();
-    let meter = lucent_core::memory::PeakMeter::start();
-    let before = problem.pager().stats();
-    let err = |e| paging_error(name, e);
+) -> Result<(Vec<glam::DVec3>, Lattice, u64), SolveError> {
     let unsupported = |feature: String| SolveError::Unsupported {
         solver: name.into(),
         feature,
@@ -61,11 +61,6 @@ pub(crate) fn convection(
     let b = layout.brick();
     let channels = problem.channels();
     let lights = directions.len();
-
-    // Memory: the pool, the bookkeeping of every field (the medium, each light's field,
-    // the fluence per channel), a march's four planes (f64 ρ and σ_a, this one and
-    // upstream, and one in f32), and one brick layer per light and the output while
-    // composing.
     let medium = problem.medium();
     let fields = medium.sigma_t.len() + medium.albedo.len() + lights + channels;
     let largest_plane = (nx * ny).max(ny * nz).max(nz * nx) as u64;
@@ -81,6 +76,27 @@ pub(crate) fn convection(
             budget: options.memory_budget,
         });
     }
+    Ok((directions, lattice, needed))
+}
+
+/// The march of every channel's lights and their composition.
+pub(crate) fn convection(
+    name: &str,
+    problem: &PagedProblem,
+    options: &SolveOptions,
+) -> Result<PagedSolution, SolveError> {
+    let started = std::time::Instant::now();
+    let meter = lucent_core::memory::PeakMeter::start();
+    let before = problem.pager().stats();
+    let err = |e| paging_error(name, e);
+    let (directions, lattice, needed) = convection_needs(name, problem, options)?;
+    let geometry = *problem.geometry();
+    let [nx, ny, nz] = geometry.dims();
+    let layout = *problem.layout();
+    let b = layout.brick();
+    let channels = problem.channels();
+    let lights = directions.len();
+    let medium = problem.medium();
 
     let work = (channels * (lights + 1)).max(1) as f64;
     let mut done = 0.0;

@@ -57,28 +57,23 @@ pub(crate) enum March {
 /// read and the write that follows it resident.
 const MIN_PAGES: usize = 2;
 
-/// The paged solve.
-pub(crate) fn solve(
+/// What [`solve`] needs before any work: the components of its state per cell, the
+/// state's dims, the state's pool and the bytes in all: the medium's pool and every paged
+/// field's bookkeeping, a pass's slabs (a ring of three old slabs and one new of the
+/// state, the medium's slabs, the output's brick layer), and the state's pool in what is
+/// left (at least [`MIN_PAGES`] pages).
+pub(crate) fn march_needs(
     name: &str,
     march: March,
     problem: &PagedProblem,
     options: &SolveOptions,
-) -> Result<PagedSolution, SolveError> {
-    let started = std::time::Instant::now();
-    let meter = lucent_core::memory::PeakMeter::start();
-    let before = problem.pager().stats();
-    let err = |e| paging_error(name, e);
+) -> Result<(usize, [usize; 3], u64, u64), SolveError> {
     let geometry = *problem.geometry();
     let [nx, ny, nz] = geometry.dims();
     let slab = nx * ny;
     let layout = *problem.layout();
     let channels = problem.channels();
     let medium = problem.medium();
-    let invalid = |reason: String| SolveError::InvalidParameter {
-        name: "problem".into(),
-        reason,
-    };
-    let h = geometry.spacing().x;
     let components = match march {
         March::P1 { .. } => 4,
         March::Ordinates { order, .. } => {
@@ -117,6 +112,32 @@ pub(crate) fn solve(
         });
     }
     let needed = fixed + pool64;
+    Ok((components, state_dims, pool64, needed))
+}
+
+/// The paged solve.
+pub(crate) fn solve(
+    name: &str,
+    march: March,
+    problem: &PagedProblem,
+    options: &SolveOptions,
+) -> Result<PagedSolution, SolveError> {
+    let started = std::time::Instant::now();
+    let meter = lucent_core::memory::PeakMeter::start();
+    let before = problem.pager().stats();
+    let err = |e| paging_error(name, e);
+    let geometry = *problem.geometry();
+    let [nx, ny, nz] = geometry.dims();
+    let slab = nx * ny;
+    let layout = *problem.layout();
+    let channels = problem.channels();
+    let medium = problem.medium();
+    let invalid = |reason: String| SolveError::InvalidParameter {
+        name: "problem".into(),
+        reason,
+    };
+    let h = geometry.spacing().x;
+    let (components, state_dims, pool64, needed) = march_needs(name, march, problem, options)?;
     let state = Arc::new(
         Pager::new(
             Box::new(FileStore::create().map_err(err)?),

@@ -74,28 +74,23 @@ fn state_fields(kind: Kind) -> usize {
 /// each first-moment component, and one of everything else).
 const WINDOW_BYTES_PER_SLAB_CELL: u64 = 3 * 4 + 3 * 8 + 9 * 4 + 8 * 8 + 6 * 4;
 
-/// The paged solve.
-pub(crate) fn solve(
+/// What [`solve`] needs before any work: the lights the scheme takes as its own sources
+/// and those that enter as uncollided light (the driver's routing: point lights inside
+/// the box are the scheme's own), the state's pool and the bytes in all: the medium's pool
+/// and every paged field's bookkeeping, the first collisions' layer, the passes' windows,
+/// and the solver's pool in what is left (at least [`MIN_PAGES`] pages).
+pub(crate) fn steady_needs(
     name: &str,
     kind: Kind,
     problem: &PagedProblem,
     options: &SolveOptions,
-) -> Result<PagedSolution, SolveError> {
-    let started = std::time::Instant::now();
-    let meter = lucent_core::memory::PeakMeter::start();
-    let before = problem.pager().stats();
-    let err = |e| paging_error(name, e);
+) -> Result<(Vec<Light>, Vec<Light>, u64, u64), SolveError> {
     let geometry = *problem.geometry();
     let [nx, ny, nz] = geometry.dims();
     let slab = nx * ny;
     let layout = *problem.layout();
     let channels = problem.channels();
     let medium = problem.medium();
-    let invalid = |reason: String| SolveError::InvalidParameter {
-        name: "problem".into(),
-        reason,
-    };
-
     // The driver's routing: point lights inside the box are the scheme's own sources;
     // every other light enters as uncollided light.
     let (lo, hi) = geometry.bounds();
@@ -144,6 +139,28 @@ pub(crate) fn solve(
         });
     }
     let needed = fixed + pool64;
+    Ok((own, external, pool64, needed))
+}
+
+/// The paged solve.
+pub(crate) fn solve(
+    name: &str,
+    kind: Kind,
+    problem: &PagedProblem,
+    options: &SolveOptions,
+) -> Result<PagedSolution, SolveError> {
+    let started = std::time::Instant::now();
+    let meter = lucent_core::memory::PeakMeter::start();
+    let before = problem.pager().stats();
+    let err = |e| paging_error(name, e);
+    let geometry = *problem.geometry();
+    let channels = problem.channels();
+    let invalid = |reason: String| SolveError::InvalidParameter {
+        name: "problem".into(),
+        reason,
+    };
+
+    let (own, external, pool64, needed) = steady_needs(name, kind, problem, options)?;
     let system = SlabSystem::new(geometry, lucent_diffusion::conditions(*problem.boundary()))
         .map_err(|e| invalid(e.to_string()))?;
     let state = Arc::new(

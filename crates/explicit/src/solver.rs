@@ -122,7 +122,84 @@ enum SteadyKind {
     Jacobi { omega: f64 },
 }
 
+/// The out-of-core scheme a paged solve runs.
+enum PagedPath {
+    /// FTCS or Jacobi to steady state, state in slab pages.
+    Steady(crate::paged_steady::Kind),
+    /// P1 or ordinates in time, state in slab pages.
+    March(crate::paged_march::March),
+    /// The absorption march plane by plane.
+    Convection,
+}
+
 impl ExplicitSolver {
+    /// Which out-of-core scheme runs for this solver, after the checks every paged solve
+    /// makes first (options, one process, the scheme's stability, capabilities).
+    fn paged_path(
+        &self,
+        problem: &PagedProblem,
+        options: &SolveOptions,
+    ) -> Result<PagedPath, SolveError> {
+        options.validate()?;
+        let one_process = |ranks: usize| {
+            if ranks > 1 || options.ranks.as_ref().is_some_and(|r| r.size() > 1) {
+                Err(SolveError::Unsupported {
+                    solver: self.name.into(),
+                    feature: "ranks out of core: a paged solve runs in one process".into(),
+                })
+            } else {
+                Ok(())
+            }
+        };
+        let path = match self.scheme {
+            Scheme::Steady {
+                iteration,
+                allow_unstable,
+                ranks,
+                ..
+            } => {
+                one_process(ranks)?;
+                PagedPath::Steady(match iteration {
+                    SteadyKind::Ftcs { fraction } => {
+                        self.check_fraction(fraction, allow_unstable)?;
+                        crate::paged_steady::Kind::Ftcs { fraction }
+                    }
+                    SteadyKind::Jacobi { omega } => crate::paged_steady::Kind::Jacobi { omega },
+                })
+            }
+            Scheme::P1 {
+                layout,
+                fraction,
+                allow_unstable,
+                ranks,
+                ..
+            } => {
+                one_process(ranks)?;
+                PagedPath::March(crate::paged_march::March::P1 {
+                    layout,
+                    fraction,
+                    allow_unstable,
+                })
+            }
+            Scheme::Ordinates {
+                order,
+                fraction,
+                allow_unstable,
+            } => PagedPath::March(crate::paged_march::March::Ordinates {
+                order,
+                fraction,
+                allow_unstable,
+            }),
+            Scheme::Convection { ranks, .. } => {
+                one_process(ranks)?;
+                self.paged_convection()?;
+                return Ok(PagedPath::Convection);
+            }
+        };
+        self.capabilities().check_paged(self.name, problem)?;
+        Ok(path)
+    }
+
     /// `ftcs-diffusion` ([`FtcsDiffusionParams`]).
     pub const FTCS_DIFFUSION: SolverEntry = SolverEntry {
         name: "ftcs-diffusion",
@@ -285,75 +362,36 @@ impl Solver for ExplicitSolver {
         }
     }
 
+    fn paged_memory(
+        &self,
+        problem: &PagedProblem,
+        options: &SolveOptions,
+    ) -> Result<u64, SolveError> {
+        Ok(match self.paged_path(problem, options)? {
+            PagedPath::Steady(kind) => {
+                crate::paged_steady::steady_needs(self.name, kind, problem, options)?.3
+            }
+            PagedPath::March(march) => {
+                crate::paged_march::march_needs(self.name, march, problem, options)?.3
+            }
+            PagedPath::Convection => crate::paged::convection_needs(self.name, problem, options)?.2,
+        })
+    }
+
     fn solve_paged(
         &self,
         problem: &PagedProblem,
         options: &SolveOptions,
     ) -> Result<PagedSolution, SolveError> {
-        if let Scheme::Steady {
-            iteration,
-            allow_unstable,
-            ranks,
-            ..
-        } = &self.scheme
-        {
-            options.validate()?;
-            if *ranks > 1 || options.ranks.as_ref().is_some_and(|r| r.size() > 1) {
-                return Err(SolveError::Unsupported {
-                    solver: self.name.into(),
-                    feature: "ranks out of core: a paged solve runs in one process".into(),
-                });
+        match self.paged_path(problem, options)? {
+            PagedPath::Steady(kind) => {
+                options.install(|| crate::paged_steady::solve(self.name, kind, problem, options))?
             }
-            let kind = match *iteration {
-                SteadyKind::Ftcs { fraction } => {
-                    self.check_fraction(fraction, *allow_unstable)?;
-                    crate::paged_steady::Kind::Ftcs { fraction }
-                }
-                SteadyKind::Jacobi { omega } => crate::paged_steady::Kind::Jacobi { omega },
-            };
-            self.capabilities().check_paged(self.name, problem)?;
-            return options
-                .install(|| crate::paged_steady::solve(self.name, kind, problem, options))?;
-        }
-        let march = match self.scheme {
-            Scheme::P1 { ranks, .. } | Scheme::Convection { ranks, .. }
-                if ranks > 1 || options.ranks.as_ref().is_some_and(|r| r.size() > 1) =>
-            {
-                return Err(SolveError::Unsupported {
-                    solver: self.name.into(),
-                    feature: "ranks out of core: a paged solve runs in one process".into(),
-                });
+            PagedPath::March(march) => {
+                options.install(|| crate::paged_march::solve(self.name, march, problem, options))?
             }
-            Scheme::P1 {
-                layout,
-                fraction,
-                allow_unstable,
-                ..
-            } => Some(crate::paged_march::March::P1 {
-                layout,
-                fraction,
-                allow_unstable,
-            }),
-            Scheme::Ordinates {
-                order,
-                fraction,
-                allow_unstable,
-            } => Some(crate::paged_march::March::Ordinates {
-                order,
-                fraction,
-                allow_unstable,
-            }),
-            _ => None,
-        };
-        if let Some(march) = march {
-            options.validate()?;
-            self.capabilities().check_paged(self.name, problem)?;
-            return options
-                .install(|| crate::paged_march::solve(self.name, march, problem, options))?;
+            PagedPath::Convection => crate::paged::convection(self.name, problem, options),
         }
-        self.paged_convection()?;
-        options.validate()?;
-        crate::paged::convection(self.name, problem, options)
     }
 
     fn capabilities(&self) -> Capabilities {

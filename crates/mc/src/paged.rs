@@ -209,48 +209,32 @@ fn overhead_bytes(problem: &PagedProblem, tally_pages: usize) -> u64 {
         + 2 * channels as u64 * (nx * ny * layout.brick()) as u64 * 4
 }
 
-/// Particle tracing on a paged problem within `budget` bytes: the in-memory estimator's
-/// results (the same bits where the bricks have `majorant_cells`³ cells) as paged fields.
-pub(crate) fn estimate_paged(
+/// What [`estimate_paged`] sizes before any work.
+pub(crate) struct PagedNeeds {
+    /// Cells of a brick (a tally page's cells).
+    cells: usize,
+    /// The tallies' smallest pool.
+    min_pool: u64,
+    /// Tally pages the pager numbers.
+    tally_pages: usize,
+    /// Bytes besides the tallies' pool: the medium's pool and every bookkeeping.
+    fixed: u64,
+}
+
+/// The memory a paged Monte Carlo solve needs under `options.memory_budget`: the medium's
+/// pager must hold every running batch's pins (σ_t and albedo per channel), and the rest of
+/// the budget must hold the tallies' smallest pool (at least one page per running batch
+/// and three per folding thread, and the logs). Depends on the problem's shape only.
+pub(crate) fn paged_needs(
     problem: &PagedProblem,
-    config: &McConfig,
-    control: &RunControl<'_>,
     options: &SolveOptions,
-) -> Result<PagedEstimate, SolveError> {
-    let started = std::time::Instant::now();
+) -> Result<PagedNeeds, SolveError> {
     let name = crate::McSolver::NAME;
-    let err = |e| paging_error(name, e);
-    if config.batches < 2 || config.particles == 0 || config.max_depth == 0 {
-        return Err(SolveError::InvalidParameter {
-            name: "mc".into(),
-            reason: "needs ≥ 2 batches, ≥ 1 particle and max_depth ≥ 1".into(),
-        });
-    }
-    let geometry = *problem.geometry();
     let layout = *problem.layout();
     let medium = problem.medium();
     let channels = problem.channels();
     let count = layout.count();
     let threads = rayon::current_num_threads().max(1);
-    // The majorants from the bricks' ranges.
-    let extinction_max = |e: usize| -> Vec<f32> {
-        (0..count)
-            .map(|id| medium.sigma_t[e].brick_range(id).map_or(0.0, |r| r.1))
-            .collect()
-    };
-    let peak = (0..medium.sigma_t.len())
-        .flat_map(extinction_max)
-        .fold(0.0f32, f32::max);
-    crate::transport::check_reach(&geometry, f64::from(peak))?;
-    let majorant_of = |maxima: Vec<f32>| {
-        if config.global_majorant {
-            let max = maxima.iter().copied().fold(0.0f32, f32::max);
-            MajorantGrid::from_brick_maxima(geometry, &layout, &vec![max; count])
-        } else {
-            MajorantGrid::from_brick_maxima(geometry, &layout, &maxima)
-        }
-    };
-
     // The medium's pager must hold every running batch's pins (σ_t and albedo per channel).
     let pins = threads * (medium.sigma_t.len() + medium.albedo.len());
     if problem.pager().capacity() < pins {
@@ -275,6 +259,72 @@ pub(crate) fn estimate_paged(
             budget: options.memory_budget,
         });
     }
+    Ok(PagedNeeds {
+        cells,
+        min_pool,
+        tally_pages,
+        fixed,
+    })
+}
+
+/// The bytes [`paged_needs`] finds at the least: the fixed part and the tallies' smallest
+/// pool.
+pub(crate) fn paged_memory(
+    problem: &PagedProblem,
+    options: &SolveOptions,
+) -> Result<u64, SolveError> {
+    let needs = paged_needs(problem, options)?;
+    Ok(needs.fixed + needs.min_pool)
+}
+
+/// Particle tracing on a paged problem within `budget` bytes: the in-memory estimator's
+/// results (the same bits where the bricks have `majorant_cells`³ cells) as paged fields.
+pub(crate) fn estimate_paged(
+    problem: &PagedProblem,
+    config: &McConfig,
+    control: &RunControl<'_>,
+    options: &SolveOptions,
+) -> Result<PagedEstimate, SolveError> {
+    let started = std::time::Instant::now();
+    let name = crate::McSolver::NAME;
+    let err = |e| paging_error(name, e);
+    if config.batches < 2 || config.particles == 0 || config.max_depth == 0 {
+        return Err(SolveError::InvalidParameter {
+            name: "mc".into(),
+            reason: "needs ≥ 2 batches, ≥ 1 particle and max_depth ≥ 1".into(),
+        });
+    }
+    let geometry = *problem.geometry();
+    let layout = *problem.layout();
+    let medium = problem.medium();
+    let channels = problem.channels();
+    let count = layout.count();
+    // The majorants from the bricks' ranges.
+    let extinction_max = |e: usize| -> Vec<f32> {
+        (0..count)
+            .map(|id| medium.sigma_t[e].brick_range(id).map_or(0.0, |r| r.1))
+            .collect()
+    };
+    let peak = (0..medium.sigma_t.len())
+        .flat_map(extinction_max)
+        .fold(0.0f32, f32::max);
+    crate::transport::check_reach(&geometry, f64::from(peak))?;
+    let majorant_of = |maxima: Vec<f32>| {
+        if config.global_majorant {
+            let max = maxima.iter().copied().fold(0.0f32, f32::max);
+            MajorantGrid::from_brick_maxima(geometry, &layout, &vec![max; count])
+        } else {
+            MajorantGrid::from_brick_maxima(geometry, &layout, &maxima)
+        }
+    };
+
+    let threads = rayon::current_num_threads().max(1);
+    let PagedNeeds {
+        cells,
+        tally_pages,
+        fixed,
+        ..
+    } = paged_needs(problem, options)?;
     // Up to half of the rest for the tallies' logs (one per running batch; 16 bytes an
     // entry and half that again for the stable sort's buffer; 2²⁰ entries amortise a
     // brick's pin over hundreds of additions), the rest for their pages.

@@ -29,6 +29,22 @@ impl Default for McSolver {
 }
 
 impl McSolver {
+    /// What every paged solve checks first: the options and a vacuum box.
+    fn check_paged(
+        &self,
+        problem: &PagedProblem,
+        options: &SolveOptions,
+    ) -> Result<(), SolveError> {
+        options.validate()?;
+        if !matches!(problem.boundary(), lucent_core::Boundary::Vacuum) {
+            return Err(SolveError::Unsupported {
+                solver: Self::NAME.into(),
+                feature: format!("a {} boundary on a paged medium", problem.boundary()),
+            });
+        }
+        Ok(())
+    }
+
     /// The registry name.
     pub const NAME: &'static str = "mc";
 
@@ -98,18 +114,21 @@ impl Solver for McSolver {
         budget / 2
     }
 
+    fn paged_memory(
+        &self,
+        problem: &PagedProblem,
+        options: &SolveOptions,
+    ) -> Result<u64, SolveError> {
+        self.check_paged(problem, options)?;
+        options.install(|| crate::paged::paged_memory(problem, options))?
+    }
+
     fn solve_paged(
         &self,
         problem: &PagedProblem,
         options: &SolveOptions,
     ) -> Result<PagedSolution, SolveError> {
-        options.validate()?;
-        if !matches!(problem.boundary(), lucent_core::Boundary::Vacuum) {
-            return Err(SolveError::Unsupported {
-                solver: Self::NAME.into(),
-                feature: format!("a {} boundary on a paged medium", problem.boundary()),
-            });
-        }
+        self.check_paged(problem, options)?;
         options.install(|| crate::paged::solve_paged(self, problem, options))?
     }
 

@@ -116,7 +116,29 @@ impl PagedGrid {
         brick: usize,
         value: f32,
     ) -> Result<Self, PagingError> {
-        Self::from_fn(pager, geometry, brick, |_| value)
+        // Every brick constant, its range the value: what `from_fn` would find, without
+        // evaluating a cell (a 384³ field is built in microseconds, not a second).
+        let layout = BrickLayout::new(geometry.dims(), brick)?;
+        if pager.brick_len() != layout.stored_len() {
+            return Self::from_fn(pager, geometry, brick, |_| value);
+        }
+        let count = layout.count();
+        let first = pager.add_bricks(count);
+        let bits = || {
+            (0..count)
+                .map(|_| AtomicU32::new(value.to_bits()))
+                .collect()
+        };
+        Ok(Self {
+            geometry,
+            layout,
+            pager,
+            first,
+            paged: (0..count).map(|_| AtomicBool::new(false)).collect(),
+            constant: bits(),
+            min: bits(),
+            max: bits(),
+        })
     }
 
     /// The geometry.
