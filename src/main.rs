@@ -296,6 +296,12 @@ fn main() -> ExitCode {
         Ok(Ended::Unconverged) => EXIT_UNCONVERGED,
         Ok(Ended::Diverged) => EXIT_DIVERGED,
         Err(Error::Io { reason, .. }) if reason.contains("Broken pipe") => 0,
+        // After a Ctrl-C whatever failed (a level of `resolution` stopped short, a solve
+        // halted in set-up) failed because of it: the status says interrupted.
+        Err(e) if interrupted() => {
+            let _ = writeln!(io::stderr(), "lucent: interrupted: {e}");
+            EXIT_INTERRUPTED
+        }
         Err(e) => {
             // Under mpirun every rank says which it is.
             let who = world().map_or(String::new(), |w| {
@@ -306,6 +312,12 @@ fn main() -> ExitCode {
                 Error::Usage(_) => 2,
                 Error::Unconverged { diverged: true, .. } => EXIT_DIVERGED,
                 Error::Unconverged { .. } => EXIT_UNCONVERGED,
+                // The time limit reached before any result existed.
+                Error::Solve(lucent::core::SolveError::Halted {
+                    halt: lucent::core::Halt::TimeLimit,
+                    ..
+                }) => EXIT_UNCONVERGED,
+                Error::Solve(lucent::core::SolveError::Halted { .. }) => EXIT_INTERRUPTED,
                 _ => 1,
             }
         }
@@ -390,18 +402,33 @@ fn cancel_flag() -> Arc<AtomicBool> {
         let seen = Arc::clone(&flag);
         // Without a handler (another one installed), Ctrl-C keeps its default: exit.
         let _ = ctrlc::set_handler(move || {
-            if seen.swap(true, Ordering::SeqCst) {
+            let again = seen.swap(true, Ordering::SeqCst);
+            // Before a solve there is nothing to keep (reading the scene, building a
+            // paged medium): end at once. A second Ctrl-C always ends at once.
+            if again || !SOLVING.load(Ordering::SeqCst) {
                 lucent::grid::io::atomic::remove_partial_files();
+                if !again {
+                    let _ = writeln!(io::stderr(), "lucent: interrupted; nothing was solved");
+                }
                 std::process::exit(i32::from(EXIT_INTERRUPTED));
             }
             let _ = writeln!(
                 io::stderr(),
-                "lucent: interrupted; stopping at the next iteration and writing what was computed (Ctrl-C again to abort)"
+                "lucent: interrupted; stopping within a second and writing what was computed (Ctrl-C again to abort)"
             );
         });
         flag
     })
     .clone()
+}
+
+/// Whether a solve has started: from then on Ctrl-C stops it and keeps what it computed;
+/// before, Ctrl-C ends the process at once.
+static SOLVING: AtomicBool = AtomicBool::new(false);
+
+/// Marks the start of the solve (see [`SOLVING`]).
+fn solving() {
+    SOLVING.store(true, Ordering::SeqCst);
 }
 
 /// Whether a Ctrl-C arrived.
@@ -614,6 +641,7 @@ fn run_solver(
     chosen.say_note();
     let (progress, meter) = bar(quiet, "solve");
     let options = args.options(chosen, meter.solver_callback())?;
+    solving();
     let solution = chosen.solver.solve(&built.problem, &options);
     progress.finish_and_clear();
     let solution = solution?;
@@ -724,6 +752,7 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
                 .ray(u, v, aspect)
                 .unwrap_or((glam::DVec3::ZERO, glam::DVec3::Z))
         };
+        solving();
         let estimate = imager.image(
             &built.problem,
             &lucent::core::ImageRequest {
@@ -732,7 +761,7 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
                 background,
                 ray: &ray,
                 progress: Some(&report),
-                cancel: Some(&cancel_flag()),
+                interrupt: lucent::core::Interrupt::of(&args.solver.options(&chosen, meter_free())?),
             },
         );
         progress.finish_and_clear();
@@ -740,7 +769,7 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
         if estimate.rows_traced < estimate.height {
             let _ = writeln!(
                 io::stderr(),
-                "lucent: interrupted: {} of {} rows traced; the others show the background (standard error {} in the .stderr.exr)",
+                "lucent: stopped: {} of {} rows traced; the others show the background (standard error {} in the .stderr.exr)",
                 estimate.rows_traced,
                 estimate.height,
                 f32::MAX
@@ -893,6 +922,7 @@ fn solve_paged_to_file(
     chosen.say_note();
     let (progress, meter) = bar(quiet, "solve");
     let options = args.options(chosen, meter.solver_callback())?;
+    solving();
     let solution = chosen.solver.solve_paged(&problem, &options);
     progress.finish_and_clear();
     let solution = solution?;
@@ -1211,6 +1241,7 @@ fn resolution(scene: &Path, args: &SolverArgs, target: f64, directions: bool) ->
                 chosen.solver.name()
             )));
         };
+        solving();
         let choice = lucent::resolution::fewest_directions_meeting(
             &built.problem,
             &family,
@@ -1260,6 +1291,7 @@ fn resolution(scene: &Path, args: &SolverArgs, target: f64, directions: bool) ->
             .map_err(io_err)
         };
     }
+    solving();
     let choice = lucent::resolution::coarsest_meeting(
         &built.problem,
         chosen.solver.as_ref(),

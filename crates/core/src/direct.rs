@@ -26,6 +26,7 @@ use lucent_optics::SphericalQuadrature;
 use rayon::prelude::*;
 
 use crate::error::SolveError;
+use crate::interrupt::{Halt, Interrupt};
 use crate::paged::{PagedProblem, PagedSolution, paging_error};
 use crate::problem::{BoundaryKind, Light, LightKind, Problem};
 use crate::registry::{Params, SolverEntry, SolverParams, param_docs, resolved_params};
@@ -151,16 +152,43 @@ const EMPTY_BRICK: usize = 8;
 
 /// Transmittance from `source(x)` to every cell centre x through `sigma_t`, whose empty
 /// bricks are `empty`.
+/// Stops between rows of cells when `interrupt` says so.
 fn transmittance(
     sigma_t: &Grid,
     empty: &EmptyBricks,
     cutoff: f64,
     source: impl Fn(DVec3) -> DVec3 + Sync,
-) -> Grid {
+    interrupt: &Interrupt,
+) -> Result<Grid, Halt> {
     let geometry = *sigma_t.geometry();
-    Grid::from_fn(geometry, |x| {
+    rows_of(geometry, interrupt, |x| {
         (-sigma_t.line_integral_skipping(empty, source(x), x, cutoff)).exp() as f32
     })
+}
+
+/// The grid of `value` at every cell centre, in parallel over z-slabs, asking `interrupt`
+/// before each row of cells (a row of ray marches takes milliseconds even at 512³).
+fn rows_of(
+    geometry: lucent_grid::GridGeometry,
+    interrupt: &Interrupt,
+    value: impl Fn(DVec3) -> f32 + Sync,
+) -> Result<Grid, Halt> {
+    let mut grid = Grid::filled(geometry, 0.0);
+    let [nx, ny, _] = geometry.dims();
+    grid.slabs_mut().for_each(|(k, slab)| {
+        for j in 0..ny {
+            if interrupt.halted() {
+                return;
+            }
+            for i in 0..nx {
+                slab[i + nx * j] = value(geometry.cell_centre(i, j, k));
+            }
+        }
+    });
+    match interrupt.halt() {
+        Some(halt) => Err(halt),
+        None => Ok(grid),
+    }
 }
 
 impl Solver for DirectSolver {
@@ -305,6 +333,10 @@ impl DirectSolver {
             + 2 * channels;
         let needed = Self::paged_needs(problem, lights, options)?;
 
+        let interrupt = Interrupt::of(options);
+        let halted = |stage: &'static str| {
+            interrupt.check(Self::NAME, stage)
+        };
         let layers = layout.bricks()[2];
         let total_layers = (layers * (outputs.max(1))) as f64;
         let mut layers_done = 0.0;
@@ -337,6 +369,11 @@ impl DirectSolver {
                         .par_chunks_mut(nx)
                         .enumerate()
                         .try_for_each(|(row, cells)| {
+                            // A row of ray marches takes milliseconds; a layer of them,
+                            // minutes at 1024³: the interrupt is asked per row.
+                            if interrupt.halted() {
+                                return Ok(());
+                            }
                             let (j, k) = (row % ny, z0 + row / ny);
                             let mut corners = sigma_t.corners();
                             for (i, cell) in cells.iter_mut().enumerate() {
@@ -345,6 +382,7 @@ impl DirectSolver {
                             Ok::<_, PagingError>(())
                         })
                         .map_err(err)?;
+                    halted("the paged transmittance")?;
                     out.write_slabs(z0, &buffer).map_err(err)?;
                     report();
                 }
@@ -404,6 +442,7 @@ impl DirectSolver {
             let mut iso_slabs = Vec::new();
             let mut t_slabs: Vec<Vec<f32>> = vec![Vec::new(); point_lights.len()];
             for layer in 0..layers {
+                halted("the paged fluence")?;
                 let z0 = layer * b;
                 let z1 = (z0 + b).min(nz);
                 let n = nx * ny * (z1 - z0);
@@ -502,6 +541,14 @@ impl DirectSolver {
         let mut done = 0.0;
         let cutoff = self.max_optical_depth;
         let directions = sky_directions(self.sky_level)?;
+        let interrupt = context.interrupt();
+        let halted = |stage: &'static str| {
+            move |halt| SolveError::Halted {
+                solver: Self::NAME.into(),
+                stage: stage.into(),
+                halt,
+            }
+        };
 
         // Empty space is stepped over unread; the integrals keep their bits.
         let empty = medium
@@ -518,13 +565,20 @@ impl DirectSolver {
                     .iter()
                     .zip(&empty)
                     .map(|(sigma_t, empty)| {
-                        transmittance(sigma_t, empty, cutoff, |x| {
-                            light
-                                .arrival(x, far, min_distance)
-                                .map_or(x, |(_, _, from)| from)
-                        })
+                        transmittance(
+                            sigma_t,
+                            empty,
+                            cutoff,
+                            |x| {
+                                light
+                                    .arrival(x, far, min_distance)
+                                    .map_or(x, |(_, _, from)| from)
+                            },
+                            &interrupt,
+                        )
                     })
-                    .collect();
+                    .collect::<Result<_, _>>()
+                    .map_err(halted("a light's transmittance"))?;
                 per_light.push(grids);
                 done += 1.0;
                 context.report(Progress {
@@ -535,41 +589,36 @@ impl DirectSolver {
                 });
             }
             // Sky: Σ_d w_d e^{−τ_d}, per extinction channel.
-            let sky_transmittance: Option<Vec<Grid>> = (!sky.is_empty()).then(|| {
+            let sky_transmittance: Option<Vec<Grid>> = if sky.is_empty() {
+                None
+            } else {
                 let sum = medium
                     .sigma_t
                     .iter()
                     .zip(&empty)
                     .map(|(sigma_t, empty)| {
-                        let mut total = Grid::filled(geometry, 0.0);
-                        total.slabs_mut().for_each(|(k, slab)| {
-                            let [nx, ny, _] = geometry.dims();
-                            for j in 0..ny {
-                                for i in 0..nx {
-                                    let x = geometry.cell_centre(i, j, k);
-                                    let tau = |a, b| {
-                                        Ok::<_, std::convert::Infallible>(
-                                            sigma_t.line_integral_skipping(empty, a, b, cutoff),
-                                        )
-                                    };
-                                    slab[i + nx * j] = match sky_sum(&directions, far, x, tau) {
-                                        Ok(v) => v,
-                                        Err(never) => match never {},
-                                    };
-                                }
+                        rows_of(geometry, &interrupt, |x| {
+                            let tau = |a, b| {
+                                Ok::<_, std::convert::Infallible>(
+                                    sigma_t.line_integral_skipping(empty, a, b, cutoff),
+                                )
+                            };
+                            match sky_sum(&directions, far, x, tau) {
+                                Ok(v) => v,
+                                Err(never) => match never {},
                             }
-                        });
-                        total
+                        })
                     })
-                    .collect();
+                    .collect::<Result<_, _>>()
+                    .map_err(halted("the sky's transmittance"))?;
                 context.report(Progress {
                     stage: "sky transmittance",
                     fraction: 1.0,
                     iteration: 0,
                     residual: None,
                 });
-                sum
-            });
+                Some(sum)
+            };
             (per_light, sky_transmittance)
         };
         let (per_light, sky_transmittance) = result;

@@ -210,6 +210,12 @@ impl<'a> Context<'a> {
         }
     }
 
+    /// The solve's [`crate::Interrupt`]: the caller's cancel flag and the deadline its
+    /// time budget set when the solve started, for the method's loops to ask.
+    pub fn interrupt(&self) -> crate::Interrupt {
+        crate::Interrupt::from_start(&self.options, self.started)
+    }
+
     /// Time since the solve started.
     pub fn elapsed(&self) -> Duration {
         self.started.elapsed()
@@ -233,6 +239,10 @@ impl<'a> Context<'a> {
     pub fn stopping_for(&self, phase: usize, phases: usize) -> Stopping {
         let mut stopping = Stopping::from_options(&self.options);
         stopping.time_budget = self.remaining_budget();
+        stopping.deadline = self
+            .options
+            .time_budget
+            .and_then(|t| self.started.checked_add(t));
         let phases = phases.max(1);
         if phases > 1
             && let Some(callback) = self.options.progress.clone()
@@ -294,7 +304,20 @@ where
         },
         started,
     };
-    let outcome = options.install(|| body(&context))??;
+    // A nested solve (the uncollided light's `direct`) halted: the solve that halted is
+    // this one.
+    let outcome = options.install(|| body(&context))?.map_err(|e| match e {
+        SolveError::Halted {
+            solver: inner,
+            stage,
+            halt,
+        } if inner != solver.name() => SolveError::Halted {
+            solver: solver.name().into(),
+            stage: format!("{stage} (`{inner}`)"),
+            halt,
+        },
+        other => other,
+    })?;
     // No output holds NaN or infinity, whatever the method did.
     let outputs = [
         ("fluence", Some(&outcome.fluence)),

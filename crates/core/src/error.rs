@@ -117,6 +117,19 @@ pub enum SolveError {
         /// What failed, with the operating system's words.
         reason: String,
     },
+    /// Ctrl-C or the time limit stopped the solve before any result existed (in set-up:
+    /// the uncollided light, a hierarchy, an assembly). An iteration stopped part way
+    /// returns its last iterate with [`crate::StopReason::Interrupted`] or
+    /// [`crate::StopReason::TimeLimit`] instead.
+    #[error("solver `{solver}` {halt} during {stage}, before any result existed")]
+    Halted {
+        /// The solver's name.
+        solver: String,
+        /// What it was doing.
+        stage: String,
+        /// Why it stopped.
+        halt: crate::Halt,
+    },
     /// The problem is invalid.
     #[error(transparent)]
     Problem(#[from] ProblemError),

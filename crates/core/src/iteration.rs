@@ -33,6 +33,10 @@ pub struct Stopping {
     pub progress: Option<ProgressFn>,
     /// Stop as interrupted once this is set (the caller's [`SolveOptions::cancel`]).
     pub cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+    /// Stop at this instant, whenever the history started: the end of the whole solve's
+    /// time budget, which phases that start late (an iteration after a long set-up) must
+    /// not push back. Set by [`crate::driver::Context::stopping_for`].
+    pub deadline: Option<Instant>,
 }
 
 impl fmt::Debug for Stopping {
@@ -45,6 +49,7 @@ impl fmt::Debug for Stopping {
             .field("divergence", &self.divergence)
             .field("progress", &self.progress.as_ref().map(|_| "callback"))
             .field("cancel", &self.cancel)
+            .field("deadline", &self.deadline)
             .finish()
     }
 }
@@ -56,6 +61,7 @@ impl PartialEq for Stopping {
             && self.absolute_tolerance == other.absolute_tolerance
             && self.max_iterations == other.max_iterations
             && self.time_budget == other.time_budget
+            && self.deadline == other.deadline
             && self.divergence == other.divergence
             && match (&self.progress, &other.progress) {
                 (None, None) => true,
@@ -80,6 +86,7 @@ impl Default for Stopping {
             divergence: 1e6,
             progress: None,
             cancel: None,
+            deadline: None,
         }
     }
 }
@@ -109,12 +116,29 @@ impl Stopping {
         self
     }
 
+    /// The [`crate::Interrupt`] of an iteration under this rule that started at
+    /// `started`: its cancel flag and the end of its time budget, for the loops inside an
+    /// iteration (a sweep, a cycle) to ask.
+    pub fn interrupt(&self, started: Instant) -> crate::Interrupt {
+        crate::Interrupt::new(self.cancel.clone(), self.end(started))
+    }
+
+    /// When the time runs out for an iteration that started at `started`: the earlier of
+    /// its budget's end and the solve's deadline.
+    fn end(&self, started: Instant) -> Option<Instant> {
+        let budget = self.time_budget.and_then(|t| started.checked_add(t));
+        match (budget, self.deadline) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
     /// The stops that differ from rank to rank, as of now: whether the time budget since
     /// `started` is spent, and whether the cancel flag is set. Decomposed solves reduce
     /// them with their norms (any rank's flag stops every rank, on the same iteration).
     pub fn local_flags(&self, started: Instant) -> [bool; 2] {
         [
-            self.time_budget.is_some_and(|t| started.elapsed() >= t),
+            self.end(started).is_some_and(|end| Instant::now() >= end),
             self.cancel
                 .as_ref()
                 .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)),
@@ -176,7 +200,7 @@ impl Stopping {
         if iteration >= self.max_iterations {
             return Some(StopReason::IterationLimit { residual: relative });
         }
-        if self.time_budget.is_some_and(|t| started.elapsed() >= t) {
+        if self.end(started).is_some_and(|end| Instant::now() >= end) {
             return Some(StopReason::TimeLimit { residual: relative });
         }
         if self
@@ -281,6 +305,7 @@ mod tests {
             divergence: 100.0,
             progress: None,
             cancel: None,
+            deadline: None,
         };
         let mut h = History::start();
         assert_eq!(h.record(&s, 1.0, 1.0), None);

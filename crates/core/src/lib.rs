@@ -65,6 +65,7 @@ pub mod driver;
 mod error;
 pub mod exact;
 mod index;
+mod interrupt;
 mod iteration;
 pub mod memory;
 mod paged;
@@ -84,6 +85,7 @@ mod uncollided;
 pub use direct::{DirectSolver, light_distances, uncollided_outcome};
 pub use error::{ProblemError, SolveError};
 pub use index::{IndexGrid, RefractiveIndex};
+pub use interrupt::{Halt, Interrupt};
 pub use iteration::{History, Stopping};
 pub use lucent_paging::PagerStats;
 pub use paged::{CellMedium, PagedMedium, PagedProblem, PagedSolution, Storage, paging_error};
@@ -103,4 +105,4 @@ pub use solver::{
     ProgressFn, Ranks, SolveOptions, SolveReport, Solver, StopReason,
 };
 pub use spectrum::Spectrum;
-pub use uncollided::{Uncollided, UncollidedCells, uncollided_cells};
+pub use uncollided::{Uncollided, UncollidedCells, uncollided_cells, uncollided_cells_within};

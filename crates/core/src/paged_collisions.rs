@@ -73,6 +73,7 @@ impl PagedProblem {
         let volume = geometry.cell_volume();
         let cutoff = DirectSolver::default().max_optical_depth;
 
+        let interrupt = crate::Interrupt::of(options);
         let direct = DirectSolver::default().transport_paged(
             self,
             lights,
@@ -123,11 +124,14 @@ impl PagedProblem {
                         .sigma_t
                         .iter()
                         .zip(&sigma_t)
-                        .map(|(field, sigma)| slab_cells(integrator, field, sigma, z0, cutoff))
+                        .map(|(field, sigma)| {
+                            slab_cells(integrator, field, sigma, z0, cutoff, &interrupt)
+                        })
                         .collect::<Result<Vec<_>, PagingError>>()
                 })
                 .collect::<Result<_, _>>()
                 .map_err(err)?;
+            interrupt.check(solver, "the paged uncollided light's cell integrals")?;
             for c in 0..channels {
                 let e = c.min(extinction - 1);
                 let (sigma, alb) = (&sigma_t[e], &albedo[c.min(albedo.len() - 1)]);
@@ -238,6 +242,7 @@ fn slab_cells(
     sigma: &[f32],
     z0: usize,
     cutoff: f64,
+    interrupt: &crate::Interrupt,
 ) -> Result<Vec<CellValues>, PagingError> {
     let geometry = *field.geometry();
     let [nx, ny, _] = geometry.dims();
@@ -250,6 +255,11 @@ fn slab_cells(
     out.par_chunks_mut(nx)
         .enumerate()
         .try_for_each(|(row, cells)| {
+            // A slab of cell integrals takes seconds at 1024²: asked per row (the caller
+            // asks again after the slab).
+            if interrupt.halted() {
+                return Ok(());
+            }
             let (j, k) = (row % ny, z0 + row / ny);
             let mut corners = field.corners();
             let mut tau =

@@ -563,6 +563,7 @@ impl DirectRefractiveSolver {
         let work = (point_lights.len() + usize::from(!sky.is_empty())) as f64;
         let mut done = 0.0;
         let extinction = medium.sigma_t.len();
+        let interrupt = context.interrupt();
 
         let mut arrivals = Vec::with_capacity(point_lights.len());
         let mut irradiances: Vec<Vec<f64>> = Vec::with_capacity(point_lights.len());
@@ -580,6 +581,7 @@ impl DirectRefractiveSolver {
             let rows: Vec<Vec<Arrival>> = (0..ny * nz)
                 .into_par_iter()
                 .map(|row| -> Result<Vec<Arrival>, SolveError> {
+                    interrupt.check(Self::NAME, "curved rays from a light")?;
                     let (j, k) = (row % ny, row / ny);
                     let mut out = Vec::with_capacity(nx);
                     let mut previous: Option<(DVec3, DVec2)> = None;
@@ -680,6 +682,7 @@ impl DirectRefractiveSolver {
             let sums: Vec<Vec<f64>> = (0..nx * ny * nz)
                 .into_par_iter()
                 .map(|cell_index| -> Result<Vec<f64>, SolveError> {
+                    interrupt.check(Self::NAME, "curved rays from the sky")?;
                     let (i, j, k) = (
                         cell_index % nx,
                         (cell_index / nx) % ny,

@@ -719,9 +719,10 @@ pub struct ImageRequest<'a> {
     pub ray: &'a (dyn Fn(f64, f64) -> (glam::DVec3, glam::DVec3) + Sync),
     /// Called with the fraction of the picture done.
     pub progress: Option<&'a (dyn Fn(f64) + Sync)>,
-    /// Once set (Ctrl-C), no new row is started: the picture comes back with the rows
-    /// traced so far ([`ImageEstimate::rows_traced`]).
-    pub cancel: Option<&'a std::sync::atomic::AtomicBool>,
+    /// Ctrl-C and the time limit: once it halts, the row being traced is given up and no
+    /// new one starts: the picture comes back with the rows traced whole
+    /// ([`ImageEstimate::rows_traced`]). Asked every pixel.
+    pub interrupt: crate::Interrupt,
 }
 
 /// A radiance image with its per-pixel standard error (linear RGB, rows from the top).
@@ -735,7 +736,7 @@ pub struct ImageEstimate {
     pub radiance: Vec<[f32; 3]>,
     /// Its standard error.
     pub std_error: Vec<[f32; 3]>,
-    /// Rows traced: `height` unless the request was cancelled. A row not traced holds the
+    /// Rows traced: `height` unless the request was interrupted. A row not traced holds the
     /// background radiance and a standard error of `f32::MAX` (unknown).
     pub rows_traced: usize,
 }

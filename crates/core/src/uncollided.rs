@@ -44,6 +44,7 @@ use rayon::prelude::*;
 
 use crate::direct::DirectSolver;
 use crate::error::SolveError;
+use crate::interrupt::{Halt, Interrupt};
 use crate::problem::{Light, Problem};
 use crate::solution::{Angular, Solution};
 use crate::solver::{SolveOptions, Solver};
@@ -607,8 +608,24 @@ fn light_power(light: &Light) -> (f64, DVec3) {
 /// trilinear extinction `sigma_t`, marching each ray until its optical depth reaches
 /// `cutoff`. `None` for sky and emission, which are not point-like.
 pub fn uncollided_cells(sigma_t: &Grid, light: &Light, cutoff: f64) -> Option<UncollidedCells> {
+    // Never interrupted: never an `Err`.
+    uncollided_cells_within(sigma_t, light, cutoff, &Interrupt::never())
+        .ok()
+        .flatten()
+}
+
+/// [`uncollided_cells`], stopped by `interrupt` (asked every row of cells and every row of
+/// a box face's fluxes): `Err` with why, when it stopped before the integrals were whole.
+pub fn uncollided_cells_within(
+    sigma_t: &Grid,
+    light: &Light,
+    cutoff: f64,
+    interrupt: &Interrupt,
+) -> Result<Option<UncollidedCells>, Halt> {
     let g = *sigma_t.geometry();
-    let integrator = Integrator::new(&g, light)?;
+    let Some(integrator) = Integrator::new(&g, light) else {
+        return Ok(None);
+    };
     let empty = EmptyBricks::of(sigma_t, 8).ok();
     // Empty space is crossed unread; the integrals keep their bits.
     let tau = |a: DVec3, b: DVec3| {
@@ -632,6 +649,9 @@ pub fn uncollided_cells(sigma_t: &Grid, light: &Light, cutoff: f64) -> Option<Un
         .for_each(|(k, ((collided, directed), fluence))| {
             let mut tau = tau;
             for ij in 0..slab {
+                if ij % nx == 0 && interrupt.halted() {
+                    return;
+                }
                 let sigma = f64::from(sigma_t.data()[ij + slab * k]);
                 let Ok(cell) = integrator.cell([ij % nx, ij / nx, k], sigma, &mut tau);
                 fluence[ij] = cell.fluence;
@@ -649,9 +669,15 @@ pub fn uncollided_cells(sigma_t: &Grid, light: &Light, cutoff: f64) -> Option<Un
     for axis in 0..3 {
         let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
         for (level, inward) in [(0i64, 1.0), (dims[axis], -1.0)] {
+            if let Some(halt) = interrupt.halt() {
+                return Err(halt);
+            }
             let faces: Vec<f64> = (0..dims[b] * dims[c])
                 .into_par_iter()
                 .map(|index| {
+                    if index % dims[b] == 0 && interrupt.halted() {
+                        return 0.0;
+                    }
                     let mut cell = [0i64; 3];
                     cell[axis] = level;
                     cell[b] = index % dims[b];
@@ -668,13 +694,16 @@ pub fn uncollided_cells(sigma_t: &Grid, light: &Light, cutoff: f64) -> Option<Un
             }
         }
     }
-    Some(UncollidedCells {
+    if let Some(halt) = interrupt.halt() {
+        return Err(halt);
+    }
+    Ok(Some(UncollidedCells {
         collided,
         directed,
         fluence,
         emitted,
         escaped,
-    })
+    }))
 }
 
 /// The uncollided light of a problem's lights as the solvers that add scattered light
@@ -708,6 +737,8 @@ impl Uncollided {
         if problem.has_graded_index() {
             return Self::curved(problem, options);
         }
+        // The deadline counts from now, before `direct` spends part of the budget.
+        let interrupt = Interrupt::of(options);
         let direct = DirectSolver::default().solve(problem, options)?;
         let lights: Vec<Light> = problem
             .lights()
@@ -723,10 +754,17 @@ impl Uncollided {
                 .map(|light| {
                     sigma_t
                         .iter()
-                        .filter_map(|s| uncollided_cells(s, light, cutoff))
-                        .collect()
+                        .filter_map(|s| {
+                            uncollided_cells_within(s, light, cutoff, &interrupt).transpose()
+                        })
+                        .collect::<Result<Vec<_>, Halt>>()
                 })
-                .collect()
+                .collect::<Result<Vec<_>, Halt>>()
+        })?
+        .map_err(|halt| SolveError::Halted {
+            solver: DirectSolver::NAME.into(),
+            stage: "the uncollided light's cell integrals".into(),
+            halt,
         })?;
         Ok(Self {
             direct,

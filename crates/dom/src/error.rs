@@ -25,6 +25,9 @@ pub enum DomError {
     /// limits, a lost device).
     #[error("device: {0}")]
     Device(String),
+    /// Ctrl-C or the time limit stopped a sweep part way.
+    #[error("the sweep {0}")]
+    Halted(lucent_core::Halt),
 }
 
 impl From<lucent_paging::PagingError> for DomError {

@@ -365,6 +365,8 @@ pub struct SourceIteration<'a> {
     device: Option<Box<dyn DeviceTransport>>,
     timings: Timings,
     monitor: Monitor,
+    /// Ctrl-C and the time limit of the run, asked by every sweep's wavefronts.
+    interrupt: lucent_core::Interrupt,
 }
 
 impl<'a> SourceIteration<'a> {
@@ -571,6 +573,7 @@ impl<'a> SourceIteration<'a> {
             tsa,
             anderson,
             device: None,
+            interrupt: lucent_core::Interrupt::never(),
             spacing: h,
             layout,
             timings: Timings::default(),
@@ -742,9 +745,10 @@ impl<'a> SourceIteration<'a> {
                 sigma_s: &self.sigma_s,
                 storage: self.ordinates.storage().len(),
             }),
+            interrupt: &self.interrupt,
         };
         let (closure, linear) = (self.settings.closure, self.linear);
-        Ok(match &mut self.work {
+        let swept = match &mut self.work {
             Work::Memory(work) => match (closure, linear) {
                 (Closure::Step, _) => sweep::<StepClosure>(&input, work),
                 (Closure::Diamond, false) => sweep::<DiamondClosure>(&input, work),
@@ -761,6 +765,13 @@ impl<'a> SourceIteration<'a> {
                     sweep_paged::<LinearExponentialClosure>(&input, pages)?
                 }
             },
+        };
+        swept.ok_or_else(|| {
+            DomError::Halted(
+                self.interrupt
+                    .halt()
+                    .unwrap_or(lucent_core::Halt::Interrupted),
+            )
         })
     }
 
@@ -1093,7 +1104,8 @@ impl<'a> SourceIteration<'a> {
     /// Solves to `stopping` with the settings' outer iteration: [`Outer::Gmres`] where
     /// anything scatters or reflects (else one sweep is the answer), source iteration
     /// otherwise.
-    pub fn run(self, stopping: &Stopping) -> Result<DomSolution, DomError> {
+    pub fn run(mut self, stopping: &Stopping) -> Result<DomSolution, DomError> {
+        self.interrupt = stopping.interrupt(Instant::now());
         if self.settings.outer == Outer::Gmres && (self.scatters || self.reflects) {
             self.run_gmres(stopping)
         } else {
@@ -1204,8 +1216,23 @@ impl<'a> SourceIteration<'a> {
     /// safeguards, the stopping rule, mixing.
     fn run_source_iteration(mut self, stopping: &Stopping) -> Result<DomSolution, DomError> {
         let started = Instant::now();
+        // The last whole iterate's sweep, for a sweep that Ctrl-C or the time limit stops
+        // part way: the solution is then that iterate's.
+        let mut previous: Option<SweepOutput> = None;
         let (stop_reason, last) = loop {
-            let mut out = self.transport()?;
+            let mut out = match self.transport() {
+                Err(DomError::Halted(halt)) if previous.is_some() => {
+                    // `mix` and the swap made `previous` the in-scattered radiance of
+                    // the last iterate: back where `finish` reads it.
+                    std::mem::swap(&mut self.previous, &mut self.inscattered);
+                    let residual = self.monitor.residuals.last().copied().unwrap_or(1.0);
+                    break (
+                        halt.stop_reason(residual),
+                        previous.take().expect("checked above"),
+                    );
+                }
+                other => other?,
+            };
             let iteration = self.monitor.residuals.len() + 1;
             if out.fluence.iter().any(|v| !v.is_finite()) {
                 break (StopReason::DivergedNonFinite { iteration }, out);
@@ -1224,6 +1251,7 @@ impl<'a> SourceIteration<'a> {
             }
             self.mix(change);
             std::mem::swap(&mut self.previous, &mut self.inscattered);
+            previous = Some(out);
         };
         Ok(self.finish(stop_reason, last))
     }

@@ -456,6 +456,11 @@ impl ChannelMethod for DomSolver {
                 unavailable: false,
                 reason,
             },
+            DomError::Halted(halt) => SolveError::Halted {
+                solver: self.name.into(),
+                stage: "the first transport sweep".into(),
+                halt,
+            },
             e => invalid("problem", e.to_string()),
         })?;
         // The whole problem's balance: the sweeps' own (whose fixed source holds the first

@@ -194,6 +194,10 @@ pub(crate) struct SweepInput<'a> {
     /// block is swept (storage directions = propagation directions), so the work is only
     /// written, never read before the sweep; without, the work holds S_n on entry.
     pub source: Option<CellSource<'a>>,
+    /// Ctrl-C and the time limit, asked before every wavefront (a sweep of 256³ cells in
+    /// 48 directions takes seconds; a wavefront, milliseconds): a halted sweep gives up
+    /// and returns `None`, its work part swept.
+    pub interrupt: &'a lucent_core::Interrupt,
 }
 
 /// What the fused source fill reads, all in block order: the fixed source (`None`: zero,
@@ -230,7 +234,10 @@ struct BlockResult {
 /// propagation directions are ordered by octant), per cell (block order) and direction of
 /// the octant, the source S_n on entry and the cell-average radiance ψ̄_n on return: each
 /// octant's sweep streams through its own contiguous eighth.
-pub(crate) fn sweep<C: CellClosure>(input: &SweepInput<'_>, work: &mut [f64]) -> SweepOutput {
+pub(crate) fn sweep<C: CellClosure>(
+    input: &SweepInput<'_>,
+    work: &mut [f64],
+) -> Option<SweepOutput> {
     let layout = input.layout;
     let cells = layout.cells();
     // Each octant's eighth of `work`, cut into one chunk per block.
@@ -275,7 +282,7 @@ pub(crate) fn sweep<C: CellClosure>(input: &SweepInput<'_>, work: &mut [f64]) ->
 pub(crate) fn sweep_paged<C: CellClosure>(
     input: &SweepInput<'_>,
     pages: &WorkPages,
-) -> Result<SweepOutput, PagingError> {
+) -> Result<Option<SweepOutput>, PagingError> {
     let widest = (0..8)
         .map(|o| {
             let negative = [o & 1 != 0, o & 2 != 0, o & 4 != 0];
@@ -368,7 +375,7 @@ fn sweep_with<C, G, E>(
     input: &SweepInput<'_>,
     mut chunk: impl FnMut(usize, usize, usize) -> Result<G, E>,
     mut between: impl FnMut(usize, &[usize], &[usize]),
-) -> Result<SweepOutput, E>
+) -> Result<Option<SweepOutput>, E>
 where
     C: CellClosure,
     G: std::ops::DerefMut<Target = [f64]> + Send,
@@ -402,6 +409,9 @@ where
         let nb = layout.bricks.bricks();
         let wavefronts = layout.bricks.wavefronts(negative);
         for (w, plane) in wavefronts.iter().enumerate() {
+            if input.interrupt.halted() {
+                return Ok(None);
+            }
             let done = if w > 0 { &wavefronts[w - 1][..] } else { &[] };
             let next = wavefronts.get(w + 1).map_or(&[][..], |n| &n[..]);
             between(slot, done, next);
@@ -483,12 +493,12 @@ where
         }
         slot += 1;
     }
-    Ok(SweepOutput {
+    Ok(Some(SweepOutput {
         fluence,
         outflow,
         inflow_power,
         outflow_power,
-    })
+    }))
 }
 
 /// The per-direction work of the sweeps in a pager of f64 pages, one page per (non-empty

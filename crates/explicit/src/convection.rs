@@ -491,12 +491,14 @@ impl Setup<'_> {
             }
             Light::Point { position, .. } => {
                 let mut keyed: Vec<(f64, usize)> = (0..n)
+                    .into_par_iter()
                     .map(|c| {
                         let x = l.centre(l.coords(c).map(|v| v as isize));
                         ((x - position).length_squared(), c)
                     })
                     .collect();
-                keyed.sort_by(|a, b| a.0.total_cmp(&b.0));
+                // Stable, as `sort_by`: cells at equal distance stay in index order.
+                keyed.par_sort_by(|a, b| a.0.total_cmp(&b.0));
                 keyed.into_iter().map(|(_, c)| c).collect()
             }
         }
@@ -743,6 +745,7 @@ pub fn propagate(
     };
     let mut next = rho.clone();
     let mut history = History::start();
+    let interrupt = settings.stopping.interrupt(history.started());
     let mut iteration = 0;
     loop {
         let stop = |reason: StopReason, rho: Vec<f64>, residuals: Vec<f64>, iterations| {
@@ -812,6 +815,11 @@ pub fn propagate(
                     let planes = PlaneMarch::new(&setup);
                     let mut values = vec![0.0f64; planes.plane_len()];
                     for &p in &planes.order {
+                        // A plane of 512² cells takes milliseconds; the pass, seconds.
+                        // Stopped part way, the planes downstream are still zero.
+                        if let Some(halt) = interrupt.halt() {
+                            return stop(halt.stop_reason(1.0), next, vec![1.0], iteration);
+                        }
                         let (setup, upstream) = (&setup, &next);
                         values.par_iter_mut().enumerate().for_each(|(local, v)| {
                             *v = setup.characteristic_from(planes.cell(p, local, s), upstream, 0);
@@ -823,7 +831,14 @@ pub fn propagate(
                     iteration += 1;
                     return stop(StopReason::Exact, next, vec![0.0], iteration);
                 }
-                for &c in &order {
+                for (k, &c) in order.iter().enumerate() {
+                    if k % 65_536 == 0
+                        && let Some(halt) = interrupt.halt()
+                    {
+                        // The last whole pass's field.
+                        let last = history.last().min(1.0);
+                        return stop(halt.stop_reason(last), rho, history.into_residuals(), iteration);
+                    }
                     next[c] = setup.fixed_point(c, &next);
                 }
             }

@@ -177,6 +177,7 @@ pub(crate) fn solve(
             index: c,
             components,
             sources: &sources,
+            interrupt: stopping.interrupt(std::time::Instant::now()),
         };
         let rec = match march {
             March::P1 {
@@ -306,6 +307,8 @@ struct Channel<'a> {
     index: usize,
     components: usize,
     sources: &'a BTreeMap<usize, f64>,
+    /// Ctrl-C and the time limit, asked every slab of a pass.
+    interrupt: lucent_core::Interrupt,
 }
 
 /// A step's computation of slab z: `(z, old slabs around it, its sources, new slab)`.
@@ -400,13 +403,17 @@ impl Channel<'_> {
         ring: &mut Ring<f64>,
         compute: &mut SlabStep<'_>,
         reduce: &mut dyn FnMut(&[f64], &[f64]),
-    ) -> Result<(), PagingError> {
+    ) -> Result<Option<lucent_core::Halt>, PagingError> {
         let [_, _, nz] = self.problem.geometry().dims();
         let slab = now.slab_len() / self.components;
         let mut q = vec![0.0f64; slab];
         let mut out = vec![0.0f64; now.slab_len()];
         ring.held = [None; 3];
         for z in 0..nz {
+            // Stopped part way, `now` still holds the last whole step.
+            if let Some(halt) = self.interrupt.halt() {
+                return Ok(Some(halt));
+            }
             ring.hold_around(z, nz, &mut |w, buffer: &mut [f64]| now.read_slab(w, buffer))?;
             self.source_slab(z, &mut q);
             let window = ring.window(z, nz);
@@ -414,7 +421,7 @@ impl Channel<'_> {
             reduce(window.here, &out);
             next.write_slab(z, &out)?;
         }
-        Ok(())
+        Ok(None)
     }
 
     /// P1 from zero: [`crate::p1::march`] with zero edges, paged.
@@ -455,7 +462,7 @@ impl Channel<'_> {
             step += 1;
             let mut sums = Sums::new(4);
             let (mut change, mut size) = (ExactSum::new(), ExactSum::new());
-            self.pass(now, next, &mut ring, &mut compute, &mut |old, new| {
+            let halted = self.pass(now, next, &mut ring, &mut compute, &mut |old, new| {
                 for n in new.chunks(4) {
                     for (field, v) in n.iter().enumerate() {
                         sums.see(field, *v);
@@ -478,6 +485,16 @@ impl Channel<'_> {
                 }
             })
             .map_err(err)?;
+            if let Some(halt) = halted {
+                let changes = history.residuals().to_vec();
+                let last = changes.last().copied().unwrap_or(1.0);
+                return Ok(p1_record(
+                    self.problem,
+                    step - 1,
+                    halt.stop_reason(last),
+                    changes,
+                ));
+            }
             if let Some(stop_reason) = sums.verdict(&monitor, step) {
                 let changes = history.residuals().to_vec();
                 return Ok(p1_record(self.problem, step, stop_reason, changes));
@@ -576,7 +593,7 @@ impl Channel<'_> {
                 });
                 Ok(())
             };
-            self.pass(now, next, &mut ring, &mut compute, &mut |old, new| {
+            let halted = self.pass(now, next, &mut ring, &mut compute, &mut |old, new| {
                 for (o, n) in old.chunks(m).zip(new.chunks(m)) {
                     for v in n {
                         sums.see(0, *v);
@@ -586,6 +603,10 @@ impl Channel<'_> {
                 }
             })
             .map_err(err)?;
+            if let Some(halt) = halted {
+                step -= 1;
+                break halt.stop_reason(history.last().min(1.0));
+            }
             if let Some(stop_reason) = sums.verdict(&monitor, step) {
                 break stop_reason;
             }

@@ -373,12 +373,17 @@ impl Channel<'_> {
         let new_slabs = || PagedSlabs::<f64>::new(self.state.clone(), geometry.dims()).map_err(err);
         let d_pages = new_slabs()?;
         let extra_pages = new_slabs()?;
+        // Ctrl-C and the time limit, asked every slab: a pass over 512³ cells through the
+        // pager takes seconds.
+        let interrupt = stopping.interrupt(std::time::Instant::now());
+        let halted = || interrupt.check(self.name, "the paged set-up passes");
 
         // Pass 1: D and the diagonal's non-coupling part, cell by cell.
         let (mut sigma, mut albedo) = (vec![0.0f32; slab], vec![0.0f32; slab]);
         let mut absorbs = false;
         let (mut d64, mut extra64) = (vec![0.0f64; slab], vec![0.0f64; slab]);
         for z in 0..nz {
+            halted()?;
             self.coefficients(z, &mut sigma, &mut albedo).map_err(err)?;
             for index in 0..slab {
                 let [_, a, d] = Coefficients::at(sigma[index], albedo[index], g, floor);
@@ -433,6 +438,7 @@ impl Channel<'_> {
         let mut b_squares = ExactSum::new();
         let mut gershgorin = 0.0f64;
         for z in 0..nz {
+            halted()?;
             d_ring.hold_around(z, nz, &mut read_d).map_err(err)?;
             read_slab(sources, z, &mut q0).map_err(err)?;
             for part in &singular {
@@ -511,7 +517,15 @@ impl Channel<'_> {
             phi_ring.held = [None; 3];
             let mut r_squares = ExactSum::new();
             finite = true;
+            let mut whole = true;
             for z in 0..=nz {
+                // A pass stopped part way leaves φ updated on the slabs it reached (a
+                // partial step, as good an iterate as the last) and the residual of the
+                // last whole pass; the stopping rule then says why.
+                if interrupt.halted() {
+                    whole = false;
+                    break;
+                }
                 if z < nz {
                     // φ on slab z.
                     let slot = z % 3;
@@ -563,7 +577,9 @@ impl Channel<'_> {
                     r_pages.write_slab(w, &r).map_err(err)?;
                 }
             }
-            relative = r_squares.value().sqrt() / b_norm;
+            if whole {
+                relative = r_squares.value().sqrt() / b_norm;
+            }
         };
         let record = Record::from_residuals(history.into_residuals(), stop_reason, 0);
 

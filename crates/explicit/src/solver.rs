@@ -701,6 +701,7 @@ impl ExplicitSolver {
                     courant: Some(courant),
                     stopping: lucent_core::Stopping {
                         time_budget: phase.time_budget,
+                        deadline: phase.deadline,
                         progress: phase.progress,
                         cancel: phase.cancel,
                         ..settings.stopping.clone()

@@ -20,4 +20,8 @@ pub enum FemError {
         /// The limit.
         limit: usize,
     },
+    /// Ctrl-C or the time limit stopped the assembly.
+    #[error("the assembly {0}")]
+    Halted(lucent_core::Halt),
 }
+

@@ -126,6 +126,16 @@ pub struct MurraySystem {
 impl MurraySystem {
     /// Assembles M + K_t R on `mesh` for extinction `sigma_t` (1/length).
     pub fn assemble(mesh: Mesh, sigma_t: f64) -> Result<Self, FemError> {
+        Self::assemble_within(mesh, sigma_t, &lucent_core::Interrupt::never())
+    }
+
+    /// [`MurraySystem::assemble`], asking `interrupt` before every layer of elements
+    /// ([`FemError::Halted`]: 64³ elements take tens of seconds).
+    pub fn assemble_within(
+        mesh: Mesh,
+        sigma_t: f64,
+        interrupt: &lucent_core::Interrupt,
+    ) -> Result<Self, FemError> {
         mesh.check()?;
         if !(sigma_t >= 0.0 && sigma_t.is_finite()) {
             return Err(FemError::Invalid(format!("K_t = {sigma_t}: must be ≥ 0")));
@@ -142,6 +152,9 @@ impl MurraySystem {
         });
         let mut triplets = sprs::TriMat::with_capacity((4 * n, 4 * n), 4 * n * 27 * 4);
         for cz in 0..cells[2] {
+            if let Some(halt) = interrupt.halt() {
+                return Err(FemError::Halted(halt));
+            }
             for cy in 0..cells[1] {
                 for cx in 0..cells[0] {
                     let vertex = |a: usize| {

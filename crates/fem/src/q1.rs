@@ -469,10 +469,36 @@ impl Q1Multigrid {
     /// shapes: prolongation is trilinear in the lattice's coordinates (exact for nested
     /// meshes, a good preconditioner for mapped ones).
     pub fn for_lattice(cells: [usize; 3], a: sprs::CsMat<f64>, sweeps: usize) -> Self {
+        match Self::build(cells, a, sweeps, || Ok::<(), std::convert::Infallible>(())) {
+            Ok(mg) => mg,
+            Err(never) => match never {},
+        }
+    }
+
+    /// [`Q1Multigrid::for_lattice`], asking `interrupt` before every level's Galerkin
+    /// product (the finest, about 7/8 of the work, is one sparse product that cannot be
+    /// stopped part way).
+    pub fn for_lattice_within(
+        cells: [usize; 3],
+        a: sprs::CsMat<f64>,
+        sweeps: usize,
+        interrupt: &lucent_core::Interrupt,
+    ) -> Result<Self, lucent_core::Halt> {
+        Self::build(cells, a, sweeps, || interrupt.halt().map_or(Ok(()), Err))
+    }
+
+    /// The hierarchy, `check` asked before every level.
+    fn build<E>(
+        cells: [usize; 3],
+        a: sprs::CsMat<f64>,
+        sweeps: usize,
+        mut check: impl FnMut() -> Result<(), E>,
+    ) -> Result<Self, E> {
         let mut operators = vec![a];
         let mut prolongations = Vec::new();
         let mut cells = cells;
         while operators[operators.len() - 1].rows() > 1000 {
+            check()?;
             // Halve while every axis has an even number of cells ≥ 2.
             if !cells.iter().all(|&c| c >= 2 && c % 2 == 0) {
                 break;
@@ -487,11 +513,11 @@ impl Q1Multigrid {
             prolongations.push(p);
             cells = coarse;
         }
-        Self {
+        Ok(Self {
             operators,
             prolongations,
             sweeps: sweeps.max(1),
-        }
+        })
     }
 
     /// Levels.

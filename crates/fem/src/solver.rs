@@ -111,8 +111,16 @@ impl ChannelMethod for FemP1Solver {
         let n = g.voxel_count();
         // Homogeneous (the capabilities ask for it): any cell's K_t.
         let kt = f64::from(channel.coefficients.sigma_t[0]);
-        let system =
-            MurraySystem::assemble(*mesh, kt).map_err(|e| invalid("problem", e.to_string()))?;
+        let interrupt = channel.stopping.interrupt(std::time::Instant::now());
+        let system = MurraySystem::assemble_within(*mesh, kt, &interrupt).map_err(|e| match e {
+            crate::FemError::Halted(halt) => SolveError::Halted {
+                solver: self.name().into(),
+                stage: "the assembly".into(),
+                halt,
+            },
+            e => invalid("problem", e.to_string()),
+        })?;
+        interrupt.check(self.name(), "the assembly")?;
         // ∫ψ_0 ϕ_k Q_e with a lumped mass: 4π Q_k h³ per vertex (vertices at cell centres).
         let mut b = vec![0.0; 4 * n];
         for (k, e) in channel.emission().iter().enumerate() {
@@ -316,9 +324,13 @@ impl FemDiffusionSolver {
             absorption: widen(&channel.coefficients.sigma_a),
             robin: [robin; 6],
         };
+        let interrupt = channel.stopping.interrupt(std::time::Instant::now());
+        let set_up = |stage: &str| interrupt.check(self.name(), stage);
+        set_up("the assembly")?;
         let matrix = q1
             .assemble()
             .map_err(|e| invalid("problem", e.to_string()))?;
+        set_up("the load")?;
         // Emission and first collisions: Q₀ lumped, the first moment in the weak form.
         let (q0, moment) = channel.diffusion_sources();
         let mut b = q1.cell_load(&q0, &moment);
@@ -356,7 +368,12 @@ impl FemDiffusionSolver {
             }
         }
         let bytes = (matrix.nnz() * 12 + matrix.rows() * 40) as u64;
-        let mg = crate::q1::Q1Multigrid::new(&q1, matrix, self.sweeps);
+        let mg = crate::q1::Q1Multigrid::for_lattice_within(q1.cells, matrix, self.sweeps, &interrupt)
+            .map_err(|halt| SolveError::Halted {
+                solver: self.name().into(),
+                stage: "the multigrid hierarchy".into(),
+                halt,
+            })?;
         let mut x = vec![0.0; b.len()];
         let convergence = mg
             .solve(&b, &mut x, &Self::stopping(channel))

@@ -78,6 +78,23 @@ pub(crate) fn next_batch(changes: &[f64], tolerance: f64, most: usize) -> usize 
     .clamp(1, most)
 }
 
+/// The longest a batch of steps submitted at once should take: a submission cannot be
+/// interrupted, so Ctrl-C and the time limit (asked between batches) wait at most about
+/// this long. A real GPU runs the largest batch in milliseconds; a software device
+/// (lavapipe) at 336³ takes seconds a step.
+pub(crate) const BATCH_SECONDS: f64 = 0.25;
+
+/// `wanted` steps cut to what fits [`BATCH_SECONDS`] at `seconds_per_step` (measured on
+/// the last batch), at least one.
+pub(crate) fn timed_batch(wanted: usize, seconds_per_step: f64) -> usize {
+    if seconds_per_step.is_finite() && seconds_per_step > 0.0 {
+        wanted.min((BATCH_SECONDS / seconds_per_step).floor().max(1.0) as usize)
+    } else {
+        wanted
+    }
+    .max(1)
+}
+
 /// The shared device, or why there is none.
 fn device(solver: &str) -> Result<&'static GpuContext, SolveError> {
     GpuContext::shared().map_err(|e| device_error(solver, e))

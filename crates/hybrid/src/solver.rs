@@ -91,7 +91,14 @@ fn invalid(name: &str, reason: impl Into<String>) -> SolveError {
 }
 
 fn dom_error(e: DomError) -> SolveError {
-    invalid("problem", e.to_string())
+    match e {
+        DomError::Halted(halt) => SolveError::Halted {
+            solver: "hybrid".into(),
+            stage: "a scattering order's sweep".into(),
+            halt,
+        },
+        e => invalid("problem", e.to_string()),
+    }
 }
 
 impl HybridSolver {

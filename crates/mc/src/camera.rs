@@ -11,6 +11,7 @@
 use std::f64::consts::PI;
 
 use glam::DVec3;
+use lucent_core::Interrupt;
 use lucent_core::{Light, Problem, SolveError};
 use lucent_grid::{Grid, ray_box};
 use lucent_optics::PhaseFunction;
@@ -50,13 +51,22 @@ pub fn camera_image(
     ray: impl Fn(f64, f64) -> (DVec3, DVec3) + Sync,
 ) -> Result<CameraEstimate, SolveError> {
     camera_image_with_progress(
-        problem, width, height, samples, background, config, ray, None, None,
+        problem,
+        width,
+        height,
+        samples,
+        background,
+        config,
+        ray,
+        None,
+        &Interrupt::never(),
     )
 }
 
-/// [`camera_image`], calling `progress` with the fraction of rows done and starting no
-/// new row once `cancel` is set (Ctrl-C): rows not reached hold the background radiance
-/// and a standard error of `f32::MAX`, and [`CameraEstimate::rows_traced`] counts the rest.
+/// [`camera_image`], calling `progress` with the fraction of rows done and stopping when
+/// `interrupt` halts (Ctrl-C, the time limit; asked every pixel): the row being traced is
+/// given up, and rows not traced whole hold the background radiance and a standard error
+/// of `f32::MAX`; [`CameraEstimate::rows_traced`] counts the rest.
 #[allow(clippy::too_many_arguments)]
 pub fn camera_image_with_progress(
     problem: &Problem,
@@ -67,7 +77,7 @@ pub fn camera_image_with_progress(
     config: &McConfig,
     ray: impl Fn(f64, f64) -> (DVec3, DVec3) + Sync,
     progress: Option<&(dyn Fn(f64) + Sync)>,
-    cancel: Option<&std::sync::atomic::AtomicBool>,
+    interrupt: &Interrupt,
 ) -> Result<CameraEstimate, SolveError> {
     let rows_done = std::sync::atomic::AtomicUsize::new(0);
     crate::transport::check_optical_reach(problem)?;
@@ -145,15 +155,18 @@ pub fn camera_image_with_progress(
         .zip(std_error.par_chunks_mut(width))
         .enumerate()
         .for_each(|(y, (row, row_err))| {
-            if cancel.is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)) {
-                let unknown = [f32::MAX; 3];
+            let unknown = |row: &mut [[f32; 3]], row_err: &mut [[f32; 3]]| {
                 for (r, e) in row.iter_mut().zip(row_err.iter_mut()) {
                     *r = background.map(|b| b as f32);
-                    *e = unknown;
+                    *e = [f32::MAX; 3];
                 }
-                return;
-            }
+            };
             for x in 0..width {
+                // A row of a dense cloud at 64 paths a pixel takes a second or more.
+                if interrupt.halted() {
+                    unknown(row, row_err);
+                    return;
+                }
                 let pixel = (y * width + x) as u64;
                 let mut sum = [0f64; 3];
                 let mut sum_sq = [0f64; 3];

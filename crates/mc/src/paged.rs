@@ -285,7 +285,6 @@ pub(crate) fn estimate_paged(
     control: &RunControl<'_>,
     options: &SolveOptions,
 ) -> Result<PagedEstimate, SolveError> {
-    let started = std::time::Instant::now();
     let name = crate::McSolver::NAME;
     let err = |e| paging_error(name, e);
     if config.batches < 2 || config.particles == 0 || config.max_depth == 0 {
@@ -379,21 +378,10 @@ pub(crate) fn estimate_paged(
         };
         let mut ran = 0;
         for chunk in batch_ids.chunks(threads) {
-            let out_of_time = control
-                .time_budget
-                .is_some_and(|budget| started.elapsed() >= budget)
-                || control
-                    .cancel
-                    .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed));
-            if out_of_time && ran >= 2 {
+            if control.interrupt.halted() {
                 break;
             }
-            let chunk = if out_of_time {
-                &chunk[..chunk.len().min(2 - ran)]
-            } else {
-                chunk
-            };
-            chunk
+            let whole: Vec<bool> = chunk
                 .par_iter()
                 .enumerate()
                 .map(|(slot, &batch)| {
@@ -413,6 +401,7 @@ pub(crate) fn estimate_paged(
                             config,
                             batch as u64,
                             tally,
+                            &control.interrupt,
                         )
                     } else {
                         trace_batch(
@@ -424,25 +413,32 @@ pub(crate) fn estimate_paged(
                             config,
                             batch as u64 + 1000 * *extinction as u64,
                             tally,
+                            &control.interrupt,
                         )
                     };
                     let now = traced.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
                     if let Some(progress) = control.progress {
                         progress(now, total);
                     }
-                    let Tally { fluence, .. } = tally;
+                    let Tally {
+                        fluence, complete, ..
+                    } = tally;
                     let tallied = fluence.finish();
-                    sampler.error.map_or(tallied, Err)
+                    sampler.error.map_or(tallied, Err).map(|()| complete)
                 })
-                .collect::<Result<Vec<()>, PagingError>>()
+                .collect::<Result<Vec<bool>, PagingError>>()
                 .map_err(err)?;
             // Fold the round's tallies brick by brick, batches in order.
             (0..count)
                 .into_par_iter()
                 .try_for_each(|brick| -> Result<(), PagingError> {
-                    let touched: Vec<usize> = (0..chunk.len())
+                    // A batch an interrupt stopped part way is dropped.
+                    let (touched, dropped): (Vec<usize>, Vec<usize>) = (0..chunk.len())
                         .filter(|&slot| !pages.pager.is_fresh(pages.batch_page(slot, brick)))
-                        .collect();
+                        .partition(|&slot| whole[slot]);
+                    for slot in dropped {
+                        pages.pager.discard(pages.batch_page(slot, brick))?;
+                    }
                     if touched.is_empty() {
                         return Ok(());
                     }
@@ -468,7 +464,14 @@ pub(crate) fn estimate_paged(
                     Ok(())
                 })
                 .map_err(err)?;
-            ran += chunk.len();
+            ran += whole.iter().filter(|&&w| w).count();
+        }
+        if let Some(halt) = control.interrupt.halt().filter(|_| ran < 2) {
+            return Err(SolveError::Halted {
+                solver: name.into(),
+                stage: "its first two batches (the least a standard error needs)".into(),
+                halt,
+            });
         }
         for &c in members {
             done[c] = ran;
@@ -576,17 +579,16 @@ pub(crate) fn solve_paged(
     report(0, solver.config.batches);
     let control = RunControl {
         progress: Some(&report),
-        time_budget: options.time_budget,
-        cancel: options.cancel.as_deref(),
+        interrupt: lucent_core::Interrupt::of(options),
     };
     let estimate = estimate_paged(problem, &solver.config, &control, options)?;
     let relative = estimate.relative_error;
     let stop_reason = if estimate.batches < solver.config.batches {
-        if options.cancelled() {
-            StopReason::Interrupted { residual: relative }
-        } else {
-            StopReason::TimeLimit { residual: relative }
-        }
+        control
+            .interrupt
+            .halt()
+            .unwrap_or(lucent_core::Halt::TimeLimit)
+            .stop_reason(relative)
     } else {
         StopReason::Sampled {
             relative_error: relative,

@@ -153,8 +153,7 @@ impl Solver for McSolver {
             report(0, self.config.batches);
             let control = RunControl {
                 progress: Some(&report),
-                time_budget: context.remaining_budget(),
-                cancel: context.options.cancel.as_deref(),
+                interrupt: context.interrupt(),
             };
             let result = estimate_with(problem, &self.config, &control)?;
             // The achieved accuracy: the mean relative standard error over cells holding
@@ -178,11 +177,11 @@ impl Solver for McSolver {
                     residuals: Vec::new(),
                     // Every batch asked for ran, or the time budget stopped the run early.
                     stop_reason: if result.batches < self.config.batches {
-                        if context.options.cancelled() {
-                            StopReason::Interrupted { residual: relative }
-                        } else {
-                            StopReason::TimeLimit { residual: relative }
-                        }
+                        control
+                            .interrupt
+                            .halt()
+                            .unwrap_or(lucent_core::Halt::TimeLimit)
+                            .stop_reason(relative)
                     } else {
                         StopReason::Sampled {
                             relative_error: relative,
@@ -214,7 +213,7 @@ impl ImageSolver for McSolver {
             &self.config,
             request.ray,
             request.progress,
-            request.cancel,
+            &request.interrupt,
         )?;
         Ok(ImageEstimate {
             width: estimate.width,

@@ -5,7 +5,7 @@
 use std::f64::consts::PI;
 
 use glam::DVec3;
-use lucent_core::{Boundary, Light, Problem, SolveError};
+use lucent_core::{Boundary, Interrupt, Light, Problem, SolveError};
 use lucent_grid::{Grid, ray_box};
 use lucent_optics::{Dielectric, PhaseFunction};
 use rayon::prelude::*;
@@ -96,6 +96,9 @@ pub(crate) struct Tally<F> {
     pub(crate) absorbed: Vec<f64>,
     pub(crate) escaped: Vec<f64>,
     pub(crate) truncated: Vec<f64>,
+    /// Every particle of the batch was traced (not stopped by an interrupt part way: such
+    /// a batch is dropped, since its tallies are normalised by the whole batch).
+    pub(crate) complete: bool,
 }
 
 impl<F> Tally<F> {
@@ -106,6 +109,7 @@ impl<F> Tally<F> {
             absorbed: vec![0.0; channels],
             escaped: vec![0.0; channels],
             truncated: vec![0.0; channels],
+            complete: true,
         }
     }
 }
@@ -401,18 +405,20 @@ pub fn estimate(problem: &Problem, config: &McConfig) -> Result<McEstimate, Solv
 }
 
 /// What a caller may ask of a run while it goes: progress after every round of batches,
-/// and a time budget after which no new batches start (at least two always run, for the
-/// standard errors).
+/// and an interrupt (Ctrl-C, the time limit) that stops it within a few milliseconds:
+/// every batch asks it every 64 paths, a batch it stops is dropped, and the estimate is
+/// made of the batches traced whole (at least two, for the standard errors: with fewer
+/// the run ends in [`SolveError::Halted`]).
 #[derive(Default)]
 pub struct RunControl<'a> {
     /// Called with (batches done, batches asked for), over every tracing group.
     pub progress: Option<&'a (dyn Fn(usize, usize) + Sync)>,
-    /// No new round of batches starts after this much time.
-    pub time_budget: Option<std::time::Duration>,
-    /// No new round of batches starts once this is set (the caller interrupted the run);
-    /// as with the time budget, at least two batches run.
-    pub cancel: Option<&'a std::sync::atomic::AtomicBool>,
+    /// What stops the run.
+    pub interrupt: Interrupt,
 }
+
+/// Paths between two looks at the interrupt (a path in a dense medium: microseconds).
+pub(crate) const PATHS_PER_CHECK: u64 = 64;
 
 /// The most tentative collisions delta tracking may need to cross the box once
 /// (the largest σ_t times the box's diagonal).
@@ -459,7 +465,6 @@ pub fn estimate_with(
     config: &McConfig,
     control: &RunControl<'_>,
 ) -> Result<McEstimate, SolveError> {
-    let started = std::time::Instant::now();
     if config.batches < 2
         || config.particles == 0
         || config.max_depth == 0
@@ -515,21 +520,9 @@ pub fn estimate_with(
         let majorant = MajorantGrid::for_config(sigma_t, config);
         let mut ran = 0;
         for chunk in batch_ids.chunks(group_size) {
-            let out_of_time = control
-                .time_budget
-                .is_some_and(|budget| started.elapsed() >= budget)
-                || control
-                    .cancel
-                    .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed));
-            if out_of_time && ran >= 2 {
+            if control.interrupt.halted() {
                 break;
             }
-            // Past the budget only the two batches the standard error needs are traced.
-            let chunk = if out_of_time {
-                &chunk[..chunk.len().min(2 - ran)]
-            } else {
-                chunk
-            };
             let tallies: Vec<Tally<Vec<Vec<f64>>>> = chunk
                 .par_iter()
                 .map(|&batch| {
@@ -543,6 +536,7 @@ pub fn estimate_with(
                             config,
                             batch as u64,
                             fluence,
+                            &control.interrupt,
                         )
                     } else {
                         trace_batch(
@@ -554,6 +548,7 @@ pub fn estimate_with(
                             config,
                             batch as u64 + 1000 * *extinction as u64,
                             fluence,
+                            &control.interrupt,
                         )
                     };
                     // One report per batch, as each finishes.
@@ -565,7 +560,9 @@ pub fn estimate_with(
                 })
                 .collect();
             // Accumulate in batch order: the result does not depend on the thread count.
-            for tally in tallies {
+            // A batch an interrupt stopped part way is dropped.
+            let whole = tallies.iter().filter(|t| t.complete).count();
+            for tally in tallies.into_iter().filter(|t| t.complete) {
                 for (m, &c) in members.iter().enumerate() {
                     let inv_volume = 1.0 / geometry.cell_volume();
                     for (v, &t) in tally.fluence[m].iter().enumerate() {
@@ -592,8 +589,15 @@ pub fn estimate_with(
                     }
                 }
             }
-            ran += chunk.len();
-            finished += chunk.len();
+            ran += whole;
+            finished += whole;
+        }
+        if let Some(halt) = control.interrupt.halt().filter(|_| ran < 2) {
+            return Err(SolveError::Halted {
+                solver: "mc".into(),
+                stage: "its first two batches (the least a standard error needs)".into(),
+                halt,
+            });
         }
         for &c in members {
             done[c] = ran;
@@ -666,6 +670,7 @@ pub(crate) fn trace_batch<M: MediumSampler, F: FluenceTally>(
     config: &McConfig,
     batch: u64,
     fluence: F,
+    interrupt: &Interrupt,
 ) -> Tally<F> {
     let geometry = scene.geometry;
     let (lo, hi) = geometry.bounds();
@@ -675,6 +680,10 @@ pub(crate) fn trace_batch<M: MediumSampler, F: FluenceTally>(
     let surface = scene.surface.as_ref();
     for (l, light) in scene.lights.iter().enumerate() {
         for path in 0..config.particles {
+            if path % PATHS_PER_CHECK == 0 && interrupt.halted() {
+                tally.complete = false;
+                return tally;
+            }
             let mut rng = PathRng::new(config.seed, batch, (l as u64) << 40 | path);
             let Some((mut pos, mut dir, power)) =
                 emit(light, scene.emission[l].as_ref(), lo, hi, &mut rng)
@@ -799,6 +808,7 @@ pub(crate) fn trace_batch_spectral<M: MediumSampler, F: FluenceTally>(
     config: &McConfig,
     batch: u64,
     fluence: F,
+    interrupt: &Interrupt,
 ) -> Tally<F> {
     let geometry = scene.geometry;
     let (lo, hi) = geometry.bounds();
@@ -807,6 +817,10 @@ pub(crate) fn trace_batch_spectral<M: MediumSampler, F: FluenceTally>(
     let n = config.particles as f64;
     for (l, light) in scene.lights.iter().enumerate() {
         for path in 0..config.particles {
+            if path % PATHS_PER_CHECK == 0 && interrupt.halted() {
+                tally.complete = false;
+                return tally;
+            }
             let mut rng = PathRng::new(config.seed, batch + 5000, (l as u64) << 40 | path);
             let Some((mut pos, mut dir, power)) =
                 emit(light, scene.emission[l].as_ref(), lo, hi, &mut rng)

@@ -91,6 +91,7 @@ fn solve_kind(e: &SolveError) -> Kind {
         SolveError::Grid(g) => grid_kind(g),
         SolveError::NonFiniteOutput { .. } | SolveError::TooMuchWork { .. } => Kind::Solve,
         SolveError::Storage { .. } => Kind::Io,
+        SolveError::Halted { .. } => Kind::Solve,
     }
 }
 

@@ -186,6 +186,18 @@ pub(crate) fn render(
             Some(token) => token.get().flag.clone(),
             None => Arc::new(AtomicBool::new(false)),
         };
+        let deadline = match options.time_limit {
+            None => None,
+            Some(t) if t > 0.0 && t.is_finite() && t < 1e9 => {
+                Some(std::time::Instant::now() + std::time::Duration::from_secs_f64(t))
+            }
+            Some(t) => {
+                return Err(invalid(
+                    "time_limit",
+                    format!("{t:?}: a positive number of seconds"),
+                ));
+            }
+        };
         let (problem, traced) = (&built.problem, &*chosen.solver);
         let estimate = run_interruptible(py, &flag, || {
             let Some(imager) = traced.images() else {
@@ -202,7 +214,10 @@ pub(crate) fn render(
                     background,
                     ray: &ray,
                     progress: None,
-                    cancel: Some(&flag),
+                    interrupt: lucent::core::Interrupt::new(
+                        Some(flag.clone()),
+                        deadline,
+                    ),
                 },
             )
         })?

@@ -1,0 +1,324 @@
+//! Ctrl-C and the time limit stop every solve within a second, whatever it is doing: set-up
+//! (the uncollided light, a hierarchy, an assembly), a sweep, a batch, a paged pass, a
+//! device submission. Measured from the signal (the cancel flag set from another thread,
+//! or the time budget running out) to the solver's return, on problems sized so that the
+//! solve would run ten seconds or more, with the signal sent early (in set-up) and late (in
+//! the iteration).
+//!
+//! The bound is 1 s of wall time on a loaded 2-core CI machine: every loop that can run
+//! for more than ~0.1 s at these sizes checks the signal, so the time to stop is a few of
+//! those (the slowest thread's current piece of work, then the write-back of what was
+//! computed).
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use glam::DVec3;
+use lucent::core::{
+    Boundary, Field, Light, Medium, ParamValue, Params, Problem, SolveError, SolveOptions,
+    Spectrum, StopReason,
+};
+use lucent::grid::{Grid, GridGeometry};
+use lucent::optics::Phase;
+
+/// The longest a solve may take to stop after the signal.
+const WITHIN: Duration = Duration::from_secs(1);
+
+/// What lights a test problem carries.
+#[derive(Clone, Copy, PartialEq)]
+enum Lit {
+    /// A sun and a point light inside: the uncollided light is set-up work (seconds at
+    /// these sizes), so an early signal lands in it.
+    Set,
+    /// Volume emission only (a point light inside for the solvers that take only point
+    /// lights): no uncollided light, the solve goes straight to its iteration, so a late
+    /// signal lands in an iteration.
+    Iterate,
+}
+
+fn point_only(name: &str) -> bool {
+    matches!(
+        name,
+        "ftcs-p1" | "gpu-ftcs-p1" | "ftcs-ordinates" | "fem-p1-jacobi"
+    )
+}
+
+/// A cloud-like medium on a grid of about `n`³ cubic cells whose sides are no multiple of
+/// 8.
+fn problem(name: &str, n: usize, lit: Lit) -> Problem {
+    let dims = [n + 1, n, n - 1];
+    let h = 2.0 / n as f64;
+    let geometry = GridGeometry::new(dims, DVec3::splat(h), DVec3::splat(-1.0)).unwrap();
+    let sigma_t = if point_only(name) {
+        Grid::filled(geometry, 8.0)
+    } else {
+        Grid::from_fn(geometry, |x| {
+            (2.0 + 30.0 * (-3.0 * x.length_squared()).exp()) as f32
+        })
+    };
+    let albedo = if name.ends_with("fem-p1-jacobi") {
+        0.0
+    } else {
+        0.95
+    };
+    let medium = Medium {
+        sigma_t: vec![sigma_t],
+        albedo: vec![Field::Constant(albedo)],
+        phase: Phase::Isotropic,
+    };
+    let point = Light::Point {
+        position: DVec3::new(0.05, -0.04, 0.03),
+        intensity: Spectrum::Grey(1.0),
+    };
+    let lights = match lit {
+        _ if point_only(name) => vec![point],
+        Lit::Set => vec![
+            Light::Directional {
+                direction: DVec3::new(-0.3, -0.4, -0.8).normalize(),
+                irradiance: Spectrum::Grey(1.0),
+            },
+            point,
+        ],
+        Lit::Iterate if matches!(name, "direct" | "direct-refractive" | "gpu-direct") => {
+            vec![point]
+        }
+        Lit::Iterate => vec![Light::Emission {
+            grid: Grid::from_fn(geometry, |x| (-4.0 * x.length_squared()).exp() as f32),
+            scale: Spectrum::Grey(1.0),
+        }],
+    };
+    Problem::new(geometry, medium, lights, Boundary::Vacuum, None).unwrap()
+}
+
+/// The grid side and parameters at which `name` would run ten seconds or more on 2 cores
+/// (the iterative solvers never stop: their tolerance is 0).
+fn sized(name: &str, lit: Lit) -> (usize, Params) {
+    let mut p = Params::default();
+    let mut set = |k: &str, v: ParamValue| {
+        p.0.insert(k.into(), v);
+    };
+    let n = match (name.trim_start_matches("gpu-"), lit) {
+        ("direct", _) => 160,
+        ("direct-refractive", _) => 96,
+        ("mc", _) => {
+            set("particles", ParamValue::Int(1 << 40));
+            set("batches", ParamValue::Int(4));
+            48
+        }
+        // The first Galerkin product of the finite elements' hierarchy, and the sparse
+        // matrix Murray's system's triplets become, cannot be stopped part way: at these
+        // sizes they take a fraction of a second.
+        ("fem-diffusion", _) => 64,
+        // The march converges in a few passes (its own tolerance): a grid whose passes
+        // take seconds.
+        ("convection-diffusion", _) => 160,
+        ("fem-p1-jacobi", _) => 32,
+        ("auto", _) => {
+            set("tolerance", ParamValue::Float(0.001));
+            80
+        }
+        (_, Lit::Set) => 96,
+        (_, Lit::Iterate) => 64,
+    };
+    (n, p)
+}
+
+/// How a stopped solve ended, and how long after the signal.
+struct Stopped {
+    after_signal: Duration,
+    outcome: Result<StopReason, SolveError>,
+}
+
+/// Runs `solve` with `options` carrying a fresh cancel flag, and sends the signal `at`
+/// after the start: the flag (`time_limit` false) or the time budget running out.
+fn stop_with(
+    at: Duration,
+    time_limit: bool,
+    options: SolveOptions,
+    solve: impl FnOnce(&SolveOptions) -> Result<StopReason, SolveError> + Send,
+) -> Stopped {
+    let cancel = Arc::new(AtomicBool::new(false));
+    let options = SolveOptions {
+        relative_tolerance: 0.0,
+        max_iterations: usize::MAX / 2,
+        time_budget: time_limit.then_some(at),
+        cancel: Some(cancel.clone()),
+        // A pool of its own: the tests run side by side, and a solve queued behind
+        // another test's work in rayon's global pool would be slow to stop for no fault
+        // of its own.
+        threads: Some(2),
+        ..options
+    };
+    let started = Instant::now();
+    let (outcome, signalled) = std::thread::scope(|s| {
+        let solve = s.spawn(|| solve(&options));
+        let signalled = started + at;
+        if !time_limit {
+            while Instant::now() < signalled && !solve.is_finished() {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            cancel.store(true, Ordering::Relaxed);
+        }
+        (solve.join().unwrap(), signalled)
+    });
+    Stopped {
+        after_signal: Instant::now().saturating_duration_since(signalled),
+        outcome,
+    }
+}
+
+/// `name` in memory on its sized problem.
+fn stop(name: &str, lit: Lit, at: Duration, time_limit: bool) -> Stopped {
+    let (n, params) = sized(name, lit);
+    let solver = lucent::registry().build(name, &params).unwrap();
+    let mut problem = problem(name, n, lit);
+    if solver.admits(&problem).is_err() {
+        // No emission (`convection-diffusion`): a point light inside, its own source.
+        problem = Problem::new(
+            *problem.geometry(),
+            problem.medium().clone(),
+            vec![Light::Point {
+                position: DVec3::new(0.05, -0.04, 0.03),
+                intensity: Spectrum::Grey(1.0),
+            }],
+            Boundary::Vacuum,
+            None,
+        )
+        .unwrap();
+    }
+    stop_with(at, time_limit, SolveOptions::default(), |options| {
+        solver
+            .solve(&problem, options)
+            .map(|s| s.report.stop_reason)
+    })
+}
+
+/// The signal stopped the solve within [`WITHIN`], and the way it says so: a stop reason
+/// naming the signal (what was computed comes back), or [`SolveError::Halted`] (stopped
+/// before any result existed). A solve that finished first is a test that proves nothing.
+fn assert_stopped(what: &str, s: &Stopped, time_limit: bool) {
+    assert!(
+        s.after_signal <= WITHIN,
+        "{what}: stopped {:.3} s after the signal: {:?}",
+        s.after_signal.as_secs_f64(),
+        s.outcome
+    );
+    let by_signal = match &s.outcome {
+        Ok(StopReason::Interrupted { .. }) => !time_limit,
+        Ok(StopReason::TimeLimit { .. }) => time_limit,
+        Err(SolveError::Halted { halt, .. }) => *halt == if time_limit {
+            lucent::core::Halt::TimeLimit
+        } else {
+            lucent::core::Halt::Interrupted
+        },
+        _ => false,
+    };
+    assert!(by_signal, "{what}: {:?}", s.outcome.as_ref().map_err(|e| e.to_string()));
+}
+
+/// Every phase of `name` in memory: Ctrl-C early (in set-up: the uncollided light, a
+/// hierarchy, the first batches), the time limit late (in the iteration), Ctrl-C late.
+/// (`auto` runs the solver it chooses, whose own test covers its iteration; its set-up,
+/// the regime and the choice, is tested here.)
+fn in_memory(name: &str) {
+    let early = Duration::from_millis(300);
+    let late = Duration::from_millis(1500);
+    let case = |phase: &str, lit, at, limit| {
+        let what = format!("{name}, {phase}");
+        assert_stopped(&what, &stop(name, lit, at, limit), limit);
+    };
+    case("Ctrl-C in set-up", Lit::Set, early, false);
+    case("time limit in set-up", Lit::Set, early, true);
+    if name != "auto" {
+        case("time limit iterating", Lit::Iterate, late, true);
+        case("Ctrl-C iterating", Lit::Iterate, late, false);
+    }
+}
+
+macro_rules! in_memory_tests {
+    ($($test:ident: $name:literal,)*) => {
+        $(
+            #[test]
+            fn $test() {
+                in_memory($name);
+            }
+        )*
+    };
+}
+
+in_memory_tests! {
+    direct_stops_in_memory: "direct",
+    direct_refractive_stops_in_memory: "direct-refractive",
+    mc_stops_in_memory: "mc",
+    diffusion_mg_stops_in_memory: "diffusion-mg",
+    diffusion_mgcg_stops_in_memory: "diffusion-mgcg",
+    diffusion_cg_stops_in_memory: "diffusion-cg",
+    diffusion_sor_stops_in_memory: "diffusion-sor",
+    diffusion_jacobi_stops_in_memory: "diffusion-jacobi",
+    ftcs_diffusion_stops_in_memory: "ftcs-diffusion",
+    jacobi_diffusion_stops_in_memory: "jacobi-diffusion",
+    convection_diffusion_stops_in_memory: "convection-diffusion",
+    ftcs_p1_stops_in_memory: "ftcs-p1",
+    ftcs_ordinates_stops_in_memory: "ftcs-ordinates",
+    fem_p1_jacobi_stops_in_memory: "fem-p1-jacobi",
+    fem_diffusion_stops_in_memory: "fem-diffusion",
+    dom_stops_in_memory: "dom",
+    lbm_stops_in_memory: "lbm",
+    hybrid_stops_in_memory: "hybrid",
+    auto_stops_in_memory: "auto",
+}
+
+/// Every registered solver is in the list above (or is a device twin, tested below).
+#[test]
+fn every_cpu_solver_has_its_stop_test() {
+    let source = include_str!("stops.rs");
+    for entry in lucent::registry().entries() {
+        if entry.name.starts_with("gpu-") {
+            continue;
+        }
+        assert!(
+            source.contains(&format!("_stops_in_memory: \"{}\"", entry.name)),
+            "{} has no stop test",
+            entry.name
+        );
+    }
+}
+/// Every CPU solver, for the survey.
+fn cpu_solvers() -> Vec<String> {
+    lucent::registry()
+        .entries()
+        .iter()
+        .map(|e| e.name.to_owned())
+        .filter(|n| !n.starts_with("gpu-"))
+        .collect()
+}
+
+/// `LUCENT_STOP_SURVEY=1 cargo test --test stops survey -- --nocapture`: the time each
+/// solver takes to stop, early and late, by Ctrl-C and by the time limit.
+#[test]
+fn survey() {
+    if std::env::var_os("LUCENT_STOP_SURVEY").is_none() {
+        return;
+    }
+    let only = std::env::var("LUCENT_STOP_ONLY").ok();
+    for name in cpu_solvers() {
+        if only.as_deref().is_some_and(|o| !o.split(',').any(|x| x == name)) {
+            continue;
+        }
+        let times: Vec<f64> = std::env::var("LUCENT_STOP_AT")
+            .ok()
+            .map(|t| t.split(',').filter_map(|x| x.parse().ok()).collect())
+            .unwrap_or_else(|| vec![0.2, 2.0]);
+        for (at, limit) in times.iter().flat_map(|&t| [(t, false), (t, true)]) {
+            let lit = if at < 1.0 { Lit::Set } else { Lit::Iterate };
+            let s = stop(&name, lit, Duration::from_secs_f64(at), limit);
+            eprintln!(
+                "{name:<22} {} at {at:>4} s: stopped {:>7.3} s after the signal: {:?}",
+                if limit { "time limit" } else { "ctrl-c    " },
+                s.after_signal.as_secs_f64(),
+                s.outcome.map(|r| format!("{r:?}")).map_err(|e| e.to_string())
+            );
+        }
+    }
+}
