@@ -761,12 +761,27 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
                 background,
                 ray: &ray,
                 progress: Some(&report),
-                interrupt: lucent::core::Interrupt::of(&args.solver.options(&chosen, meter_free())?),
+                interrupt: lucent::core::Interrupt::of(
+                    &args.solver.options(&chosen, meter_free())?,
+                ),
             },
         );
         progress.finish_and_clear();
         let estimate = estimate?;
         if estimate.rows_traced < estimate.height {
+            // Ctrl-C writes what was traced (exit 130); the time limit is a solve that did
+            // not finish, as for every solver: exit 3, nothing written unless asked.
+            let by_clock = !interrupted();
+            if by_clock && !args.solver.allow_unconverged {
+                let _ = writeln!(
+                    io::stderr(),
+                    "lucent: `{}` reached its time limit with {} of {} rows traced; no image written (--allow-unconverged writes it anyway)",
+                    chosen.solver.name(),
+                    estimate.rows_traced,
+                    estimate.height
+                );
+                return Ok(Ended::Unconverged);
+            }
             let _ = writeln!(
                 io::stderr(),
                 "lucent: stopped: {} of {} rows traced; the others show the background (standard error {} in the .stderr.exr)",

@@ -1851,3 +1851,116 @@ fn outputs_onto_a_full_disk_fail_and_keep_the_older_file() {
         assert!(left.is_empty(), "{args:?} left {left:?}");
     }
 }
+
+/// Sends SIGINT to `child` after `after` and returns its output and how long it took to end
+/// after the signal.
+#[cfg(unix)]
+fn interrupt_after(
+    child: std::process::Child,
+    after: std::time::Duration,
+) -> (Output, std::time::Duration) {
+    std::thread::sleep(after);
+    let signalled = std::time::Instant::now();
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let out = child.wait_with_output().unwrap();
+    (out, signalled.elapsed())
+}
+
+/// A cloud of `n`³ cells lit by a sun, as a scene file in `dir`.
+fn cloud_scene(dir: &Path, n: usize) -> String {
+    let text = std::fs::read_to_string(scene("default.toml"))
+        .unwrap()
+        .replace(
+            "resolution = [64, 64, 64]",
+            &format!("resolution = [{n}, {n}, {n}]"),
+        );
+    std::fs::write(dir.join("cloud.toml"), text).unwrap();
+    "cloud.toml".into()
+}
+
+/// Ctrl-C before a solve has started (building a paged medium takes tens of seconds at
+/// 384³) ends the process at once with 130, writing nothing; Ctrl-C during `resolution`
+/// exits 130, not 3 (its interrupted level read as "did not converge").
+#[cfg(unix)]
+#[test]
+fn ctrl_c_before_a_solve_or_during_resolution_exits_130_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let cloud = cloud_scene(dir.path(), 384);
+    let child = Command::new(env!("CARGO_BIN_EXE_lucent"))
+        .args([
+            "solve",
+            &cloud,
+            "--solver",
+            "direct",
+            "--memory-budget",
+            "64MiB",
+        ])
+        .args(["-o", "phi.npy", "-q"])
+        .current_dir(dir.path())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (out, took) = interrupt_after(child, std::time::Duration::from_millis(500));
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
+    assert!(took < std::time::Duration::from_secs(1), "took {took:?}");
+    assert!(!dir.path().join("phi.npy").exists() && !dir.path().join("phi.json").exists());
+
+    let cloud = cloud_scene(dir.path(), 96);
+    let child = Command::new(env!("CARGO_BIN_EXE_lucent"))
+        .args([
+            "resolution",
+            &cloud,
+            "--solver",
+            "diffusion-jacobi",
+            "--error",
+            "0.001",
+        ])
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (out, took) = interrupt_after(child, std::time::Duration::from_millis(1500));
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
+    assert!(took < std::time::Duration::from_secs(1), "took {took:?}");
+}
+
+/// `render --solver mc --time-limit` stops within a second of the limit (camera paths once
+/// ignored it): a solve that did not finish, exit 3, no image unless
+/// `--allow-unconverged`, which writes the rows traced.
+#[test]
+fn a_path_traced_render_honours_the_time_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let cloud = cloud_scene(dir.path(), 64);
+    for (allow, code) in [(false, 3), (true, 0)] {
+        let started = std::time::Instant::now();
+        let mut args = vec![
+            "render",
+            &cloud,
+            "--solver",
+            "mc",
+            "--param",
+            "spp=65536",
+            "--size",
+            "64x48",
+            "--time-limit",
+            "1",
+            "-o",
+            "mc.png",
+            "-q",
+        ];
+        if allow {
+            args.push("--allow-unconverged");
+        }
+        let out = lucent(&args, dir.path());
+        let took = started.elapsed();
+        assert_eq!(out.status.code(), Some(code), "{}", stderr(&out));
+        // One second of tracing, a second for the rest (building the scene, writing).
+        assert!(took < std::time::Duration::from_secs(3), "took {took:?}");
+        assert_eq!(dir.path().join("mc.png").exists(), allow);
+    }
+}

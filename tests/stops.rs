@@ -112,8 +112,12 @@ fn sized(name: &str, lit: Lit) -> (usize, Params) {
         ("fem-diffusion", _) => 64,
         // The march converges in a few passes (its own tolerance): a grid whose passes
         // take seconds.
-        ("convection-diffusion", _) => 160,
-        ("fem-p1-jacobi", _) => 32,
+        ("convection-diffusion", _) => 144,
+        ("fem-p1-jacobi", _) => {
+            // Murray's Jacobi diverges on this system (ρ ≥ 19/8) before a late signal.
+            set("solver", ParamValue::Text("gmres".into()));
+            24
+        }
         ("auto", _) => {
             set("tolerance", ParamValue::Float(0.001));
             80
@@ -138,6 +142,12 @@ fn stop_with(
     options: SolveOptions,
     solve: impl FnOnce(&SolveOptions) -> Result<StopReason, SolveError> + Send,
 ) -> Stopped {
+    // One timed solve at a time: the tests of this file run side by side, and a solve
+    // sharing two cores with another would measure the other's work.
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _turn = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     let cancel = Arc::new(AtomicBool::new(false));
     let options = SolveOptions {
         relative_tolerance: 0.0,
@@ -207,14 +217,21 @@ fn assert_stopped(what: &str, s: &Stopped, time_limit: bool) {
     let by_signal = match &s.outcome {
         Ok(StopReason::Interrupted { .. }) => !time_limit,
         Ok(StopReason::TimeLimit { .. }) => time_limit,
-        Err(SolveError::Halted { halt, .. }) => *halt == if time_limit {
-            lucent::core::Halt::TimeLimit
-        } else {
-            lucent::core::Halt::Interrupted
-        },
+        Err(SolveError::Halted { halt, .. }) => {
+            *halt
+                == if time_limit {
+                    lucent::core::Halt::TimeLimit
+                } else {
+                    lucent::core::Halt::Interrupted
+                }
+        }
         _ => false,
     };
-    assert!(by_signal, "{what}: {:?}", s.outcome.as_ref().map_err(|e| e.to_string()));
+    assert!(
+        by_signal,
+        "{what}: {:?}",
+        s.outcome.as_ref().map_err(|e| e.to_string())
+    );
 }
 
 /// Every phase of `name` in memory: Ctrl-C early (in set-up: the uncollided light, a
@@ -303,7 +320,10 @@ fn survey() {
     }
     let only = std::env::var("LUCENT_STOP_ONLY").ok();
     for name in cpu_solvers() {
-        if only.as_deref().is_some_and(|o| !o.split(',').any(|x| x == name)) {
+        if only
+            .as_deref()
+            .is_some_and(|o| !o.split(',').any(|x| x == name))
+        {
             continue;
         }
         let times: Vec<f64> = std::env::var("LUCENT_STOP_AT")
@@ -317,8 +337,240 @@ fn survey() {
                 "{name:<22} {} at {at:>4} s: stopped {:>7.3} s after the signal: {:?}",
                 if limit { "time limit" } else { "ctrl-c    " },
                 s.after_signal.as_secs_f64(),
-                s.outcome.map(|r| format!("{r:?}")).map_err(|e| e.to_string())
+                s.outcome
+                    .map(|r| format!("{r:?}"))
+                    .map_err(|e| e.to_string())
             );
+        }
+    }
+}
+
+/// A procedural cloud (or, for `Lit::Iterate`, a point light inside a homogeneous
+/// medium) as a scene file gives it, on a grid of about `n`³ cubic cells.
+fn scene(n: usize, lit: Lit) -> lucent::scene::Scene {
+    let h = 2.0 / n as f64;
+    let (x, y, z) = ((n + 1) as f64 * h, n as f64 * h, (n - 1) as f64 * h);
+    let lights = match lit {
+        Lit::Set => {
+            "[[lights]]\nkind = \"directional\"\ndirection = [-0.3, -0.4, -0.86]\nirradiance = 1.0\n[[lights]]\nkind = \"point\"\nposition = [1.05, 0.96, 1.03]\nintensity = 1.0\n"
+        }
+        Lit::Iterate => {
+            "[[lights]]\nkind = \"point\"\nposition = [1.05, 0.96, 1.03]\nintensity = 1.0\n"
+        }
+    };
+    let volume = match lit {
+        Lit::Set => "kind = \"cloud\"\nseed = 3\nthreshold = 0.2",
+        Lit::Iterate => {
+            "kind = \"shape\"\nshape = { type = \"box\", min = [-1.0, -1.0, -1.0], max = [9.0, 9.0, 9.0] }"
+        }
+    };
+    let text = format!(
+        "[volume]\n{volume}\nresolution = [{}, {n}, {}]\nbounds = [[0, 0, 0], [{x}, {y}, {z}]]\n[medium]\ndensity = 20.0\nalbedo = 0.95\n{lights}[camera]\nkind = \"pinhole\"\nposition = [5, 1, 1]\nlook_at = [1, 1, 1]\n",
+        n + 1,
+        n - 1
+    );
+    lucent::scene::Scene::parse(&text, std::path::Path::new("stops.toml")).unwrap()
+}
+
+/// `name` out of core: the medium paged under a budget of an eighth of its dense fields.
+fn stop_paged(name: &str, n: usize, lit: Lit, at: Duration, time_limit: bool) -> Stopped {
+    let solver = lucent::registry().build(name, &Params::default()).unwrap();
+    let scene = scene(n, lit);
+    let options = SolveOptions {
+        memory_budget: 64 << 20,
+        ..SolveOptions::default()
+    };
+    let problem = scene.build_paged_for(solver.as_ref(), &options).unwrap();
+    stop_with(at, time_limit, options, |options| {
+        solver
+            .solve_paged(&problem, options)
+            .map(|s| s.report.stop_reason)
+    })
+}
+
+/// Every solver that pages, out of core: Ctrl-C and the time limit in set-up (the paged
+/// uncollided light and first collisions, the first batches) and in the iteration (a
+/// paged pass).
+#[test]
+fn every_paging_solver_stops_out_of_core() {
+    let early = Duration::from_millis(300);
+    let late = Duration::from_millis(1500);
+    let registry = lucent::registry();
+    let mut tested = 0;
+    for entry in registry.entries() {
+        let solver = registry.build(entry.name, &Params::default()).unwrap();
+        if !solver.pages() {
+            continue;
+        }
+        let name = entry.name;
+        // What each takes out of core: `convection-diffusion` distant lights only, the
+        // moment schemes a point light inside only.
+        let (set_up, iterates) = match name {
+            "direct" => (Lit::Set, None),
+            "mc" => (Lit::Set, None),
+            "convection-diffusion" => (Lit::Set, None),
+            "ftcs-p1" | "ftcs-ordinates" => (Lit::Iterate, Some(Lit::Iterate)),
+            _ => (Lit::Set, Some(Lit::Iterate)),
+        };
+        let n = match name {
+            "direct" | "convection-diffusion" => 128,
+            "mc" => 64,
+            _ => 96,
+        };
+        for (phase, lit, at) in [
+            ("set-up", Some(set_up), early),
+            ("iteration", iterates, late),
+        ] {
+            let Some(lit) = lit else { continue };
+            for limit in [false, true] {
+                let what = format!(
+                    "{name} out of core, {} in {phase}",
+                    if limit { "time limit" } else { "Ctrl-C" }
+                );
+                let stopped = if name == "convection-diffusion" {
+                    // Distant lights only: the sun of the cloud, without the point light.
+                    stop_paged_sun_only(name, n, at, limit)
+                } else {
+                    stop_paged(name, n, lit, at, limit)
+                };
+                assert_stopped(&what, &stopped, limit);
+            }
+        }
+        tested += 1;
+    }
+    assert!(tested >= 7, "{tested} solvers page");
+}
+
+/// [`stop_paged`] on the cloud lit by its sun alone.
+fn stop_paged_sun_only(name: &str, n: usize, at: Duration, time_limit: bool) -> Stopped {
+    let solver = lucent::registry().build(name, &Params::default()).unwrap();
+    let mut scene = scene(n, Lit::Set);
+    scene.lights.truncate(1);
+    let options = SolveOptions {
+        memory_budget: 64 << 20,
+        ..SolveOptions::default()
+    };
+    let problem = scene.build_paged_for(solver.as_ref(), &options).unwrap();
+    stop_with(at, time_limit, options, |options| {
+        solver
+            .solve_paged(&problem, options)
+            .map(|s| s.report.stop_reason)
+    })
+}
+
+/// The solvers that split over ranks, on two in-process ranks: any rank's signal stops
+/// every rank (the flags travel with the norms), in set-up and in the iteration.
+#[test]
+fn every_ranked_solver_stops_on_two_ranks() {
+    let early = Duration::from_millis(300);
+    let late = Duration::from_millis(1500);
+    // `convection-diffusion` splits its one-pass absorption march over ranks, which runs
+    // its pass to the end (the ranks go in lock step; no flag is reduced inside a pass):
+    // docs/reliability.md lists it among the steps that can take longer.
+    for name in [
+        "diffusion-mg",
+        "ftcs-diffusion",
+        "jacobi-diffusion",
+        "ftcs-p1",
+    ] {
+        let (n, _) = sized(name, Lit::Iterate);
+        let mut params = Params::default();
+        params.0.insert("ranks".into(), ParamValue::Int(2));
+        let solver = lucent::registry().build(name, &params).unwrap();
+        for (phase, lit, at) in [
+            ("set-up", Lit::Set, early),
+            ("iteration", Lit::Iterate, late),
+        ] {
+            let mut problem = problem(name, n, lit);
+            if solver.admits(&problem).is_err() {
+                problem = problem_with_point(&problem);
+            }
+            for limit in [false, true] {
+                let what = format!(
+                    "{name} on 2 ranks, {} in {phase}",
+                    if limit { "time limit" } else { "Ctrl-C" }
+                );
+                let stopped = stop_with(at, limit, SolveOptions::default(), |options| {
+                    solver
+                        .solve(&problem, options)
+                        .map(|s| s.report.stop_reason)
+                });
+                // The march of a sun is one pass: over before a late signal.
+                if stopped.after_signal.is_zero()
+                    && matches!(stopped.outcome, Ok(ref r) if r.is_converged())
+                {
+                    continue;
+                }
+                assert_stopped(&what, &stopped, limit);
+            }
+        }
+    }
+}
+
+/// `problem` lit by a point light inside instead.
+fn problem_with_point(problem: &Problem) -> Problem {
+    Problem::new(
+        *problem.geometry(),
+        problem.medium().clone(),
+        vec![Light::Point {
+            position: DVec3::new(0.05, -0.04, 0.03),
+            intensity: Spectrum::Grey(1.0),
+        }],
+        Boundary::Vacuum,
+        None,
+    )
+    .unwrap()
+}
+
+/// The device twins (on lavapipe in CI): a submission cannot be interrupted, so batches
+/// are sized to a quarter of a second of device time and the signal is asked between
+/// them. Skipped where no adapter exists outside CI.
+#[test]
+fn every_device_solver_stops() {
+    let ci = std::env::var("CI").is_ok_and(|v| v == "true" || v == "1");
+    if !ci && lucent::gpu::GpuContext::shared().is_err() {
+        eprintln!("skipped: no GPU adapter");
+        return;
+    }
+    let early = Duration::from_millis(300);
+    let late = Duration::from_millis(1500);
+    for entry in lucent::registry().entries() {
+        let name = entry.name;
+        if !name.starts_with("gpu-") {
+            continue;
+        }
+        let solver = lucent::registry().build(name, &Params::default()).unwrap();
+        // One device transport of `gpu-dom` is one submission that cannot be stopped part
+        // way (14 s at 64³ on lavapipe): a grid where it takes a fraction of a second.
+        let n = if name == "gpu-dom" { 20 } else { 64 };
+        for (phase, lit, at) in [
+            ("set-up", Lit::Set, early),
+            ("iteration", Lit::Iterate, late),
+        ] {
+            let mut problem = problem(name, n, lit);
+            if solver.admits(&problem).is_err() {
+                problem = problem_with_point(&problem);
+            }
+            if solver.admits(&problem).is_err() {
+                continue;
+            }
+            for limit in [false, true] {
+                let what = format!(
+                    "{name}, {} in {phase}",
+                    if limit { "time limit" } else { "Ctrl-C" }
+                );
+                let stopped = stop_with(at, limit, SolveOptions::default(), |options| {
+                    solver
+                        .solve(&problem, options)
+                        .map(|s| s.report.stop_reason)
+                });
+                // A device solve that finished before the signal proves nothing here but
+                // is no failure: lavapipe's speed varies with the machine.
+                if matches!(stopped.outcome, Ok(ref r) if r.is_converged()) {
+                    continue;
+                }
+                assert_stopped(&what, &stopped, limit);
+            }
         }
     }
 }

@@ -334,9 +334,7 @@ impl DirectSolver {
         let needed = Self::paged_needs(problem, lights, options)?;
 
         let interrupt = Interrupt::of(options);
-        let halted = |stage: &'static str| {
-            interrupt.check(Self::NAME, stage)
-        };
+        let halted = |stage: &'static str| interrupt.check(Self::NAME, stage);
         let layers = layout.bricks()[2];
         let total_layers = (layers * (outputs.max(1))) as f64;
         let mut layers_done = 0.0;

@@ -76,9 +76,11 @@ impl Interrupt {
     pub fn from_start(options: &SolveOptions, started: Instant) -> Self {
         Self {
             cancel: options.cancel.clone(),
-            deadline: options
-                .time_budget
-                .map(|t| started.checked_add(t).unwrap_or(started + Duration::from_secs(1 << 40))),
+            deadline: options.time_budget.map(|t| {
+                started
+                    .checked_add(t)
+                    .unwrap_or(started + Duration::from_secs(1 << 40))
+            }),
         }
     }
 

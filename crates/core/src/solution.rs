@@ -190,17 +190,17 @@ pub struct Solution {
 }
 
 impl Solution {
-    /// Whether this can be a solution of `problem`: a fluence per channel of the problem,
-    /// every grid (fluence, standard errors, angular parts) on the problem's geometry.
-    /// `Err` says what differs. (A renderer handed the solution of another problem would
-    /// otherwise sample it as if it were this one's.)
+    /// Whether this can be a solution of `problem`: grey or RGB fluence (a grey problem's
+    /// solution may carry three channels, which the renderer follows), and every grid
+    /// (fluence, standard errors, angular parts) on the problem's geometry. `Err` says what
+    /// differs. (A renderer handed the solution of another problem would otherwise sample
+    /// it as if it were this one's.)
     pub fn check_fits(&self, problem: &crate::Problem) -> Result<(), String> {
         let geometry = problem.geometry();
-        if self.fluence.len() != problem.channels() {
+        if !matches!(self.fluence.len(), 1 | 3) {
             return Err(format!(
-                "the solution has {} fluence channels, the problem {}",
-                self.fluence.len(),
-                problem.channels()
+                "the solution has {} fluence channels (1 or 3)",
+                self.fluence.len()
             ));
         }
         let mut grids: Vec<&Grid> = self.fluence.iter().collect();

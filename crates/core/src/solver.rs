@@ -175,6 +175,20 @@ impl Capabilities {
 }
 
 impl Capabilities {
+    /// [`Capabilities::check_paged`] without what only the medium's values can say
+    /// (whether it absorbs): for a [`crate::PagedProblem::shell`], whose medium is zero.
+    pub fn check_paged_shape(
+        &self,
+        solver: &str,
+        problem: &crate::PagedProblem,
+    ) -> Result<(), SolveError> {
+        Capabilities {
+            needs_absorption: false,
+            ..self.clone()
+        }
+        .check_paged(solver, problem)
+    }
+
     /// [`Capabilities::check`] for a paged problem (which has no embedded geometry and no
     /// emission): the same verdicts, uniformity taken from the fields' brick ranges and the
     /// absorption test made slab by slab.

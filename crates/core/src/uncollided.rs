@@ -748,24 +748,25 @@ impl Uncollided {
             .collect();
         let sigma_t = problem.medium().sigma_t.clone();
         let cutoff = DirectSolver::default().max_optical_depth;
-        let cells = options.install(|| {
-            lights
-                .iter()
-                .map(|light| {
-                    sigma_t
-                        .iter()
-                        .filter_map(|s| {
-                            uncollided_cells_within(s, light, cutoff, &interrupt).transpose()
-                        })
-                        .collect::<Result<Vec<_>, Halt>>()
-                })
-                .collect::<Result<Vec<_>, Halt>>()
-        })?
-        .map_err(|halt| SolveError::Halted {
-            solver: DirectSolver::NAME.into(),
-            stage: "the uncollided light's cell integrals".into(),
-            halt,
-        })?;
+        let cells = options
+            .install(|| {
+                lights
+                    .iter()
+                    .map(|light| {
+                        sigma_t
+                            .iter()
+                            .filter_map(|s| {
+                                uncollided_cells_within(s, light, cutoff, &interrupt).transpose()
+                            })
+                            .collect::<Result<Vec<_>, Halt>>()
+                    })
+                    .collect::<Result<Vec<_>, Halt>>()
+            })?
+            .map_err(|halt| SolveError::Halted {
+                solver: DirectSolver::NAME.into(),
+                stage: "the uncollided light's cell integrals".into(),
+                halt,
+            })?;
         Ok(Self {
             direct,
             lights,

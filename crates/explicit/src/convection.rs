@@ -837,7 +837,12 @@ pub fn propagate(
                     {
                         // The last whole pass's field.
                         let last = history.last().min(1.0);
-                        return stop(halt.stop_reason(last), rho, history.into_residuals(), iteration);
+                        return stop(
+                            halt.stop_reason(last),
+                            rho,
+                            history.into_residuals(),
+                            iteration,
+                        );
                     }
                     next[c] = setup.fixed_point(c, &next);
                 }

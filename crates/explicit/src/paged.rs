@@ -90,6 +90,7 @@ pub(crate) fn convection(
     let before = problem.pager().stats();
     let err = |e| paging_error(name, e);
     let (directions, lattice, needed) = convection_needs(name, problem, options)?;
+    let interrupt = lucent_core::Interrupt::of(options);
     let geometry = *problem.geometry();
     let [nx, ny, nz] = geometry.dims();
     let layout = *problem.layout();
@@ -107,10 +108,15 @@ pub(crate) fn convection(
         for direction in &directions {
             let field = problem.new_field().map_err(err)?;
             let mut plane32 = Vec::new();
-            crate::convection::march_distant_planes(
+            let marched = crate::convection::march_distant_planes(
                 &lattice,
                 *direction,
                 |axis, p, out| {
+                    // Asked every plane (a plane of 1024² cells through the pager takes
+                    // tens of milliseconds; a march, minutes): the march ends there.
+                    if interrupt.halted() {
+                        return Err(lucent_paging::PagingError::Shape("interrupted".into()));
+                    }
                     plane32.resize(out.len(), 0.0);
                     sigma_t.read_plane(axis, p, &mut plane32)?;
                     for (o, v) in out.iter_mut().zip(&plane32) {
@@ -122,8 +128,9 @@ pub(crate) fn convection(
                     let stored: Vec<f32> = values.iter().map(|&v| v as f32).collect();
                     field.write_plane(axis, p, &stored)
                 },
-            )
-            .map_err(err)?;
+            );
+            interrupt.check(name, "the paged absorption march")?;
+            marched.map_err(err)?;
             light_fields.push(field);
             done += 1.0;
             options.report(Progress {

@@ -462,29 +462,30 @@ impl Channel<'_> {
             step += 1;
             let mut sums = Sums::new(4);
             let (mut change, mut size) = (ExactSum::new(), ExactSum::new());
-            let halted = self.pass(now, next, &mut ring, &mut compute, &mut |old, new| {
-                for n in new.chunks(4) {
-                    for (field, v) in n.iter().enumerate() {
-                        sums.see(field, *v);
+            let halted = self
+                .pass(now, next, &mut ring, &mut compute, &mut |old, new| {
+                    for n in new.chunks(4) {
+                        for (field, v) in n.iter().enumerate() {
+                            sums.see(field, *v);
+                        }
                     }
-                }
-                // The norm's runs of eight cells along x, each left to right, the run
-                // sums added exactly (as `p1::march` sums them).
-                let line = 4 * nx;
-                for (o, n) in old.chunks(line).zip(new.chunks(line)) {
-                    for (o, n) in o.chunks(4 * NORM_RUN).zip(n.chunks(4 * NORM_RUN)) {
-                        let (c, z) = o
-                            .chunks(4)
-                            .zip(n.chunks(4))
-                            .fold((0.0, 0.0), |(c, z), (o, n)| {
-                                (c + (n[0] - o[0]).powi(2), z + n[0] * n[0])
-                            });
-                        change.add(c);
-                        size.add(z);
+                    // The norm's runs of eight cells along x, each left to right, the run
+                    // sums added exactly (as `p1::march` sums them).
+                    let line = 4 * nx;
+                    for (o, n) in old.chunks(line).zip(new.chunks(line)) {
+                        for (o, n) in o.chunks(4 * NORM_RUN).zip(n.chunks(4 * NORM_RUN)) {
+                            let (c, z) = o
+                                .chunks(4)
+                                .zip(n.chunks(4))
+                                .fold((0.0, 0.0), |(c, z), (o, n)| {
+                                    (c + (n[0] - o[0]).powi(2), z + n[0] * n[0])
+                                });
+                            change.add(c);
+                            size.add(z);
+                        }
                     }
-                }
-            })
-            .map_err(err)?;
+                })
+                .map_err(err)?;
             if let Some(halt) = halted {
                 let changes = history.residuals().to_vec();
                 let last = changes.last().copied().unwrap_or(1.0);
@@ -593,16 +594,17 @@ impl Channel<'_> {
                 });
                 Ok(())
             };
-            let halted = self.pass(now, next, &mut ring, &mut compute, &mut |old, new| {
-                for (o, n) in old.chunks(m).zip(new.chunks(m)) {
-                    for v in n {
-                        sums.see(0, *v);
+            let halted = self
+                .pass(now, next, &mut ring, &mut compute, &mut |old, new| {
+                    for (o, n) in old.chunks(m).zip(new.chunks(m)) {
+                        for v in n {
+                            sums.see(0, *v);
+                        }
+                        let change = cell_fluence(n, weights) - cell_fluence(o, weights);
+                        sums.change += change * change;
                     }
-                    let change = cell_fluence(n, weights) - cell_fluence(o, weights);
-                    sums.change += change * change;
-                }
-            })
-            .map_err(err)?;
+                })
+                .map_err(err)?;
             if let Some(halt) = halted {
                 step -= 1;
                 break halt.stop_reason(history.last().min(1.0));

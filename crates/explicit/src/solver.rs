@@ -134,11 +134,13 @@ enum PagedPath {
 
 impl ExplicitSolver {
     /// Which out-of-core scheme runs for this solver, after the checks every paged solve
-    /// makes first (options, one process, the scheme's stability, capabilities).
+    /// makes first (options, one process, the scheme's stability, capabilities: the
+    /// medium's values too where `medium`, not on a shell).
     fn paged_path(
         &self,
         problem: &PagedProblem,
         options: &SolveOptions,
+        medium: bool,
     ) -> Result<PagedPath, SolveError> {
         options.validate()?;
         let one_process = |ranks: usize| {
@@ -196,7 +198,11 @@ impl ExplicitSolver {
                 return Ok(PagedPath::Convection);
             }
         };
-        self.capabilities().check_paged(self.name, problem)?;
+        if medium {
+            self.capabilities().check_paged(self.name, problem)?;
+        } else {
+            self.capabilities().check_paged_shape(self.name, problem)?;
+        }
         Ok(path)
     }
 
@@ -367,7 +373,7 @@ impl Solver for ExplicitSolver {
         problem: &PagedProblem,
         options: &SolveOptions,
     ) -> Result<u64, SolveError> {
-        Ok(match self.paged_path(problem, options)? {
+        Ok(match self.paged_path(problem, options, false)? {
             PagedPath::Steady(kind) => {
                 crate::paged_steady::steady_needs(self.name, kind, problem, options)?.3
             }
@@ -383,7 +389,7 @@ impl Solver for ExplicitSolver {
         problem: &PagedProblem,
         options: &SolveOptions,
     ) -> Result<PagedSolution, SolveError> {
-        match self.paged_path(problem, options)? {
+        match self.paged_path(problem, options, true)? {
             PagedPath::Steady(kind) => {
                 options.install(|| crate::paged_steady::solve(self.name, kind, problem, options))?
             }

@@ -24,4 +24,3 @@ pub enum FemError {
     #[error("the assembly {0}")]
     Halted(lucent_core::Halt),
 }
-

@@ -368,8 +368,9 @@ impl FemDiffusionSolver {
             }
         }
         let bytes = (matrix.nnz() * 12 + matrix.rows() * 40) as u64;
-        let mg = crate::q1::Q1Multigrid::for_lattice_within(q1.cells, matrix, self.sweeps, &interrupt)
-            .map_err(|halt| SolveError::Halted {
+        let mg =
+            crate::q1::Q1Multigrid::for_lattice_within(q1.cells, matrix, self.sweeps, &interrupt)
+                .map_err(|halt| SolveError::Halted {
                 solver: self.name().into(),
                 stage: "the multigrid hierarchy".into(),
                 halt,

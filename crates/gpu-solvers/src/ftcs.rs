@@ -239,15 +239,12 @@ fn march(
     upload(&r)?;
     let mut parity = 0usize;
     let mut iteration = 0usize;
-    // The first batch is one step: its time sizes the next (`timed_batch`).
-    let mut batch = 1usize;
-    let mut seconds_per_step = f64::NAN;
+    let mut batch = 4usize;
     loop {
-        let k = crate::solver::timed_batch(batch, seconds_per_step)
+        let k = crate::solver::bounded_batch(batch, n)
             .min(MAX_BATCH)
             .min(stop.max_iterations.saturating_sub(iteration))
             .max(1);
-        let submitted = std::time::Instant::now();
         context.submit_pass("gpu-ftcs-diffusion", |pass| {
             for j in 0..k {
                 kernel.dispatch(pass, &bind[(parity + j) % 2][j], groups);
@@ -256,7 +253,6 @@ fn march(
             kernel.dispatch(pass, &bind[(parity + k) % 2][MAX_BATCH + 1 + k], groups);
         })?;
         let sums = partials.download_prefix(context, (k + 1) * per_step)?;
-        seconds_per_step = submitted.elapsed().as_secs_f64() / k as f64;
         parity = (parity + k) % 2;
         // Residual norms of the states after steps 1..=k (partials of step j are of
         // the state before it; the state after the batch has its own slot, k).

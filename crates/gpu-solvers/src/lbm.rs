@@ -187,8 +187,8 @@ pub fn march(
         .map_err(err)?;
     let groups = groups_2d(gpu, n as u64, WORKGROUP);
     let per_step_values = (groups[0] * groups[1]) as usize;
-    let partials =
-        DeviceField::zeros(gpu, "LBM partials", PARTIALS * MAX_BATCH * per_step_values).map_err(err)?;
+    let partials = DeviceField::zeros(gpu, "LBM partials", PARTIALS * MAX_BATCH * per_step_values)
+        .map_err(err)?;
     let (file, source_text) = match settings.velocities {
         Velocities::D3q7 => ("lbm_d3q7.wgsl + lbm.wgsl", shaders::LBM_D3Q7),
         Velocities::D3q19 => ("lbm_d3q19.wgsl + lbm.wgsl", shaders::LBM_D3Q19),
@@ -257,22 +257,18 @@ pub fn march(
     let mut history = History::start();
     let stopping = &settings.stopping;
     let mut read = 0usize;
-    // The first batch is one step: its time sizes the next (`timed_batch`).
-    let mut batch = 1usize;
-    let mut seconds_per_step = f64::NAN;
+    let mut batch = 8usize;
     let stop_reason = loop {
         let done = ledger.steps();
-        let k = crate::solver::timed_batch(batch, seconds_per_step)
+        let k = crate::solver::bounded_batch(batch, n)
             .min(MAX_BATCH)
             .min(stopping.max_iterations.saturating_sub(done))
             .max(1);
-        let submitted = std::time::Instant::now();
         run(read, k)?;
         read = (read + k) % 2;
         let sums = partials
             .download_prefix(gpu, PARTIALS * k * per_step_values)
             .map_err(err)?;
-        seconds_per_step = submitted.elapsed().as_secs_f64() / k as f64;
         let mut stopped = None;
         let mut changes = Vec::with_capacity(k);
         for block in sums.chunks_exact(PARTIALS * per_step_values) {

@@ -186,20 +186,16 @@ pub(crate) fn march(
     let mut history = History::start();
     let mut step = 0usize;
     let mut parity = 0usize;
-    // The first batch is one step: its time sizes the next (`timed_batch`).
-    let mut batch = 1usize;
-    let mut seconds_per_step = f64::NAN;
+    let mut batch = 8usize;
     let stop_reason = loop {
-        let k = crate::solver::timed_batch(batch, seconds_per_step)
+        let k = crate::solver::bounded_batch(batch, n)
             .min(MAX_BATCH)
             .min(stopping.max_iterations.saturating_sub(step))
             .max(1);
-        let submitted = std::time::Instant::now();
         run(parity, k)?;
         let sums = partials
             .download_prefix(gpu, 4 * k * per_step)
             .map_err(err)?;
-        seconds_per_step = submitted.elapsed().as_secs_f64() / k as f64;
         let mut stopped = None;
         let mut changes = Vec::with_capacity(k);
         for j in 0..k {

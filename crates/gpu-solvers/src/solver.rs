@@ -78,21 +78,17 @@ pub(crate) fn next_batch(changes: &[f64], tolerance: f64, most: usize) -> usize 
     .clamp(1, most)
 }
 
-/// The longest a batch of steps submitted at once should take: a submission cannot be
-/// interrupted, so Ctrl-C and the time limit (asked between batches) wait at most about
-/// this long. A real GPU runs the largest batch in milliseconds; a software device
-/// (lavapipe) at 336³ takes seconds a step.
-pub(crate) const BATCH_SECONDS: f64 = 0.25;
+/// The most cell-steps one submission of a batch of steps may hold: a submission cannot be
+/// interrupted, so Ctrl-C and the time limit (asked between submissions) wait for at most
+/// one. 2²² cell-steps take tens of microseconds on a real GPU and under half a second on
+/// a software device (lavapipe: P1's step at 64³ measured about 50 ms under load; a
+/// batch of 64 steps at 336³ once took 90 s). A count of cells, not of seconds, so that
+/// batches, and so results, do not depend on the machine's speed or load.
+pub(crate) const CELL_STEPS_PER_SUBMIT: usize = 1 << 22;
 
-/// `wanted` steps cut to what fits [`BATCH_SECONDS`] at `seconds_per_step` (measured on
-/// the last batch), at least one.
-pub(crate) fn timed_batch(wanted: usize, seconds_per_step: f64) -> usize {
-    if seconds_per_step.is_finite() && seconds_per_step > 0.0 {
-        wanted.min((BATCH_SECONDS / seconds_per_step).floor().max(1.0) as usize)
-    } else {
-        wanted
-    }
-    .max(1)
+/// `wanted` steps cut to [`CELL_STEPS_PER_SUBMIT`] on a grid of `cells`, at least one.
+pub(crate) fn bounded_batch(wanted: usize, cells: usize) -> usize {
+    wanted.min(CELL_STEPS_PER_SUBMIT / cells.max(1)).max(1)
 }
 
 /// The shared device, or why there is none.

@@ -214,10 +214,7 @@ pub(crate) fn render(
                     background,
                     ray: &ray,
                     progress: None,
-                    interrupt: lucent::core::Interrupt::new(
-                        Some(flag.clone()),
-                        deadline,
-                    ),
+                    interrupt: lucent::core::Interrupt::new(Some(flag.clone()), deadline),
                 },
             )
         })?
