@@ -260,7 +260,7 @@ pub fn march(
     let mut batch = 8usize;
     let stop_reason = loop {
         let done = ledger.steps();
-        let k = crate::solver::bounded_batch(batch, n)
+        let k = crate::solver::bounded_batch(batch, n, crate::solver::cell_steps_per_submit(gpu))
             .min(MAX_BATCH)
             .min(stopping.max_iterations.saturating_sub(done))
             .max(1);

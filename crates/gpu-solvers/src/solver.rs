@@ -78,17 +78,30 @@ pub(crate) fn next_batch(changes: &[f64], tolerance: f64, most: usize) -> usize 
     .clamp(1, most)
 }
 
-/// The most cell-steps one submission of a batch of steps may hold: a submission cannot be
-/// interrupted, so Ctrl-C and the time limit (asked between submissions) wait for at most
-/// one. 2²² cell-steps take tens of microseconds on a real GPU and under half a second on
-/// a software device (lavapipe: P1's step at 64³ measured about 50 ms under load; a
-/// batch of 64 steps at 336³ once took 90 s). A count of cells, not of seconds, so that
-/// batches, and so results, do not depend on the machine's speed or load.
-pub(crate) const CELL_STEPS_PER_SUBMIT: usize = 1 << 22;
+/// The most cell-steps one submission of a batch of steps may hold on `device`: a
+/// submission cannot be interrupted, so Ctrl-C and the time limit (asked between
+/// submissions) wait for at most one. A count of cells fixed by the kind of device, not a
+/// time, so that batches, and so results, do not depend on the machine's load (batches
+/// timed on the first step made two runs of a solve differ).
+///
+/// * A software device (lavapipe, WARP): 2²² cell-steps, under half a second (P1's step
+///   at 64³ measured about 50 ms under load; a batch of 64 steps at 336³ once took 90 s).
+/// * A hardware device: 2²⁸, a quarter second at 10⁹ cell-steps per second (a weak
+///   integrated GPU on the lattice-Boltzmann step); a data-centre GPU runs it in tens of
+///   milliseconds, and a 256³ grid still gets 16 steps per submission, so the wait on
+///   each submission's partial sums stays small beside the steps.
+pub(crate) fn cell_steps_per_submit(device: &GpuContext) -> usize {
+    if device.is_software() {
+        1 << 22
+    } else {
+        1 << 28
+    }
+}
 
-/// `wanted` steps cut to [`CELL_STEPS_PER_SUBMIT`] on a grid of `cells`, at least one.
-pub(crate) fn bounded_batch(wanted: usize, cells: usize) -> usize {
-    wanted.min(CELL_STEPS_PER_SUBMIT / cells.max(1)).max(1)
+/// `wanted` steps cut to `most_cell_steps` ([`cell_steps_per_submit`]) on a grid of
+/// `cells`, at least one.
+pub(crate) fn bounded_batch(wanted: usize, cells: usize, most_cell_steps: usize) -> usize {
+    wanted.min(most_cell_steps / cells.max(1)).max(1)
 }
 
 /// The shared device, or why there is none.
