@@ -232,20 +232,10 @@ fn main() -> ExitCode {
         let reuse = args.iter().any(|a| a == "--reuse");
         return pareto(args.into_iter().filter(|a| a != "--reuse").collect(), reuse);
     }
+    if command.as_deref() == Some("ci") {
+        return ci();
+    }
     let steps: Vec<Vec<&str>> = match command.as_deref() {
-        Some("ci") => vec![
-            vec!["fmt", "--all", "--check"],
-            vec![
-                "clippy",
-                "--workspace",
-                "--all-targets",
-                "--",
-                "-D",
-                "warnings",
-            ],
-            vec!["doc", "--workspace", "--no-deps"],
-            vec!["test", "--workspace"],
-        ],
         Some("doc") => vec![vec!["doc", "--workspace", "--no-deps"]],
         Some("tidy") => vec![vec!["test", "--package", "lucent", "--test", "tidy"]],
         _ => {
@@ -273,6 +263,25 @@ fn main() -> ExitCode {
         }
     }
     ExitCode::SUCCESS
+}
+
+/// Runs `.ci/run`, the script CI runs: formatting, clippy, rustdoc, the README's test
+/// command, the Python bindings under pytest and the MPI checks, installing what they need
+/// (lavapipe, python3-venv, OpenMPI; with `sudo` when not root). One script, so that this
+/// command cannot drift from CI.
+fn ci() -> ExitCode {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    match Command::new("bash").arg(root.join(".ci/run")).status() {
+        Ok(s) if s.success() => ExitCode::SUCCESS,
+        Ok(s) => {
+            eprintln!("xtask: .ci/run failed ({s})");
+            ExitCode::FAILURE
+        }
+        Err(e) => {
+            eprintln!("xtask: could not run .ci/run: {e}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
 /// Runs the cross-check harness and writes `docs/validation.md`.
