@@ -1054,8 +1054,12 @@ fn solve_to_file(
         return Ok(ended);
     }
     if !quiet {
+        let ranks = match world().map_or(1, |w| w.size()) {
+            1 => String::new(),
+            n => format!(" on {n} MPI ranks"),
+        };
         say!(
-            "lucent: solved {name} with `{}`: {stop}, {:.2} s; fluence {} and report {}",
+            "lucent: solved {name} with `{}`{ranks}: {stop}, {:.2} s; fluence {} and report {}",
             chosen.solver.name(),
             solution.report.wall_time_s,
             output.display(),

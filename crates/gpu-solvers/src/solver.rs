@@ -18,8 +18,8 @@
 
 use lucent_core::driver::{self, Channel, ChannelMethod, ChannelSolution, Context, Route};
 use lucent_core::{
-    Capabilities, DirectSolver, Light, ParamValue, Params, Problem, Solution, SolveError,
-    SolveOptions, Solver, SolverEntry, param_docs, resolved_params,
+    Capabilities, DirectSolver, Light, ParamDoc, ParamValue, Params, Problem, Solution, SolveError,
+    SolveOptions, Solver, SolverEntry, SolverParams, param_docs, resolved_params,
 };
 use lucent_diffusion::{
     CycleParam, DiffusionSolver, DiscretisationParam, MultigridParams, SmootherParam,
@@ -109,6 +109,45 @@ fn device(solver: &str) -> Result<&'static GpuContext, SolveError> {
     GpuContext::shared().map_err(|e| device_error(solver, e))
 }
 
+/// Parameters of the CPU twins that split a solve over ranks; a device solver runs in one
+/// process on one device, so it neither lists nor accepts them.
+const RANKS_ONLY: [&str; 2] = ["ranks", "decomposition"];
+
+/// `params`, or the refusal of a ranks-only parameter set for a device solver (it was
+/// accepted, recorded in the report and ignored).
+fn one_device<'a>(params: &'a Params, solver: &str) -> Result<&'a Params, SolveError> {
+    match RANKS_ONLY.iter().find(|name| params.0.contains_key(**name)) {
+        Some(name) => Err(SolveError::InvalidParameter {
+            name: (*name).into(),
+            reason: format!(
+                "`{solver}` runs on one device in one process and splits over no ranks (the CPU solver without `gpu-` does)"
+            ),
+        }),
+        None => Ok(params),
+    }
+}
+
+/// The CPU twin's parameters `T` without [`RANKS_ONLY`].
+fn device_param_docs<T: SolverParams>() -> Vec<ParamDoc> {
+    let mut docs = param_docs::<T>();
+    docs.retain(|d| !RANKS_ONLY.contains(&d.name.as_str()));
+    docs
+}
+
+/// The parameters that run, as `resolved_params`, without [`RANKS_ONLY`].
+fn device_resolved<T: SolverParams>(
+    params: &Params,
+    solver: &str,
+) -> Result<serde_json::Value, SolveError> {
+    let mut value = resolved_params::<T>(one_device(params, solver)?, solver)?;
+    if let serde_json::Value::Object(map) = &mut value {
+        for name in RANKS_ONLY {
+            map.remove(name);
+        }
+    }
+    Ok(value)
+}
+
 impl GpuSolver {
     /// `gpu-direct` ([`DirectSolver`]'s parameters).
     pub const GPU_DIRECT: SolverEntry = SolverEntry {
@@ -117,11 +156,11 @@ impl GpuSolver {
         build: |p| {
             Ok(Box::new(GpuSolver {
                 name: "gpu-direct",
-                backend: Backend::Direct(p.parse("gpu-direct")?),
+                backend: Backend::Direct(one_device(p, "gpu-direct")?.parse("gpu-direct")?),
             }))
         },
-        params: param_docs::<DirectSolver>,
-        resolved: |p| resolved_params::<DirectSolver>(p, "gpu-direct"),
+        params: device_param_docs::<DirectSolver>,
+        resolved: |p| device_resolved::<DirectSolver>(p, "gpu-direct"),
     };
 
     /// `gpu-ftcs-diffusion` ([`FtcsDiffusionParams`]).
@@ -131,11 +170,13 @@ impl GpuSolver {
         build: |p| {
             Ok(Box::new(GpuSolver {
                 name: "gpu-ftcs-diffusion",
-                backend: Backend::FtcsDiffusion(p.parse("gpu-ftcs-diffusion")?),
+                backend: Backend::FtcsDiffusion(
+                    one_device(p, "gpu-ftcs-diffusion")?.parse("gpu-ftcs-diffusion")?,
+                ),
             }))
         },
-        params: param_docs::<FtcsDiffusionParams>,
-        resolved: |p| resolved_params::<FtcsDiffusionParams>(p, "gpu-ftcs-diffusion"),
+        params: device_param_docs::<FtcsDiffusionParams>,
+        resolved: |p| device_resolved::<FtcsDiffusionParams>(p, "gpu-ftcs-diffusion"),
     };
 
     /// `gpu-ftcs-p1` ([`P1Params`]).
@@ -145,11 +186,11 @@ impl GpuSolver {
         build: |p| {
             Ok(Box::new(GpuSolver {
                 name: "gpu-ftcs-p1",
-                backend: Backend::P1(p.parse("gpu-ftcs-p1")?),
+                backend: Backend::P1(one_device(p, "gpu-ftcs-p1")?.parse("gpu-ftcs-p1")?),
             }))
         },
-        params: param_docs::<P1Params>,
-        resolved: |p| resolved_params::<P1Params>(p, "gpu-ftcs-p1"),
+        params: device_param_docs::<P1Params>,
+        resolved: |p| device_resolved::<P1Params>(p, "gpu-ftcs-p1"),
     };
 
     /// `gpu-convection-diffusion` ([`GpuConvectionParams`]).
@@ -159,11 +200,13 @@ impl GpuSolver {
         build: |p| {
             Ok(Box::new(GpuSolver {
                 name: "gpu-convection-diffusion",
-                backend: Backend::Convection(p.parse("gpu-convection-diffusion")?),
+                backend: Backend::Convection(
+                    one_device(p, "gpu-convection-diffusion")?.parse("gpu-convection-diffusion")?,
+                ),
             }))
         },
-        params: param_docs::<GpuConvectionParams>,
-        resolved: |p| resolved_params::<GpuConvectionParams>(p, "gpu-convection-diffusion"),
+        params: device_param_docs::<GpuConvectionParams>,
+        resolved: |p| device_resolved::<GpuConvectionParams>(p, "gpu-convection-diffusion"),
     };
 
     /// `gpu-lbm` ([`LbmParams`]).
@@ -173,11 +216,11 @@ impl GpuSolver {
         build: |p| {
             Ok(Box::new(GpuSolver {
                 name: "gpu-lbm",
-                backend: Backend::Lbm(p.parse("gpu-lbm")?),
+                backend: Backend::Lbm(one_device(p, "gpu-lbm")?.parse("gpu-lbm")?),
             }))
         },
-        params: param_docs::<LbmParams>,
-        resolved: |p| resolved_params::<LbmParams>(p, "gpu-lbm"),
+        params: device_param_docs::<LbmParams>,
+        resolved: |p| device_resolved::<LbmParams>(p, "gpu-lbm"),
     };
 
     /// `gpu-dom` (`dom`'s parameters but `storage_level` and `work_pool_mib`, which it
@@ -188,11 +231,14 @@ impl GpuSolver {
         build: |p| {
             Ok(Box::new(GpuSolver {
                 name: "gpu-dom",
-                backend: Backend::Dom(DomSolver::from_params_as(p, "gpu-dom")?),
+                backend: Backend::Dom(DomSolver::from_params_as(
+                    one_device(p, "gpu-dom")?,
+                    "gpu-dom",
+                )?),
             }))
         },
-        params: param_docs::<DomParams>,
-        resolved: |p| resolved_params::<DomParams>(p, "gpu-dom"),
+        params: device_param_docs::<DomParams>,
+        resolved: |p| device_resolved::<DomParams>(p, "gpu-dom"),
     };
 
     /// `gpu-diffusion-mg` (`diffusion-mg`'s [`MultigridParams`]; V-cycles with red–black
@@ -202,7 +248,8 @@ impl GpuSolver {
         name: "gpu-diffusion-mg",
         summary: "diffusion-mg on the GPU: full multigrid, V-cycles and (where the device has f64) the f64 outer iteration on the device",
         build: |p| {
-            let params: MultigridParams = p.parse("gpu-diffusion-mg")?;
+            let params: MultigridParams =
+                one_device(p, "gpu-diffusion-mg")?.parse("gpu-diffusion-mg")?;
             let refuse = |name: &str, reason: &str| {
                 Err(SolveError::InvalidParameter {
                     name: name.into(),
@@ -223,8 +270,8 @@ impl GpuSolver {
                 backend: Backend::DiffusionMg(params),
             }))
         },
-        params: param_docs::<MultigridParams>,
-        resolved: |p| resolved_params::<MultigridParams>(p, "gpu-diffusion-mg"),
+        params: device_param_docs::<MultigridParams>,
+        resolved: |p| device_resolved::<MultigridParams>(p, "gpu-diffusion-mg"),
     };
 
     /// Every GPU entry.
@@ -418,5 +465,43 @@ impl ChannelMethod for GpuSolver {
             record,
             extra: (),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `ranks` and `decomposition` of the CPU twins were listed for `gpu-ftcs-diffusion`,
+    /// `gpu-ftcs-p1` and `gpu-diffusion-mg`, accepted, recorded in the report and ignored:
+    /// every device solver now neither lists nor accepts them, and the error names the
+    /// parameter.
+    #[test]
+    fn no_device_solver_lists_or_accepts_ranks() {
+        for entry in GpuSolver::ENTRIES {
+            let docs = (entry.params)();
+            assert!(
+                docs.iter().all(|d| !RANKS_ONLY.contains(&d.name.as_str())),
+                "{} lists a ranks parameter",
+                entry.name
+            );
+            let resolved = (entry.resolved)(&Params::default()).unwrap();
+            for name in RANKS_ONLY {
+                assert!(resolved.get(name).is_none(), "{} records {name}", entry.name);
+                let mut params = Params::default();
+                let value = match name {
+                    "ranks" => ParamValue::Int(2),
+                    _ => ParamValue::Text("boxes".into()),
+                };
+                params.0.insert(name.into(), value);
+                match (entry.build)(&params) {
+                    Err(SolveError::InvalidParameter { name: refused, .. }) => {
+                        assert_eq!(refused, name, "{}", entry.name)
+                    }
+                    Err(other) => panic!("{}: {name}: {other}", entry.name),
+                    Ok(_) => panic!("{}: {name} accepted", entry.name),
+                }
+            }
+        }
     }
 }
