@@ -57,8 +57,9 @@ use std::time::{Duration, Instant};
 
 use lucent_core::regime::Regime;
 use lucent_core::{
-    Capabilities, FluenceKind, Light, OutputKind, ParamValue, Params, Problem, Registry, Solution,
-    SolveError, SolveOptions, Solver, SolverEntry, SolverParams, param_docs, resolved_params,
+    Capabilities, Composition, Decision, FluenceKind, Light, Neighbour, OutputKind, ParamValue,
+    Params, Problem, Registry, Solution, SolveError, SolveOptions, Solver, SolverEntry,
+    SolverParams, param_docs, resolved_params,
 };
 use lucent_grid::resample::restrict;
 use rayon::prelude::*;
@@ -460,9 +461,11 @@ impl fmt::Display for Choice {
         let what = format!("`{}` ({})", self.run.label, self.run.setting);
         let scenes = match self.neighbours.as_slice() {
             [(name, d)] if *d < SAME_SCENE => format!("this suite scene, {name}"),
-            [(name, d)] => format!("the nearest suite scene in regime, {name} (distance {d:.2})"),
+            [(name, d)] => {
+                format!("the nearest suite scene in regime, {name} (regime distance {d:.2})")
+            }
             many => format!(
-                "the suite scenes nearest in regime, {}",
+                "the suite scenes nearest in regime (regime distance), {}",
                 many.iter()
                     .map(|(n, d)| format!("{n} ({d:.2})"))
                     .collect::<Vec<_>>()
@@ -487,10 +490,22 @@ impl fmt::Display for Choice {
             String::new()
         };
         let refused = format!("{scaled}{refused}");
+        // On a scene it has not measured, a run must come within `UNSEEN_MARGIN` of the
+        // tolerance: say so, or "cannot meet 5 % … with 4.29 %" reads as a contradiction.
+        let limit = self.error_limit();
+        let margin = if limit < self.tolerance {
+            format!(
+                " (at most {} measured: a margin of {:.0} % for a scene not in the suite)",
+                pct(limit),
+                100.0 * (1.0 - limit / self.tolerance)
+            )
+        } else {
+            String::new()
+        };
         if self.meets {
             write!(
                 f,
-                "auto chose {what}: the fastest measured to meet {} on {scenes}, with at most {} there; expected {:.3} s here{refused}",
+                "auto chose {what}: the fastest measured to meet {}{margin} on {scenes}, with at most {} there; expected {:.3} s here{refused}",
                 pct(self.tolerance),
                 pct(self.expected_error),
                 self.expected_seconds
@@ -498,7 +513,7 @@ impl fmt::Display for Choice {
         } else {
             write!(
                 f,
-                "auto cannot meet {}{}: the best measured on {scenes} is {what} with {}; running it (expected {:.3} s here){refused}",
+                "auto cannot meet {}{margin}{}: the best measured on {scenes} is {what} with {}; running it (expected {:.3} s here){refused}",
                 pct(self.tolerance),
                 if self.budget_bound {
                     " within the time budget"
@@ -541,6 +556,47 @@ impl Choice {
             Some(ParamValue::Int(n)) => Some((*n as f64 * self.cells_ratio).ceil() as i64),
             _ => None,
         }
+    }
+
+    /// The expected error a run may have to be chosen: the tolerance on a measured
+    /// scene, [`UNSEEN_MARGIN`] of it on any other.
+    pub fn error_limit(&self) -> f64 {
+        match self.neighbours.as_slice() {
+            [(_, d)] if *d < SAME_SCENE => self.tolerance,
+            _ => UNSEEN_MARGIN * self.tolerance,
+        }
+    }
+
+    /// The report's fields for this choice: the solver and parameters that ran, their
+    /// parts (those of `inner`, the chosen solver's own composition, as `hybrid`'s) and the
+    /// numbers of the decision.
+    pub fn composition(
+        &self,
+        registry: &Registry,
+        inner: Option<Composition>,
+    ) -> Result<Composition, SolveError> {
+        let params = (registry.entry(self.run.solver)?.resolved)(&self.params()?)?;
+        Ok(Composition {
+            solver: self.run.solver.into(),
+            params,
+            parts: inner.map(|c| c.parts).unwrap_or_default(),
+            decision: Some(Decision {
+                tolerance: self.tolerance,
+                error_limit: self.error_limit(),
+                expected_error: self.expected_error,
+                expected_seconds: self.expected_seconds,
+                meets: self.meets,
+                budget_bound: self.budget_bound,
+                neighbours: self
+                    .neighbours
+                    .iter()
+                    .map(|(scene, d)| Neighbour {
+                        scene: scene.clone(),
+                        regime_distance: *d,
+                    })
+                    .collect(),
+            }),
+        })
     }
 
     /// The nearest measured scene.
@@ -892,6 +948,8 @@ impl AutoSolver {
                     }
                     solution.report.solver = Self::NAME.into();
                     solution.report.choice = Some(line);
+                    let inner = solution.report.composition.take();
+                    solution.report.composition = Some(choice.composition(&registry, inner)?);
                     solution.report.wall_time_s = start.elapsed().as_secs_f64();
                     return Ok((solution, choice));
                 }

@@ -875,11 +875,18 @@ fn solve_report(
     fluence: Option<&Path>,
     report: &lucent::core::SolveReport,
 ) -> serde_json::Value {
+    // What ran: the solver asked for, or the one `auto` chose, with its parameters (the
+    // parts of a composition are in `report.composition`).
+    let ran = match &report.composition {
+        Some(c) => serde_json::json!({ "solver": c.solver, "params": c.params }),
+        None => serde_json::json!({ "solver": chosen.solver.name(), "params": chosen.resolved }),
+    };
     serde_json::json!({
         "scene": name,
         "solver": chosen.solver.name(),
         "params": chosen.resolved,
         "params_given": chosen.params,
+        "ran": ran,
         "options": {
             "tolerance": chosen.tolerance,
             "max_iterations": args.max_iterations,

@@ -1525,6 +1525,32 @@ fn auto_says_what_it_chose_and_why() {
             format!("lucent: {}", report["report"]["choice"].as_str().unwrap()),
             said[0]
         );
+        // What ran, as fields (it was only in the line): the chosen solver, its full
+        // parameters, and the numbers of the decision.
+        let composition = &report["report"]["composition"];
+        let solver = composition["solver"].as_str().unwrap();
+        assert_ne!(solver, "auto");
+        assert!(said[0].contains(&format!("`{solver}`")), "{}", said[0]);
+        assert_eq!(report["ran"]["solver"], solver);
+        assert_eq!(report["ran"]["params"], composition["params"]);
+        assert!(
+            composition["params"]
+                .as_object()
+                .is_some_and(|p| !p.is_empty()),
+            "{composition}"
+        );
+        let decision = &composition["decision"];
+        assert_eq!(
+            decision["tolerance"].as_f64().unwrap(),
+            tolerance.parse::<f64>().unwrap()
+        );
+        assert_eq!(decision["neighbours"][0]["scene"], "slab");
+        assert!(
+            decision["neighbours"][0]["regime_distance"]
+                .as_f64()
+                .unwrap()
+                < 0.05
+        );
         said[0].clone()
     };
     let loose = solve("0.2");
@@ -1537,6 +1563,95 @@ fn auto_says_what_it_chose_and_why() {
         tight.starts_with("lucent: auto cannot meet 0.01%"),
         "{tight}"
     );
+}
+
+/// On a scene the suite has not measured, `auto` asks a run to come within a margin of
+/// the tolerance: the line says so, with the limit, and labels the regime distances ("auto
+/// cannot meet 5.00 % … with 4.29 %" read as a contradiction).
+#[test]
+fn auto_names_its_margin_on_a_scene_it_has_not_measured() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = lucent(
+        &[
+            "solve",
+            &scene("point_light.toml"),
+            "--solver",
+            "auto",
+            "--param",
+            "tolerance=0.05",
+            "-o",
+            "phi.npy",
+            "--quiet",
+            "--allow-unconverged",
+        ],
+        d,
+    );
+    assert!(matches!(out.status.code(), Some(0 | 3)), "{}", stderr(&out));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("phi.json")).unwrap()).unwrap();
+    let decision = &report["report"]["composition"]["decision"];
+    let limit = decision["error_limit"].as_f64().unwrap();
+    assert!((limit - 0.04).abs() < 1e-12, "{decision}");
+    let line = report["report"]["choice"].as_str().unwrap();
+    assert!(
+        line.contains("(at most 4.00% measured: a margin of 20 %"),
+        "{line}"
+    );
+    assert!(line.contains("regime distance"), "{line}");
+}
+
+/// `hybrid` says in one line what its parts did and records them as fields: the uncollided
+/// light, the orders swept, the diffused rest with its V-cycles (it printed nothing).
+#[test]
+fn hybrid_reports_its_parts() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = lucent(
+        &[
+            "solve",
+            &scene("suite/slab.toml"),
+            "--solver",
+            "hybrid",
+            "--param",
+            "orders=2",
+            "-o",
+            "phi.npy",
+        ],
+        d,
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("lucent: hybrid ran "),
+        "{}",
+        stderr(&out)
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("phi.json")).unwrap()).unwrap();
+    let composition = &report["report"]["composition"];
+    assert_eq!(composition["solver"], "hybrid");
+    assert_eq!(report["ran"]["params"]["orders"], 2);
+    let parts = composition["parts"].as_array().unwrap();
+    let methods: Vec<&str> = parts
+        .iter()
+        .map(|p| p["method"].as_str().unwrap())
+        .collect();
+    assert_eq!(methods.last(), Some(&"diffusion-mg"), "{composition}");
+    assert!(
+        methods.iter().any(|m| m.contains("sweeps")),
+        "{composition}"
+    );
+    let swept = parts
+        .iter()
+        .find(|p| p["method"].as_str().unwrap().contains("sweeps"))
+        .unwrap();
+    // At most two orders swept per channel, at least one.
+    let sweeps = swept["iterations"].as_u64().unwrap();
+    assert!(sweeps >= 1, "{composition}");
+    let rest = parts.last().unwrap();
+    let share = rest["share"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&share), "{composition}");
+    assert!(rest["iterations"].as_u64().unwrap() >= 1, "{composition}");
 }
 
 // ---------------------------------------------------------------------------------------

@@ -517,6 +517,7 @@ impl DirectSolver {
                 stop_reason: crate::solver::StopReason::Exact,
                 paging: Some(after.since(&before)),
                 choice: None,
+                composition: None,
             },
             paging: after.since(&before),
         })

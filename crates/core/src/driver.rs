@@ -359,6 +359,7 @@ where
             measured_peak_bytes: meter.and_then(|m| m.peak_bytes()),
             paging: record.paging,
             choice: None,
+            composition: None,
         },
     })
 }

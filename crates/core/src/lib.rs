@@ -101,8 +101,9 @@ pub use singular::{
 };
 pub use solution::{Angular, CurvedArrival, LightTransmittance, OrdinateRadiance, Solution};
 pub use solver::{
-    Capabilities, FluenceKind, ImageEstimate, ImageRequest, ImageSolver, OutputKind, Progress,
-    ProgressFn, Ranks, SolveOptions, SolveReport, Solver, StopReason,
+    Capabilities, Composition, Decision, FluenceKind, ImageEstimate, ImageRequest, ImageSolver,
+    Neighbour, OutputKind, Part, Progress, ProgressFn, Ranks, SolveOptions, SolveReport, Solver,
+    StopReason,
 };
 pub use spectrum::Spectrum;
 pub use uncollided::{Uncollided, UncollidedCells, uncollided_cells, uncollided_cells_within};

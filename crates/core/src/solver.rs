@@ -644,10 +644,78 @@ pub struct SolveReport {
     /// sweeps under a tight memory budget): hits, misses, evictions, bytes moved.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub paging: Option<lucent_paging::PagerStats>,
-    /// What a solver that chooses among others (`auto`) ran and why, in one line; `None`
-    /// for every solver that runs its own method.
+    /// What a solver that chooses among others (`auto`) or composes them (`hybrid`) ran
+    /// and why, in one line for people; `None` for every solver that runs one method.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub choice: Option<String>,
+    /// The same as fields: the solver and parameters that ran, the parts they were made
+    /// of and, for `auto`, the numbers it decided on; `None` where `choice` is.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub composition: Option<Composition>,
+}
+
+/// What a choosing or composing solver ran ([`SolveReport::composition`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Composition {
+    /// The registered solver that ran (for `auto`, the one it chose; for `hybrid`,
+    /// `hybrid`).
+    pub solver: String,
+    /// Its parameters as they ran, defaults included.
+    pub params: serde_json::Value,
+    /// What it was made of, in the order they ran (empty for a solver of one method).
+    pub parts: Vec<Part>,
+    /// Why `auto` chose it; `None` for a solver that composes without choosing.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub decision: Option<Decision>,
+}
+
+/// One part of a composed solve ([`Composition::parts`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Part {
+    /// What it computes: `"uncollided light"`, `"scattering orders 1-4"`, `"the rest"`.
+    pub computes: String,
+    /// The method that computed it (`direct`'s cell integrals, `dom`'s sweeps,
+    /// `diffusion-mg`).
+    pub method: String,
+    /// Its parameters as they ran.
+    pub params: serde_json::Value,
+    /// Iterations it took (sweeps, V-cycles), summed over channels.
+    pub iterations: usize,
+    /// Its source's power over the first scattering order's source power (0 to 1): how
+    /// much of the scattered light it carried; `None` where not a single number.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub share: Option<f64>,
+}
+
+/// The numbers `auto` decided on ([`Composition::decision`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Decision {
+    /// The relative error asked for (0.02: 2 %).
+    pub tolerance: f64,
+    /// The expected error a run may have to be chosen: the tolerance on a measured scene,
+    /// less a margin for noise and spread on any other.
+    pub error_limit: f64,
+    /// The chosen run's largest measured error on the deciding scenes.
+    pub expected_error: f64,
+    /// Its measured time scaled to this problem's cell count, seconds.
+    pub expected_seconds: f64,
+    /// Whether it is expected to meet `error_limit`.
+    pub meets: bool,
+    /// Whether the time budget ruled out runs that would have met it.
+    pub budget_bound: bool,
+    /// The measured scenes that decided, nearest first.
+    pub neighbours: Vec<Neighbour>,
+}
+
+/// A measured scene that decided `auto`'s choice ([`Decision::neighbours`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Neighbour {
+    /// The suite scene's name.
+    pub scene: String,
+    /// Its distance from the problem in regime: Euclidean, over features such as the
+    /// logarithms of absorption and optical depths, the anisotropy g and the share of empty
+    /// cells (`lucent::auto::Features`); below 0.05 it is taken as the same scene.
+    pub regime_distance: f64,
 }
 
 /// A light-transport solver: one obvious way to be called.

@@ -199,6 +199,7 @@ pub(crate) fn convection(
             stop_reason: StopReason::Exact,
             paging: Some(after.since(&before)),
             choice: None,
+            composition: None,
         },
         paging: after.since(&before),
     })

@@ -276,6 +276,7 @@ pub(crate) fn solve(
             stop_reason: record.stop_reason,
             paging: Some(paging),
             choice: None,
+            composition: None,
         },
         paging,
     })

@@ -256,6 +256,7 @@ pub(crate) fn solve(
             stop_reason: record.stop_reason,
             paging: Some(paging),
             choice: None,
+            composition: None,
         },
         paging,
     })

@@ -487,7 +487,11 @@ mod tests {
             );
             let resolved = (entry.resolved)(&Params::default()).unwrap();
             for name in RANKS_ONLY {
-                assert!(resolved.get(name).is_none(), "{} records {name}", entry.name);
+                assert!(
+                    resolved.get(name).is_none(),
+                    "{} records {name}",
+                    entry.name
+                );
                 let mut params = Params::default();
                 let value = match name {
                     "ranks" => ParamValue::Int(2),

@@ -3,9 +3,9 @@
 
 use lucent_core::driver::{self, Channel, ChannelMethod, ChannelSolution, Coefficients, Context};
 use lucent_core::{
-    Angular, BoundaryKind, Capabilities, FluenceKind, Light, LightKind, OutputKind, Params,
-    Problem, Solution, SolveError, SolveOptions, Solver, SolverEntry, Uncollided, param_docs,
-    resolved_params,
+    Angular, BoundaryKind, Capabilities, Composition, FluenceKind, Light, LightKind, OutputKind,
+    Params, Part, Problem, Solution, SolveError, SolveOptions, Solver, SolverEntry, Uncollided,
+    param_docs, resolved_params,
 };
 use lucent_diffusion::{CellGeometry, DiffusionProblem, Method, MultigridParams, Sources};
 use lucent_dom::angular::Ordinates;
@@ -185,9 +185,83 @@ impl HybridSolver {
         problem: &Problem,
         options: &SolveOptions,
     ) -> Result<(Solution, Vec<HybridChannel>), SolveError> {
-        let (solution, extras) = driver::solve_per_channel(self, self, problem, options)?;
-        Ok((solution, extras.into_iter().map(|(_, c)| c).collect()))
+        let (mut solution, extras) = driver::solve_per_channel(self, self, problem, options)?;
+        let channels: Vec<HybridChannel> = extras.into_iter().map(|(_, c)| c).collect();
+        let composition = self.composition(problem, &channels);
+        solution.report.choice = Some(describe(&composition));
+        solution.report.composition = Some(composition);
+        Ok((solution, channels))
     }
+
+    /// The report's fields for a solve whose channels went as `channels`: the uncollided
+    /// light (where a point-like light has one), the orders swept and the diffused rest,
+    /// each with its iterations; the rest with its source's power over the first order's
+    /// (the largest over channels).
+    fn composition(&self, problem: &Problem, channels: &[HybridChannel]) -> Composition {
+        let json = |v: serde_json::Result<serde_json::Value>| v.unwrap_or(serde_json::Value::Null);
+        let params = self.params();
+        let swept = channels.iter().map(|c| c.sweeps.len()).max().unwrap_or(0);
+        let diffused = channels
+            .iter()
+            .map(|c| c.diffused_share)
+            .fold(0.0f64, f64::max);
+        let mut parts = Vec::new();
+        if problem.lights().iter().any(Light::is_pointlike) {
+            parts.push(Part {
+                computes: "uncollided light".into(),
+                method: "direct's exact cell integrals".into(),
+                params: serde_json::Value::Object(Default::default()),
+                iterations: 0,
+                share: None,
+            });
+        }
+        parts.push(Part {
+            computes: match swept {
+                1 => "scattering order 1".into(),
+                k => format!("scattering orders 1-{k}"),
+            },
+            method: format!("S{} transport sweeps, one per order", params.order),
+            params: serde_json::json!({
+                "order": params.order,
+                "closure": json(serde_json::to_value(params.closure)),
+                "orders": params.orders,
+                "block": params.block,
+            }),
+            iterations: channels.iter().map(|c| c.sweeps.len()).sum(),
+            share: None,
+        });
+        parts.push(Part {
+            computes: "the rest".into(),
+            method: "diffusion-mg".into(),
+            params: json(serde_json::to_value(MultigridParams::default())),
+            iterations: channels.iter().map(|c| c.cycles).sum(),
+            share: Some(diffused),
+        });
+        Composition {
+            solver: "hybrid".into(),
+            params: json(serde_json::to_value(params)),
+            parts,
+            decision: None,
+        }
+    }
+}
+
+/// `composition` in one line for people.
+fn describe(composition: &Composition) -> String {
+    let parts: Vec<String> = composition
+        .parts
+        .iter()
+        .map(|p| {
+            let share = p.share.map_or(String::new(), |s| {
+                format!(", its source {:.1} % of the first order's", 100.0 * s)
+            });
+            format!(
+                "{} by {} ({} iterations{share})",
+                p.computes, p.method, p.iterations
+            )
+        })
+        .collect();
+    format!("hybrid ran {}", parts.join("; "))
 }
 
 impl HybridParams {

@@ -620,6 +620,7 @@ pub(crate) fn solve_paged(
             stop_reason,
             paging: Some(paging),
             choice: None,
+            composition: None,
         },
         paging,
     })

@@ -401,7 +401,9 @@ impl PySolution {
     /// The report as a dict: `solver`, `iterations`, `residual_history`, `wall_time_s`,
     /// `peak_memory_bytes` (the solver's estimate), `measured_peak_bytes`,
     /// `stop_reason` (`{"reason": "converged-relative", "residual": ...}`), `paging`,
-    /// `choice` (`auto`), and `params` (every parameter that ran).
+    /// `choice` (`auto`, `hybrid`: one line), `composition` (the same as fields: the solver
+    /// and parameters that ran, its parts, `auto`'s decision), and `params` (every
+    /// parameter that ran).
     #[getter]
     fn report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let mut json = serde_json::to_value(&self.solution.report)

@@ -582,6 +582,7 @@ mod tests {
                 measured_peak_bytes: None,
                 paging: None,
                 choice: None,
+                composition: None,
                 stop_reason: StopReason::Exact,
             },
         };

@@ -54,6 +54,7 @@ fn report() -> SolveReport {
         measured_peak_bytes: None,
         paging: None,
         choice: None,
+        composition: None,
         stop_reason: StopReason::Exact,
     }
 }

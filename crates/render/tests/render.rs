@@ -33,6 +33,7 @@ fn dark_solution(problem: &Problem) -> Solution {
             measured_peak_bytes: None,
             paging: None,
             choice: None,
+            composition: None,
             stop_reason: StopReason::Exact,
         },
     }
