@@ -649,7 +649,32 @@ fn run_solver(
     if let Some(choice) = &solution.report.choice {
         let _ = writeln!(io::stderr(), "lucent: {choice}");
     }
+    let ran = solution
+        .report
+        .composition
+        .as_ref()
+        .map_or(chosen.solver.name(), |c| c.solver.as_str());
+    if ran.starts_with("gpu-") && !quiet {
+        say_if_software_device();
+    }
     Ok(solution)
+}
+
+/// Says, once per process, that the GPU in use is a software device (lavapipe, WARP):
+/// its results are right, its times are not a GPU's.
+fn say_if_software_device() {
+    static SAID: std::sync::Once = std::sync::Once::new();
+    if let Ok(device) = lucent::gpu::GpuContext::shared()
+        && device.is_software()
+    {
+        SAID.call_once(|| {
+            let _ = writeln!(
+                io::stderr(),
+                "lucent: the GPU is a software device ({}): its results are right, its times are not a GPU's",
+                device.info().name
+            );
+        });
+    }
 }
 
 /// How a solve that stopped for `reason` ends the job; says so on stderr when it did not
@@ -719,12 +744,16 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
                 chosen.solver.name()
             )));
         }
-        Some(lucent::gpu::GpuContext::shared().map_err(|e| {
+        let device = lucent::gpu::GpuContext::shared().map_err(|e| {
             lucent::render::RenderError::Device {
                 unavailable: true,
                 reason: e.to_string(),
             }
-        })?)
+        })?;
+        if !quiet {
+            say_if_software_device();
+        }
+        Some(device)
     } else {
         None
     };

@@ -1857,6 +1857,18 @@ fn a_headless_gpu_run_prints_no_window_system_errors() {
     assert_eq!(out.status.code(), Some(0), "{err}");
     assert!(!err.contains("XDG_RUNTIME_DIR"), "{err}");
     assert!(err.is_empty(), "a quiet run says nothing: {err}");
+    // Without -q, a run on a software device (lavapipe here) says so once, naming it.
+    let out = Command::new(env!("CARGO_BIN_EXE_lucent"))
+        .args(["solve", &scene("suite/slab.toml"), "--solver", "gpu-direct"])
+        .args(["-o", "phi.npy"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let said = err.matches("is a software device").count();
+    let software = lucent::gpu::GpuContext::shared().is_ok_and(|d| d.is_software());
+    assert_eq!(said, usize::from(software), "{err}");
 }
 
 /// `lucent ARGS` in `dir` under a file-size limit of `blocks` × 512 bytes: a full disk as
