@@ -744,12 +744,11 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
                 chosen.solver.name()
             )));
         }
-        let device = lucent::gpu::GpuContext::shared().map_err(|e| {
-            lucent::render::RenderError::Device {
+        let device =
+            lucent::gpu::GpuContext::shared().map_err(|e| lucent::render::RenderError::Device {
                 unavailable: true,
                 reason: e.to_string(),
-            }
-        })?;
+            })?;
         if !quiet {
             say_if_software_device();
         }

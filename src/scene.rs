@@ -3,7 +3,8 @@
 //! file per feature; `default.toml` there is the built-in default scene.
 //!
 //! Paths to volume files are relative to the scene file; a `data:` prefix resolves in
-//! `$LUCENT_DATA` (default `../shared/data/volumes`).
+//! `$LUCENT_DATA`, else `../shared/data/volumes` from the working folder, else the first
+//! `shared/data/volumes` beside the scene's folder or a parent of it.
 
 use std::path::{Path, PathBuf};
 
@@ -1334,7 +1335,24 @@ pub fn data_dir() -> PathBuf {
 
 fn resolve(base: &Path, path: &str) -> PathBuf {
     match path.strip_prefix("data:") {
-        Some(name) => data_dir().join(name),
+        Some(name) => data_dir_for(base).join(name),
         None => base.join(path),
     }
+}
+
+/// The folder of shared volumes for a scene in `base`: `$LUCENT_DATA`; else
+/// `../shared/data/volumes` from the working folder where it exists; else the first
+/// `shared/data/volumes` beside the scene's folder or one of its parents (a scene in a
+/// clone's `examples/scenes/` finds the data beside the clone from any working folder);
+/// else [`data_dir`], which the missing file's error then names.
+fn data_dir_for(base: &Path) -> PathBuf {
+    let default = data_dir();
+    if std::env::var_os("LUCENT_DATA").is_some() || default.is_dir() {
+        return default;
+    }
+    let base = std::fs::canonicalize(base).unwrap_or_else(|_| base.to_owned());
+    base.ancestors()
+        .map(|folder| folder.join("shared/data/volumes"))
+        .find(|candidate| candidate.is_dir())
+        .unwrap_or(default)
 }

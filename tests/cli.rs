@@ -2091,3 +2091,30 @@ fn a_path_traced_render_honours_the_time_limit() {
         assert_eq!(dir.path().join("mc.png").exists(), allow);
     }
 }
+
+/// A scene with a `data:` volume is found from any working folder (it resolved only from
+/// the clone's root): without `$LUCENT_DATA`, the first `shared/data/volumes` beside the
+/// scene's folder or a parent of it.
+#[test]
+fn data_volumes_resolve_from_any_working_folder() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let beside = root.join("../shared/data/volumes/tooth_103x94x161_uint8.raw");
+    if !beside.is_file() {
+        // The layout CI has (the data beside the clone); elsewhere there is nothing to find.
+        eprintln!("skipped: no shared/data/volumes beside the clone");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_lucent"))
+        .args(["info", &scene("ct_tooth.toml")])
+        .current_dir(dir.path())
+        .env_remove("LUCENT_DATA")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("103"),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+}
