@@ -491,6 +491,8 @@ struct Chosen {
     solver: Box<dyn Solver>,
     /// Said on stderr just before solving (after every check has passed).
     note: Option<String>,
+    /// Said with it unless `--quiet`: what the default solver leaves out.
+    advice: Option<String>,
     params: Params,
     resolved: serde_json::Value,
     /// `--tolerance`, else the scene's, else the default.
@@ -498,9 +500,12 @@ struct Chosen {
 }
 
 impl Chosen {
-    fn say_note(&self) {
+    fn say_note(&self, quiet: bool) {
         if let Some(note) = &self.note {
             let _ = writeln!(io::stderr(), "{note}");
+        }
+        if let Some(advice) = self.advice.as_ref().filter(|_| !quiet) {
+            let _ = writeln!(io::stderr(), "{advice}");
         }
     }
 }
@@ -510,6 +515,12 @@ fn choose_solver(scene: &Scene, args: &SolverArgs) -> Result<Chosen, Error> {
     let name = args.solver.as_deref().unwrap_or(&scene.solver.name);
     let entry = registry.entry(name)?;
     let mut note = None;
+    let mut advice = None;
+    if args.solver.is_none() && scene.solver.defaulted {
+        advice = Some(format!(
+            "lucent: note: the scene has no [solver]: `{name}` computes the uncollided light only (a render adds single scattering); `--solver dom`, `hybrid` or `auto` add multiple scattering"
+        ));
+    }
     let mut params = if name == scene.solver.name {
         scene.solver.params.clone()
     } else {
@@ -534,15 +545,20 @@ fn choose_solver(scene: &Scene, args: &SolverArgs) -> Result<Chosen, Error> {
     if let Some(world) = world().filter(|w| w.size() > 1)
         && !solver.capabilities().ranks
     {
-        return Err(Error::Usage(format!(
-            "`{name}` runs in one process, not on {} MPI ranks (diffusion-mg, ftcs-diffusion, jacobi-diffusion, ftcs-p1 and convection-diffusion's ordered characteristic or paper march split over ranks)",
-            world.size()
-        )));
+        // A feature the solver cannot handle (exit 1, as README says), not a usage error.
+        return Err(Error::Solve(lucent::core::SolveError::Unsupported {
+            solver: name.into(),
+            feature: format!(
+                "{} MPI ranks: it runs in one process (diffusion-mg, ftcs-diffusion, jacobi-diffusion, ftcs-p1 and convection-diffusion's ordered characteristic or paper march split over ranks)",
+                world.size()
+            ),
+        }));
     }
     let resolved = (entry.resolved)(&params)?;
     Ok(Chosen {
         solver,
         note,
+        advice,
         tolerance: args
             .tolerance
             .or(scene.solver.tolerance)
@@ -638,7 +654,7 @@ fn run_solver(
     args: &SolverArgs,
     quiet: bool,
 ) -> Result<Solution, Error> {
-    chosen.say_note();
+    chosen.say_note(quiet);
     let (progress, meter) = bar(quiet, "solve");
     let options = args.options(chosen, meter.solver_callback())?;
     solving();
@@ -772,7 +788,7 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
         let camera = built.camera;
         camera.validate()?;
         let aspect = s.width as f64 / s.height as f64;
-        chosen.say_note();
+        chosen.say_note(quiet);
         let (progress, meter) = bar(quiet, "trace");
         let report = meter.fraction_callback("camera paths");
         let ray = |u: f64, v: f64| {
@@ -969,7 +985,7 @@ fn solve_paged_to_file(
     // The medium gets its share of the budget, the solver pages its own data in the rest;
     // a budget that cannot do is refused before the medium is built.
     let problem = parsed.build_paged_for(chosen.solver.as_ref(), &options)?;
-    chosen.say_note();
+    chosen.say_note(quiet);
     let (progress, meter) = bar(quiet, "solve");
     let options = args.options(chosen, meter.solver_callback())?;
     solving();

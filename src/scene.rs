@@ -112,8 +112,11 @@ pub struct Scene {
     /// The medium's refractive index, where it is graded (curved rays: `direct-refractive`).
     #[serde(default)]
     pub refractive_index: Option<IndexSpec>,
-    /// The camera.
-    pub camera: Camera,
+    /// The camera (only `render` looks through it); without one, [`framing_camera`]: a
+    /// pinhole looking at the box's centre from the front right, above, the whole box in
+    /// view.
+    #[serde(default)]
+    pub camera: Option<Camera>,
     /// Image size and tone mapping.
     #[serde(default)]
     pub image: ImageSpec,
@@ -581,6 +584,10 @@ pub struct SolverSpec {
     /// line's `--tolerance` overrides it.
     #[serde(default)]
     pub tolerance: Option<f64>,
+    /// Whether the scene had no `[solver]` table (this is the default, `direct`: the
+    /// command says what that leaves out).
+    #[serde(skip)]
+    pub defaulted: bool,
 }
 
 fn default_solver() -> String {
@@ -593,6 +600,7 @@ impl Default for SolverSpec {
             name: default_solver(),
             params: Params::default(),
             tolerance: None,
+            defaulted: true,
         }
     }
 }
@@ -722,7 +730,10 @@ impl Scene {
         if let Some(index) = self.refractive_index {
             problem = problem.with_refractive_index(index.to_index(&volume))?;
         }
-        self.camera.validate()?;
+        let camera = self
+            .camera
+            .unwrap_or_else(|| framing_camera(geometry.origin(), geometry.extent()));
+        camera.validate()?;
         let i = self.image;
         let settings = RenderSettings {
             width: i.width,
@@ -739,7 +750,7 @@ impl Scene {
         }
         Ok(BuiltScene {
             problem,
-            camera: self.camera,
+            camera,
             settings,
             exposure: i.exposure,
             tone: i.tone,
@@ -1325,6 +1336,24 @@ pub fn sky_background(problem: &Problem) -> [f64; 3] {
             .map(|l| l.spectrum().channel(c))
             .sum()
     })
+}
+
+/// The camera of a scene without `[camera]`: a pinhole with a 40° field of view and +z up,
+/// looking at the centre of the box `origin`..`origin + extent` from the front right
+/// (+x, −y) and above, far enough that the box's circumscribed sphere fills the view's
+/// height.
+pub fn framing_camera(origin: DVec3, extent: DVec3) -> Camera {
+    let centre = origin + 0.5 * extent;
+    let radius = 0.5 * extent.length();
+    let fov: f64 = 40.0;
+    let distance = radius / (0.5 * fov).to_radians().sin();
+    let towards_eye = DVec3::new(1.0, -0.8, 0.45).normalize();
+    Camera::Pinhole {
+        position: (centre + distance * towards_eye).to_array(),
+        look_at: centre.to_array(),
+        up: [0.0, 0.0, 1.0],
+        fov,
+    }
 }
 
 /// The folder of shared test volumes: `$LUCENT_DATA`, or `../shared/data/volumes`.

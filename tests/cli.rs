@@ -2118,3 +2118,52 @@ fn data_volumes_resolve_from_any_working_folder() {
         String::from_utf8_lossy(&out.stdout)
     );
 }
+
+/// A scene needs no `[camera]` for `info` and `solve` (it was required, its error at line
+/// 1, column 1), and `render` frames the box without one; a scene without `[solver]` runs
+/// `direct` and, unless `--quiet`, says what that leaves out.
+#[test]
+fn a_scene_without_camera_or_solver_runs_and_says_what_direct_leaves_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("bare.toml"),
+        "[volume]\nkind = \"blob\"\nresolution = [13, 10, 9]\nbounds = [[2.0, -1.0, 0.0], [4.0, 0.5, 1.2]]\ncentre = [3.0, -0.25, 0.6]\nsigma = 0.3\n\
+         [medium]\ndensity = 30.0\nalbedo = 0.9\n\
+         [[lights]]\nkind = \"directional\"\ndirection = [0.0, 0.0, -1.0]\nirradiance = 4.0\n",
+    )
+    .unwrap();
+    let info = lucent(&["info", "bare.toml"], d);
+    assert_eq!(info.status.code(), Some(0), "{}", stderr(&info));
+    let solve = lucent(&["solve", "bare.toml", "-o", "phi.npy"], d);
+    assert_eq!(solve.status.code(), Some(0), "{}", stderr(&solve));
+    assert!(
+        stderr(&solve).contains("has no [solver]"),
+        "{}",
+        stderr(&solve)
+    );
+    let quiet = lucent(&["solve", "bare.toml", "-o", "phi.npy", "-q"], d);
+    assert!(stderr(&quiet).is_empty(), "{}", stderr(&quiet));
+    let render = lucent(
+        &[
+            "render",
+            "bare.toml",
+            "-o",
+            "bare.png",
+            "--size",
+            "64x48",
+            "-q",
+        ],
+        d,
+    );
+    assert_eq!(render.status.code(), Some(0), "{}", stderr(&render));
+    // The framing camera looks at the box's centre (far from the origin here): the lit
+    // blob there stands out from the picture's corner.
+    let image = image::open(d.join("bare.png")).unwrap().into_rgb8();
+    let centre = i32::from(image.get_pixel(32, 24)[1]);
+    let corner = i32::from(image.get_pixel(0, 0)[1]);
+    assert!(
+        (centre - corner).abs() > 8,
+        "centre {centre}, corner {corner}"
+    );
+}
