@@ -140,6 +140,10 @@ pub enum Error {
         /// Why.
         reason: String,
     },
+    /// A scene too large for the memory budget in memory (it is valid: a larger budget,
+    /// or solving out of core where the scene and solver allow, would do).
+    #[error("over the memory budget: {0}")]
+    OverBudget(String),
     /// A command-line argument that makes no sense.
     #[error("{0}")]
     Usage(String),

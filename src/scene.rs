@@ -35,6 +35,22 @@ pub fn max_grid_bytes(budget: u64) -> u64 {
     budget / 8
 }
 
+/// The registered solvers that solve a procedural scene out of core ([`Solver::pages`]),
+/// in registry order.
+///
+/// [`Solver::pages`]: lucent_core::Solver::pages
+pub fn paging_solvers() -> Vec<String> {
+    let registry = crate::registry();
+    registry
+        .entries()
+        .iter()
+        .filter_map(|entry| {
+            let solver = (entry.build)(&Params::default()).ok()?;
+            solver.pages().then(|| entry.name.to_owned())
+        })
+        .collect()
+}
+
 /// What reading a volume file may take, its payload and its decoded grid together: three
 /// fields' worth (an f64 payload and its f32 grid of the largest field), so that a file
 /// claiming more (a decompression bomb, a VDB whose tree spans a huge box) is refused
@@ -1104,8 +1120,19 @@ impl Scene {
             )?;
             let bytes = g.voxel_count() as u64 * 4;
             if bytes > max_grid_bytes(budget) {
-                return Err(Error::Invalid(format!(
-                    "a {resolution:?} grid needs {bytes} bytes per field; a scene holds up to 8 fields, so a memory budget of {budget} bytes allows {} per field (--memory-budget sets it; `direct` and `convection-diffusion` solve procedural scenes beyond it out of core)",
+                let out_of_core = match &self.volume {
+                    VolumeSpec::File { .. } => String::new(),
+                    _ => format!(
+                        "; `lucent solve` solves this procedural scene out of core with {}, while `render`, `info` and the other solvers build it in memory",
+                        paging_solvers()
+                            .iter()
+                            .map(|n| format!("`{n}`"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                };
+                return Err(Error::OverBudget(format!(
+                    "a {resolution:?} grid needs {bytes} bytes per field; a scene holds up to 8 fields, so a memory budget of {budget} bytes allows {} per field in memory (--memory-budget sets it){out_of_core}",
                     max_grid_bytes(budget)
                 )));
             }

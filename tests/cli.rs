@@ -2167,3 +2167,67 @@ fn a_scene_without_camera_or_solver_runs_and_says_what_direct_leaves_out() {
         "centre {centre}, corner {corner}"
     );
 }
+
+/// A procedural scene too large for the budget in memory is not called invalid: the
+/// refusal says which command and which solvers solve it out of core (every solver that
+/// pages, from the registry: the list was stale and `render`, whose solver was `direct`,
+/// was told `direct` would do).
+#[test]
+fn a_scene_over_the_budget_in_memory_says_who_pages_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("big.toml"),
+        "[volume]\nkind = \"cloud\"\nresolution = [100, 90, 70]\nbounds = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]]\nseed = 1\n\
+         [medium]\ndensity = 10.0\nalbedo = 0.9\n\
+         [[lights]]\nkind = \"directional\"\ndirection = [0.0, 0.0, -1.0]\nirradiance = 1.0\n",
+    )
+    .unwrap();
+    for command in [
+        &["render", "big.toml", "-o", "big.png"][..],
+        &["info", "big.toml"][..],
+        &[
+            "solve",
+            "big.toml",
+            "--solver",
+            "diffusion-mg",
+            "-o",
+            "phi.npy",
+        ][..],
+    ] {
+        let mut args = command.to_vec();
+        args.extend_from_slice(&["--memory-budget", "8MiB"]);
+        let out = lucent(&args, d);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(!err.contains("invalid scene"), "{err}");
+        assert!(err.contains("over the memory budget"), "{err}");
+        assert!(
+            err.contains("`lucent solve` solves this procedural scene out of core"),
+            "{err}"
+        );
+        for solver in lucent::scene::paging_solvers() {
+            assert!(err.contains(&format!("`{solver}`")), "{solver}: {err}");
+        }
+    }
+    let pagers = lucent::scene::paging_solvers();
+    for solver in ["direct", "convection-diffusion", "mc", "ftcs-diffusion"] {
+        assert!(pagers.iter().any(|p| p == solver), "{pagers:?}");
+    }
+    // And `solve` with one of them does page it.
+    let out = lucent(
+        &[
+            "solve",
+            "big.toml",
+            "--solver",
+            "direct",
+            "-o",
+            "phi.npy",
+            "-q",
+            "--memory-budget",
+            "8MiB",
+        ],
+        d,
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+}

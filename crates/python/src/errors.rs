@@ -110,7 +110,7 @@ pub(crate) fn from_lucent(e: lucent::Error) -> PyErr {
             _ => Kind::InvalidInput,
         },
         E::Unconverged { .. } => Kind::Solve,
-        E::PagedBudget { .. } => Kind::OverBudget,
+        E::PagedBudget { .. } | E::OverBudget(_) => Kind::OverBudget,
     };
     raise(kind, e.to_string())
 }
