@@ -65,6 +65,10 @@ struct Cli {
     /// No progress bars.
     #[arg(long, short, global = true)]
     quiet: bool,
+    /// Check the command line and exit (0, or 2 with the usage error): the docs' commands
+    /// are checked with it (`tests/tidy.rs`).
+    #[arg(long, global = true, hide = true)]
+    parse_only: bool,
 }
 
 /// Which solver, with which parameters, and what to accept.
@@ -238,6 +242,9 @@ fn main() -> ExitCode {
         Ok(cli) => cli,
         Err(e) => e.exit(),
     };
+    if cli.parse_only {
+        return ExitCode::SUCCESS;
+    }
     if let Some(note) = lucent::cap_global_threads() {
         let _ = writeln!(io::stderr(), "lucent: {note}");
     }
@@ -356,7 +363,7 @@ where
     if let Some((name, _)) = matches.subcommand() {
         let given: Vec<String> = matches
             .ids()
-            .filter(|id| id.as_str() != "quiet")
+            .filter(|id| !matches!(id.as_str(), "quiet" | "parse_only"))
             .filter(|id| matches.value_source(id.as_str()) == Some(ValueSource::CommandLine))
             // Arguments only (a flattened struct is also a group of its arguments' ids).
             .filter_map(|id| command.get_arguments().find(|a| a.get_id() == id))

@@ -302,3 +302,147 @@ fn citations_point_at_what_a_user_has() {
     }
     assert!(offences.is_empty(), "{}", offences.join("\n"));
 }
+
+/// The `lucent …` commands the docs show: in code blocks (a line whose program is `lucent`,
+/// `target/release/lucent` or `target/debug/lucent`, after environment assignments and an
+/// `mpirun … ` prefix, continuation lines joined, comments dropped) and in inline code
+/// spans; each with the file and line it came from, as arguments, and whether it is a
+/// whole command (a code block's line; an inline span may name a command and its flags
+/// without their values). A synopsis is read as its fullest example: brackets dropped, the
+/// first of `a|b`, no `...`.
+fn documented_commands(path: &Path) -> Vec<(String, Vec<String>, bool)> {
+    let text = read(path);
+    let name = path
+        .strip_prefix(root())
+        .unwrap_or(path)
+        .display()
+        .to_string();
+    let mut found = Vec::new();
+    let mut in_block = false;
+    let mut pending = String::new();
+    let mut pending_line = 0;
+    for (number, line) in text.lines().enumerate() {
+        let trimmed = line.trim_start();
+        if trimmed.starts_with("```") {
+            in_block = !in_block;
+            continue;
+        }
+        if in_block {
+            let code = trimmed.strip_prefix("$ ").unwrap_or(trimmed);
+            let code = match code.find(" #") {
+                Some(i) => &code[..i],
+                None if code.starts_with('#') => "",
+                None => code,
+            };
+            if pending.is_empty() {
+                pending_line = number + 1;
+            }
+            pending.push_str(code.trim_end_matches('\\'));
+            pending.push(' ');
+            if code.trim_end().ends_with('\\') {
+                continue;
+            }
+            let joined = std::mem::take(&mut pending);
+            if let Some(args) = lucent_arguments(&joined) {
+                found.push((format!("{name}:{pending_line}"), args, true));
+            }
+        } else {
+            for (i, span) in line.split('`').enumerate() {
+                if i % 2 == 1
+                    && span.starts_with("lucent ")
+                    && let Some(args) = lucent_arguments(span)
+                {
+                    found.push((format!("{name}:{}", number + 1), args, false));
+                }
+            }
+        }
+    }
+    found
+}
+
+/// The arguments of `command` when its program is the `lucent` command.
+fn lucent_arguments(command: &str) -> Option<Vec<String>> {
+    let mut words = command.split_whitespace().peekable();
+    // Environment assignments, then an `mpirun` with its options.
+    while words
+        .peek()
+        .is_some_and(|w| w.contains('=') && !w.starts_with('-'))
+    {
+        words.next();
+    }
+    if words.peek() == Some(&"mpirun") {
+        while words.next_if(|w| !w.ends_with("lucent")).is_some() {}
+    }
+    let program = words.next()?;
+    if !(program == "lucent"
+        || program.ends_with("/release/lucent")
+        || program.ends_with("/debug/lucent"))
+    {
+        return None;
+    }
+    let args: Vec<String> = words
+        .filter(|w| !matches!(*w, "..." | "…"))
+        .map(|w| {
+            let w = w
+                .replace(['[', ']'], "")
+                .replace("...", "")
+                .replace('…', "");
+            let w = w.split('|').next().unwrap_or_default().to_owned();
+            w.trim_matches(|c| c == '"' || c == '\'').to_owned()
+        })
+        .filter(|w| !w.is_empty())
+        .collect();
+    Some(args)
+}
+
+/// Every `lucent …` command in README.md, docs/ and examples/README.md parses (it once
+/// showed commands that failed: flags before the subcommand, a solver parameter that is
+/// no flag): each is run with the hidden `--parse-only`, which checks the command line
+/// and exits.
+#[test]
+fn every_documented_lucent_command_parses() {
+    let mut files = vec![root().join("README.md"), root().join("examples/README.md")];
+    let mut docs: Vec<PathBuf> = std::fs::read_dir(root().join("docs"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "md"))
+        .collect();
+    docs.sort();
+    files.extend(docs);
+    let mut checked = 0;
+    let mut failures = Vec::new();
+    for file in &files {
+        for (place, args, whole) in documented_commands(file) {
+            let out = std::process::Command::new(env!("CARGO_BIN_EXE_lucent"))
+                .args(&args)
+                .arg("--parse-only")
+                .output()
+                .unwrap();
+            checked += 1;
+            let err = String::from_utf8_lossy(&out.stderr);
+            // A reference in prose ("`lucent solve --memory-budget` pages ...") names the
+            // command and its flags: they must exist, the values may be left out.
+            let reference = !whole
+                && (err.contains("required arguments were not provided")
+                    || err.contains("a value is required"));
+            if !out.status.success() && !reference {
+                failures.push(format!(
+                    "{place}: lucent {}: {}",
+                    args.join(" "),
+                    String::from_utf8_lossy(&out.stderr)
+                        .lines()
+                        .next()
+                        .unwrap_or("")
+                ));
+            }
+        }
+    }
+    // The README alone shows a dozen; fewer means the extraction broke.
+    assert!(checked >= 20, "only {checked} commands found");
+    assert!(
+        failures.is_empty(),
+        "{} of {checked} commands do not parse:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+}
