@@ -574,6 +574,31 @@ pub fn validation_markdown(outcomes: &[Outcome], command: &str) -> String {
     out.push_str(DOM_NOTE);
     out.push_str(POINT_NOTE);
     out.push_str(CONVECTION_NOTE);
+    out.push_str(&elsewhere_note());
+    out
+}
+
+/// The registered solvers that have no row in the suite's table, and where each is
+/// checked instead (a test keeps every registered solver in the table or here).
+pub const CHECKED_ELSEWHERE: &[(&str, &str)] = &[
+    (
+        "direct-refractive",
+        "curved rays through a graded refractive index, which no suite scene has: with a uniform index it gives `direct`'s fluence to 2e-5 relative on boxes of several shapes; through a graded index a beam keeps its flux across every cell-centre plane to 1e-4 (measured 1.3e-6); a Luneburg lens focuses a beam on its far rim (`crates/core/tests/refractive.rs`)",
+    ),
+    (
+        "auto",
+        "runs another registered solver, chosen from measurements: measured against the fastest single solver on every suite scene (\"`auto` against the fastest single solver\" below)",
+    ),
+];
+
+/// The section on [`CHECKED_ELSEWHERE`].
+fn elsewhere_note() -> String {
+    let mut out = String::from(
+        "\n## Solvers without rows in the table\n\nEvery registered solver has rows above or is here, with where it is checked instead.\n\n",
+    );
+    for (solver, why) in CHECKED_ELSEWHERE {
+        out.push_str(&format!("- `{solver}`: {why}.\n"));
+    }
     out
 }
 

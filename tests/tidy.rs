@@ -446,3 +446,38 @@ fn every_documented_lucent_command_parses() {
         failures.join("\n")
     );
 }
+
+/// Every registered solver has rows in the suite's table (`tolerances.toml`, from which
+/// `docs/validation.md` is generated) or is listed, with where it is checked instead, in
+/// `crosscheck::CHECKED_ELSEWHERE`, whose section `docs/validation.md` carries
+/// (`direct-refractive` had neither).
+#[test]
+fn every_solver_has_validation_rows_or_a_stated_reason() {
+    let (_, tolerances) =
+        lucent::crosscheck::load_suite(&root().join("examples/scenes/suite")).unwrap();
+    let validation = read("docs/validation.md");
+    for entry in lucent::registry().entries() {
+        let rows = tolerances.iter().any(|t| t.solver == entry.name);
+        let elsewhere = lucent::crosscheck::CHECKED_ELSEWHERE
+            .iter()
+            .any(|(s, _)| *s == entry.name);
+        assert!(
+            rows ^ elsewhere,
+            "`{}`: rows in tolerances.toml {rows}, in CHECKED_ELSEWHERE {elsewhere} (exactly one)",
+            entry.name
+        );
+        if elsewhere {
+            assert!(
+                validation.contains(&format!("\n- `{}`: ", entry.name)),
+                "docs/validation.md lacks `{}` under \"Solvers without rows in the table\" (cargo xtask crosscheck writes it)",
+                entry.name
+            );
+        } else {
+            assert!(
+                validation.contains(&format!("\n| {} | ", entry.name)),
+                "docs/validation.md has no row of `{}` (cargo xtask crosscheck writes them)",
+                entry.name
+            );
+        }
+    }
+}
