@@ -781,7 +781,7 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
     };
     // A solver that makes pictures itself (Monte Carlo's camera paths) says so; the rest
     // hand the renderer a fluence.
-    let (solve_seconds, image) = if let Some(imager) = chosen.solver.images() {
+    let ((stage, solve_seconds), image) = if let Some(imager) = chosen.solver.images() {
         let error_path = output.with_extension("stderr.exr");
         check_output(
             &error_path,
@@ -804,6 +804,7 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
                 .unwrap_or((glam::DVec3::ZERO, glam::DVec3::Z))
         };
         solving();
+        let traced = Instant::now();
         let estimate = imager.image(
             &built.problem,
             &lucent::core::ImageRequest {
@@ -859,7 +860,8 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
             height: estimate.height,
             pixels: estimate.radiance,
         };
-        (0.0, image)
+        // The paths are the solve: their time, not 0 (the summary said "solve 0.00 s").
+        (("camera paths", traced.elapsed().as_secs_f64()), image)
     } else {
         let solution = run_solver(&chosen, &built, &args.solver, quiet)?;
         if !writes() {
@@ -895,12 +897,12 @@ fn render(args: &RenderArgs, quiet: bool) -> Result<Ended, Error> {
             ),
         };
         progress.finish_and_clear();
-        (report.wall_time_s, image?)
+        (("solve", report.wall_time_s), image?)
     };
     image.write(output, built.exposure, built.tone)?;
     if !quiet {
         say!(
-            "lucent: rendered {name} with `{}` to {} ({}×{}{}) in {:.2} s (solve {solve_seconds:.2} s)",
+            "lucent: rendered {name} with `{}` to {} ({}×{}{}) in {:.2} s ({stage} {solve_seconds:.2} s)",
             chosen.solver.name(),
             output.display(),
             image.width,

@@ -2090,6 +2090,34 @@ fn a_path_traced_render_honours_the_time_limit() {
         assert!(took < std::time::Duration::from_secs(3), "took {took:?}");
         assert_eq!(dir.path().join("mc.png").exists(), allow);
     }
+    // Without -q the summary gives the paths' time (it said "solve 0.00 s"): about the
+    // one-second limit.
+    let out = lucent(
+        &[
+            "render",
+            &cloud,
+            "--solver",
+            "mc",
+            "--param",
+            "spp=65536",
+            "--size",
+            "64x48",
+            "--time-limit",
+            "1",
+            "-o",
+            "mc.png",
+            "--allow-unconverged",
+        ],
+        dir.path(),
+    );
+    let said = String::from_utf8_lossy(&out.stdout);
+    let seconds: f64 = said
+        .split("(camera paths ")
+        .nth(1)
+        .and_then(|rest| rest.split(" s)").next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{said}"));
+    assert!((0.8..3.0).contains(&seconds), "{said}");
 }
 
 /// A scene with a `data:` volume is found from any working folder (it resolved only from
