@@ -181,8 +181,11 @@ enum Command {
         #[arg(short, long)]
         output: PathBuf,
     },
-    /// List the solvers and what they can do.
-    Solvers,
+    /// List the solvers; with a NAME, what that one handles and its parameters.
+    Solvers {
+        /// A registered solver (`lucent solvers` lists them).
+        name: Option<String>,
+    },
     /// Describe a scene: grid, medium, lights, and whether its solver can handle it.
     Info {
         /// Scene file (TOML); the built-in default scene if omitted.
@@ -274,7 +277,7 @@ fn main() -> ExitCode {
             solver,
             output,
         }) => solve_to_file(&scene, &solver, &output, quiet),
-        Some(Command::Solvers) => list_solvers().map(|()| Ended::Done),
+        Some(Command::Solvers { name }) => list_solvers(name.as_deref()).map(|()| Ended::Done),
         Some(Command::Info { scene, solver }) => {
             info(scene.as_deref(), &solver).map(|()| Ended::Done)
         }
@@ -1129,40 +1132,68 @@ fn solve_to_file(
     Ok(Ended::Done)
 }
 
-fn list_solvers() -> Result<(), Error> {
+fn list_solvers(name: Option<&str>) -> Result<(), Error> {
     let mut out = io::stdout().lock();
     let io_err = |e: io::Error| Error::Io {
         path: "<stdout>".into(),
         reason: e.to_string(),
     };
-    for entry in lucent::registry().entries() {
-        let solver = (entry.build)(&Default::default())?;
-        let c = solver.capabilities();
-        let list = |items: Vec<String>| items.join(", ");
-        writeln!(out, "{:<16} {}", entry.name, entry.summary).map_err(io_err)?;
+    let registry = lucent::registry();
+    let Some(name) = name else {
+        // One line each, the summaries aligned after the longest name.
+        let width = registry
+            .entries()
+            .iter()
+            .map(|e| e.name.len())
+            .max()
+            .unwrap_or(0);
+        for entry in registry.entries() {
+            writeln!(out, "{:<width$}  {}", entry.name, entry.summary).map_err(io_err)?;
+        }
         writeln!(
             out,
-            "{:<16} anisotropic: {}, heterogeneous: {}, embedded geometry: {}, graded index: {}, output: {}\n{:<16} boundaries: {}\n{:<16} lights: {}",
-            "",
-            yes_no(c.anisotropic),
-            yes_no(c.heterogeneous),
-            yes_no(c.embedded_geometry),
-            yes_no(c.graded_index),
-            kebab(&c.output),
-            "",
-            list(c.boundaries.iter().map(kebab).collect()),
-            "",
-            list(c.lights.iter().map(kebab).collect()),
+            "\n`lucent solvers NAME`: what one solver handles, its parameters and their defaults"
         )
         .map_err(io_err)?;
-        let params = (entry.params)();
-        if params.is_empty() {
-            writeln!(out, "{:<16} parameters: none", "").map_err(io_err)?;
-        }
-        for p in params {
-            let setting = format!("{} = {}", p.name, p.default);
-            writeln!(out, "{:<16} {setting:<28} {}", "", p.meaning).map_err(io_err)?;
-        }
+        return Ok(());
+    };
+    let entry = registry.entry(name)?;
+    let solver = (entry.build)(&Default::default())?;
+    let c = solver.capabilities();
+    let list = |items: Vec<String>| items.join(", ");
+    let rows = [
+        ("anisotropic", yes_no(c.anisotropic).to_owned()),
+        ("heterogeneous", yes_no(c.heterogeneous).to_owned()),
+        ("embedded geometry", yes_no(c.embedded_geometry).to_owned()),
+        ("graded index", yes_no(c.graded_index).to_owned()),
+        ("output", kebab(&c.output)),
+        ("boundaries", list(c.boundaries.iter().map(kebab).collect())),
+        ("lights", list(c.lights.iter().map(kebab).collect())),
+        ("out of core", yes_no(solver.pages()).to_owned()),
+        ("MPI ranks", yes_no(c.ranks).to_owned()),
+    ];
+    writeln!(out, "{}: {}\n", entry.name, entry.summary).map_err(io_err)?;
+    for (what, value) in rows {
+        writeln!(out, "  {what:<18} {value}").map_err(io_err)?;
+    }
+    let params = (entry.params)();
+    if params.is_empty() {
+        writeln!(out, "\n  parameters: none").map_err(io_err)?;
+        return Ok(());
+    }
+    writeln!(out, "\n  parameters (--param KEY=VALUE; default shown):").map_err(io_err)?;
+    let settings: Vec<String> = params
+        .iter()
+        .map(|p| format!("{} = {}", p.name, p.default))
+        .collect();
+    let width = settings
+        .iter()
+        .map(|s| s.chars().count())
+        .max()
+        .unwrap_or(0);
+    for (setting, p) in settings.iter().zip(&params) {
+        let pad = width - setting.chars().count();
+        writeln!(out, "  {setting}{:pad$}  {}", "", p.meaning).map_err(io_err)?;
     }
     Ok(())
 }

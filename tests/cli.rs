@@ -272,21 +272,41 @@ fn resolution_chooses_the_fewest_directions() {
     assert!(stderr(&none).contains("(dom, hybrid)"), "{}", stderr(&none));
 }
 
+/// `lucent solvers` is one aligned line per solver (it was 300 lines whose columns broke
+/// on names longer than 16); `lucent solvers NAME` is one solver whole.
 #[test]
 fn lists_solvers_with_capabilities() {
     let out = lucent(&["solvers"], Path::new("."));
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
+    let entries = lucent::registry().entries().len();
+    let lines: Vec<&str> = text.lines().take(entries).collect();
+    let column = |line: &str| {
+        let name = line.split_whitespace().next().unwrap();
+        line[name.len()..].find(|c: char| c != ' ').unwrap() + name.len()
+    };
+    for (line, entry) in lines.iter().zip(lucent::registry().entries()) {
+        assert!(line.starts_with(entry.name), "{text}");
+        assert_eq!(column(line), column(lines[0]), "summaries aligned:\n{text}");
+    }
+    let out = lucent(&["solvers", "direct"], Path::new("."));
+    let text = String::from_utf8_lossy(&out.stdout);
     assert!(
-        text.contains("direct") && text.contains("boundaries") && text.contains("directional"),
+        text.contains("boundaries") && text.contains("directional"),
         "{text}"
     );
+    let out = lucent(&["solvers", "no-such-solver"], Path::new("."));
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("no-such-solver"), "{}", stderr(&out));
 }
 
 #[test]
 fn lists_every_parameter_of_every_solver_with_its_default() {
-    let out = lucent(&["solvers"], Path::new("."));
-    let text = String::from_utf8_lossy(&out.stdout);
+    let mut text = String::new();
+    for entry in lucent::registry().entries() {
+        let out = lucent(&["solvers", entry.name], Path::new("."));
+        text.push_str(&String::from_utf8_lossy(&out.stdout));
+    }
     for entry in lucent::registry().entries() {
         for p in (entry.params)() {
             let line = format!("{} = {}", p.name, p.default);
