@@ -196,10 +196,21 @@ fn an_unseen_problem_is_decided_by_its_neighbours_with_a_margin() {
     );
     let choice = choose(problem, 0.05, None, &alone, &registry).unwrap();
     assert!(!choice.meets, "{choice}");
+    // The line says the margin (without it, "cannot meet 5 % … with 4.5 %" read as a
+    // contradiction) and labels the distance.
     assert!(
-        choice.to_string().contains("touching_faces (distance 0."),
+        choice
+            .to_string()
+            .contains("touching_faces (regime distance 0."),
         "{choice}"
     );
+    assert!(
+        choice
+            .to_string()
+            .contains("(at most 4.00% measured: a margin of 20 %"),
+        "{choice}"
+    );
+    assert!((choice.error_limit() - 0.04).abs() < 1e-12);
 }
 
 /// What `auto` runs is that run, bit for bit: the solver with the table's parameters and

@@ -1113,6 +1113,9 @@ impl<'a, C: Communicator + ?Sized> OnRanks<'a, C> {
         let shared = Stopping {
             time_budget: None,
             cancel: None,
+            // The deadline too: each rank's clock travels with the reduced flags;
+            // asked alone, ranks would stop at different steps and wait on each other.
+            deadline: None,
             progress: if self.rank == 0 {
                 stopping.progress.clone()
             } else {

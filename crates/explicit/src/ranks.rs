@@ -916,6 +916,9 @@ fn sweep(
     let shared = Stopping {
         time_budget: None,
         cancel: None,
+        // The deadline too: each rank's clock travels with the reduced flags;
+        // asked alone, ranks would stop at different steps and wait on each other.
+        deadline: None,
         progress: if rank == 0 {
             settings.stopping.progress.clone()
         } else {
@@ -1232,6 +1235,9 @@ pub fn march_p1_box(
     let shared = Stopping {
         time_budget: None,
         cancel: None,
+        // The deadline too: each rank's clock travels with the reduced flags;
+        // asked alone, ranks would stop at different steps and wait on each other.
+        deadline: None,
         progress: if rank == 0 {
             settings.stopping.progress.clone()
         } else {
