@@ -437,6 +437,9 @@ pub struct Choice {
     /// than [`SAME_SCENE`]), else every one within [`NEIGHBOUR_FACTOR`] × the nearest
     /// distance + [`NEIGHBOUR_SLACK`].
     pub neighbours: Vec<(String, f64)>,
+    /// The expected error a run may have to be chosen: the tolerance on a measured scene,
+    /// [`UNSEEN_MARGIN`] of it on any other.
+    pub error_limit: f64,
     /// The run chosen (solver, parameters, grid refinement, iteration tolerance).
     pub run: Run,
     /// Its largest error on the deciding scenes that measured it.
@@ -492,7 +495,7 @@ impl fmt::Display for Choice {
         let refused = format!("{scaled}{refused}");
         // On a scene it has not measured, a run must come within `UNSEEN_MARGIN` of the
         // tolerance: say so, or "cannot meet 5 % … with 4.29 %" reads as a contradiction.
-        let limit = self.error_limit();
+        let limit = self.error_limit;
         let margin = if limit < self.tolerance {
             format!(
                 " (at most {} measured: a margin of {:.0} % for a scene not in the suite)",
@@ -558,15 +561,6 @@ impl Choice {
         }
     }
 
-    /// The expected error a run may have to be chosen: the tolerance on a measured
-    /// scene, [`UNSEEN_MARGIN`] of it on any other.
-    pub fn error_limit(&self) -> f64 {
-        match self.neighbours.as_slice() {
-            [(_, d)] if *d < SAME_SCENE => self.tolerance,
-            _ => UNSEEN_MARGIN * self.tolerance,
-        }
-    }
-
     /// The report's fields for this choice: the solver and parameters that ran, their
     /// parts (those of `inner`, the chosen solver's own composition, as `hybrid`'s) and the
     /// numbers of the decision.
@@ -582,7 +576,7 @@ impl Choice {
             parts: inner.map(|c| c.parts).unwrap_or_default(),
             decision: Some(Decision {
                 tolerance: self.tolerance,
-                error_limit: self.error_limit(),
+                error_limit: self.error_limit,
                 expected_error: self.expected_error,
                 expected_seconds: self.expected_seconds,
                 meets: self.meets,
@@ -715,6 +709,7 @@ fn choose_from(
     let fits = |seconds: f64| budget.is_none_or(|b| seconds <= b.as_secs_f64());
     let choice = |(run, error, seconds): &(Run, f64, f64), meets, budget_bound, refused| Choice {
         tolerance,
+        error_limit: limit,
         neighbours: deciding.iter().map(|(d, s)| (s.name.clone(), *d)).collect(),
         run: run.clone(),
         expected_error: *error,

@@ -210,7 +210,7 @@ fn an_unseen_problem_is_decided_by_its_neighbours_with_a_margin() {
             .contains("(at most 4.00% measured: a margin of 20 %"),
         "{choice}"
     );
-    assert!((choice.error_limit() - 0.04).abs() < 1e-12);
+    assert!((choice.error_limit - 0.04).abs() < 1e-12);
 }
 
 /// What `auto` runs is that run, bit for bit: the solver with the table's parameters and

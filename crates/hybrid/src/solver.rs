@@ -59,6 +59,9 @@ pub struct HybridChannel {
     /// The diffusion part's balance: the power of the source handed to it (the scattered
     /// part of the last sweep's collisions) against what it absorbs and lets escape.
     pub diffusion: lucent_diffusion::Balance,
+    /// Transport sweeps run, over all orders (one per order, more where a reflecting
+    /// boundary makes an order iterate).
+    pub sweeps_run: usize,
     /// V-cycles of the diffusion part.
     pub cycles: usize,
     /// Share of the scattered power that diffusion carried: the diffusion source's power
@@ -220,14 +223,10 @@ impl HybridSolver {
                 1 => "scattering order 1".into(),
                 k => format!("scattering orders 1-{k}"),
             },
-            method: format!("S{} transport sweeps, one per order", params.order),
-            params: serde_json::json!({
-                "order": params.order,
-                "closure": json(serde_json::to_value(params.closure)),
-                "orders": params.orders,
-                "block": params.block,
-            }),
-            iterations: channels.iter().map(|c| c.sweeps.len()).sum(),
+            method: format!("S{} transport sweeps, one order each", params.order),
+            // Every one of `hybrid`'s own parameters is the sweeps'.
+            params: json(serde_json::to_value(params)),
+            iterations: channels.iter().map(|c| c.sweeps_run).sum(),
             share: None,
         });
         parts.push(Part {
@@ -527,6 +526,7 @@ impl ChannelMethod for HybridSolver {
                     sweeps,
                     handed,
                     diffusion: diffused.balance,
+                    sweeps_run,
                     cycles,
                     diffused_share,
                     balance,
