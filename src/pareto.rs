@@ -9,7 +9,7 @@
 //!   multigrid methods
 //!   (against the total fluence: the curves flatten at the diffusion model's error);
 //! - `fem-p1-jacobi`: the Jacobi iteration count (its error grows: the method diverges),
-//!   and the same system by GMRES (`fem-p1-gmres`) over the stopping tolerance, against
+//!   and the same system by GMRES (the curve `fem-p1-jacobi solver=gmres`) over the stopping tolerance, against
 //!   the uncollided fluence;
 //! - `dom`: the level-symmetric order S2–S12 with diamond difference, and step and
 //!   exponential closures at S8 (tolerance 1e-4), against the total fluence;
@@ -22,7 +22,7 @@
 //! The knobs live in one table, [`runs`]; a run whose solver does not admit the scene is
 //! skipped.
 //!
-//! `cargo xtask pareto` writes `docs/pareto/<scene>.svg` and `.csv` (each run's error
+//! `cargo xtask pareto` writes `docs/pareto/<scene>.csv` (and draws its chart, `.svg`) (each run's error
 //! against its own reference and against the total fluence), `auto`'s table
 //! (`docs/pareto/auto.csv`, [`crate::auto::Table`]) and `auto`'s own runs on each scene
 //! ([`measure_auto`]: with the scene's rows in the table, and with them left out), whose
@@ -244,7 +244,7 @@ pub fn runs() -> Vec<Run> {
         });
     }
     runs.push(Run {
-        label: "fem-p1-gmres",
+        label: "fem-p1-jacobi solver=gmres",
         tolerance: Some(1e-4),
         ..Run::new(
             "fem-p1-jacobi",
@@ -864,130 +864,6 @@ pub fn csv(points: &[Point]) -> String {
         ));
     }
     out
-}
-
-/// [`svg`] with `auto`'s runs (with the scene's own rows in its table) as one more curve,
-/// their errors against the total fluence.
-pub fn svg_with_auto(title: &str, points: &[Point], autos: &[AutoPoint]) -> String {
-    let mut all = points.to_vec();
-    all.extend(
-        autos
-            .iter()
-            .filter(|a| a.own_rows || a.held_out)
-            .map(|a| Point {
-                solver: "auto".into(),
-                setting: format!("tolerance {:.0}%: {}", 100.0 * a.tolerance, a.chose),
-                seconds: a.seconds,
-                error: a.error_total,
-                error_total: a.error_total,
-            }),
-    );
-    svg(title, &all)
-}
-
-/// A log-log chart of error against time, one curve per solver, as SVG.
-pub fn svg(title: &str, points: &[Point]) -> String {
-    let (w, h) = (640.0, 420.0);
-    let (left, right, top, bottom) = (70.0, 150.0, 40.0, 50.0);
-    let lg = |v: f64| v.max(1e-12).log10();
-    let (mut x0, mut x1, mut y0, mut y1) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for p in points {
-        x0 = x0.min(lg(p.seconds));
-        x1 = x1.max(lg(p.seconds));
-        y0 = y0.min(lg(p.error));
-        y1 = y1.max(lg(p.error));
-    }
-    if !x0.is_finite() {
-        (x0, x1, y0, y1) = (-3.0, 0.0, -3.0, 0.0);
-    }
-    let (x0, x1, y0, y1) = (
-        x0.floor(),
-        x1.ceil().max(x0.floor() + 1.0),
-        y0.floor(),
-        y1.ceil().max(y0.floor() + 1.0),
-    );
-    let px = |v: f64| left + (lg(v) - x0) / (x1 - x0) * (w - left - right);
-    let py = |v: f64| h - bottom - (lg(v) - y0) / (y1 - y0) * (h - top - bottom);
-    let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"12\">\n\
-         <rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\n<text x=\"{}\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">{title}</text>\n",
-        (left + w - right) / 2.0
-    );
-    for d in (x0 as i32)..=(x1 as i32) {
-        let x = px(10f64.powi(d));
-        s.push_str(&format!(
-            "<line x1=\"{x}\" y1=\"{top}\" x2=\"{x}\" y2=\"{}\" stroke=\"#ddd\"/><text x=\"{x}\" y=\"{}\" text-anchor=\"middle\">1e{d}</text>\n",
-            h - bottom,
-            h - bottom + 16.0
-        ));
-    }
-    for d in (y0 as i32)..=(y1 as i32) {
-        let y = py(10f64.powi(d));
-        s.push_str(&format!(
-            "<line x1=\"{left}\" y1=\"{y}\" x2=\"{}\" y2=\"{y}\" stroke=\"#ddd\"/><text x=\"{}\" y=\"{}\" text-anchor=\"end\">1e{d}</text>\n",
-            w - right,
-            left - 6.0,
-            y + 4.0
-        ));
-    }
-    s.push_str(&format!(
-        "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">wall time (s)</text>\n<text x=\"16\" y=\"{}\" text-anchor=\"middle\" transform=\"rotate(-90 16 {})\">relative L2 error</text>\n",
-        (left + w - right) / 2.0,
-        h - 12.0,
-        (top + h - bottom) / 2.0,
-        (top + h - bottom) / 2.0
-    ));
-    let colours = [
-        "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf",
-        "#bcbd22", "#7f7f7f", "#000000", "#aec7e8",
-    ];
-    let mut solvers: Vec<&str> = points.iter().map(|p| p.solver.as_str()).collect();
-    solvers.dedup();
-    for (i, solver) in solvers.iter().enumerate() {
-        let colour = colours[i % colours.len()];
-        let mut curve: Vec<&Point> = points.iter().filter(|p| p.solver == *solver).collect();
-        curve.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
-        let path: Vec<String> = curve
-            .iter()
-            .map(|p| format!("{:.1},{:.1}", px(p.seconds), py(p.error)))
-            .collect();
-        s.push_str(&format!(
-            "<polyline points=\"{}\" fill=\"none\" stroke=\"{colour}\" stroke-width=\"2\"/>\n",
-            path.join(" ")
-        ));
-        for p in &curve {
-            s.push_str(&format!(
-                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"4\" fill=\"{colour}\"><title>{}: {} ({:.3} s, {:.2}%)</title></circle>\n",
-                px(p.seconds),
-                py(p.error),
-                p.solver,
-                p.setting,
-                p.seconds,
-                100.0 * p.error
-            ));
-        }
-        let label = match *solver {
-            "direct" => "direct (uncollided)",
-            "direct-refractive" => "direct-refractive (uncollided)",
-            "auto" => "auto (total)",
-            _ => solver,
-        };
-        let ly = top + 20.0 + 20.0 * i as f64;
-        s.push_str(&format!(
-            "<line x1=\"{}\" y1=\"{ly}\" x2=\"{}\" y2=\"{ly}\" stroke=\"{colour}\" stroke-width=\"3\"/><text x=\"{}\" y=\"{}\">{label}</text>\n",
-            w - right + 10.0,
-            w - right + 30.0,
-            w - right + 36.0,
-            ly + 4.0
-        ));
-    }
-    s.push_str("</svg>\n");
-    s
 }
 
 #[cfg(test)]
