@@ -8,12 +8,14 @@
 //!   `dbg!`/`todo!`, every crate listed in ARCHITECTURE.md.
 //! - `crosscheck [--refined]`: every solver on every suite scene against its reference
 //!   (with `--refined`, the convergence checks on refined grids too); prints the
-//!   table and writes `docs/validation.md`. References are cached in
-//!   `target/crosscheck-cache/`.
+//!   table and writes `docs/validation.md`. Monte Carlo references are stored in
+//!   `examples/scenes/suite/references/` (committed: the test run reads them instead of
+//!   computing them); a reference no entry used is removed.
 //!
-//! - `pareto [--reuse] [SCENE...]`: error against wall time for every solver on the suite
+//! - `pareto [--reuse | --redraw] [SCENE...]`: error against wall time for every solver on the suite
 //!   scenes (all of them by default), as `docs/pareto/<scene>.svg` and `.csv`; `auto`'s
-//!   table and its runs (`--reuse`: from the CSVs already there, re-running only `auto`).
+//!   table and its runs (`--reuse`: from the CSVs already there, re-running only `auto`;
+//!   `--redraw`: the charts alone, drawn again from the CSVs, measuring nothing).
 //!
 //! - `mitsuba [SPP]`: the default cloud and `examples/scenes/box_filling.toml` (a medium
 //!   filling a box of odd dimensions) at 256×256 rendered by lucent's Monte Carlo and by
@@ -64,12 +66,13 @@ mod bench_fem;
 mod bench_gpu;
 mod bench_lbm;
 mod bench_paging;
+mod chart;
 mod paged_solve;
 mod stability;
 
 use std::process::{Command, ExitCode};
 
-const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck [--refined] | pareto [--reuse] [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] [--gpu] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] [--gpu] | bench-lbm [N] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
+const USAGE: &str = "usage: cargo xtask <ci | doc | tidy | crosscheck [--refined] | pareto [--reuse | --redraw] [SCENE...] | mitsuba [SPP] | bench-diffusion [N...] [--gpu] | bench-explicit [N] | bench-gpu [N...] | bench-paging [N] [BRICK] [DOM_N] | paged-solve [SOLVER] [N] [BUDGET_MIB] [BRICK] | bench-fem [N...] | bench-dom [N] [ORDER] [--gpu] | bench-lbm [N] | stability | fuzz [TARGET...] [--runs N] [--seed S]>";
 
 fn main() -> ExitCode {
     let command = std::env::args().nth(1);
@@ -227,6 +230,9 @@ fn main() -> ExitCode {
             }
         };
     }
+    if command.as_deref() == Some("pareto") && std::env::args().any(|a| a == "--redraw") {
+        return redraw();
+    }
     if command.as_deref() == Some("pareto") {
         let args: Vec<String> = std::env::args().skip(2).collect();
         let reuse = args.iter().any(|a| a == "--reuse");
@@ -291,10 +297,16 @@ fn crosscheck(refined: bool) -> ExitCode {
         eprintln!("xtask: LUCENT_DATA not set; the suite's CT scene reads ../shared/data/volumes");
     }
     let started = std::time::Instant::now();
+    let selection = if refined {
+        lucent::crosscheck::Selection::Refined
+    } else {
+        lucent::crosscheck::Selection::All
+    };
     let outcomes = match lucent::crosscheck::run_with(
         &root.join("examples/scenes/suite"),
-        Some(&root.join("target/crosscheck-cache")),
-        refined,
+        Some(&root.join("examples/scenes/suite/references")),
+        selection,
+        &mut |progress| eprintln!("xtask: {progress}"),
     ) {
         Ok(o) => o,
         Err(e) => {
@@ -302,6 +314,13 @@ fn crosscheck(refined: bool) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
+    let suite = root.join("examples/scenes/suite");
+    if let Ok((scenes, _)) = lucent::crosscheck::load_suite(&suite) {
+        for stale in lucent::crosscheck::stale_references(&suite.join("references"), &scenes) {
+            eprintln!("xtask: removing the stale reference {}", stale.display());
+            let _ = std::fs::remove_file(stale);
+        }
+    }
     let command = if refined {
         "cargo xtask crosscheck --refined"
     } else {
@@ -330,6 +349,43 @@ fn crosscheck(refined: bool) -> ExitCode {
     }
 }
 
+/// Draws every chart of `docs/pareto/` again from its CSV and `auto`'s runs, measuring
+/// nothing (after a change to the charts alone).
+fn redraw() -> ExitCode {
+    let out = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/pareto");
+    let read = |path: &std::path::Path| {
+        std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))
+    };
+    let run = || -> Result<usize, String> {
+        let autos = lucent::pareto::parse_auto_csv(&read(&out.join("auto_runs.csv"))?)?;
+        let mut drawn = 0;
+        for entry in std::fs::read_dir(&out).map_err(|e| e.to_string())? {
+            let path = entry.map_err(|e| e.to_string())?.path();
+            let scene = path.file_stem().unwrap_or_default().to_string_lossy();
+            if path.extension().is_none_or(|e| e != "csv") || scene.starts_with("auto") {
+                continue;
+            }
+            let points = lucent::pareto::parse_csv(&read(&path)?)?;
+            let autos: Vec<_> = autos.iter().filter(|a| a.scene == scene).cloned().collect();
+            let svg = chart::Chart::new(&chart::title(&scene), &points, &autos).svg()?;
+            let target = path.with_extension("svg");
+            std::fs::write(&target, svg).map_err(|e| format!("{}: {e}", target.display()))?;
+            drawn += 1;
+        }
+        Ok(drawn)
+    };
+    match run() {
+        Ok(drawn) => {
+            eprintln!("xtask: {drawn} charts drawn again in {}", out.display());
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("xtask: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
 /// Sweeps every solver on the suite scenes and writes the error-against-time charts, the
 /// table `auto` chooses from (`docs/pareto/auto.csv`), `auto`'s own runs on each scene
 /// (`docs/pareto/auto_runs.csv`, drawn on the chart too) and their table in
@@ -340,7 +396,7 @@ fn crosscheck(refined: bool) -> ExitCode {
 /// (for a change to `auto` alone).
 fn pareto(only: Vec<String>, reuse: bool) -> ExitCode {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let cache = root.join("target/crosscheck-cache");
+    let cache = root.join("examples/scenes/suite/references");
     let out = root.join("docs/pareto");
     let scenes = match lucent::crosscheck::load_suite(&root.join("examples/scenes/suite")) {
         Ok((scenes, _)) => scenes,
@@ -431,7 +487,13 @@ fn pareto(only: Vec<String>, reuse: bool) -> ExitCode {
                  title: &str,
                  sweep: &lucent::pareto::Sweep,
                  autos: &[lucent::pareto::AutoPoint]| {
-        let svg = lucent::pareto::svg_with_auto(title, &sweep.points, autos);
+        let svg = match chart::Chart::new(title, &sweep.points, autos).svg() {
+            Ok(svg) => svg,
+            Err(e) => {
+                eprintln!("xtask: {}: the chart: {e}", scene.name);
+                return Err(());
+            }
+        };
         let csv = lucent::pareto::csv(&sweep.points);
         [("svg", svg), ("csv", csv)]
             .iter()
@@ -454,8 +516,7 @@ fn pareto(only: Vec<String>, reuse: bool) -> ExitCode {
         if write(&runs_path, &lucent::pareto::auto_csv(&auto_runs)).is_err() {
             return ExitCode::FAILURE;
         }
-        let title = format!("{}: error against time (dev machine)", scene.name);
-        if chart(scene, &title, &sweep, &autos).is_err() {
+        if chart(scene, &chart::title(&scene.name), &sweep, &autos).is_err() {
             return ExitCode::FAILURE;
         }
         swept.push((scene, sweep));
