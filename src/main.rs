@@ -1212,7 +1212,11 @@ fn kebab<T: serde::Serialize>(value: &T) -> String {
 }
 
 fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
-    let (parsed, built, name) = load(scene, args.budget())?;
+    let (parsed, base, name) = parse(scene)?;
+    if parsed.pageable() && !parsed.fits_in_memory(args.budget()) {
+        return info_paged(&parsed, &name, args);
+    }
+    let built = parsed.build_within(&base, args.budget())?;
     let p = &built.problem;
     let g = p.geometry();
     let s = built.volume.stats();
@@ -1309,6 +1313,115 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
         out,
         "  image     {} × {} pixels, {}",
         built.settings.width, built.settings.height, built.camera
+    )
+    .map_err(io_err)?;
+    Ok(())
+}
+
+/// `lucent info` of a scene over the memory budget that `lucent solve` can page: the
+/// medium is built as `solve` builds it (brick by brick under the budget) and read back a
+/// few slabs at a time for its statistics; what would need the scene in memory (the
+/// regime estimate, the camera) is named instead.
+fn info_paged(parsed: &Scene, name: &str, args: &SolverArgs) -> Result<(), Error> {
+    let budget = args.budget();
+    let problem = parsed.build_paged(budget)?;
+    let g = problem.geometry();
+    let mut out = io::stdout().lock();
+    let io_err = |e: io::Error| Error::Io {
+        path: "<stdout>".into(),
+        reason: e.to_string(),
+    };
+    let paging =
+        |e: lucent::paging::PagingError| Error::from(lucent::core::paging_error("info", e));
+    // min, max and mean of a paged field, read a few z-slabs at a time (at most a sixteenth
+    // of the budget in memory).
+    let stats = |field: &lucent::paging::PagedGrid| -> Result<(f32, f32, f64), Error> {
+        let [nx, ny, nz] = g.dims();
+        let plane = nx * ny;
+        let slabs = ((budget / 16 / 4) as usize / plane).clamp(1, nz);
+        let (mut lo, mut hi, mut sum) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f64);
+        let mut buffer = vec![0.0f32; slabs * plane];
+        for z0 in (0..nz).step_by(slabs) {
+            let z1 = (z0 + slabs).min(nz);
+            let chunk = &mut buffer[..(z1 - z0) * plane];
+            field.read_slabs(z0, z1, chunk).map_err(paging)?;
+            for &v in chunk.iter() {
+                lo = lo.min(v);
+                hi = hi.max(v);
+                sum += f64::from(v);
+            }
+        }
+        Ok((lo, hi, sum / g.voxel_count() as f64))
+    };
+    let (lo, hi) = g.bounds();
+    let v = |a: glam::DVec3| format!("({}, {}, {})", S(a.x), S(a.y), S(a.z));
+    let [nx, ny, nz] = g.dims();
+    let field_bytes = g.voxel_count() as u64 * 4;
+    writeln!(out, "{name}").map_err(io_err)?;
+    writeln!(
+        out,
+        "  grid      {nx} × {ny} × {nz} cells of {}, box {} to {} (scene units)",
+        S(g.spacing().x),
+        v(lo),
+        v(hi)
+    )
+    .map_err(io_err)?;
+    writeln!(
+        out,
+        "  memory    {field_bytes} bytes per field, over the {} a field may take in memory under --memory-budget {budget}: paged in bricks of {}³ cells",
+        lucent::scene::max_grid_bytes(budget),
+        problem.layout().brick()
+    )
+    .map_err(io_err)?;
+    let medium = problem.medium();
+    let channels = medium.sigma_t.len().max(medium.albedo.len());
+    for c in 0..channels {
+        let (_, sigma_max, sigma_mean) = stats(&medium.sigma_t[c.min(medium.sigma_t.len() - 1)])?;
+        let (a_lo, a_hi, _) = stats(&medium.albedo[c.min(medium.albedo.len() - 1)])?;
+        let albedo = if a_lo == a_hi {
+            S(f64::from(a_lo)).to_string()
+        } else {
+            format!("{} to {} per cell", S(f64::from(a_lo)), S(f64::from(a_hi)))
+        };
+        let label = if channels > 1 {
+            format!("medium {}", ["R", "G", "B"].get(c).copied().unwrap_or("?"))
+        } else {
+            "medium".to_owned()
+        };
+        writeln!(
+            out,
+            "  {label:<10}sigma_t up to {} per unit (mean {}), albedo {albedo}",
+            S(f64::from(sigma_max)),
+            S(sigma_mean)
+        )
+        .map_err(io_err)?;
+    }
+    writeln!(out, "  phase     {}", medium.phase).map_err(io_err)?;
+    writeln!(
+        out,
+        "  regime    not estimated out of core (it samples the medium in memory)"
+    )
+    .map_err(io_err)?;
+    for light in problem.lights() {
+        writeln!(out, "  light     {light}").map_err(io_err)?;
+    }
+    writeln!(out, "  boundary  {}", problem.boundary()).map_err(io_err)?;
+    let chosen = choose_solver(parsed, args)?;
+    let pagers = lucent::scene::paging_solvers()
+        .iter()
+        .map(|n| format!("`{n}`"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let verdict = if chosen.solver.pages() {
+        "`lucent solve` pages this scene (the fluence streamed to a .npy file)".to_owned()
+    } else {
+        format!("needs the scene in memory; `lucent solve --solver NAME` pages it with {pagers}")
+    };
+    writeln!(out, "  solver    `{}`: {verdict}", chosen.solver.name()).map_err(io_err)?;
+    writeln!(
+        out,
+        "  image     `lucent render` needs the scene in memory: --memory-budget {} or more",
+        8 * field_bytes
     )
     .map_err(io_err)?;
     Ok(())

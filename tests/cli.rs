@@ -2233,7 +2233,6 @@ fn a_scene_over_the_budget_in_memory_says_who_pages_it() {
     .unwrap();
     for command in [
         &["render", "big.toml", "-o", "big.png"][..],
-        &["info", "big.toml"][..],
         &[
             "solve",
             "big.toml",
@@ -2262,6 +2261,44 @@ fn a_scene_over_the_budget_in_memory_says_who_pages_it() {
     for solver in ["direct", "convection-diffusion", "mc", "ftcs-diffusion"] {
         assert!(pagers.iter().any(|p| p == solver), "{pagers:?}");
     }
+    // `info` describes it from the paged medium: the same medium line as in memory (the
+    // paged medium is evaluated with the same arithmetic; the mean is summed in another
+    // order, which the printed digits do not see), and says who pages it.
+    let medium_line = |args: &[&str]| {
+        let out = lucent(args, d);
+        assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        let line = text
+            .lines()
+            .find(|l| l.trim_start().starts_with("medium"))
+            .unwrap_or_else(|| panic!("no medium line: {text}"))
+            .to_owned();
+        (line, text)
+    };
+    let (paged, text) = medium_line(&["info", "big.toml", "--memory-budget", "8MiB"]);
+    let (in_memory, _) = medium_line(&["info", "big.toml"]);
+    assert_eq!(paged, in_memory);
+    assert!(text.contains("paged in bricks of"), "{text}");
+    assert!(
+        text.contains("`lucent render` needs the scene in memory"),
+        "{text}"
+    );
+    assert!(
+        text.contains("`direct`: `lucent solve` pages this scene"),
+        "{text}"
+    );
+    let (_, text) = medium_line(&[
+        "info",
+        "big.toml",
+        "--memory-budget",
+        "8MiB",
+        "--solver",
+        "diffusion-mg",
+    ]);
+    assert!(
+        text.contains("`lucent solve --solver NAME` pages it with"),
+        "{text}"
+    );
     // And `solve` with one of them does page it.
     let out = lucent(
         &[
