@@ -391,18 +391,20 @@ impl Default for MediumSpec {
             albedo: default_albedo(),
             extinction_color: None,
             transfer: None,
-            phase: PhaseSpec::Isotropic,
+            phase: PhaseSpec::Isotropic {},
         }
     }
 }
 
 /// A phase function.
-#[derive(Debug, Clone, Copy, Default, Deserialize)]
+///
+/// The keyless kinds are tables of no keys (`Isotropic {}`), so that a stray key beside
+/// them is refused (serde lets extra keys through an internally tagged unit variant).
+#[derive(Debug, Clone, Copy, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum PhaseSpec {
     /// Isotropic.
-    #[default]
-    Isotropic,
+    Isotropic {},
     /// Henyey–Greenstein with mean cosine `g`.
     HenyeyGreenstein {
         /// Mean cosine.
@@ -418,7 +420,13 @@ pub enum PhaseSpec {
         weight: f64,
     },
     /// Rayleigh.
-    Rayleigh,
+    Rayleigh {},
+}
+
+impl Default for PhaseSpec {
+    fn default() -> Self {
+        Self::Isotropic {}
+    }
 }
 
 impl PhaseSpec {
@@ -426,12 +434,12 @@ impl PhaseSpec {
     pub fn to_phase(self) -> Result<Phase, Error> {
         let invalid = |e: lucent_optics::OpticsError| Error::Invalid(e.to_string());
         Ok(match self {
-            PhaseSpec::Isotropic => Phase::Isotropic,
+            PhaseSpec::Isotropic {} => Phase::Isotropic,
             PhaseSpec::HenyeyGreenstein { g } => Phase::henyey_greenstein(g).map_err(invalid)?,
             PhaseSpec::DoubleHenyeyGreenstein { g1, g2, weight } => {
                 Phase::double_henyey_greenstein(g1, g2, weight).map_err(invalid)?
             }
-            PhaseSpec::Rayleigh => Phase::Rayleigh,
+            PhaseSpec::Rayleigh {} => Phase::Rayleigh,
         })
     }
 }
@@ -644,9 +652,17 @@ pub struct BuiltScene {
 impl Scene {
     /// Parses scene text; `origin` names it in errors and anchors relative paths.
     pub fn parse(text: &str, origin: &Path) -> Result<Self, Error> {
-        toml::from_str(text).map_err(|e| Error::Scene {
-            path: origin.to_owned(),
-            reason: pinpoint(text, &e).unwrap_or_else(|| e.to_string()),
+        toml::from_str(text).map_err(|e| {
+            let mut reason = light_missing_key(text, &e)
+                .or_else(|| pinpoint(text, &e))
+                .unwrap_or_else(|| e.to_string());
+            if let Some(hint) = missing_key_hint(text, &e) {
+                reason = format!("{}\n{hint}", reason.trim_end());
+            }
+            Error::Scene {
+                path: origin.to_owned(),
+                reason,
+            }
         })
     }
 
@@ -1123,7 +1139,7 @@ impl Scene {
                 let out_of_core = match &self.volume {
                     VolumeSpec::File { .. } => String::new(),
                     _ => format!(
-                        "; `lucent solve` solves this procedural scene out of core with {}, while `render`, `info` and the other solvers build it in memory",
+                        "; `lucent solve` solves this procedural scene out of core with {}, and `lucent info` describes it; `render` and the other solvers build it in memory",
                         paging_solvers()
                             .iter()
                             .map(|n| format!("`{n}`"))
@@ -1282,6 +1298,68 @@ fn pinpoint(text: &str, error: &toml::de::Error) -> Option<String> {
         lines[line],
         " ".repeat(column)
     ))
+}
+
+/// A key missing from one of several `[[lights]]`: the reader points at the first
+/// `[[lights]]` header whichever light lacks it, so each light is read again on its own to
+/// find the one, and the error points at its header.
+fn light_missing_key(text: &str, error: &toml::de::Error) -> Option<String> {
+    let message = error.message();
+    if !message.starts_with("missing field") {
+        return None;
+    }
+    let span = error.span()?;
+    let header = text.get(span.start..)?.lines().next()?.trim();
+    if header != "[[lights]]" {
+        return None;
+    }
+    let table: toml::Table = toml::from_str(text).ok()?;
+    let lights = table.get("lights")?.as_array()?;
+    let index = lights.iter().position(|light| {
+        light
+            .clone()
+            .try_into::<LightSpec>()
+            .is_err_and(|e| e.to_string().contains(message))
+    })?;
+    let (line, shown) = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| l.trim() == "[[lights]]")
+        .nth(index)?;
+    let number = line + 1;
+    let gutter = " ".repeat(number.to_string().len());
+    Some(format!(
+        "TOML parse error at line {number}, column 1\n{gutter} |\n{number} | {shown}\n{gutter} | {}\n{message} (light {} of {})\n",
+        "^".repeat(shown.len()),
+        index + 1,
+        lights.len()
+    ))
+}
+
+/// What a "missing field" error means in a scene's words: the table that lacks the key
+/// (the reader points at the table's header, or at the file's start for a top-level key)
+/// and where the keys are listed.
+fn missing_key_hint(text: &str, error: &toml::de::Error) -> Option<String> {
+    let field = error
+        .message()
+        .strip_prefix("missing field `")?
+        .split('`')
+        .next()?;
+    let header = error
+        .span()
+        .and_then(|span| text.get(span.start..))
+        .and_then(|rest| rest.lines().next())
+        .map(str::trim)
+        .filter(|line| line.starts_with('['));
+    Some(match (field, header) {
+        ("volume", _) => "a scene needs a `[volume]` table: where its density comes from (docs/scene-format.md lists every table and key)".to_owned(),
+        (field, Some(header)) => format!(
+            "`{header}` needs `{field}` (docs/scene-format.md lists each table's keys and defaults)"
+        ),
+        (field, None) => format!(
+            "the table needs `{field}` (docs/scene-format.md lists each table's keys and defaults)"
+        ),
+    })
 }
 
 /// The column of `key` as a key (`key =`, `key=`, or `, key =` in an inline table) in `line`.

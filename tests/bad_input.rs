@@ -273,3 +273,33 @@ fn point_lights_far_from_the_box() {
         }
     }
 }
+
+/// A missing key is reported at the table that lacks it, with the table named in the
+/// scene's words; a scene without `[volume]` is told it needs one.
+#[test]
+fn a_missing_key_names_its_table() {
+    let error = |text: &str| {
+        lucent::scene::Scene::parse(text, std::path::Path::new("s.toml"))
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_else(|| panic!("accepted:\n{text}"))
+    };
+    let blob = "[volume]\nkind = \"blob\"\nresolution = [8, 8, 8]\nbounds = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]]\ncentre = [0.0, 0.0, 0.0]\nsigma = 0.3\n";
+    let e = error(&format!(
+        "{blob}\n[[lights]]\nkind = \"sky\"\nradiance = 1.0\n\n[[lights]]\nkind = \"point\"\nposition = [0.0, 0.0, 0.0]\n"
+    ));
+    assert!(e.contains("line 12"), "{e}");
+    assert!(e.contains("`[[lights]]` needs `intensity`"), "{e}");
+    let e = error("[volume]\nkind = \"cloud\"\nbounds = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]]\n");
+    assert!(e.contains("`[volume]` needs `resolution`"), "{e}");
+    let e = error("[medium]\ndensity = 3.0\n");
+    assert!(e.contains("a scene needs a `[volume]` table"), "{e}");
+    // A stray key beside a kind that has none is refused, not ignored.
+    for stray in [
+        "[boundary]\nkind = \"vacuum\"\neta = 1.3\n",
+        "[medium.phase]\nkind = \"isotropic\"\ng = 0.8\n",
+    ] {
+        let e = error(&format!("{blob}{stray}"));
+        assert!(e.contains("unknown field"), "{e}");
+    }
+}

@@ -481,3 +481,147 @@ fn every_solver_has_validation_rows_or_a_stated_reason() {
         }
     }
 }
+
+/// The keys a scene table accepts, as the reader says: a probe key no table has, placed in
+/// the table, makes serde name every key it allows ("unknown field `…`, expected one of
+/// `a`, `b`"; "expected `a`" for one key, "there are no fields" for none).
+fn accepted_keys(scene: &str) -> Vec<String> {
+    let err = match lucent::scene::Scene::parse(scene, Path::new("probe.toml")) {
+        Ok(_) => panic!("the probe was accepted:\n{scene}"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        err.contains("unknown field `lucent_probe`"),
+        "not an unknown-field error for\n{scene}\n{err}"
+    );
+    if err.contains("there are no fields") {
+        return Vec::new();
+    }
+    let tail = err
+        .split("expected ")
+        .nth(1)
+        .unwrap_or_else(|| panic!("{err}"));
+    let tail = tail.lines().next().unwrap_or_default();
+    let mut keys: Vec<String> = tail
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .map(str::to_owned)
+        .collect();
+    keys.sort();
+    keys
+}
+
+/// The `kind` (or `type`) values a tagged table accepts, as the reader says.
+fn accepted_variants(scene: &str) -> Vec<String> {
+    let err = match lucent::scene::Scene::parse(scene, Path::new("probe.toml")) {
+        Ok(_) => panic!("the probe was accepted:\n{scene}"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        err.contains("unknown variant `lucent_probe`"),
+        "not an unknown-variant error for\n{scene}\n{err}"
+    );
+    let tail = err
+        .split("expected ")
+        .nth(1)
+        .unwrap_or_else(|| panic!("{err}"));
+    let tail = tail.lines().next().unwrap_or_default();
+    let mut variants: Vec<String> = tail
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .map(str::to_owned)
+        .collect();
+    variants.sort();
+    variants
+}
+
+/// `docs/scene-format.md` is the reference for scene files: each of its key tables lists
+/// exactly the keys the reader accepts there (no key missing, none invented), every tagged
+/// table has a section for every `kind` (or `type`) the reader knows, and the tone curves
+/// named are the reader's.
+#[test]
+fn the_scene_format_reference_matches_the_reader() {
+    let doc = read("docs/scene-format.md");
+    // Each "### " heading with the key table under it.
+    let mut sections: Vec<(String, Vec<String>)> = Vec::new();
+    for line in doc.lines() {
+        if let Some(heading) = line.strip_prefix("### ") {
+            sections.push((heading.to_owned(), Vec::new()));
+        } else if let Some(row) = line.strip_prefix("| `") {
+            let key = row.split('`').next().unwrap().to_owned();
+            sections
+                .last_mut()
+                .unwrap_or_else(|| panic!("a key row before any section: {line}"))
+                .1
+                .push(key);
+        }
+    }
+    // What a section's heading means: the table's path and its tag, and the lines of a
+    // scene that reach that table (the parents' tags the table needs).
+    let parents = |table: &str| -> &'static str {
+        match table {
+            "volume.raw" => "[volume]\nkind = \"file\"\npath = \"x.raw\"\n",
+            "volume.shape" => "[volume]\nkind = \"shape\"\n",
+            _ => "",
+        }
+    };
+    let mut tagged: std::collections::BTreeMap<(String, String), Vec<String>> = Default::default();
+    let mut checked = 0;
+    for (heading, mut keys) in sections {
+        keys.sort();
+        let probe = if heading == "Top-level keys" {
+            "lucent_probe = 1\n".to_owned()
+        } else {
+            let mut parts = heading.split('`');
+            let _ = parts.next();
+            let table = parts
+                .next()
+                .unwrap_or_else(|| panic!("a section that names no table: {heading}"));
+            let rest = parts.next().unwrap_or_default().trim();
+            let path = table.trim_matches(['[', ']']);
+            let mut probe = parents(path).to_owned();
+            probe.push_str(&format!("{table}\n"));
+            if let Some((tag, value)) = rest.split_once(" = ") {
+                let value = value.trim_matches('"');
+                tagged
+                    .entry((table.to_owned(), tag.to_owned()))
+                    .or_default()
+                    .push(value.to_owned());
+                probe.push_str(&format!("{tag} = \"{value}\"\n"));
+            }
+            probe.push_str("lucent_probe = 1\n");
+            probe
+        };
+        let accepted = accepted_keys(&probe);
+        // The tag itself is the section's name, not a key of its table.
+        assert_eq!(
+            keys, accepted,
+            "docs/scene-format.md, `{heading}`: the keys listed (left) are not the keys the reader accepts (right)"
+        );
+        checked += 1;
+    }
+    assert!(checked >= 30, "{checked} sections checked");
+    for ((table, tag), mut documented) in tagged {
+        documented.sort();
+        let path = table.trim_matches(['[', ']']);
+        let probe = format!("{}{table}\n{tag} = \"lucent_probe\"\n", parents(path));
+        assert_eq!(
+            documented,
+            accepted_variants(&probe),
+            "docs/scene-format.md: the {tag}s of `{table}`"
+        );
+    }
+    let tones = accepted_variants("[volume]\nkind = \"blob\"\n[image]\ntone = \"lucent_probe\"\n");
+    let tone_row = doc
+        .lines()
+        .find(|l| l.starts_with("| `tone`"))
+        .expect("the tone row");
+    for tone in tones {
+        assert!(
+            tone_row.contains(&format!("`\"{tone}\"`")),
+            "{tone}: {tone_row}"
+        );
+    }
+}

@@ -337,7 +337,7 @@ impl Light {
 /// `{ kind = "robin", eta = 1.3 }`, `{ kind = "dirichlet", value = 0.0 }`,
 /// `{ kind = "neumann", flux = 0.0 }`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(from = "BoundaryToml")]
 pub enum Boundary {
     /// Nothing comes in; light leaves freely (index-matched).
     #[default]
@@ -359,6 +359,29 @@ pub enum Boundary {
         /// Outward normal flux.
         flux: f64,
     },
+}
+
+/// What a scene file writes: [`Boundary`] with `vacuum` as a table of no keys, so that a
+/// stray key beside `kind = "vacuum"` is refused like any other unknown key (serde lets
+/// extra keys through an internally tagged unit variant).
+#[derive(serde::Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+enum BoundaryToml {
+    Vacuum {},
+    Robin { eta: f64 },
+    Dirichlet { value: f64 },
+    Neumann { flux: f64 },
+}
+
+impl From<BoundaryToml> for Boundary {
+    fn from(b: BoundaryToml) -> Self {
+        match b {
+            BoundaryToml::Vacuum {} => Boundary::Vacuum,
+            BoundaryToml::Robin { eta } => Boundary::Robin { eta },
+            BoundaryToml::Dirichlet { value } => Boundary::Dirichlet { value },
+            BoundaryToml::Neumann { flux } => Boundary::Neumann { flux },
+        }
+    }
 }
 
 impl std::fmt::Display for Boundary {

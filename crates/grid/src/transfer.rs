@@ -108,6 +108,7 @@ pub struct TransferFunction {
 
 /// Per-channel colour ramps.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ColorRamp {
     /// Red channel.
     pub red: PiecewiseLinear,
