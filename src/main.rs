@@ -1323,7 +1323,14 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
 /// few slabs at a time for its statistics; what would need the scene in memory (the
 /// regime estimate, the camera) is named instead.
 fn info_paged(parsed: &Scene, name: &str, args: &SolverArgs) -> Result<(), Error> {
+    /// Beyond this many cells the medium is not evaluated for its statistics (256³: about
+    /// a second); the scene is described from its file.
+    const STATISTICS_CELLS: usize = 1 << 24;
     let budget = args.budget();
+    let geometry = parsed.paged_geometry()?;
+    if geometry.voxel_count() > STATISTICS_CELLS {
+        return info_outline(parsed, name, args, &geometry);
+    }
     let problem = parsed.build_paged(budget)?;
     let g = problem.geometry();
     let mut out = io::stdout().lock();
@@ -1416,6 +1423,81 @@ fn info_paged(parsed: &Scene, name: &str, args: &SolverArgs) -> Result<(), Error
         "`lucent solve` pages this scene (the fluence streamed to a .npy file)".to_owned()
     } else {
         format!("needs the scene in memory; `lucent solve --solver NAME` pages it with {pagers}")
+    };
+    writeln!(out, "  solver    `{}`: {verdict}", chosen.solver.name()).map_err(io_err)?;
+    writeln!(
+        out,
+        "  image     `lucent render` needs the scene in memory: --memory-budget {} or more",
+        8 * field_bytes
+    )
+    .map_err(io_err)?;
+    Ok(())
+}
+
+/// `lucent info` of a procedural scene too large to evaluate for a description: what its
+/// file says, the memory it needs, and who can solve it.
+fn info_outline(
+    parsed: &Scene,
+    name: &str,
+    args: &SolverArgs,
+    g: &lucent::grid::GridGeometry,
+) -> Result<(), Error> {
+    let budget = args.budget();
+    let mut out = io::stdout().lock();
+    let io_err = |e: io::Error| Error::Io {
+        path: "<stdout>".into(),
+        reason: e.to_string(),
+    };
+    let (lo, hi) = g.bounds();
+    let v = |a: glam::DVec3| format!("({}, {}, {})", S(a.x), S(a.y), S(a.z));
+    let [nx, ny, nz] = g.dims();
+    let field_bytes = g.voxel_count() as u64 * 4;
+    let spectrum = |s: &lucent::core::Spectrum| match s {
+        lucent::core::Spectrum::Grey(v) => S(*v).to_string(),
+        lucent::core::Spectrum::Rgb([r, gr, b]) => format!("[{}, {}, {}]", S(*r), S(*gr), S(*b)),
+    };
+    writeln!(out, "{name}").map_err(io_err)?;
+    writeln!(
+        out,
+        "  grid      {nx} × {ny} × {nz} cells of {}, box {} to {} (scene units)",
+        S(g.spacing().x),
+        v(lo),
+        v(hi)
+    )
+    .map_err(io_err)?;
+    writeln!(
+        out,
+        "  memory    {field_bytes} bytes per field, over the {} a field may take in memory under --memory-budget {budget}; out of core the medium takes {} bytes on disk per field",
+        lucent::scene::max_grid_bytes(budget),
+        field_bytes
+    )
+    .map_err(io_err)?;
+    writeln!(
+        out,
+        "  medium    sigma_t = {} × the volume's value per unit, albedo {} (statistics not computed: {} cells, over the {} that info evaluates)",
+        S(parsed.medium.density),
+        spectrum(&parsed.medium.albedo),
+        g.voxel_count(),
+        1usize << 24
+    )
+    .map_err(io_err)?;
+    writeln!(out, "  phase     {}", parsed.medium.phase.to_phase()?).map_err(io_err)?;
+    for light in &parsed.lights {
+        writeln!(out, "  light     {}", light.to_light(None)?).map_err(io_err)?;
+    }
+    writeln!(out, "  boundary  {}", parsed.boundary).map_err(io_err)?;
+    let chosen = choose_solver(parsed, args)?;
+    let verdict = if chosen.solver.pages() {
+        "`lucent solve` would page this scene, evaluating the medium brick by brick (Ctrl-C or --time-limit stop it)".to_owned()
+    } else {
+        format!(
+            "needs the scene in memory; `lucent solve --solver NAME` pages it with {}",
+            lucent::scene::paging_solvers()
+                .iter()
+                .map(|n| format!("`{n}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
     };
     writeln!(out, "  solver    `{}`: {verdict}", chosen.solver.name()).map_err(io_err)?;
     writeln!(

@@ -933,7 +933,7 @@ impl Scene {
     }
 
     /// The geometry of a paged build, and the checks that need nothing built.
-    fn paged_geometry(&self) -> Result<GridGeometry, Error> {
+    pub fn paged_geometry(&self) -> Result<GridGeometry, Error> {
         let (resolution, bounds) = match &self.volume {
             VolumeSpec::Cloud {
                 resolution, bounds, ..

@@ -241,11 +241,14 @@ fn march(
     let mut iteration = 0usize;
     let mut batch = 4usize;
     loop {
-        let k =
-            crate::solver::bounded_batch(batch, n, crate::solver::cell_steps_per_submit(context))
-                .min(MAX_BATCH)
-                .min(stop.max_iterations.saturating_sub(iteration))
-                .max(1);
+        let k = crate::solver::bounded_batch(
+            batch,
+            n,
+            crate::solver::cell_steps_per_submit(context, 1),
+        )
+        .min(MAX_BATCH)
+        .min(stop.max_iterations.saturating_sub(iteration))
+        .max(1);
         context.submit_pass("gpu-ftcs-diffusion", |pass| {
             for j in 0..k {
                 kernel.dispatch(pass, &bind[(parity + j) % 2][j], groups);

@@ -260,10 +260,14 @@ pub fn march(
     let mut batch = 8usize;
     let stop_reason = loop {
         let done = ledger.steps();
-        let k = crate::solver::bounded_batch(batch, n, crate::solver::cell_steps_per_submit(gpu))
-            .min(MAX_BATCH)
-            .min(stopping.max_iterations.saturating_sub(done))
-            .max(1);
+        let k = crate::solver::bounded_batch(
+            batch,
+            n,
+            crate::solver::cell_steps_per_submit(gpu, q.div_ceil(4)),
+        )
+        .min(MAX_BATCH)
+        .min(stopping.max_iterations.saturating_sub(done))
+        .max(1);
         run(read, k)?;
         read = (read + k) % 2;
         let sums = partials

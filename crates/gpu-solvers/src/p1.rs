@@ -188,10 +188,11 @@ pub(crate) fn march(
     let mut parity = 0usize;
     let mut batch = 8usize;
     let stop_reason = loop {
-        let k = crate::solver::bounded_batch(batch, n, crate::solver::cell_steps_per_submit(gpu))
-            .min(MAX_BATCH)
-            .min(stopping.max_iterations.saturating_sub(step))
-            .max(1);
+        let k =
+            crate::solver::bounded_batch(batch, n, crate::solver::cell_steps_per_submit(gpu, 2))
+                .min(MAX_BATCH)
+                .min(stopping.max_iterations.saturating_sub(step))
+                .max(1);
         run(parity, k)?;
         let sums = partials
             .download_prefix(gpu, 4 * k * per_step)

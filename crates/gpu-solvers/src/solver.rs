@@ -90,12 +90,18 @@ pub(crate) fn next_batch(changes: &[f64], tolerance: f64, most: usize) -> usize 
 ///   integrated GPU on the lattice-Boltzmann step); a data-centre GPU runs it in tens of
 ///   milliseconds, and a 256³ grid still gets 16 steps per submission, so the wait on
 ///   each submission's partial sums stays small beside the steps.
-pub(crate) fn cell_steps_per_submit(device: &GpuContext) -> usize {
-    if device.is_software() {
+///
+/// `weight` is the step's cost per cell in units of a scalar stencil update (FTCS 1, P1's
+/// four values 2, a lattice of q populations ⌈q/4⌉): the count is divided by it, so that
+/// a submission takes about as long for every scheme (D3Q19's batch of 2²² cell-steps took
+/// 1.5 s on lavapipe beside another test, and Ctrl-C waited for it).
+pub(crate) fn cell_steps_per_submit(device: &GpuContext, weight: usize) -> usize {
+    let cell_steps: usize = if device.is_software() {
         1 << 22
     } else {
         1 << 28
-    }
+    };
+    cell_steps / weight.max(1)
 }
 
 /// `wanted` steps cut to `most_cell_steps` ([`cell_steps_per_submit`]) on a grid of
