@@ -1286,6 +1286,11 @@ fn render_gpu_draws_the_cpu_picture() {
             if gpu {
                 args.push("--gpu".into());
             }
+            if name == "default" {
+                // The march is compared, not the fluence it marches through: `dom` to a
+                // loose tolerance (the same fluence both times: the solve is deterministic).
+                args.extend(["--tolerance".into(), "1e-2".into()]);
+            }
             let args: Vec<&str> = args.iter().map(String::as_str).collect();
             let out = lucent(&args, dir.path());
             assert!(out.status.success(), "{name} gpu={gpu}: {}", stderr(&out));

@@ -65,10 +65,13 @@ fn bits(v: &[f64]) -> Vec<u64> {
     v.iter().map(|x| x.to_bits()).collect()
 }
 
+/// To 10⁻⁴: converged (the stop is part of what must agree), in a few hundred steps; the
+/// bits of every step agree or none do, so a tighter tolerance (10⁻⁷ took thousands of
+/// steps per decomposition) proves nothing more.
 fn converging() -> SteadySettings {
     SteadySettings {
         stopping: Stopping {
-            relative_tolerance: 1e-7,
+            relative_tolerance: 1e-4,
             max_iterations: 50_000,
             ..Stopping::default()
         },
