@@ -14,7 +14,7 @@
 //! - each series joined in order of time.
 //!
 //! [`Chart::svg`] is what `cargo xtask pareto` writes to `docs/pareto/<scene>.svg`;
-//! [`Chart::rgb`] draws the same chart into pixels, which the tests below read back.
+//! `Chart::rgb` draws the same chart into pixels for the tests below, which read them back.
 
 use std::collections::BTreeMap;
 use std::sync::OnceLock;
