@@ -1225,23 +1225,7 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
         path: "<stdout>".into(),
         reason: e.to_string(),
     };
-    let (lo, hi) = g.bounds();
-    let v = |a: glam::DVec3| format!("({}, {}, {})", S(a.x), S(a.y), S(a.z));
-    let [nx, ny, nz] = g.dims();
-    let h = g.spacing();
-    let cells = if h.x == h.y && h.y == h.z {
-        format!("cubic cells of {}", S(h.x))
-    } else {
-        format!("cells of {} × {} × {}", S(h.x), S(h.y), S(h.z))
-    };
-    writeln!(out, "{name}").map_err(io_err)?;
-    writeln!(
-        out,
-        "  grid      {nx} × {ny} × {nz} {cells}, box {} to {} (scene units)",
-        v(lo),
-        v(hi)
-    )
-    .map_err(io_err)?;
+    writeln!(out, "{name}\n{}", grid_line(g)).map_err(io_err)?;
     writeln!(
         out,
         "  volume    values {} to {}, mean {}, {}% of cells non-zero",
@@ -1318,177 +1302,101 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
     Ok(())
 }
 
-/// `lucent info` of a scene over the memory budget that `lucent solve` can page: the
-/// medium is built as `solve` builds it (brick by brick under the budget) and read back a
-/// few slabs at a time for its statistics; what would need the scene in memory (the
-/// regime estimate, the camera) is named instead.
-fn info_paged(parsed: &Scene, name: &str, args: &SolverArgs) -> Result<(), Error> {
-    /// Beyond this many cells the medium is not evaluated for its statistics (256³: about
-    /// a second); the scene is described from its file.
-    const STATISTICS_CELLS: usize = 1 << 24;
-    let budget = args.budget();
-    let geometry = parsed.paged_geometry()?;
-    if geometry.voxel_count() > STATISTICS_CELLS {
-        return info_outline(parsed, name, args, &geometry);
-    }
-    let problem = parsed.build_paged(budget)?;
-    let g = problem.geometry();
-    let mut out = io::stdout().lock();
-    let io_err = |e: io::Error| Error::Io {
-        path: "<stdout>".into(),
-        reason: e.to_string(),
-    };
-    let paging =
-        |e: lucent::paging::PagingError| Error::from(lucent::core::paging_error("info", e));
-    // min, max and mean of a paged field, read a few z-slabs at a time (at most a sixteenth
-    // of the budget in memory).
-    let stats = |field: &lucent::paging::PagedGrid| -> Result<(f32, f32, f64), Error> {
-        let [nx, ny, nz] = g.dims();
-        let plane = nx * ny;
-        let slabs = ((budget / 16 / 4) as usize / plane).clamp(1, nz);
-        let (mut lo, mut hi, mut sum) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f64);
-        let mut buffer = vec![0.0f32; slabs * plane];
-        for z0 in (0..nz).step_by(slabs) {
-            let z1 = (z0 + slabs).min(nz);
-            let chunk = &mut buffer[..(z1 - z0) * plane];
-            field.read_slabs(z0, z1, chunk).map_err(paging)?;
-            for &v in chunk.iter() {
-                lo = lo.min(v);
-                hi = hi.max(v);
-                sum += f64::from(v);
-            }
-        }
-        Ok((lo, hi, sum / g.voxel_count() as f64))
-    };
+/// `info`'s grid line: cells, their size and the box.
+fn grid_line(g: &lucent::grid::GridGeometry) -> String {
     let (lo, hi) = g.bounds();
     let v = |a: glam::DVec3| format!("({}, {}, {})", S(a.x), S(a.y), S(a.z));
     let [nx, ny, nz] = g.dims();
-    let field_bytes = g.voxel_count() as u64 * 4;
-    writeln!(out, "{name}").map_err(io_err)?;
-    writeln!(
-        out,
-        "  grid      {nx} × {ny} × {nz} cells of {}, box {} to {} (scene units)",
-        S(g.spacing().x),
+    let h = g.spacing();
+    let cells = if h.x == h.y && h.y == h.z {
+        format!("cubic cells of {}", S(h.x))
+    } else {
+        format!("cells of {} × {} × {}", S(h.x), S(h.y), S(h.z))
+    };
+    format!(
+        "  grid      {nx} × {ny} × {nz} {cells}, box {} to {} (scene units)",
         v(lo),
         v(hi)
     )
-    .map_err(io_err)?;
-    writeln!(
-        out,
-        "  memory    {field_bytes} bytes per field, over the {} a field may take in memory under --memory-budget {budget}: paged in bricks of {}³ cells",
-        lucent::scene::max_grid_bytes(budget),
-        problem.layout().brick()
-    )
-    .map_err(io_err)?;
-    let medium = problem.medium();
-    let channels = medium.sigma_t.len().max(medium.albedo.len());
-    for c in 0..channels {
-        let (_, sigma_max, sigma_mean) = stats(&medium.sigma_t[c.min(medium.sigma_t.len() - 1)])?;
-        let (a_lo, a_hi, _) = stats(&medium.albedo[c.min(medium.albedo.len() - 1)])?;
-        let albedo = if a_lo == a_hi {
-            S(f64::from(a_lo)).to_string()
-        } else {
-            format!("{} to {} per cell", S(f64::from(a_lo)), S(f64::from(a_hi)))
-        };
-        let label = if channels > 1 {
-            format!("medium {}", ["R", "G", "B"].get(c).copied().unwrap_or("?"))
-        } else {
-            "medium".to_owned()
-        };
-        writeln!(
-            out,
-            "  {label:<10}sigma_t up to {} per unit (mean {}), albedo {albedo}",
-            S(f64::from(sigma_max)),
-            S(sigma_mean)
-        )
-        .map_err(io_err)?;
-    }
-    writeln!(out, "  phase     {}", medium.phase).map_err(io_err)?;
-    writeln!(
-        out,
-        "  regime    not estimated out of core (it samples the medium in memory)"
-    )
-    .map_err(io_err)?;
-    for light in problem.lights() {
-        writeln!(out, "  light     {light}").map_err(io_err)?;
-    }
-    writeln!(out, "  boundary  {}", problem.boundary()).map_err(io_err)?;
-    let chosen = choose_solver(parsed, args)?;
-    let pagers = lucent::scene::paging_solvers()
-        .iter()
-        .map(|n| format!("`{n}`"))
-        .collect::<Vec<_>>()
-        .join(", ");
-    let verdict = if chosen.solver.pages() {
-        "`lucent solve` pages this scene (the fluence streamed to a .npy file)".to_owned()
-    } else {
-        format!("needs the scene in memory; `lucent solve --solver NAME` pages it with {pagers}")
-    };
-    writeln!(out, "  solver    `{}`: {verdict}", chosen.solver.name()).map_err(io_err)?;
-    writeln!(
-        out,
-        "  image     `lucent render` needs the scene in memory: --memory-budget {} or more",
-        8 * field_bytes
-    )
-    .map_err(io_err)?;
-    Ok(())
 }
 
-/// `lucent info` of a procedural scene too large to evaluate for a description: what its
-/// file says, the memory it needs, and who can solve it.
-fn info_outline(
-    parsed: &Scene,
-    name: &str,
-    args: &SolverArgs,
-    g: &lucent::grid::GridGeometry,
-) -> Result<(), Error> {
+/// `lucent info` of a procedural scene over the memory budget, which `lucent solve` can
+/// page. Up to [`STATISTICS_CELLS`] cells the medium is built as `solve` builds it (brick
+/// by brick under the budget) and read back a few slabs at a time for its statistics;
+/// beyond, the scene is described from its file (evaluating 10¹¹ cells would take hours).
+/// What needs the scene in memory (the regime estimate, the camera) is named instead.
+fn info_paged(parsed: &Scene, name: &str, args: &SolverArgs) -> Result<(), Error> {
     let budget = args.budget();
-    let mut out = io::stdout().lock();
-    let io_err = |e: io::Error| Error::Io {
-        path: "<stdout>".into(),
-        reason: e.to_string(),
-    };
-    let (lo, hi) = g.bounds();
-    let v = |a: glam::DVec3| format!("({}, {}, {})", S(a.x), S(a.y), S(a.z));
-    let [nx, ny, nz] = g.dims();
+    let g = parsed.paged_geometry()?;
     let field_bytes = g.voxel_count() as u64 * 4;
-    let spectrum = |s: &lucent::core::Spectrum| match s {
-        lucent::core::Spectrum::Grey(v) => S(*v).to_string(),
-        lucent::core::Spectrum::Rgb([r, gr, b]) => format!("[{}, {}, {}]", S(*r), S(*gr), S(*b)),
+    let over_budget = format!(
+        "{field_bytes} bytes per field, over the {} a field may take in memory under --memory-budget {budget}",
+        lucent::scene::max_grid_bytes(budget)
+    );
+    let mut lines = Vec::new();
+    let pages = if g.voxel_count() > STATISTICS_CELLS {
+        let albedo = match parsed.medium.albedo {
+            lucent::core::Spectrum::Grey(a) => S(a).to_string(),
+            lucent::core::Spectrum::Rgb([r, gr, b]) => format!("[{}, {}, {}]", S(r), S(gr), S(b)),
+        };
+        lines.push(format!(
+            "  memory    {over_budget}; out of core the medium takes {field_bytes} bytes on disk per field"
+        ));
+        lines.push(format!(
+            "  medium    sigma_t = {} × the volume's value per unit, albedo {albedo} (statistics not computed: {} cells, over the {STATISTICS_CELLS} that info evaluates)",
+            S(parsed.medium.density),
+            g.voxel_count(),
+        ));
+        lines.push(format!("  phase     {}", parsed.medium.phase.to_phase()?));
+        for light in &parsed.lights {
+            lines.push(format!("  light     {}", light.to_light(None)?));
+        }
+        lines.push(format!("  boundary  {}", parsed.boundary));
+        "`lucent solve` would page this scene, evaluating the medium brick by brick (Ctrl-C or --time-limit stop it)"
+    } else {
+        let problem = parsed.build_paged(budget)?;
+        lines.push(format!(
+            "  memory    {over_budget}: paged in bricks of {}³ cells",
+            problem.layout().brick()
+        ));
+        let medium = problem.medium();
+        let channels = medium.sigma_t.len().max(medium.albedo.len());
+        for c in 0..channels {
+            let sigma = paged_stats(&medium.sigma_t[c.min(medium.sigma_t.len() - 1)], budget)?;
+            let a = paged_stats(&medium.albedo[c.min(medium.albedo.len() - 1)], budget)?;
+            let albedo = if a.min == a.max {
+                S(f64::from(a.min)).to_string()
+            } else {
+                format!(
+                    "{} to {} per cell",
+                    S(f64::from(a.min)),
+                    S(f64::from(a.max))
+                )
+            };
+            let label = if channels > 1 {
+                format!("medium {}", ["R", "G", "B"].get(c).copied().unwrap_or("?"))
+            } else {
+                "medium".to_owned()
+            };
+            lines.push(format!(
+                "  {label:<10}sigma_t up to {} per unit (mean {}), albedo {albedo}",
+                S(f64::from(sigma.max)),
+                S(sigma.mean)
+            ));
+        }
+        lines.push(format!("  phase     {}", medium.phase));
+        lines.push(
+            "  regime    not estimated out of core (it samples the medium in memory)".to_owned(),
+        );
+        for light in problem.lights() {
+            lines.push(format!("  light     {light}"));
+        }
+        lines.push(format!("  boundary  {}", problem.boundary()));
+        "`lucent solve` pages this scene (the fluence streamed to a .npy file)"
     };
-    writeln!(out, "{name}").map_err(io_err)?;
-    writeln!(
-        out,
-        "  grid      {nx} × {ny} × {nz} cells of {}, box {} to {} (scene units)",
-        S(g.spacing().x),
-        v(lo),
-        v(hi)
-    )
-    .map_err(io_err)?;
-    writeln!(
-        out,
-        "  memory    {field_bytes} bytes per field, over the {} a field may take in memory under --memory-budget {budget}; out of core the medium takes {} bytes on disk per field",
-        lucent::scene::max_grid_bytes(budget),
-        field_bytes
-    )
-    .map_err(io_err)?;
-    writeln!(
-        out,
-        "  medium    sigma_t = {} × the volume's value per unit, albedo {} (statistics not computed: {} cells, over the {} that info evaluates)",
-        S(parsed.medium.density),
-        spectrum(&parsed.medium.albedo),
-        g.voxel_count(),
-        1usize << 24
-    )
-    .map_err(io_err)?;
-    writeln!(out, "  phase     {}", parsed.medium.phase.to_phase()?).map_err(io_err)?;
-    for light in &parsed.lights {
-        writeln!(out, "  light     {}", light.to_light(None)?).map_err(io_err)?;
-    }
-    writeln!(out, "  boundary  {}", parsed.boundary).map_err(io_err)?;
     let chosen = choose_solver(parsed, args)?;
     let verdict = if chosen.solver.pages() {
-        "`lucent solve` would page this scene, evaluating the medium brick by brick (Ctrl-C or --time-limit stop it)".to_owned()
+        pages.to_owned()
     } else {
         format!(
             "needs the scene in memory; `lucent solve --solver NAME` pages it with {}",
@@ -1499,14 +1407,53 @@ fn info_outline(
                 .join(", ")
         )
     };
-    writeln!(out, "  solver    `{}`: {verdict}", chosen.solver.name()).map_err(io_err)?;
-    writeln!(
-        out,
+    lines.push(format!("  solver    `{}`: {verdict}", chosen.solver.name()));
+    lines.push(format!(
         "  image     `lucent render` needs the scene in memory: --memory-budget {} or more",
         8 * field_bytes
-    )
-    .map_err(io_err)?;
-    Ok(())
+    ));
+    let mut out = io::stdout().lock();
+    writeln!(out, "{name}\n{}\n{}", grid_line(&g), lines.join("\n")).map_err(|e| Error::Io {
+        path: "<stdout>".into(),
+        reason: e.to_string(),
+    })
+}
+
+/// Beyond this many cells `lucent info` does not evaluate a paged medium for its
+/// statistics (256³: about a second).
+const STATISTICS_CELLS: usize = 1 << 24;
+
+/// Minimum, maximum and mean of a paged field, read a few z-slabs at a time (at most a
+/// sixteenth of `budget` in memory).
+fn paged_stats(
+    field: &lucent::paging::PagedGrid,
+    budget: u64,
+) -> Result<lucent::grid::GridStats, Error> {
+    let [nx, ny, nz] = field.geometry().dims();
+    let plane = nx * ny;
+    let slabs = ((budget / 16 / 4) as usize / plane).clamp(1, nz);
+    let (mut min, mut max, mut sum, mut nonzero) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f64, 0);
+    let mut buffer = vec![0.0f32; slabs * plane];
+    for z0 in (0..nz).step_by(slabs) {
+        let z1 = (z0 + slabs).min(nz);
+        let chunk = &mut buffer[..(z1 - z0) * plane];
+        field
+            .read_slabs(z0, z1, chunk)
+            .map_err(|e| Error::from(lucent::core::paging_error("info", e)))?;
+        for &v in chunk.iter() {
+            min = min.min(v);
+            max = max.max(v);
+            sum += f64::from(v);
+            nonzero += usize::from(v != 0.0);
+        }
+    }
+    let cells = (plane * nz) as f64;
+    Ok(lucent::grid::GridStats {
+        min,
+        max,
+        mean: sum / cells,
+        nonzero_fraction: nonzero as f64 / cells,
+    })
 }
 
 /// `lucent resolution`: the levels solved, their estimated errors and the one chosen.

@@ -272,3 +272,38 @@ fn monte_carlo_matches_diffusion_through_fresnel_interfaces_of_several_indices()
         );
     }
 }
+
+/// The stored Monte Carlo references describe the suite as it is: none is stale (a scene
+/// edited without `cargo xtask crosscheck` would have its references computed again by
+/// every test run), and the staleness rule itself tells a changed scene's or an old
+/// recipe's file from a current one, leaving other scenes' files (`slab_x` is not `slab`).
+#[test]
+fn stored_references_describe_the_suite_as_it_is() {
+    use lucent::crosscheck::{REFERENCE_VERSION, load_suite, stale_references};
+    let suite = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/suite");
+    let (scenes, _) = load_suite(&suite).unwrap();
+    let stored = suite.join("references");
+    assert!(
+        stale_references(&stored, &scenes).is_empty(),
+        "stale references in {}: run `cargo xtask crosscheck`",
+        stored.display()
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let slab = scenes.iter().find(|s| s.name == "slab").unwrap();
+    let name = |hash: u64, version: u32| format!("slab-total-{hash:016x}-1e-2-v{version}.npy");
+    let current = name(slab.text_hash, REFERENCE_VERSION);
+    let edited = name(slab.text_hash ^ 1, REFERENCE_VERSION);
+    let old = name(slab.text_hash, REFERENCE_VERSION + 1);
+    let other = format!("slab_x-total-{:016x}-1e-2-v1.npy", 7);
+    for file in [&current, &edited, &old, &other] {
+        std::fs::write(dir.path().join(file), b"").unwrap();
+    }
+    let mut stale: Vec<String> = stale_references(dir.path(), &scenes)
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    stale.sort();
+    let mut expected = vec![edited, old];
+    expected.sort();
+    assert_eq!(stale, expected);
+}

@@ -482,17 +482,17 @@ fn every_solver_has_validation_rows_or_a_stated_reason() {
     }
 }
 
-/// The keys a scene table accepts, as the reader says: a probe key no table has, placed in
-/// the table, makes serde name every key it allows ("unknown field `…`, expected one of
-/// `a`, `b`"; "expected `a`" for one key, "there are no fields" for none).
-fn accepted_keys(scene: &str) -> Vec<String> {
+/// What the reader says it expected when `scene` fails with `error` (`"unknown field"` or
+/// `"unknown variant"` of the probe): the names serde lists ("expected one of `a`, `b`";
+/// "expected `a`"; none for "there are no fields"), sorted.
+fn expected_names(scene: &str, error: &str) -> Vec<String> {
     let err = match lucent::scene::Scene::parse(scene, Path::new("probe.toml")) {
         Ok(_) => panic!("the probe was accepted:\n{scene}"),
         Err(e) => e.to_string(),
     };
     assert!(
-        err.contains("unknown field `lucent_probe`"),
-        "not an unknown-field error for\n{scene}\n{err}"
+        err.contains(&format!("{error} `lucent_probe`")),
+        "not an {error} error for\n{scene}\n{err}"
     );
     if err.contains("there are no fields") {
         return Vec::new();
@@ -501,40 +501,28 @@ fn accepted_keys(scene: &str) -> Vec<String> {
         .split("expected ")
         .nth(1)
         .unwrap_or_else(|| panic!("{err}"));
-    let tail = tail.lines().next().unwrap_or_default();
-    let mut keys: Vec<String> = tail
+    let mut names: Vec<String> = tail
+        .lines()
+        .next()
+        .unwrap_or_default()
         .split('`')
         .skip(1)
         .step_by(2)
         .map(str::to_owned)
         .collect();
-    keys.sort();
-    keys
+    names.sort();
+    names
+}
+
+/// The keys a scene table accepts, as the reader says: a probe key no table has, placed in
+/// the table, makes serde name every key it allows.
+fn accepted_keys(scene: &str) -> Vec<String> {
+    expected_names(scene, "unknown field")
 }
 
 /// The `kind` (or `type`) values a tagged table accepts, as the reader says.
 fn accepted_variants(scene: &str) -> Vec<String> {
-    let err = match lucent::scene::Scene::parse(scene, Path::new("probe.toml")) {
-        Ok(_) => panic!("the probe was accepted:\n{scene}"),
-        Err(e) => e.to_string(),
-    };
-    assert!(
-        err.contains("unknown variant `lucent_probe`"),
-        "not an unknown-variant error for\n{scene}\n{err}"
-    );
-    let tail = err
-        .split("expected ")
-        .nth(1)
-        .unwrap_or_else(|| panic!("{err}"));
-    let tail = tail.lines().next().unwrap_or_default();
-    let mut variants: Vec<String> = tail
-        .split('`')
-        .skip(1)
-        .step_by(2)
-        .map(str::to_owned)
-        .collect();
-    variants.sort();
-    variants
+    expected_names(scene, "unknown variant")
 }
 
 /// `docs/scene-format.md` is the reference for scene files: each of its key tables lists
