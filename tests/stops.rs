@@ -2,16 +2,18 @@
 //! (the uncollided light, a hierarchy, an assembly), a sweep, a batch, a paged pass, a
 //! device submission. Measured from the signal (the cancel flag set from another thread,
 //! or the time budget running out) to the solver's return, on problems sized so that the
-//! solve would run ten seconds or more, with the signal sent early (in set-up) and late (in
-//! the iteration).
+//! solve would run ten seconds or more, with the signal sent early (in set-up, 0.2 s after
+//! the start) and late (in the iteration: 0.15 s after the solve first reports one, the
+//! time limit set from when an earlier run of the same solve did, so that no case waits a
+//! fixed second for an iteration that began in a tenth of one).
 //!
 //! The bound is 1 s of wall time on a loaded 2-core CI machine: every loop that can run
 //! for more than ~0.1 s at these sizes checks the signal, so the time to stop is a few of
 //! those (the slowest thread's current piece of work, then the write-back of what was
 //! computed).
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Condvar, Mutex, OnceLock, PoisonError};
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
@@ -132,54 +134,160 @@ fn sized(name: &str, lit: Lit) -> (usize, Params) {
 struct Stopped {
     after_signal: Duration,
     outcome: Result<StopReason, SolveError>,
+    /// When the solve first reported an iteration (counted from its start), if it did
+    /// before the signal.
+    iterating_at: Option<Duration>,
 }
 
-/// Runs `solve` with `options` carrying a fresh cancel flag, and sends the signal `at`
-/// after the start: the flag (`time_limit` false) or the time budget running out.
+/// When to send the signal.
+#[derive(Clone, Copy, Debug)]
+enum At {
+    /// This long after the start (early: inside the set-up of a problem whose set-up takes
+    /// seconds).
+    After(Duration),
+    /// In the iteration: [`SETTLE`] after the solve's first progress report of an
+    /// iteration (by Ctrl-C), or at a time budget of `iterating + SETTLE` where `iterating`
+    /// is when an earlier run of the same solve first reported one; [`LATE`] after the
+    /// start where neither is known (a solver that reports no iterations).
+    Iterating(Option<Duration>),
+}
+
+/// How long after the first report of an iteration a late signal comes: the solve is then
+/// inside its second iteration or later, in the loops that ask the signal most often.
+const SETTLE: Duration = Duration::from_millis(150);
+
+/// The late signal of a solve that reports no iteration.
+const LATE: Duration = Duration::from_millis(1000);
+
+/// The early signal, inside the set-up of a problem lit by a sun and a point light (the
+/// uncollided light takes seconds at these sizes).
+const EARLY: Duration = Duration::from_millis(200);
+
+impl At {
+    /// The late signal of a solve whose earlier run (`previous`) first reported an
+    /// iteration when it did.
+    fn after(previous: &Stopped) -> At {
+        At::Iterating(previous.iterating_at)
+    }
+}
+
+/// The machine's cores, shared out among the timed solves of the tests running side by
+/// side.
+struct Cores(usize);
+
+impl Cores {
+    fn state() -> &'static (Mutex<usize>, Condvar) {
+        static FREE: OnceLock<(Mutex<usize>, Condvar)> = OnceLock::new();
+        FREE.get_or_init(|| (Mutex::new(Self::all()), Condvar::new()))
+    }
+
+    /// At least two: a solve of two threads must be able to run.
+    fn all() -> usize {
+        std::thread::available_parallelism().map_or(2, |n| n.get().max(2))
+    }
+
+    /// Waits until `threads` cores (at most all of them) are free, and holds them.
+    fn take(threads: usize) -> Cores {
+        let wanted = threads.clamp(1, Self::all());
+        let (free, freed) = Self::state();
+        let mut free = free.lock().unwrap_or_else(PoisonError::into_inner);
+        while *free < wanted {
+            free = freed.wait(free).unwrap_or_else(PoisonError::into_inner);
+        }
+        *free -= wanted;
+        Cores(wanted)
+    }
+}
+
+impl Drop for Cores {
+    fn drop(&mut self) {
+        let (free, freed) = Self::state();
+        *free.lock().unwrap_or_else(PoisonError::into_inner) += self.0;
+        freed.notify_all();
+    }
+}
+
+/// Runs `solve` on a pool of `threads` with `options` carrying a fresh cancel flag, and
+/// sends the signal `at`: the flag (`time_limit` false) or the time budget running out.
 fn stop_with(
-    at: Duration,
+    at: At,
     time_limit: bool,
+    threads: usize,
     options: SolveOptions,
     solve: impl FnOnce(&SolveOptions) -> Result<StopReason, SolveError> + Send,
 ) -> Stopped {
-    // One timed solve at a time: the tests of this file run side by side, and a solve
-    // sharing two cores with another would measure the other's work.
-    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let _turn = ONE_AT_A_TIME
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    // The tests of this file run side by side: a timed solve holds its threads' worth of
+    // cores, so that none shares a core with another's work and measures it.
+    let _cores = Cores::take(threads);
     let cancel = Arc::new(AtomicBool::new(false));
+    // The first report of an iteration, in nanoseconds from the start (0: none yet).
+    let iterating = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let started = Instant::now();
+    let report = {
+        let iterating = iterating.clone();
+        let user = options.progress.clone();
+        move |p: lucent::core::Progress| {
+            if p.iteration >= 1 {
+                let now = started.elapsed().as_nanos().max(1) as u64;
+                let _ = iterating.compare_exchange(0, now, Ordering::Relaxed, Ordering::Relaxed);
+            }
+            if let Some(user) = &user {
+                user(p);
+            }
+        }
+    };
+    let budget = match at {
+        At::After(t) => t,
+        At::Iterating(Some(t)) => t + SETTLE,
+        At::Iterating(None) => LATE,
+    };
     let options = SolveOptions {
         relative_tolerance: 0.0,
         max_iterations: usize::MAX / 2,
-        time_budget: time_limit.then_some(at),
+        time_budget: time_limit.then_some(budget),
         cancel: Some(cancel.clone()),
+        progress: Some(Arc::new(report)),
         // A pool of its own: the tests run side by side, and a solve queued behind
         // another test's work in rayon's global pool would be slow to stop for no fault
         // of its own.
-        threads: Some(2),
+        threads: Some(threads),
         ..options
     };
-    let started = Instant::now();
+    let iterating_at = || match iterating.load(Ordering::Relaxed) {
+        0 => None,
+        t => Some(Duration::from_nanos(t)),
+    };
     let (outcome, signalled) = std::thread::scope(|s| {
         let solve = s.spawn(|| solve(&options));
-        let signalled = started + at;
+        let mut signalled = started + budget;
         if !time_limit {
-            while Instant::now() < signalled && !solve.is_finished() {
-                std::thread::sleep(Duration::from_millis(5));
+            loop {
+                if solve.is_finished() {
+                    break;
+                }
+                if let (At::Iterating(_), Some(t)) = (at, iterating_at()) {
+                    signalled = signalled.min(started + t + SETTLE);
+                }
+                if Instant::now() >= signalled {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(2));
             }
+            signalled = signalled.min(Instant::now());
             cancel.store(true, Ordering::Relaxed);
         }
         (solve.join().unwrap(), signalled)
     });
+    let after_signal = Instant::now().saturating_duration_since(signalled);
     Stopped {
-        after_signal: Instant::now().saturating_duration_since(signalled),
+        after_signal,
         outcome,
+        iterating_at: iterating_at().filter(|&t| started + t <= signalled),
     }
 }
 
 /// `name` in memory on its sized problem.
-fn stop(name: &str, lit: Lit, at: Duration, time_limit: bool) -> Stopped {
+fn stop(name: &str, lit: Lit, at: At, time_limit: bool) -> Stopped {
     let (n, params) = sized(name, lit);
     let solver = lucent::registry().build(name, &params).unwrap();
     let mut problem = problem(name, n, lit);
@@ -197,7 +305,9 @@ fn stop(name: &str, lit: Lit, at: Duration, time_limit: bool) -> Stopped {
         )
         .unwrap();
     }
-    stop_with(at, time_limit, SolveOptions::default(), |options| {
+    // One thread: two in-memory solves run side by side, each on a core of its own (the
+    // slowest case for stopping: one thread finishes its current piece of work alone).
+    stop_with(at, time_limit, 1, SolveOptions::default(), |options| {
         solver
             .solve(&problem, options)
             .map(|s| s.report.stop_reason)
@@ -239,19 +349,22 @@ fn assert_stopped(what: &str, s: &Stopped, time_limit: bool) {
 /// (`auto` runs the solver it chooses, whose own test covers its iteration; its set-up,
 /// the regime and the choice, is tested here.)
 fn in_memory(name: &str) {
-    let early = Duration::from_millis(300);
-    // Past the set-up of the emission-lit problems (no uncollided light to compute); the
-    // file's timed solves run one at a time, so every 0.1 s here is 4 s of the test run.
-    let late = Duration::from_millis(1000);
     let case = |phase: &str, lit, at, limit| {
         let what = format!("{name}, {phase}");
-        assert_stopped(&what, &stop(name, lit, at, limit), limit);
+        let stopped = stop(name, lit, at, limit);
+        assert_stopped(&what, &stopped, limit);
+        stopped
     };
-    case("Ctrl-C in set-up", Lit::Set, early, false);
-    case("time limit in set-up", Lit::Set, early, true);
+    case("Ctrl-C in set-up", Lit::Set, At::After(EARLY), false);
+    case("time limit in set-up", Lit::Set, At::After(EARLY), true);
     if name != "auto" {
-        case("time limit iterating", Lit::Iterate, late, true);
-        case("Ctrl-C iterating", Lit::Iterate, late, false);
+        let ctrl_c = case("Ctrl-C iterating", Lit::Iterate, At::Iterating(None), false);
+        case(
+            "time limit iterating",
+            Lit::Iterate,
+            At::after(&ctrl_c),
+            true,
+        );
     }
 }
 
@@ -334,7 +447,7 @@ fn survey() {
             .unwrap_or_else(|| vec![0.2, 2.0]);
         for (at, limit) in times.iter().flat_map(|&t| [(t, false), (t, true)]) {
             let lit = if at < 1.0 { Lit::Set } else { Lit::Iterate };
-            let s = stop(&name, lit, Duration::from_secs_f64(at), limit);
+            let s = stop(&name, lit, At::After(Duration::from_secs_f64(at)), limit);
             eprintln!(
                 "{name:<22} {} at {at:>4} s: stopped {:>7.3} s after the signal: {:?}",
                 if limit { "time limit" } else { "ctrl-c    " },
@@ -375,7 +488,7 @@ fn scene(n: usize, lit: Lit) -> lucent::scene::Scene {
 }
 
 /// `name` out of core: the medium paged under a budget of an eighth of its dense fields.
-fn stop_paged(name: &str, n: usize, lit: Lit, at: Duration, time_limit: bool) -> Stopped {
+fn stop_paged(name: &str, n: usize, lit: Lit, at: At, time_limit: bool) -> Stopped {
     let solver = lucent::registry().build(name, &Params::default()).unwrap();
     let scene = scene(n, lit);
     let options = SolveOptions {
@@ -383,7 +496,7 @@ fn stop_paged(name: &str, n: usize, lit: Lit, at: Duration, time_limit: bool) ->
         ..SolveOptions::default()
     };
     let problem = scene.build_paged_for(solver.as_ref(), &options).unwrap();
-    stop_with(at, time_limit, options, |options| {
+    stop_with(at, time_limit, 2, options, |options| {
         solver
             .solve_paged(&problem, options)
             .map(|s| s.report.stop_reason)
@@ -395,10 +508,6 @@ fn stop_paged(name: &str, n: usize, lit: Lit, at: Duration, time_limit: bool) ->
 /// paged pass).
 #[test]
 fn every_paging_solver_stops_out_of_core() {
-    let early = Duration::from_millis(300);
-    // Past the set-up of the emission-lit problems (no uncollided light to compute); the
-    // file's timed solves run one at a time, so every 0.1 s here is 4 s of the test run.
-    let late = Duration::from_millis(1000);
     let registry = lucent::registry();
     let mut tested = 0;
     for entry in registry.entries() {
@@ -422,10 +531,12 @@ fn every_paging_solver_stops_out_of_core() {
             _ => 96,
         };
         for (phase, lit, at) in [
-            ("set-up", Some(set_up), early),
-            ("iteration", iterates, late),
+            ("set-up", Some(set_up), At::After(EARLY)),
+            ("iteration", iterates, At::Iterating(None)),
         ] {
             let Some(lit) = lit else { continue };
+            // Ctrl-C first: the time limit's late signal follows its first iteration.
+            let mut at = at;
             for limit in [false, true] {
                 let what = format!(
                     "{name} out of core, {} in {phase}",
@@ -437,6 +548,9 @@ fn every_paging_solver_stops_out_of_core() {
                 } else {
                     stop_paged(name, n, lit, at, limit)
                 };
+                if let At::Iterating(_) = at {
+                    at = At::after(&stopped);
+                }
                 assert_stopped(&what, &stopped, limit);
             }
         }
@@ -446,7 +560,7 @@ fn every_paging_solver_stops_out_of_core() {
 }
 
 /// [`stop_paged`] on the cloud lit by its sun alone.
-fn stop_paged_sun_only(name: &str, n: usize, at: Duration, time_limit: bool) -> Stopped {
+fn stop_paged_sun_only(name: &str, n: usize, at: At, time_limit: bool) -> Stopped {
     let solver = lucent::registry().build(name, &Params::default()).unwrap();
     let mut scene = scene(n, Lit::Set);
     scene.lights.truncate(1);
@@ -455,7 +569,7 @@ fn stop_paged_sun_only(name: &str, n: usize, at: Duration, time_limit: bool) -> 
         ..SolveOptions::default()
     };
     let problem = scene.build_paged_for(solver.as_ref(), &options).unwrap();
-    stop_with(at, time_limit, options, |options| {
+    stop_with(at, time_limit, 2, options, |options| {
         solver
             .solve_paged(&problem, options)
             .map(|s| s.report.stop_reason)
@@ -466,10 +580,6 @@ fn stop_paged_sun_only(name: &str, n: usize, at: Duration, time_limit: bool) -> 
 /// every rank (the flags travel with the norms), in set-up and in the iteration.
 #[test]
 fn every_ranked_solver_stops_on_two_ranks() {
-    let early = Duration::from_millis(300);
-    // Past the set-up of the emission-lit problems (no uncollided light to compute); the
-    // file's timed solves run one at a time, so every 0.1 s here is 4 s of the test run.
-    let late = Duration::from_millis(1000);
     // `convection-diffusion` splits its one-pass absorption march over ranks, which runs
     // its pass to the end (the ranks go in lock step; no flag is reduced inside a pass):
     // docs/reliability.md lists it among the steps that can take longer.
@@ -484,23 +594,28 @@ fn every_ranked_solver_stops_on_two_ranks() {
         params.0.insert("ranks".into(), ParamValue::Int(2));
         let solver = lucent::registry().build(name, &params).unwrap();
         for (phase, lit, at) in [
-            ("set-up", Lit::Set, early),
-            ("iteration", Lit::Iterate, late),
+            ("set-up", Lit::Set, At::After(EARLY)),
+            ("iteration", Lit::Iterate, At::Iterating(None)),
         ] {
             let mut problem = problem(name, n, lit);
             if solver.admits(&problem).is_err() {
                 problem = problem_with_point(&problem);
             }
+            // Ctrl-C first: the time limit's late signal follows its first iteration.
+            let mut at = at;
             for limit in [false, true] {
                 let what = format!(
                     "{name} on 2 ranks, {} in {phase}",
                     if limit { "time limit" } else { "Ctrl-C" }
                 );
-                let stopped = stop_with(at, limit, SolveOptions::default(), |options| {
+                let stopped = stop_with(at, limit, 2, SolveOptions::default(), |options| {
                     solver
                         .solve(&problem, options)
                         .map(|s| s.report.stop_reason)
                 });
+                if let At::Iterating(_) = at {
+                    at = At::after(&stopped);
+                }
                 // The march of a sun is one pass: over before a late signal.
                 if stopped.after_signal.is_zero()
                     && matches!(stopped.outcome, Ok(ref r) if r.is_converged())
@@ -538,10 +653,6 @@ fn every_device_solver_stops() {
         eprintln!("skipped: no GPU adapter");
         return;
     }
-    let early = Duration::from_millis(300);
-    // Past the set-up of the emission-lit problems (no uncollided light to compute); the
-    // file's timed solves run one at a time, so every 0.1 s here is 4 s of the test run.
-    let late = Duration::from_millis(1000);
     for entry in lucent::registry().entries() {
         let name = entry.name;
         if !name.starts_with("gpu-") {
@@ -552,8 +663,8 @@ fn every_device_solver_stops() {
         // way (14 s at 64³ on lavapipe): a grid where it takes a fraction of a second.
         let n = if name == "gpu-dom" { 20 } else { 64 };
         for (phase, lit, at) in [
-            ("set-up", Lit::Set, early),
-            ("iteration", Lit::Iterate, late),
+            ("set-up", Lit::Set, At::After(EARLY)),
+            ("iteration", Lit::Iterate, At::Iterating(None)),
         ] {
             let mut problem = problem(name, n, lit);
             if solver.admits(&problem).is_err() {
@@ -562,16 +673,21 @@ fn every_device_solver_stops() {
             if solver.admits(&problem).is_err() {
                 continue;
             }
+            // Ctrl-C first: the time limit's late signal follows its first iteration.
+            let mut at = at;
             for limit in [false, true] {
                 let what = format!(
                     "{name}, {} in {phase}",
                     if limit { "time limit" } else { "Ctrl-C" }
                 );
-                let stopped = stop_with(at, limit, SolveOptions::default(), |options| {
+                let stopped = stop_with(at, limit, 2, SolveOptions::default(), |options| {
                     solver
                         .solve(&problem, options)
                         .map(|s| s.report.stop_reason)
                 });
+                if let At::Iterating(_) = at {
+                    at = At::after(&stopped);
+                }
                 // A device solve that finished before the signal proves nothing here but
                 // is no failure: lavapipe's speed varies with the machine.
                 if matches!(stopped.outcome, Ok(ref r) if r.is_converged()) {
