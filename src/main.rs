@@ -1239,30 +1239,15 @@ fn info(scene: Option<&Path>, args: &SolverArgs) -> Result<(), Error> {
     // One line when every channel shares σ_t and albedo (a grey medium under coloured light).
     let distinct = medium.sigma_t.len().max(medium.albedo.len());
     for c in 0..distinct {
-        let sigma = medium.sigma_t(c).stats();
         let albedo = match medium.albedo(c) {
-            lucent::core::Field::Constant(a) => S(f64::from(*a)).to_string(),
+            lucent::core::Field::Constant(a) => (*a, *a),
             lucent::core::Field::Grid(grid) => {
                 let a = grid.stats();
-                format!(
-                    "{} to {} per cell",
-                    S(f64::from(a.min)),
-                    S(f64::from(a.max))
-                )
+                (a.min, a.max)
             }
         };
-        let label = if distinct > 1 {
-            format!("medium {}", ["R", "G", "B"].get(c).copied().unwrap_or("?"))
-        } else {
-            "medium".to_owned()
-        };
-        writeln!(
-            out,
-            "  {label:<10}sigma_t up to {} per unit (mean {}), albedo {albedo}",
-            S(f64::from(sigma.max)),
-            S(sigma.mean)
-        )
-        .map_err(io_err)?;
+        let line = medium_line(c, distinct, &medium.sigma_t(c).stats(), albedo);
+        writeln!(out, "{line}").map_err(io_err)?;
     }
     writeln!(out, "  phase     {}", medium.phase).map_err(io_err)?;
     for c in 0..distinct {
@@ -1364,25 +1349,7 @@ fn info_paged(parsed: &Scene, name: &str, args: &SolverArgs) -> Result<(), Error
         for c in 0..channels {
             let sigma = paged_stats(&medium.sigma_t[c.min(medium.sigma_t.len() - 1)], budget)?;
             let a = paged_stats(&medium.albedo[c.min(medium.albedo.len() - 1)], budget)?;
-            let albedo = if a.min == a.max {
-                S(f64::from(a.min)).to_string()
-            } else {
-                format!(
-                    "{} to {} per cell",
-                    S(f64::from(a.min)),
-                    S(f64::from(a.max))
-                )
-            };
-            let label = if channels > 1 {
-                format!("medium {}", ["R", "G", "B"].get(c).copied().unwrap_or("?"))
-            } else {
-                "medium".to_owned()
-            };
-            lines.push(format!(
-                "  {label:<10}sigma_t up to {} per unit (mean {}), albedo {albedo}",
-                S(f64::from(sigma.max)),
-                S(sigma.mean)
-            ));
+            lines.push(medium_line(c, channels, &sigma, (a.min, a.max)));
         }
         lines.push(format!("  phase     {}", medium.phase));
         lines.push(
@@ -1417,6 +1384,35 @@ fn info_paged(parsed: &Scene, name: &str, args: &SolverArgs) -> Result<(), Error
         path: "<stdout>".into(),
         reason: e.to_string(),
     })
+}
+
+/// `info`'s medium line of extinction channel `c` of `channels`: σ_t's peak and mean, and
+/// the albedo's range (one value where it is uniform).
+fn medium_line(
+    c: usize,
+    channels: usize,
+    sigma: &lucent::grid::GridStats,
+    (albedo_min, albedo_max): (f32, f32),
+) -> String {
+    let albedo = if albedo_min == albedo_max {
+        S(f64::from(albedo_min)).to_string()
+    } else {
+        format!(
+            "{} to {} per cell",
+            S(f64::from(albedo_min)),
+            S(f64::from(albedo_max))
+        )
+    };
+    let label = if channels > 1 {
+        format!("medium {}", ["R", "G", "B"].get(c).copied().unwrap_or("?"))
+    } else {
+        "medium".to_owned()
+    };
+    format!(
+        "  {label:<10}sigma_t up to {} per unit (mean {}), albedo {albedo}",
+        S(f64::from(sigma.max)),
+        S(sigma.mean)
+    )
 }
 
 /// Beyond this many cells `lucent info` does not evaluate a paged medium for its
