@@ -18,7 +18,7 @@
 
 use crate::error::FemError;
 use crate::operator::LinearOperator;
-use crate::solvers::{Convergence, lu_solve};
+use crate::solvers::{Convergence, DenseLu};
 use lucent_core::Stopping;
 
 /// A box of `cells` elements of side `spacing`, low corner `origin`, with D and σ_a per
@@ -414,38 +414,56 @@ fn element_matrices(h: f64) -> ([[f64; 8]; 8], [[f64; 8]; 8]) {
     (mass, stiffness)
 }
 
-/// Trilinear prolongation from the coarse vertices (`coarse` cells per axis) to the fine
-/// ones (twice as many cells).
-fn prolongation(coarse: [usize; 3]) -> sprs::CsMat<f64> {
+/// The coarse lattice of `fine` cells per axis: ⌈n/2⌉ cells whose vertices are the fine
+/// vertices 0, 2, 4, … and the last one, n. An odd axis ends in a coarse cell one fine
+/// cell wide, so every coarse cell is a union of fine cells and the coarse trilinear space
+/// lies inside the fine one (nested: the Galerkin operator is exact on any lattice).
+fn coarsened(fine: [usize; 3]) -> [usize; 3] {
+    fine.map(|n| n.div_ceil(2))
+}
+
+/// Trilinear prolongation from the vertices of [`coarsened`]`(fine)` to those of `fine`
+/// cells per axis.
+fn prolongation(fine: [usize; 3]) -> sprs::CsMat<f64> {
+    let coarse = coarsened(fine);
     let cn = coarse.map(|c| c + 1);
-    let fine = coarse.map(|c| 2 * c + 1);
-    let nf: usize = fine.iter().product();
+    let fv = fine.map(|c| c + 1);
+    let nf: usize = fv.iter().product();
     let nc: usize = cn.iter().product();
+    // Per axis and fine vertex: the coarse vertices it interpolates and their weights. An
+    // even fine index (and the last vertex of an odd axis) sits on a coarse vertex, an odd
+    // one halfway between two.
+    let weights: [Vec<[(usize, f64); 2]>; 3] = std::array::from_fn(|a| {
+        (0..fv[a])
+            .map(|f| {
+                if f == fine[a] {
+                    [(coarse[a], 1.0), (coarse[a], 0.0)]
+                } else if f % 2 == 0 {
+                    [(f / 2, 1.0), (f / 2, 0.0)]
+                } else {
+                    [(f / 2, 0.5), (f / 2 + 1, 0.5)]
+                }
+            })
+            .collect()
+    });
     let mut t = sprs::TriMat::with_capacity((nf, nc), 8 * nf);
-    for k in 0..fine[2] {
-        for j in 0..fine[1] {
-            for i in 0..fine[0] {
-                let row = i + fine[0] * (j + fine[1] * k);
-                let at = [i, j, k];
-                // Per axis: an even fine index sits on a coarse vertex, an odd one halfway.
-                let options: [Vec<(usize, f64)>; 3] = std::array::from_fn(|a| {
-                    if at[a] % 2 == 0 {
-                        vec![(at[a] / 2, 1.0)]
-                    } else {
-                        vec![(at[a] / 2, 0.5), (at[a] / 2 + 1, 0.5)]
-                    }
-                });
-                for &(x, wx) in &options[0] {
-                    for &(y, wy) in &options[1] {
-                        for &(z, wz) in &options[2] {
-                            t.add_triplet(row, x + cn[0] * (y + cn[1] * z), wx * wy * wz);
+    for k in 0..fv[2] {
+        for j in 0..fv[1] {
+            for i in 0..fv[0] {
+                let row = i + fv[0] * (j + fv[1] * k);
+                for &(x, wx) in &weights[0][i] {
+                    for &(y, wy) in &weights[1][j] {
+                        for &(z, wz) in &weights[2][k] {
+                            let w = wx * wy * wz;
+                            if w != 0.0 {
+                                t.add_triplet(row, x + cn[0] * (y + cn[1] * z), w);
+                            }
                         }
                     }
                 }
             }
         }
     }
-
     t.to_csr()
 }
 
@@ -454,12 +472,16 @@ fn prolongation(coarse: [usize; 3]) -> sprs::CsMat<f64> {
 pub struct Q1Multigrid {
     operators: Vec<sprs::CsMat<f64>>,
     prolongations: Vec<sprs::CsMat<f64>>,
+    /// The coarsest operator's LU factors, computed once (`None` if it is singular to
+    /// working precision: the coarsest level is then smoothed instead).
+    coarsest: Option<DenseLu>,
     sweeps: usize,
 }
 
 impl Q1Multigrid {
     /// Builds the hierarchy of `problem`'s matrix `a` (Galerkin coarse operators) down to a
-    /// level of at most 1000 vertices or one that cannot halve.
+    /// level of at most 1000 vertices; odd axes coarsen too (a last coarse cell one fine
+    /// cell wide).
     pub fn new(problem: &Q1Problem, a: sprs::CsMat<f64>, sweeps: usize) -> Self {
         Self::for_lattice(problem.cells, a, sweeps)
     }
@@ -497,14 +519,11 @@ impl Q1Multigrid {
         let mut operators = vec![a];
         let mut prolongations = Vec::new();
         let mut cells = cells;
-        while operators[operators.len() - 1].rows() > 1000 {
+        // Halve (odd axes too, see `coarsened`) while an axis has two cells or more.
+        while operators[operators.len() - 1].rows() > 1000 && cells.iter().any(|&c| c >= 2) {
             check()?;
-            // Halve while every axis has an even number of cells ≥ 2.
-            if !cells.iter().all(|&c| c >= 2 && c % 2 == 0) {
-                break;
-            }
-            let coarse = cells.map(|c| c / 2);
-            let p = prolongation(coarse);
+            let coarse = coarsened(cells);
+            let p = prolongation(cells);
             let pt = p.transpose_view().to_csr();
             let fine = &operators[operators.len() - 1];
             let ap = fine * &p;
@@ -513,9 +532,12 @@ impl Q1Multigrid {
             prolongations.push(p);
             cells = coarse;
         }
+        check()?;
+        let coarsest = DenseLu::factor(&operators[operators.len() - 1]).ok();
         Ok(Self {
             operators,
             prolongations,
+            coarsest,
             sweeps: sweeps.max(1),
         })
     }
@@ -552,9 +574,9 @@ impl Q1Multigrid {
     fn cycle(&self, level: usize, b: &[f64], x: &mut [f64]) {
         let a = &self.operators[level];
         if level + 1 == self.operators.len() {
-            match lu_solve(a, b) {
-                Ok(solution) => x.copy_from_slice(&solution),
-                Err(_) => {
+            match &self.coarsest {
+                Some(lu) => x.copy_from_slice(&lu.solve(b)),
+                None => {
                     for _ in 0..50 {
                         Self::smooth(a, b, x, true);
                         Self::smooth(a, b, x, false);

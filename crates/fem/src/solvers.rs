@@ -350,55 +350,103 @@ pub fn conjugate_gradient(
 pub const DENSE_LIMIT: usize = 6000;
 
 /// Solves A x = b by dense LU with partial pivoting (A given as any operator, expanded
-/// column by column).
+/// column by column): [`DenseLu::factor`] and one [`DenseLu::solve`].
 pub fn lu_solve(op: &dyn LinearOperator, b: &[f64]) -> Result<Vec<f64>, FemError> {
-    let n = op.dim();
-    if n > DENSE_LIMIT {
-        return Err(FemError::TooLarge {
-            unknowns: n,
-            limit: DENSE_LIMIT,
-        });
-    }
-    let mut a = vec![0.0; n * n];
-    let mut e = vec![0.0; n];
-    let mut col = vec![0.0; n];
-    for j in 0..n {
-        e.fill(0.0);
-        e[j] = 1.0;
-        op.apply(&e, &mut col);
-        for i in 0..n {
-            a[i * n + j] = col[i];
+    check_sizes(op, b, b)?;
+    Ok(DenseLu::factor(op)?.solve(b))
+}
+
+/// The LU factors of a dense matrix with partial pivoting, P A = L U: factored once in
+/// O(n³), each [`DenseLu::solve`] then costs O(n²) (a multigrid's coarsest level is
+/// solved this way once per cycle).
+#[derive(Debug, Clone)]
+pub struct DenseLu {
+    n: usize,
+    /// L below the diagonal (unit diagonal implied), U on and above it; row-major.
+    factors: Vec<f64>,
+    /// Row `k` of the factors came from row `pivots[k]` of the permuted right-hand side
+    /// at step `k`: the swaps in the order they were made.
+    pivots: Vec<usize>,
+}
+
+impl DenseLu {
+    /// Factors `op` (at most [`DENSE_LIMIT`] unknowns; an error naming the column if a
+    /// pivot is below 10⁻¹⁴ of the largest entry).
+    pub fn factor(op: &dyn LinearOperator) -> Result<Self, FemError> {
+        let n = op.dim();
+        if n > DENSE_LIMIT {
+            return Err(FemError::TooLarge {
+                unknowns: n,
+                limit: DENSE_LIMIT,
+            });
         }
-    }
-    let mut x = b.to_vec();
-    let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    for k in 0..n {
-        let p = (k..n)
-            .max_by(|&i, &j| a[i * n + k].abs().total_cmp(&a[j * n + k].abs()))
-            .unwrap_or(k);
-        if a[p * n + k].abs() <= 1e-14 * scale {
-            return Err(FemError::Singular { column: k });
-        }
-        if p != k {
-            for j in 0..n {
-                a.swap(k * n + j, p * n + j);
+        let mut a = vec![0.0; n * n];
+        let mut e = vec![0.0; n];
+        let mut col = vec![0.0; n];
+        for j in 0..n {
+            e.fill(0.0);
+            e[j] = 1.0;
+            op.apply(&e, &mut col);
+            for i in 0..n {
+                a[i * n + j] = col[i];
             }
+        }
+        let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let mut pivots = Vec::with_capacity(n);
+        for k in 0..n {
+            let p = (k..n)
+                .max_by(|&i, &j| a[i * n + k].abs().total_cmp(&a[j * n + k].abs()))
+                .unwrap_or(k);
+            let pivot = a[p * n + k].abs();
+            if pivot.is_nan() || pivot <= 1e-14 * scale {
+                return Err(FemError::Singular { column: k });
+            }
+            if p != k {
+                for j in 0..n {
+                    a.swap(k * n + j, p * n + j);
+                }
+            }
+            pivots.push(p);
+            let pivot = a[k * n + k];
+            let (done, rest) = a.split_at_mut((k + 1) * n);
+            let row_k = &done[k * n..];
+            for row in rest.chunks_exact_mut(n) {
+                let f = row[k] / pivot;
+                row[k] = f;
+                if f != 0.0 {
+                    for (r, u) in row[k + 1..].iter_mut().zip(&row_k[k + 1..]) {
+                        *r -= f * u;
+                    }
+                }
+            }
+        }
+        Ok(Self {
+            n,
+            factors: a,
+            pivots,
+        })
+    }
+
+    /// Unknowns.
+    pub fn dim(&self) -> usize {
+        self.n
+    }
+
+    /// x = A⁻¹ b (`b` of [`DenseLu::dim`] entries).
+    pub fn solve(&self, b: &[f64]) -> Vec<f64> {
+        let (n, a) = (self.n, &self.factors);
+        let mut x = b.to_vec();
+        for (k, &p) in self.pivots.iter().enumerate() {
             x.swap(k, p);
         }
-        let pivot = a[k * n + k];
-        for i in k + 1..n {
-            let f = a[i * n + k] / pivot;
-            if f != 0.0 {
-                for j in k..n {
-                    a[i * n + j] -= f * a[k * n + j];
-                }
-                x[i] -= f * x[k];
-            }
+        for i in 0..n {
+            let s: f64 = (0..i).map(|j| a[i * n + j] * x[j]).sum();
+            x[i] -= s;
         }
+        for k in (0..n).rev() {
+            let s: f64 = (k + 1..n).map(|j| a[k * n + j] * x[j]).sum();
+            x[k] = (x[k] - s) / a[k * n + k];
+        }
+        x
     }
-    for k in (0..n).rev() {
-        let s: f64 = (k + 1..n).map(|j| a[k * n + j] * x[j]).sum();
-        x[k] = (x[k] - s) / a[k * n + k];
-    }
-    Ok(x)
 }
