@@ -63,7 +63,7 @@ pub struct Tolerance {
     /// Too slow for the default test run (its solve and reference together take seconds
     /// where the others take fractions): `cargo xtask crosscheck` runs it, the test does
     /// not ([`Selection::Quick`]). Every solver and every scene keeps entries that are not
-    /// heavy, which `tests/cross_check.rs` asserts.
+    /// heavy, which `tests/it/cross_check.rs` asserts.
     #[serde(default)]
     pub heavy: bool,
 }
@@ -717,7 +717,7 @@ pub fn validation_markdown(outcomes: &[Outcome], command: &str) -> String {
 pub const CHECKED_ELSEWHERE: &[(&str, &str)] = &[
     (
         "direct-refractive",
-        "curved rays through a graded refractive index, which no suite scene has: with a uniform index it gives `direct`'s fluence to 2e-5 relative on boxes of several shapes; through a graded index a beam keeps its flux across every cell-centre plane to 1e-4 (measured 1.3e-6); a Luneburg lens focuses a beam on its far rim (`crates/core/tests/refractive.rs`)",
+        "curved rays through a graded refractive index, which no suite scene has: with a uniform index it gives `direct`'s fluence to 2e-5 relative on boxes of several shapes; through a graded index a beam keeps its flux across every cell-centre plane to 1e-4 (measured 1.3e-6); a Luneburg lens focuses a beam on its far rim (`crates/core/tests/it/refractive.rs`)",
     ),
     (
         "auto",
@@ -759,7 +759,7 @@ until the spatial error and the reference's own noise (0.6%) remain.
   the low orders' inability to represent a g = 0.8 lobe (S2's 8 directions are 55° apart).
 - **Closures.** Step differencing is first order and smears (false scattering): twice diamond's
   error at S8. Bernabei's exponential face-to-face scheme attenuates with the mean chord, which
-  errs by several per cent per cell at σ_t h ≈ 1 (crates/dom/tests/closure.rs), so at these
+  errs by several per cent per cell at σ_t h ≈ 1 (crates/dom/tests/it/closure.rs), so at these
   resolutions it sits between the two.
 - **Iterations** (crates/dom/tests/transport.rs). DSA with `lucent-diffusion`'s cell-centred
   operator takes albedo 0.999 at σ_t h = 0.67 to 10⁻⁶ in 21 sweeps (12 with Anderson mixing);
@@ -786,7 +786,7 @@ the light where centre values and cell averages of a 1/r² field differ by O(1).
 - **The diffusion solvers' point sources** have their singular part taken analytically
   (docs/point-sources.md). In a Robin sphere with the source 4.2 mm off centre at 64³,
   `diffusion-mg` is 3.7·10⁻⁴ from the exact series and `fem-diffusion` 1.2·10⁻³; they agree
-  within 0.78% in every cell outside the source's (tests/point_sources.rs), where they
+  within 0.78% in every cell outside the source's (tests/it/point_sources.rs), where they
   differed by 1.75% (12.8% in the worst cell) with the source as a cell or nodal load. On
   the marble sphere `diffusion-mg` went from 1.0% to 0.08%.
 ";
@@ -797,7 +797,7 @@ const CONVECTION_NOTE: &str = "
 
 `convection-diffusion` against `direct` (exact) under an oblique sun (−0.3, −0.4, −0.8) on a
 purely absorbing medium, relative L2 at 16×16×24, 32×32×48, 64×64×96
-(crates/explicit/tests/registry.rs):
+(crates/explicit/tests/it/registry.rs):
 
 | medium | model | 16 | 32 | 64 | observed order |
 |---|---|---|---|---|---|
@@ -826,7 +826,7 @@ Monte Carlo (a Fresnel interface on the embedded sphere: reflection, refraction,
 internal reflection) against the analytic diffusion solution (Mertens T7) with the Robin
 condition, as the ratio of fluences averaged over 1 mm shells (measured 2026-11-23 on the
 dev machine with the suite scene and `McConfig { particles: 8000, batches: 8 }`; `cargo test
---release --test cross_check fresnel` asserts the compared shells within 2.5% at 4000 paths
+--release --test it fresnel` asserts the compared shells within 2.5% at 4000 paths
 per batch for η = 1, 1.3, 1.4 and 1.5). The diffusion solvers' A is the transport-exact
 extrapolation length of the Milne problem, A = 3z_b(η)/2 (docs/milne.md); the P1 boundary
 factors (Marshak's 1, Haskell's partial currents, Groenhuis' fit) misplace the extrapolated

@@ -1,6 +1,6 @@
 //! Fuzz targets, shared by the libFuzzer harness in `fuzz/` (nightly, `cargo fuzz run
 //! TARGET`), the stable mutation harness `cargo xtask fuzz`, and the regression corpus that
-//! `cargo test` replays (`tests/fuzz_regressions.rs`).
+//! `cargo test` replays (`tests/it/fuzz_regressions.rs`).
 //!
 //! Each [`Target`] feeds arbitrary bytes to one reader (or to the scene parser and
 //! [`Scene::build_within`]) under a small memory budget. A target never panics, never

@@ -66,7 +66,7 @@ struct Cli {
     #[arg(long, short, global = true)]
     quiet: bool,
     /// Check the command line and exit (0, or 2 with the usage error): the docs' commands
-    /// are checked with it (`tests/tidy.rs`).
+    /// are checked with it (`tests/it/tidy.rs`).
     #[arg(long, global = true, hide = true)]
     parse_only: bool,
 }

@@ -4,7 +4,7 @@
 //! - `ci`: what `.ci/run` checks, in the same order: formatting, clippy with warnings
 //!   denied, documentation with warnings denied, then the README's test command.
 //! - `doc`: `cargo doc --workspace --no-deps` with rustdoc warnings denied.
-//! - `tidy`: the repository's own checks (`tests/tidy.rs`): crate docs present, no stray
+//! - `tidy`: the repository's own checks (`tests/it/tidy.rs`): crate docs present, no stray
 //!   `dbg!`/`todo!`, every crate listed in ARCHITECTURE.md.
 //! - `crosscheck [--refined]`: every solver on every suite scene against its reference
 //!   (with `--refined`, the convergence checks on refined grids too); prints the
@@ -243,7 +243,14 @@ fn main() -> ExitCode {
     }
     let steps: Vec<Vec<&str>> = match command.as_deref() {
         Some("doc") => vec![vec!["doc", "--workspace", "--no-deps"]],
-        Some("tidy") => vec![vec!["test", "--package", "lucent", "--test", "tidy"]],
+        Some("tidy") => vec![vec![
+            "test",
+            "--package",
+            "lucent",
+            "--test",
+            "it",
+            "tidy::",
+        ]],
         _ => {
             eprintln!("{USAGE}");
             return ExitCode::FAILURE;

@@ -9,11 +9,11 @@
 //! harmonic mean, the patches' couplings and data fluxes, the point sources' trilinear
 //! weights) and summed in the order `assemble` sums it, so a row and a right-hand side
 //! have the bits of the assembled matrix's row and vector (test:
-//! `crates/diffusion/tests/slab_system.rs`). [`SlabSystem::block`] gathers the rows of a
+//! `crates/diffusion/tests/it/slab_system.rs`). [`SlabSystem::block`] gathers the rows of a
 //! box of cells (a z-slab is a box of whole layers) into a CSR block with the whole grid's
 //! column numbers, from the coefficients of that box and the cell beyond each of its faces:
 //! what one rank of a decomposition into boxes or slabs iterates without the rest of the
-//! volume (test: `crates/diffusion/tests/slab_block.rs`).
+//! volume (test: `crates/diffusion/tests/it/slab_block.rs`).
 
 use std::ops::Range;
 

@@ -10,7 +10,7 @@
 //! the change and size norms — added as in memory (P1: runs of eight cells along x, the
 //! run sums added exactly; ordinates: in cell order). Then the two swap. So
 //! the stopping decisions and the fluence have the in-memory bits
-//! (`crates/explicit/tests/paged_march.rs`).
+//! (`crates/explicit/tests/it/paged_march.rs`).
 //!
 //! Sources are the point lights inside the grid (power 4πI into the cell that holds them;
 //! a paged problem has no emission), kept as a sparse list. `ftcs-p1` takes a uniform

@@ -21,7 +21,7 @@
 //!
 //! Every value is computed by the in-memory arithmetic in the in-memory order, so the
 //! residual history, the stopping decision and the fluence have the in-memory bits
-//! (`crates/explicit/tests/paged_steady.rs`). The iterates b, φ and r (and D, the diagonal
+//! (`crates/explicit/tests/it/paged_steady.rs`). The iterates b, φ and r (and D, the diagonal
 //! part and Jacobi's scale) live in f64 pages of whole slabs (`lucent_paging::PagedSlabs`)
 //! in a pool of their own, under what the budget leaves beside the medium's pool: 40–48
 //! bytes per cell paged instead of 600 in memory.

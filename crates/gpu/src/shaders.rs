@@ -1,6 +1,6 @@
 //! The WGSL sources of lucent's kernels, from the repository's top-level `shaders/` folder,
 //! compiled into the crate. Every kernel is prefixed with `shaders/common.wgsl` (2-D workgroup numbering, pairwise workgroup sums, finiteness
-//! tests). `tests/shaders.rs` validates every one with naga, so a shader error fails
+//! tests). `tests/it/shaders.rs` validates every one with naga, so a shader error fails
 //! `cargo test` rather than a user's run.
 
 /// Helpers prepended to the kernels below.

@@ -28,7 +28,7 @@
 //! (the largest of the three extinctions), and every channel is weighted by the balance
 //! heuristic over the three heroes — one path instead of three, unbiased; the fluence
 //! tallies every piece between tentative collisions with the weights of its start
-//! (`tests/transport.rs` and `tests/camera.rs` check both estimators against per-channel
+//! (`tests/it/transport.rs` and `tests/it/camera.rs` check both estimators against per-channel
 //! tracing). With embedded geometry the fluence falls back to per-channel tracing.
 //!
 //! ## Determinism
@@ -44,7 +44,7 @@
 //! applies them to f64 pages sorted by brick with a stable sort, so every cell receives its
 //! additions in path order, and the pages are folded into Σφ and Σφ² in batch order. With
 //! bricks of `majorant_cells`³ cells the result has the in-memory solve's bits
-//! (`tests/paged.rs`). The medium gets half of the memory budget; the tallies' logs and
+//! (`tests/it/paged.rs`). The medium gets half of the memory budget; the tallies' logs and
 //! pages the rest.
 //!
 //! ## Units and limits

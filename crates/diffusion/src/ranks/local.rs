@@ -21,7 +21,7 @@
 //!
 //! Each step sums what the whole build sums in the same order, so the frames, the history
 //! and φ are the bits of [`Multigrid::solve`] on the assembled problem (test:
-//! `crates/diffusion/tests/ranks.rs`).
+//! `crates/diffusion/tests/it/ranks.rs`).
 
 use std::borrow::Cow;
 use std::ops::Range;

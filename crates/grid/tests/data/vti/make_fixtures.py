@@ -1,4 +1,4 @@
-"""Writes the .vti fixtures of crates/grid/tests/vti.rs with VTK's own writer (pip install vtk).
+"""Writes the .vti fixtures of crates/grid/tests/it/vti.rs with VTK's own writer (pip install vtk).
 
 A 5 x 4 x 3 image, origin (1, 2, 3), spacing (0.5, 0.25, 2), whose point value at
 index (i, j, k) is i + 10 j + 100 k, in every encoding vtkXMLImageDataWriter has; and a

@@ -286,7 +286,7 @@ fn citations_point_at_what_a_user_has() {
     ];
     let mut files = Vec::new();
     user_facing_files(root(), &mut files);
-    let this = root().join("tests/tidy.rs");
+    let this = root().join(file!());
     let mut offences = Vec::new();
     for file in files.iter().filter(|f| **f != this) {
         let text = fs::read_to_string(file).unwrap_or_default();

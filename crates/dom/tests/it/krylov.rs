@@ -9,7 +9,7 @@ use lucent_dom::{
 };
 use lucent_optics::{Phase, SphericalQuadrature};
 
-mod common;
+use crate::common;
 
 use common::{glowing_cube, relative_l2};
 

@@ -60,7 +60,7 @@ fn ftcs_growth(beta: f64, albedo: f64, r: f64, steps: usize) -> f64 {
 }
 
 /// The smallest r (to 0.1%) at which random data grows over 400 steps.
-pub fn measured_blow_up(beta: f64, albedo: f64) -> f64 {
+fn measured_blow_up(beta: f64, albedo: f64) -> f64 {
     let vn = stability::ftcs_diffusion::von_neumann(beta, albedo);
     let (mut lo, mut hi) = (0.5 * vn, 2.0 * vn);
     while hi - lo > 1e-3 * vn {

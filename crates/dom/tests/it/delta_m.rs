@@ -8,7 +8,7 @@ use lucent_dom::{DeltaM, DomBoundary, DomProblem, DomSettings, legendre_moment, 
 use lucent_grid::GridGeometry;
 use lucent_optics::{Phase, SphericalQuadrature};
 
-mod common;
+use crate::common;
 
 use common::{glowing_cube, relative_l2};
 

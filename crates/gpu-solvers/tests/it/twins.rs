@@ -203,7 +203,7 @@ fn gpu_ftcs_diffusion_matches_ftcs_diffusion_step_for_step() {
 
 /// `gpu-diffusion-mg` against `diffusion-mg` from the same start (`full_multigrid =
 /// false`: the device's solve starts from zero), to 1e-8: the cycles differ only by f32
-/// rounding inside each correction (`tests/multigrid.rs`: ≤ 2e-7 of a cycle's peak),
+/// rounding inside each correction (`tests/it/multigrid.rs`: ≤ 2e-7 of a cycle's peak),
 /// which the f64 outer iteration removes, so the same cycle count or one apart and the
 /// fluences within 1e-6 of the peak (each within 1e-8 of the residual times the
 /// operator's condition; the uncollided light is the host's in both). The same from the

@@ -173,7 +173,7 @@ fn what_cannot_march_plane_by_plane_is_refused() {
         intensity: Spectrum::Grey(1.0),
     };
     assert!(refused(&[], vec![point]).contains("point"));
-    // Every other explicit entry pages (tests/paged_steady.rs, tests/paged_march.rs).
+    // Every other explicit entry pages (tests/it/paged_steady.rs, tests/it/paged_march.rs).
     for entry in ExplicitSolver::ENTRIES {
         let solver = (entry.build)(&Params::default()).unwrap();
         assert!(solver.pages(), "{}", entry.name);

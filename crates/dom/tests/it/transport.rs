@@ -8,7 +8,7 @@ use lucent_dom::{Acceleration, Closure, DomBoundary, DomProblem, DomSettings, so
 use lucent_grid::GridGeometry;
 use lucent_optics::{Phase, SphericalQuadrature};
 
-mod common;
+use crate::common;
 
 fn stopping(tolerance: f64, max: usize) -> Stopping {
     Stopping {

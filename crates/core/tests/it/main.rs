@@ -1,0 +1,11 @@
+//! lucent-core's integration tests, one binary: `cargo test` runs test binaries one after
+//! another, each linked on its own, so one binary per file leaves a core idle behind
+//! each file's last long test and links the crate once per file (the repository's
+//! `tests/it/main.rs` says more). `cargo test -p lucent-core --test it MODULE::` runs
+//! one file's tests.
+
+mod direct;
+mod paged;
+mod refractive;
+mod regime;
+mod uncollided;
