@@ -170,7 +170,8 @@ enum Command {
     /// Solve a scene and render it to PNG (sRGB) or EXR (linear).
     #[command(after_help = EXIT_STATUS_HELP)]
     Render(RenderArgs),
-    /// Solve a scene and write the fluence grid (.npy or .vol) and a JSON report beside it.
+    /// Solve a scene and write the fluence grid (.npy or .vol) and a JSON report beside it
+    /// (and a Monte Carlo solve's per-cell standard error, NAME.stderr.npy or .vol).
     #[command(after_help = EXIT_STATUS_HELP)]
     Solve {
         /// Scene file (TOML).
@@ -955,10 +956,17 @@ fn solve_report(
         "dims": g.dims(),
         "spacing": g.spacing().to_array(),
         "origin": g.origin().to_array(),
-        "fluence": fluence.and_then(|f| f.file_name()).map(|n| n.to_string_lossy().into_owned()),
+        "fluence": file_name(fluence),
         "converged": report.stop_reason.is_converged(),
         "report": report,
     })
+}
+
+/// The file name of `path` for a report (null for none).
+fn file_name(path: Option<&Path>) -> serde_json::Value {
+    path.and_then(Path::file_name)
+        .map(|n| n.to_string_lossy().into_owned())
+        .into()
 }
 
 /// Writes `report` as pretty JSON to `path`, whole or not at all.
@@ -1014,10 +1022,18 @@ fn solve_paged_to_file(
         args.allow_unconverged,
         "fluence",
     );
+    let standard_error = (ended.is_none() && !solution.standard_error.is_empty())
+        .then(|| standard_error_path(output));
     if ended.is_none() {
         lucent::grid::io::npy::write_f32_slabs(output, g.dims(), channels, |c, z, out| {
             solution.fluence[c].read_slabs(z, z + 1, out)
         })?;
+        if let Some(path) = &standard_error {
+            let errors = &solution.standard_error;
+            lucent::grid::io::npy::write_f32_slabs(path, g.dims(), errors.len(), |c, z, out| {
+                errors[c].read_slabs(z, z + 1, out)
+            })?;
+        }
     }
     let report_path = output.with_extension("json");
     let mut report = solve_report(
@@ -1032,14 +1048,18 @@ fn solve_paged_to_file(
     report["options"]["memory_budget"] = args.budget().into();
     report["storage"] = "paged".into();
     report["brick"] = problem.layout().brick().into();
+    report["standard_error"] = file_name(standard_error.as_deref());
     write_report(&report_path, &report)?;
     if let Some(ended) = ended {
         return Ok(ended);
     }
     if !quiet {
         let p = &solution.paging;
+        let errors = standard_error.map_or_else(String::new, |p| {
+            format!(", its standard error per cell {}", p.display())
+        });
         say!(
-            "lucent: solved {name} with `{}` out of core ({} MiB budget, a pool of {} bricks of {}³ cells): {}, {:.2} s, {} pins at a hit rate of {:.3}, {} MiB read and {} MiB written; fluence {} and report {}",
+            "lucent: solved {name} with `{}` out of core ({} MiB budget, a pool of {} bricks of {}³ cells): {}, {:.2} s, {} pins at a hit rate of {:.3}, {} MiB read and {} MiB written; fluence {}{errors} and report {}",
             chosen.solver.name(),
             args.budget() >> 20,
             p.slots,
@@ -1055,6 +1075,15 @@ fn solve_paged_to_file(
         );
     }
     Ok(Ended::Done)
+}
+
+/// Where a stochastic solver's per-cell standard error goes: beside the fluence, in its
+/// format, `NAME.stderr.EXT` (as `render` writes `NAME.stderr.exr` beside an image).
+fn standard_error_path(output: &Path) -> PathBuf {
+    let extension = output
+        .extension()
+        .map_or_else(String::new, |e| e.to_string_lossy().into_owned());
+    output.with_extension(format!("stderr.{extension}"))
 }
 
 fn solve_to_file(
@@ -1096,14 +1125,23 @@ fn solve_to_file(
         let is_npy = output
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
-        if is_npy {
-            lucent::grid::io::npy::write_channels(output, &grids, ScalarType::F32)?;
-        } else {
-            lucent::grid::io::mitsuba::write(output, &grids)?;
+        let write = |path: &Path, grids: &[&lucent::grid::Grid]| {
+            if is_npy {
+                lucent::grid::io::npy::write_channels(path, grids, ScalarType::F32)
+            } else {
+                lucent::grid::io::mitsuba::write(path, grids)
+            }
+        };
+        write(output, &grids)?;
+        if let Some(errors) = &solution.standard_error {
+            let errors: Vec<&lucent::grid::Grid> = errors.iter().collect();
+            write(&standard_error_path(output), &errors)?;
         }
     }
+    let standard_error =
+        (ended.is_none() && solution.standard_error.is_some()).then(|| standard_error_path(output));
     // The report is written either way: it says why the solve stopped.
-    let report = solve_report(
+    let mut report = solve_report(
         &name,
         &chosen,
         args,
@@ -1112,6 +1150,7 @@ fn solve_to_file(
         ended.is_none().then_some(output),
         &solution.report,
     );
+    report["standard_error"] = file_name(standard_error.as_deref());
     write_report(&report_path, &report)?;
     if let Some(ended) = ended {
         return Ok(ended);
@@ -1121,8 +1160,11 @@ fn solve_to_file(
             1 => String::new(),
             n => format!(" on {n} MPI ranks"),
         };
+        let errors = standard_error.map_or_else(String::new, |p| {
+            format!(", its standard error per cell {}", p.display())
+        });
         say!(
-            "lucent: solved {name} with `{}`{ranks}: {stop}, {:.2} s; fluence {} and report {}",
+            "lucent: solved {name} with `{}`{ranks}: {stop}, {:.2} s; fluence {}{errors} and report {}",
             chosen.solver.name(),
             solution.report.wall_time_s,
             output.display(),

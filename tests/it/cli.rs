@@ -1126,6 +1126,33 @@ fn monte_carlo_that_took_every_path_is_a_finished_solve() {
         .as_f64()
         .unwrap();
     assert!(error > 0.0 && error < 1.0, "{error}");
+    // The per-cell standard errors are written beside the fluence (`mc.stderr.npy`, named
+    // in the report), and they are the ones the reported error summarises: its mean
+    // relative error over the cells above a thousandth of the peak, recomputed from the two
+    // files (f32 values, summed in f64 in the same order: equal to rounding).
+    assert_eq!(report["standard_error"], "mc.stderr.npy");
+    let load = |name: &str| {
+        lucent::grid::io::npy::read(dir.path().join(name), &Default::default())
+            .unwrap()
+            .data()
+            .to_vec()
+    };
+    let (phi, se) = (load("mc.npy"), load("mc.stderr.npy"));
+    assert_eq!(phi.len(), se.len());
+    assert!(se.iter().all(|e| e.is_finite() && *e >= 0.0));
+    let peak = phi.iter().copied().fold(0.0f32, f32::max);
+    let (sum, count) = phi
+        .iter()
+        .zip(&se)
+        .filter(|(p, _)| **p > 1e-3 * peak)
+        .fold((0.0, 0usize), |(s, n), (p, e)| {
+            (s + f64::from(*e / *p), n + 1)
+        });
+    let recomputed = sum / count as f64;
+    assert!(
+        (recomputed - error).abs() <= 1e-9 * error,
+        "{recomputed} vs the report's {error}"
+    );
 }
 
 #[test]
@@ -1493,6 +1520,28 @@ fn a_scene_beyond_the_budget_is_solved_out_of_core_to_the_same_bytes() {
         );
         let report: serde_json::Value = serde_json::from_slice(&read("paged.json")).unwrap();
         assert_eq!(report["storage"], "paged", "{report}");
+        // Monte Carlo's per-cell standard error goes beside the fluence, in memory and out
+        // of core alike; the other solvers have none to write.
+        for run in ["memory", "paged"] {
+            let errors = dir.path().join(format!("{run}.stderr.npy"));
+            let report: serde_json::Value =
+                serde_json::from_slice(&read(&format!("{run}.json"))).unwrap();
+            if solver == "mc" {
+                assert_eq!(report["standard_error"], format!("{run}.stderr.npy"));
+                assert!(errors.exists(), "{run}");
+            } else {
+                assert!(report["standard_error"].is_null(), "{report}");
+                assert!(!errors.exists(), "{solver} {run}");
+            }
+        }
+        if solver == "mc" {
+            assert!(
+                read("memory.stderr.npy") == read("paged.stderr.npy"),
+                "mc: the standard errors differ"
+            );
+            std::fs::remove_file(dir.path().join("memory.stderr.npy")).unwrap();
+            std::fs::remove_file(dir.path().join("paged.stderr.npy")).unwrap();
+        }
         assert!(
             report["report"]["paging"]["evictions"].as_u64().unwrap() > 0,
             "{report}"
