@@ -108,9 +108,8 @@ fn sized(name: &str, lit: Lit) -> (usize, Params) {
             set("batches", ParamValue::Int(4));
             48
         }
-        // The first Galerkin product of the finite elements' hierarchy, and the sparse
-        // matrix Murray's system's triplets become, cannot be stopped part way: at these
-        // sizes they take a fraction of a second.
+        // The first Galerkin product of the finite elements' hierarchy cannot be stopped
+        // part way: at this size it takes a fraction of a second.
         ("fem-diffusion", _) => 64,
         // The march converges in a few passes (its own tolerance): a grid whose passes
         // take seconds.

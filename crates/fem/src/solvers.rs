@@ -222,6 +222,10 @@ pub fn gmres(
     residual(op, b, x, &mut r);
     let mut residuals = vec![norm(&r) / b_norm];
     let mut iteration = 0;
+    // Asked after every Arnoldi step: a restart cycle of m products can outlast the time
+    // a stop may take (0.3-0.5 s at 24³ on one thread); the cycle then ends at the steps
+    // it has, and the verdict at the top of the loop names the stop.
+    let interrupt = stopping.interrupt(started);
     loop {
         let beta = norm(&r);
         if let Some(stop_reason) = verdict(stopping, beta / b_norm, b_norm, iteration, started) {
@@ -268,6 +272,7 @@ pub fn gmres(
             if rel <= stopping.relative_tolerance
                 || iteration >= stopping.max_iterations
                 || d == 0.0
+                || interrupt.halted()
             {
                 break;
             }

@@ -254,3 +254,119 @@ fn gauss_seidel_converges_on_a_diagonally_dominant_fe_mass_system() {
         j.stop_reason
     );
 }
+
+#[test]
+fn row_assembly_is_the_element_triplets_matrix() {
+    // The row-by-row assembly (every vertex gathers its elements' blocks) against the
+    // element triplets summed into CSR: the same structure, every entry equal to rounding
+    // (sums of at most 8 element terms in another order: 1e-14 of the largest entry), on
+    // bounded meshes of even and odd sides (not cubes), periodic ones, with and without
+    // extinction.
+    let meshes = [
+        Mesh {
+            nodes: [4, 5, 3],
+            spacing: 0.5,
+            periodic: false,
+        },
+        Mesh {
+            nodes: [7, 6, 9],
+            spacing: 1.25,
+            periodic: false,
+        },
+        Mesh {
+            nodes: [3, 4, 5],
+            spacing: 1.0,
+            periodic: true,
+        },
+        Mesh {
+            nodes: [6, 6, 6],
+            spacing: 0.1,
+            periodic: true,
+        },
+    ];
+    for mesh in meshes {
+        for sigma_t in [0.0, 0.7, 12.0] {
+            let rows = MurraySystem::assemble(mesh, sigma_t).unwrap().matrix;
+            let elements = MurraySystem::assemble_by_elements(mesh, sigma_t)
+                .unwrap()
+                .matrix;
+            let what = format!("{mesh:?}, K_t = {sigma_t}");
+            assert_eq!(rows.shape(), elements.shape(), "{what}");
+            assert_eq!(
+                rows.indptr().raw_storage(),
+                elements.indptr().raw_storage(),
+                "{what}"
+            );
+            assert_eq!(rows.indices(), elements.indices(), "{what}");
+            let scale = elements.data().iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (a, b) in rows.data().iter().zip(elements.data()) {
+                assert!((a - b).abs() <= 1e-14 * scale, "{what}: {a} vs {b}");
+            }
+        }
+    }
+}
+
+#[test]
+fn gmres_stops_inside_a_restart_cycle() {
+    // Ctrl-C raised during the 5th matrix-vector product of a GMRES(30) cycle: the cycle
+    // ends at the steps it has (its iterate is GMRES's over them) and the solve says
+    // Interrupted after 5 iterations, not after the 30 of a whole cycle (a cycle at 24³
+    // took 0.3-0.5 s, too long for a stop that must come within a second under load).
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    struct Raising<'a> {
+        a: &'a Dense,
+        products: AtomicUsize,
+        cancel: Arc<AtomicBool>,
+    }
+    impl LinearOperator for Raising<'_> {
+        fn dim(&self) -> usize {
+            self.a.dim()
+        }
+        fn apply(&self, x: &[f64], y: &mut [f64]) {
+            // The first product is the initial residual's; the 6th the 5th Arnoldi step's.
+            if self.products.fetch_add(1, Ordering::Relaxed) + 1 == 6 {
+                self.cancel.store(true, Ordering::Relaxed);
+            }
+            self.a.apply(x, y);
+        }
+    }
+    let a = random_matrix(60, 7, false);
+    let b: Vec<f64> = (0..60).map(|i| (i as f64 * 0.37).sin()).collect();
+    let cancel = Arc::new(AtomicBool::new(false));
+    let op = Raising {
+        a: &a,
+        products: AtomicUsize::new(0),
+        cancel: cancel.clone(),
+    };
+    let stopping = Stopping {
+        relative_tolerance: 1e-300,
+        max_iterations: 1000,
+        cancel: Some(cancel),
+        ..default_stopping()
+    };
+    let mut x = vec![0.0; 60];
+    let c = gmres(&op, &b, &mut x, 30, &stopping).unwrap();
+    assert!(
+        matches!(c.stop_reason, StopReason::Interrupted { .. }),
+        "{:?}",
+        c.stop_reason
+    );
+    assert_eq!(c.residuals.len() - 1, 5, "{:?}", c.residuals);
+    // The iterate is the 5-step GMRES iterate: its residual is the one reported.
+    let mut r = vec![0.0; 60];
+    a.apply(&x, &mut r);
+    let true_residual = r
+        .iter()
+        .zip(&b)
+        .map(|(r, b)| (b - r).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        / b.iter().map(|b| b * b).sum::<f64>().sqrt();
+    assert!(
+        (true_residual - c.residuals[5]).abs() <= 1e-12,
+        "{true_residual} vs {:?}",
+        c.residuals
+    );
+    assert!(c.residuals[5] < c.residuals[0]);
+}
