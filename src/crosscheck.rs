@@ -761,7 +761,7 @@ until the spatial error and the reference's own noise (0.6%) remain.
   error at S8. Bernabei's exponential face-to-face scheme attenuates with the mean chord, which
   errs by several per cent per cell at σ_t h ≈ 1 (crates/dom/tests/it/closure.rs), so at these
   resolutions it sits between the two.
-- **Iterations** (crates/dom/tests/transport.rs). DSA with `lucent-diffusion`'s cell-centred
+- **Iterations** (crates/dom/tests/it/transport.rs). DSA with `lucent-diffusion`'s cell-centred
   operator takes albedo 0.999 at σ_t h = 0.67 to 10⁻⁶ in 21 sweeps (12 with Anderson mixing);
   plain source iteration would need about 390. At σ_t h = 2 with diamond difference this
   inconsistent DSA amplifies errors and is dropped (the solver reports `dsa_abandoned`), while
@@ -781,7 +781,7 @@ the light where centre values and cell averages of a 1/r² field differ by O(1).
   singularity and lost its power: for a unit light in a 30-mean-free-path box of albedo 0.95
   it absorbed 0.637, 0.798, 0.888 at 16³, 32³, 64³ against 0.986; now 0.9864, 0.9858,
   0.9857, with emitted = absorbed + escaped within 1.3·10⁻⁵ at every resolution
-  (crates/dom/tests/transport.rs). The diffusion solvers and `fem-diffusion` take the same
+  (crates/dom/tests/it/transport.rs). The diffusion solvers and `fem-diffusion` take the same
   cell integrals for lights outside their medium.
 - **The diffusion solvers' point sources** have their singular part taken analytically
   (docs/point-sources.md). In a Robin sphere with the source 4.2 mm off centre at 64³,

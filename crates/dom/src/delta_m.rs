@@ -22,7 +22,7 @@
 //! 0.619 against 0.595; l = 4, 0.383 against 0.266; l = 6, 0.237 against 0. The orders
 //! where they differ most are the ones the quadrature resolves least.
 //!
-//! Measured (tests/delta_m.rs: 24³ at albedo 0.95, g = 0.9, σ_t h = 0.5, S6 against an
+//! Measured (tests/it/delta_m.rs: 24³ at albedo 0.95, g = 0.9, σ_t h = 0.5, S6 against an
 //! S12 solution of the untruncated problem): the sweeps to 1e-6 drop from 26 to 16 on a
 //! homogeneous cube and from 23 to 14 on a cloud, and the fluence's error against the
 //! S12 answer drops too, from 4.8 % to 3.9 % and from 5.8 % to 5.2 %: the forward peak that

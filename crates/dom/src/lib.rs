@@ -37,7 +37,7 @@
 //!   step closure it needs 14 sweeps at g = 0.6 and 22 at g = 0.9 where DSA alone needs 21
 //!   and 36, and half of source iteration's sweeps under a reflecting boundary; with
 //!   diamond difference the fix-up's settling after it costs more than it saves, so source
-//!   iteration with DSA and Anderson mixing stays the default (tests/krylov.rs).
+//!   iteration with DSA and Anderson mixing stays the default (tests/it/krylov.rs).
 //! - `Acceleration::Tsa`, for either outer iteration: transport synthetic acceleration of
 //!   the isotropic and first moments (Ramoné, Adams & Nowak 1997). DSA leaves the first
 //!   moments' error, which contracts by about ωg per sweep; after each sweep TSA solves
@@ -70,7 +70,7 @@
 //! operator is not consistent with the transport closures: with diamond difference at
 //! σ_t h = 2 it amplifies the error and the solver drops it (`dsa_abandoned`); Anderson
 //! mixing on top converges there in 14 sweeps, and with the exponential closure at
-//! σ_t h = 8 in 52 (all in tests/transport.rs). DSA accelerates the isotropic error only:
+//! σ_t h = 8 in 52 (all in tests/it/transport.rs). DSA accelerates the isotropic error only:
 //! with strongly forward scattering the first-moment error still contracts by about ωg per
 //! sweep. Diamond difference is second order in thin cells and needs its fix-up (first order, positive) in thick ones; step is
 //! first order and positive; the exponential closure is exact along the axes and for

@@ -83,7 +83,7 @@ pub enum Outer {
     /// Source iteration: one sweep per step, the DSA correction and Anderson mixing (when
     /// set) after it, with the safeguards that drop DSA where it amplifies the error. The
     /// default: with diamond difference (the default closure) it needs fewer sweeps than
-    /// GMRES, whose answer the fix-up then has to settle (tests/krylov.rs).
+    /// GMRES, whose answer the fix-up then has to settle (tests/it/krylov.rs).
     #[default]
     SourceIteration,
     /// Restarted GMRES on the DSA-preconditioned fixed point (the `gmres` module's docs):
@@ -1396,7 +1396,7 @@ enum Verdict {
 const ROWS: usize = 1024;
 
 /// The thickest cell (σ_t times the largest cell width) [`Acceleration::Tsa`] accepts.
-/// Measured on a homogeneous 16³ cube at albedo 0.99, S4, g = 0.6 (tests/krylov.rs): up
+/// Measured on a homogeneous 16³ cube at albedo 0.99, S4, g = 0.6 (tests/it/krylov.rs): up
 /// to σ_t h = 4 TSA takes fewer sweeps than DSA with every closure (diamond at σ_t h = 2:
 /// 14 without mixing where DSA alone is dropped); at σ_t h = 8 (exponential closure)
 /// source iteration with TSA drops it or stalls, and GMRES with TSA needs 142 sweeps
@@ -1404,7 +1404,7 @@ const ROWS: usize = 1024;
 pub(crate) const TSA_MAX_CELL_THICKNESS: f64 = 4.0;
 
 /// V-cycles of the DSA correction inside GMRES: a fixed count keeps the preconditioned
-/// operator linear. Eight instead of three changed no sweep count of tests/krylov.rs
+/// operator linear. Eight instead of three changed no sweep count of tests/it/krylov.rs
 /// (measured): the correction's accuracy is not what limits the Krylov iteration.
 const DSA_CYCLES: usize = 3;
 

@@ -34,7 +34,7 @@
 //! travels with it (as delta-M asks; integrating the uncollided light with σ_t and only the
 //! sweeps with σ_t′ would put the δ back into the sweeps' first-collision source). The
 //! fluence is the total fluence of the truncated problem, which approximates the true
-//! one (the error against an untruncated S12 solution is measured in `tests/delta_m.rs`).
+//! one (the error against an untruncated S12 solution is measured in `tests/it/delta_m.rs`).
 //! For the renderer, which extinguishes camera rays with σ_t and in-scatters with σ_s, the
 //! lights' exact single scattering keeps the true phase function with the truncated
 //! transmittance (Nakajima & Tanaka's correction of the single-scattered light), and the
@@ -77,7 +77,7 @@ pub struct DomChannel {
     /// for a sun, the 2×2×2 Gauss cell rule's error, of order (σ_t ℓ)⁴/4320 per cell with
     /// ℓ the distance over which the light changes across the cell (large where it enters
     /// a cell through its side), and the difference between the rays' trilinear σ_t and
-    /// the cell's constant one where σ_t jumps. Measured (`tests/delta_m.rs` and variants
+    /// the cell's constant one where σ_t jumps. Measured (`tests/it/delta_m.rs` and variants
     /// of it, a sun at 24³): 1.4e-5 on a homogeneous cube at σ_t h = 0.5 under a vertical
     /// sun, 1.8e-3 under an oblique one, 7.5e-3 and 1.6e-2 on a sharp-edged cloud (σ_t h ≤
     /// 0.75, oblique and vertical).
