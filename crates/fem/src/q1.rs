@@ -10,11 +10,12 @@
 //! products of the 1-D ones (stiffness (1/h)[[1, −1], [−1, 1]], mass (h/6)[[2, 1], [1, 2]]),
 //! so assembly is exact. Second order in L2 for smooth solutions.
 //!
-//! Multigrid: vertex-centred, nested meshes (cells halve per level while every axis has
-//! an even count), prolongation P = trilinear interpolation (exact for nested Q1 spaces),
-//! restriction Pᵀ, Galerkin coarse operators PᵀAP (sparse products), symmetric
-//! Gauss–Seidel V(ν, ν) cycles, the coarsest level by dense LU: a symmetric positive
-//! definite preconditioner, as CG needs.
+//! Multigrid: vertex-centred, nested meshes (n cells become ⌈n/2⌉ per level down to at
+//! most 1000 vertices; an odd axis ends in a coarse cell one fine cell wide, so the coarse
+//! space stays inside the fine one), prolongation P = trilinear interpolation (exact for
+//! nested Q1 spaces), restriction Pᵀ, Galerkin coarse operators PᵀAP (sparse products),
+//! symmetric Gauss–Seidel V(ν, ν) cycles, the coarsest level by dense LU factored once: a
+//! symmetric positive definite preconditioner, as CG needs.
 
 use crate::error::FemError;
 use crate::operator::LinearOperator;
