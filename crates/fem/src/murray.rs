@@ -150,11 +150,18 @@ impl MurraySystem {
         let (mass, derivative) = element_matrices(mesh.spacing);
         let (alpha, gamma) = (alpha(), gamma());
         // The streaming block of local vertices (a, b): Σ_axis α_ij,axis ∂_axis[a][b].
-        let streaming = |a: usize, b: usize, i: usize, j: usize| -> f64 {
-            (0..3)
-                .map(|ax| alpha[i][j][ax] * derivative[ax][a][b])
-                .sum()
-        };
+        let mut streaming = [[[[0.0f64; 4]; 4]; 8]; 8];
+        for (a, row) in streaming.iter_mut().enumerate() {
+            for (b, block) in row.iter_mut().enumerate() {
+                for (i, line) in block.iter_mut().enumerate() {
+                    for (j, v) in line.iter_mut().enumerate() {
+                        *v = (0..3)
+                            .map(|ax| alpha[i][j][ax] * derivative[ax][a][b])
+                            .sum();
+                    }
+                }
+            }
+        }
         let nodes = mesh.nodes;
         let cells: [usize; 3] = std::array::from_fn(|a| {
             if mesh.periodic {
@@ -165,54 +172,57 @@ impl MurraySystem {
         });
         // The cells along an axis holding vertex coordinate v, with v's local offset in
         // each (1: v is the cell's upper vertex).
-        let owners = |axis: usize, v: usize| -> Vec<(usize, usize)> {
-            let mut out = Vec::with_capacity(2);
-            for offset in 0..2 {
+        let owners = |axis: usize, v: usize| -> [Option<(usize, usize)>; 2] {
+            std::array::from_fn(|offset| {
                 let cell = if mesh.periodic {
                     Some((v + nodes[axis] - offset) % nodes[axis])
                 } else {
                     v.checked_sub(offset).filter(|&c| c < cells[axis])
                 };
-                if let Some(c) = cell {
-                    out.push((c, offset));
-                }
-            }
-            out
+                cell.map(|c| (c, offset))
+            })
         };
-        /// A vertex's four rows: per neighbour (sorted), its 4×4 block and which entries
-        /// an element touched (the element triplets' structure).
-        type Rows = Vec<(usize, [[f64; 4]; 4], [[bool; 4]; 4])>;
-        let layers: Vec<Result<Vec<Rows>, FemError>> = (0..nodes[2])
+        /// A layer's rows in CSR pieces: each row's length, its columns and values.
+        type Layer = (Vec<usize>, Vec<usize>, Vec<f64>);
+        /// A neighbour's 4×4 block and which of its entries an element touched.
+        type Block = (usize, [[f64; 4]; 4], [[bool; 4]; 4]);
+        let layers: Vec<Result<Layer, FemError>> = (0..nodes[2])
             .into_par_iter()
             .map(|z| {
                 if let Some(halt) = interrupt.halt() {
                     return Err(FemError::Halted(halt));
                 }
-                let mut layer = Vec::with_capacity(nodes[0] * nodes[1]);
+                let rows_here = 4 * nodes[0] * nodes[1];
+                let mut lengths = Vec::with_capacity(rows_here);
+                let mut indices = Vec::with_capacity(rows_here * 27 * 4);
+                let mut data = Vec::with_capacity(rows_here * 27 * 4);
+                // One vertex's blocks per neighbour (at most 27) and which entries an
+                // element touched (the element triplets' structure), reused.
+                let mut blocks: Vec<Block> = Vec::with_capacity(27);
                 for y in 0..nodes[1] {
                     for x in 0..nodes[0] {
-                        let mut rows: Rows = Vec::with_capacity(27);
-                        for &(cz, oz) in &owners(2, z) {
-                            for &(cy, oy) in &owners(1, y) {
-                                for &(cx, ox) in &owners(0, x) {
+                        blocks.clear();
+                        for (cz, oz) in owners(2, z).into_iter().flatten() {
+                            for (cy, oy) in owners(1, y).into_iter().flatten() {
+                                for (cx, ox) in owners(0, x).into_iter().flatten() {
                                     let a = ox + 2 * oy + 4 * oz;
                                     for b in 0..8 {
                                         let at = [cx + (b & 1), cy + ((b >> 1) & 1), cz + (b >> 2)];
                                         let l =
                                             mesh.index(std::array::from_fn(|i| at[i] % nodes[i]));
-                                        let slot = match rows.iter().position(|r| r.0 == l) {
+                                        let slot = match blocks.iter().position(|r| r.0 == l) {
                                             Some(slot) => slot,
                                             None => {
-                                                rows.push((l, [[0.0; 4]; 4], [[false; 4]; 4]));
-                                                rows.len() - 1
+                                                blocks.push((l, [[0.0; 4]; 4], [[false; 4]; 4]));
+                                                blocks.len() - 1
                                             }
                                         };
-                                        let (_, block, touched) = &mut rows[slot];
+                                        let (_, block, touched) = &mut blocks[slot];
                                         for i in 0..4 {
                                             block[i][i] += sigma_t * gamma[i] * mass[a][b];
                                             touched[i][i] = true;
                                             for j in 0..4 {
-                                                let v = streaming(a, b, i, j);
+                                                let v = streaming[a][b][i][j];
                                                 if v != 0.0 {
                                                     block[i][j] += v;
                                                     touched[i][j] = true;
@@ -223,31 +233,43 @@ impl MurraySystem {
                                 }
                             }
                         }
-                        rows.sort_unstable_by_key(|r| r.0);
-                        layer.push(rows);
+                        blocks.sort_unstable_by_key(|r| r.0);
+                        for i in 0..4 {
+                            let before = indices.len();
+                            for (l, block, touched) in &blocks {
+                                for j in 0..4 {
+                                    if touched[i][j] {
+                                        indices.push(4 * l + j);
+                                        data.push(block[i][j]);
+                                    }
+                                }
+                            }
+                            lengths.push(indices.len() - before);
+                        }
                     }
                 }
-                Ok(layer)
+                Ok((lengths, indices, data))
             })
             .collect();
         let n = mesh.len();
         let mut indptr = Vec::with_capacity(4 * n + 1);
-        let mut indices = Vec::with_capacity(4 * n * 27 * 4);
-        let mut data = Vec::with_capacity(4 * n * 27 * 4);
+        let (mut indices, mut data) = (Vec::new(), Vec::new());
         indptr.push(0);
         for layer in layers {
-            for rows in layer? {
-                for i in 0..4 {
-                    for (l, block, touched) in &rows {
-                        for j in 0..4 {
-                            if touched[i][j] {
-                                indices.push(4 * l + j);
-                                data.push(block[i][j]);
-                            }
-                        }
-                    }
-                    indptr.push(indices.len());
-                }
+            let (lengths, layer_indices, layer_data) = layer?;
+            for length in lengths {
+                indptr.push(indptr[indptr.len() - 1] + length);
+            }
+            if indices.is_empty() {
+                // The first layer's arrays, grown in place by the others.
+                let total = layer_indices.len() * nodes[2];
+                indices = layer_indices;
+                data = layer_data;
+                indices.reserve(total.saturating_sub(indices.len()));
+                data.reserve(total.saturating_sub(data.len()));
+            } else {
+                indices.extend(layer_indices);
+                data.extend(layer_data);
             }
         }
         let matrix = sprs::CsMat::try_new((4 * n, 4 * n), indptr, indices, data)
